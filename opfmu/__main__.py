@@ -1,0 +1,5 @@
+import sys
+
+from opfmu.cli import main
+
+sys.exit(main())

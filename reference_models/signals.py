@@ -1,0 +1,182 @@
+"""Time-varying bus-voltage inputs u(t) = (Vs [pu], theta_vs [rad]).
+
+A signal is built from one channel per input. Every channel is a closed-form function of time, so
+the solver and the sensors see exactly the same signal, and lists its breakpoints (times where the
+value or its slope jumps) so the solver can integrate piece by piece without stepping over them.
+Channels take a float (the solver's hot path, plain `math`) or an array of times.
+Signals serialise to plain dicts (stored with each dataset trajectory) and back.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+
+def _ops(t):
+    """The math module for a float time (fast scalar path), numpy for arrays."""
+    return math if isinstance(t, float) else np
+
+
+@dataclass(frozen=True)
+class FirstOrder:
+    """dy/dt = -k (y - y_ref) + A sin(w t), y(0) = y0 (paper eq. ode1); k, w in 1/s and rad/s."""
+
+    y0: float
+    k: float
+    A: float
+    w: float
+    y_ref: float
+
+    def __call__(self, t):
+        m = _ops(t)
+        kw2 = self.k**2 + self.w**2
+        transient = (self.y0 - self.y_ref + self.A * self.w / kw2) * m.exp(-self.k * t)
+        forced = self.A * (self.k * m.sin(self.w * t) - self.w * m.cos(self.w * t)) / kw2
+        return self.y_ref + transient + forced
+
+    def breakpoints(self):
+        return ()
+
+
+@dataclass(frozen=True)
+class SecondOrder:
+    """y'' + 2 zeta wn y' + wn^2 (y - y_ref) = 0, y(0) = y0, y'(0) = dy0 (paper eq. ode2, zeta < 1)."""
+
+    y0: float
+    dy0: float
+    zeta: float
+    wn: float
+    y_ref: float
+
+    def __call__(self, t):
+        m = _ops(t)
+        wd = self.wn * math.sqrt(1.0 - self.zeta**2)
+        c1 = self.y0 - self.y_ref
+        c2 = (self.dy0 + self.zeta * self.wn * c1) / wd
+        return self.y_ref + m.exp(-self.zeta * self.wn * t) * (c1 * m.cos(wd * t) + c2 * m.sin(wd * t))
+
+    def breakpoints(self):
+        return ()
+
+
+@dataclass(frozen=True)
+class Piecewise:
+    """Piecewise-constant level: values[i] on [times[i-1], times[i]) with times ascending."""
+
+    values: tuple
+    times: tuple
+
+    def __call__(self, t):
+        if isinstance(t, float):
+            return float(self.values[bisect.bisect_right(self.times, t)])
+        index = np.searchsorted(np.asarray(self.times), t, side="right")
+        return np.asarray(self.values, dtype=float)[index]
+
+    def breakpoints(self):
+        return tuple(self.times)
+
+
+@dataclass(frozen=True)
+class Ramp:
+    """y0 until t_start, linear to y1 at t_end, y1 after."""
+
+    y0: float
+    y1: float
+    t_start: float
+    t_end: float
+
+    def __call__(self, t):
+        frac = np.clip((t - self.t_start) / (self.t_end - self.t_start), 0.0, 1.0)
+        return self.y0 + (self.y1 - self.y0) * float(frac) if isinstance(t, float) else (
+            self.y0 + (self.y1 - self.y0) * frac
+        )
+
+    def breakpoints(self):
+        return (self.t_start, self.t_end)
+
+
+@dataclass(frozen=True)
+class Dip:
+    """Fault: y0 until t_fault, y_fault for `duration`, then recovery to y_post with time constant tau
+    (tau = 0: instant)."""
+
+    y0: float
+    y_fault: float
+    t_fault: float
+    duration: float
+    y_post: float
+    tau: float
+
+    def __call__(self, t):
+        if isinstance(t, float):
+            return float(self(np.array(t)))
+        t_clear = self.t_fault + self.duration
+        since = np.maximum(t - t_clear, 0.0)
+        decay = np.exp(-since / self.tau) if self.tau > 0 else np.zeros_like(since)
+        recovery = self.y_post + (self.y_fault - self.y_post) * decay
+        return np.where(t < self.t_fault, self.y0, np.where(t < t_clear, self.y_fault, recovery))
+
+    def breakpoints(self):
+        return (self.t_fault, self.t_fault + self.duration)
+
+
+CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ramp, Dip)}
+
+
+@dataclass(frozen=True)
+class Signal:
+    """u(t) = (Vs(t), theta_vs(t)); optionally held piecewise constant every `hold` seconds (ZOH)."""
+
+    Vs: object
+    theta_vs: object
+    hold: float = 0.0
+
+    def __call__(self, t):
+        """u at times t [...] -> [..., 2] (t scalar -> [2])."""
+        t = self.sample_time(np.asarray(t, dtype=float))
+        return np.stack([self.Vs(t), self.theta_vs(t)], axis=-1)
+
+    def at(self, t: float) -> tuple:
+        """(Vs, theta_vs) at one time t [s] as floats: the solver's fast path."""
+        t = float(self.sample_time(t))
+        return self.Vs(t), self.theta_vs(t)
+
+    def sample_time(self, t):
+        """The time whose value is seen at t: t itself, or under ZOH the last sample instant k*hold
+        (the small offset keeps k*hold itself in slot k despite rounding)."""
+        if self.hold > 0:
+            return np.floor(t / self.hold + 1e-9) * self.hold
+        return t
+
+    def breakpoints(self, horizon: float) -> np.ndarray:
+        """Sorted times in (0, horizon) where u jumps or kinks [s]."""
+        if self.hold > 0:
+            points = np.arange(1, int(math.ceil(horizon / self.hold)) + 1) * self.hold
+        else:
+            points = np.array(self.Vs.breakpoints() + self.theta_vs.breakpoints(), dtype=float)
+        return np.unique(points[(points > 0) & (points < horizon)])
+
+    def to_dict(self) -> dict:
+        def channel(c):
+            return {"kind": type(c).__name__, **{f.name: getattr(c, f.name) for f in fields(c)}}
+
+        return {"Vs": channel(self.Vs), "theta_vs": channel(self.theta_vs), "hold": self.hold}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Signal":
+        def channel(d):
+            d = dict(d)
+            kind = CHANNELS[d.pop("kind")]
+            return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+        return cls(channel(data["Vs"]), channel(data["theta_vs"]), float(data.get("hold", 0.0)))
+
+
+def held(signal: Signal, hold: float) -> Signal:
+    """The same signal sampled and held every `hold` seconds (zero-order hold, as a co-simulation
+    master with communication step `hold` delivers it)."""
+    return Signal(signal.Vs, signal.theta_vs, hold)
+

@@ -1,0 +1,69 @@
+"""Runs reference solves chunk by chunk: in-process, on a local dask cluster, or on a dask scheduler."""
+from __future__ import annotations
+
+import numpy as np
+
+from reference_models.signals import Signal
+from reference_models.simulate import SolverConfig, simulate
+
+
+def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict) -> np.ndarray:
+    """States [n, S, 4] for one chunk; takes plain data so it travels to any dask worker."""
+    config = SolverConfig(**solver)
+    return np.stack([simulate(x0, Signal.from_dict(s), t, solver=config) for x0, s in zip(x0s, signal_dicts)])
+
+
+class SolveRunner:
+    """Context manager that solves chunks and hands each result to a callback as it finishes.
+
+    workers = 0 solves in this process; otherwise a dask LocalCluster of `workers` single-threaded
+    processes is started, unless `scheduler` gives the address of a running dask scheduler (its
+    workers must have opfmu installed).
+    """
+
+    def __init__(self, workers: int = 2, scheduler: str | None = None):
+        self.workers = workers
+        self.scheduler = scheduler
+        self._client = None
+        self._cluster = None
+
+    def __enter__(self):
+        if self.scheduler:
+            from dask.distributed import Client
+
+            self._client = Client(self.scheduler, timeout="20s")
+        elif self.workers > 0:
+            from dask.distributed import Client, LocalCluster
+
+            self._cluster = LocalCluster(
+                n_workers=self.workers, threads_per_worker=1, processes=True,
+                dashboard_address=None, silence_logs=40,
+            )
+            self._client = Client(self._cluster)
+        return self
+
+    def __exit__(self, *exc):
+        if self._client is not None:
+            self._client.close()
+        if self._cluster is not None:
+            self._cluster.close()
+
+    def run(self, chunks: dict, t: np.ndarray, solver: SolverConfig, on_done) -> None:
+        """Solve chunks {key: (x0s [n, 4], signal dicts [n])}; on_done(key, x [n, S, 4]) per chunk."""
+        solver_dict = solver.to_dict()
+        if self._client is None:
+            for key, (x0s, signal_dicts) in chunks.items():
+                on_done(key, solve_chunk(x0s, signal_dicts, t, solver_dict))
+            return
+        from dask.distributed import as_completed
+
+        futures = {
+            self._client.submit(solve_chunk, x0s, sigs, t, solver_dict, pure=False, key=f"solve-{key}"): key
+            for key, (x0s, sigs) in chunks.items()
+        }
+        try:
+            for future in as_completed(futures):
+                on_done(futures[future], future.result())
+        except BaseException:
+            self._client.cancel(list(futures))
+            raise

@@ -1,0 +1,37 @@
+"""Small dataset recipes shared by the tests."""
+import json
+from dataclasses import replace
+
+import pytest
+
+from surrogate.data import generate, preset
+
+
+def tiny(name="paper", **changes):
+    """A few trajectories of a named preset (chunks of 3 unless changed)."""
+    changes = {"counts": {"train": 8, "collocation": 4, "val": 3, "test": 3}, "chunk_size": 3, **changes}
+    return replace(preset(name), **changes)
+
+
+def preset_file(path, recipe):
+    """Writes a preset as the JSON file `opfmu data --preset FILE.json` reads."""
+    path.write_text(json.dumps(recipe.to_dict()))
+    return path
+
+
+@pytest.fixture(scope="session")
+def paper_tiny(tmp_path_factory):
+    """(recipe, directory) of a tiny paper-preset dataset, generated once."""
+    recipe = tiny("paper")
+    out = tmp_path_factory.mktemp("paper_tiny")
+    generate(recipe, out, seed=7, progress=False)
+    return recipe, out
+
+
+@pytest.fixture(scope="session")
+def cosim_tiny(tmp_path_factory):
+    """(recipe, directory) of a tiny cosim-preset dataset (2 probes per family), generated once."""
+    recipe = tiny("cosim", probes_per_family=2)
+    out = tmp_path_factory.mktemp("cosim_tiny")
+    generate(recipe, out, seed=3, progress=False)
+    return recipe, out

@@ -1,0 +1,54 @@
+"""The command line: user mistakes are one line with exit code 2."""
+import subprocess
+import sys
+
+import numpy as np
+
+from surrogate.data import load_split
+
+from conftest import preset_file, tiny
+
+
+def opfmu(*args):
+    return subprocess.run([sys.executable, "-m", "opfmu", *args], capture_output=True, text=True)
+
+
+def assert_one_line_error(result, *words):
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:"), result.stderr
+    assert "Traceback" not in result.stderr
+    for word in words:
+        assert word in lines[0]
+
+
+def test_unknown_preset_is_a_one_line_error():
+    assert_one_line_error(opfmu("data", "--preset", "huge", "--out", "x"), "unknown preset 'huge'")
+
+
+def test_missing_output_directory_is_a_one_line_error():
+    assert_one_line_error(opfmu("data", "--preset", "quick"), "--out")
+
+
+def test_unknown_subcommand_is_a_one_line_error():
+    assert_one_line_error(opfmu("frobnicate"), "invalid choice")
+
+
+def test_malformed_preset_file_is_a_one_line_error(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert_one_line_error(opfmu("data", "--preset", str(bad), "--out", str(tmp_path / "d")), "not a valid preset")
+
+
+def test_negative_worker_count_is_a_one_line_error(tmp_path):
+    assert_one_line_error(opfmu("data", "--workers", "-1", "--out", str(tmp_path)), "--workers")
+
+
+def test_data_command_writes_the_splits_a_preview_and_a_summary(tmp_path):
+    spec = preset_file(tmp_path / "p.json", tiny("paper"))
+    result = opfmu("data", "--preset", str(spec), "--out", str(tmp_path / "d"), "--workers", "0", "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert "dataset written to" in result.stdout and "delta" in result.stdout
+    assert (tmp_path / "d" / "preview.png").stat().st_size > 10_000
+    assert load_split(tmp_path / "d", "test")["x"].shape == (3, 1001, 4)
+    assert np.isfinite(load_split(tmp_path / "d", "train")["x"]).all()

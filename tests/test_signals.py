@@ -1,0 +1,87 @@
+"""Input families: closed forms against their ODEs, holds, faults, serialisation."""
+import json
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from reference_models.families import DIP, FAST, SLOW, family
+from reference_models.signals import Signal, held
+
+T = np.linspace(0.0, 1.0, 1001)
+
+
+def sample(fam, n=6, seed=0):
+    return fam.sample(np.random.default_rng(seed).random((n, fam.dim)), 1.0)
+
+
+def test_slow_family_signal_solves_its_first_order_ode():
+    for s in sample(SLOW):
+        for ch in (s.Vs, s.theta_vs):
+            ode = lambda t, y: [-ch.k * (y[0] - ch.y_ref) + ch.A * np.sin(ch.w * t)]
+            sol = solve_ivp(ode, (0, 1), [ch.y0], method="DOP853", t_eval=T, rtol=1e-12, atol=1e-13)
+            np.testing.assert_allclose(ch(T), sol.y[0], rtol=0, atol=1e-9)
+
+
+def test_fast_family_signal_solves_its_second_order_ode():
+    for s in sample(FAST):
+        for ch in (s.Vs, s.theta_vs):
+            ode = lambda t, y: [y[1], -2 * ch.zeta * ch.wn * y[1] - ch.wn**2 * (y[0] - ch.y_ref)]
+            sol = solve_ivp(ode, (0, 1), [ch.y0, ch.dy0], method="DOP853", t_eval=T, rtol=1e-12, atol=1e-13)
+            np.testing.assert_allclose(ch(T), sol.y[0], rtol=0, atol=1e-9)
+
+
+def test_paper_family_parameters_lie_in_the_paper_ranges():
+    for s in sample(SLOW, 50):
+        assert 1 <= s.Vs.k <= 2 and 0 <= s.Vs.A <= 0.03 and 0.5 <= s.Vs.w <= 1.5 and 0.7 <= s.Vs.y0 <= 1.2
+        assert 1 <= s.theta_vs.k <= 3 and 0 <= s.theta_vs.A <= 0.05 and 0.1 <= s.theta_vs.w <= 0.5
+        assert s.Vs.y_ref == 1.0 and s.theta_vs.y_ref == 0.0
+    for s in sample(FAST, 50):
+        assert 0.6 <= s.Vs.zeta <= 0.8 and 8 <= s.Vs.wn <= 12 and -0.2 <= s.Vs.dy0 <= 0.2
+        assert 0.2 <= s.theta_vs.zeta <= 0.4 and 10 <= s.theta_vs.wn <= 18 and -0.8 <= s.theta_vs.dy0 <= 0.8
+        assert -0.5 <= s.theta_vs.y0 <= 0.5
+
+
+def test_zero_order_hold_keeps_the_value_of_the_last_sample_instant():
+    base = sample(FAST, 1)[0]
+    s = held(base, 0.01)
+    t = np.array([0.0, 0.004, 0.0099, 0.01, 0.0151, 0.5])
+    expected = base(np.array([0.0, 0.0, 0.0, 0.01, 0.01, 0.5]))
+    np.testing.assert_allclose(s(t), expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s.breakpoints(0.05), [0.01, 0.02, 0.03, 0.04])
+
+
+def test_dip_drops_holds_and_recovers():
+    s = DIP.build({"Vs0": 1.0, "Vs_fault": 0.3, "t_fault": 0.2, "duration": 0.1, "post_shift": 0.02,
+                   "tau": 0.05, "theta0": 0.1, "jump": 0.2, "jump_post": 0.05}, 1.0)
+    Vs = s(np.array([0.19, 0.2, 0.29, 0.3, 0.35, 1.0]))[:, 0]
+    np.testing.assert_allclose(Vs[:4], [1.0, 0.3, 0.3, 0.3])
+    assert Vs[4] == pytest.approx(1.02 + (0.3 - 1.02) * np.exp(-1.0))
+    assert Vs[5] == pytest.approx(1.02, abs=1e-6)
+    np.testing.assert_allclose(s(np.array([0.1, 0.25, 0.5]))[:, 1], [0.1, 0.3, 0.15])
+    np.testing.assert_allclose(s.breakpoints(1.0), [0.2, 0.3])
+
+
+@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-fast", "zoh-ramp"])
+def test_signal_round_trips_through_json(name):
+    for s in sample(family(name), 3):
+        back = Signal.from_dict(json.loads(json.dumps(s.to_dict())))
+        np.testing.assert_array_equal(back(T), s(T))
+        assert back == s
+
+
+@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-slow"])
+def test_scalar_and_array_evaluation_agree(name):
+    for s in sample(family(name), 3):
+        scalar = np.array([s.at(float(t)) for t in T])
+        np.testing.assert_allclose(scalar, s(T), rtol=0, atol=1e-14)
+
+
+def test_zoh_family_holds_at_steps_between_1_and_50_ms():
+    holds = [s.hold for s in sample(family("zoh-slow"), 40)]
+    assert 0.001 <= min(holds) and max(holds) <= 0.05
+
+
+def test_unknown_family_is_refused_with_the_known_names():
+    with pytest.raises(ValueError, match="unknown input family 'sine'.*slow, fast"):
+        family("sine")

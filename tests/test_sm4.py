@@ -1,0 +1,81 @@
+"""The SM4 equations: one definition, numpy and torch, equilibrium and derived outputs."""
+import numpy as np
+import pytest
+import torch
+
+from reference_models.sm4 import (SM4Params, min_voltage_with_equilibrium, outputs, rhs,
+                                  steady_state)
+
+
+def random_points(n=200, seed=0):
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(-0.5, 0.5, n),
+                         rng.uniform(0.2, 1.3, n)])
+    u = np.column_stack([rng.uniform(0.2, 1.3, n), rng.uniform(-1, 1, n)])
+    return x, u
+
+
+def test_numpy_and_torch_right_hand_sides_agree_in_float64():
+    x, u = random_points()
+    expected = rhs(x, u)
+    got = rhs(torch.tensor(x), torch.tensor(u)).numpy()
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+
+
+def test_numpy_and_torch_derived_outputs_agree_in_float64():
+    x, u = random_points()
+    np.testing.assert_allclose(outputs(torch.tensor(x), torch.tensor(u)).numpy(), outputs(x, u), rtol=0, atol=1e-12)
+
+
+def test_torch_right_hand_side_is_differentiable_and_batched():
+    x, u = random_points(6)
+    xt = torch.tensor(x.reshape(2, 3, 4), requires_grad=True)
+    ut = torch.tensor(u.reshape(2, 3, 2))
+    assert rhs(xt, ut).shape == (2, 3, 4)
+    assert torch.autograd.gradcheck(lambda z: rhs(z, ut), (xt,))
+
+
+@pytest.mark.parametrize("Vs, theta", [(1.0, 0.0), (0.9, -0.5), (1.2, 0.5), (1.05, 0.2)])
+def test_steady_state_has_zero_derivative(Vs, theta):
+    x = steady_state(Vs, theta)
+    assert np.max(np.abs(rhs(x, np.array([Vs, theta])))) < 1e-12
+
+
+def test_steady_state_at_nominal_voltage_is_the_documented_equilibrium():
+    np.testing.assert_allclose(steady_state(1.0, 0.0), [1.0593, 0.0, 0.3336, 0.6347], atol=5e-5)
+
+
+def test_steady_state_is_stable():
+    x, u = steady_state(1.0, 0.0), np.array([1.0, 0.0])
+    eps = 1e-7
+    jac = np.column_stack([(rhs(x + eps * e, u) - rhs(x - eps * e, u)) / (2 * eps) for e in np.eye(4)])
+    assert np.all(np.linalg.eigvals(jac).real < 0)
+
+
+def test_no_equilibrium_below_the_minimum_voltage():
+    v_min = min_voltage_with_equilibrium()
+    assert 0.85 < v_min < 0.9
+    steady_state(v_min + 1e-6)
+    with pytest.raises(ValueError, match="no stable equilibrium"):
+        steady_state(v_min - 1e-3)
+
+
+def test_bus_power_equals_air_gap_power_without_resistance():
+    x, u = random_points()
+    p = SM4Params()
+    Id, Iq, _, _, P, _ = outputs(x, u).T
+    Pe = x[:, 2] * Id + x[:, 3] * Iq + (p.Xq_p - p.Xd_p) * Id * Iq
+    np.testing.assert_allclose(P, Pe, rtol=0, atol=1e-12)
+
+
+def test_network_frame_current_has_the_dq_current_magnitude():
+    x, u = random_points()
+    Id, Iq, I_re, I_im, _, _ = outputs(x, u).T
+    np.testing.assert_allclose(np.hypot(I_re, I_im), np.hypot(Id, Iq), rtol=1e-12)
+
+
+def test_resistance_makes_bus_power_smaller_than_air_gap_power():
+    p = SM4Params(Re=0.05)
+    x = steady_state(1.0, 0.0, p)
+    Id, Iq, _, _, P, _ = outputs(x, np.array([1.0, 0.0]), p)
+    assert P == pytest.approx(p.Pm - 0.05 * (Id**2 + Iq**2), abs=1e-10)
