@@ -102,6 +102,9 @@ def main(argv=None) -> int:
     except (UserError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except RuntimeError as exc:  # a failed reference solve: finished work is kept for the rerun
+        print(f"failed: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted: rerun the same command to resume", file=sys.stderr)
         return 130

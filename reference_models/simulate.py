@@ -50,17 +50,16 @@ def simulate(
     state = np.asarray(x0, dtype=float)
     for start, stop in zip(edges[:-1], edges[1:]):
         inside = (t_eval >= start) & (t_eval <= stop)
-        # the signal on [start, stop): evaluate just inside the segment so a jump at `stop` is not seen
-        mid = math.nextafter(stop, start)
-        u_of_t = _segment_input(signal, start, mid)
-        sol = solve_ivp(
-            _scalar_rhs(u_of_t, p), (start, stop), state, method=solver.method,
-            t_eval=t_eval[inside], rtol=solver.rtol, atol=solver.atol,
-        )
+        # the signal on [start, stop): evaluated just inside the segment so a jump at `stop` is not seen
+        f = _scalar_rhs(_segment_input(signal, start, math.nextafter(stop, start)), p)
+        # `stop` is always evaluated too: it is the next segment's initial state
+        times = np.union1d(t_eval[inside], [stop])
+        sol = solve_ivp(f, (start, stop), state, method=solver.method, t_eval=times,
+                        rtol=solver.rtol, atol=solver.atol)
         if sol.status != 0 or not np.all(np.isfinite(sol.y)):
             raise RuntimeError(f"reference solve failed on [{start:.6g}, {stop:.6g}] s: {sol.message}")
-        x[inside] = sol.y.T
-        state = solve_end_state(sol, stop, _scalar_rhs(u_of_t, p), state, start, solver)
+        x[inside] = sol.y[:, np.searchsorted(times, t_eval[inside])].T
+        state = sol.y[:, -1]
     return x
 
 
@@ -76,14 +75,6 @@ def _segment_input(signal: Signal, start: float, last: float):
         return signal.at(min(max(t, start), last))
 
     return u_of_t
-
-
-def solve_end_state(sol, stop, f, state, start, solver):
-    """State at `stop` from a finished segment solve (its last t_eval point when it is `stop`)."""
-    if sol.t.size and sol.t[-1] == stop:
-        return sol.y[:, -1]
-    end = solve_ivp(f, (start, stop), state, method=solver.method, rtol=solver.rtol, atol=solver.atol)
-    return end.y[:, -1]
 
 
 def simulate_many(x0s, signals, t_eval, p: SM4Params = SM4Params(), solver: SolverConfig = SolverConfig()):

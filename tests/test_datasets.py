@@ -150,3 +150,13 @@ def test_cosim_splits_mix_the_cosimulation_families(tmp_path):
 
     names = {n for n, _ in preset("cosim").families}
     assert {"step", "dip", "ramp"} <= names and any(n.startswith("zoh-") for n in names)
+
+
+def test_an_existing_dask_scheduler_runs_the_solves(paper_tiny, tmp_path):
+    from dask.distributed import LocalCluster
+
+    recipe, first = paper_tiny
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        generate(recipe, tmp_path, seed=7, runner=SolveRunner(0, scheduler=cluster.scheduler_address),
+                 progress=False)
+    np.testing.assert_array_equal(load_split(tmp_path, "test")["x"], load_split(first, "test")["x"])

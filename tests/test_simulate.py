@@ -34,3 +34,12 @@ def test_step_input_is_integrated_piecewise_like_two_separate_solves():
     b = solve_ivp(f([0.8, 0.0]), (0.3037, 0.6511), a, **tight).y[:, -1]
     c = solve_ivp(f([0.8, 0.2]), (0.6511, 1.0), b, t_eval=[1.0], **tight).y[:, -1]
     np.testing.assert_allclose(simulate(x0, s, T)[-1], c, rtol=0, atol=1e-7)
+
+
+def test_breakpoints_closer_than_the_output_grid_are_integrated_through():
+    from reference_models.signals import Ramp
+
+    s = Signal(Ramp(1.0, 0.8, 0.5001, 0.5004), Piecewise((0.0, 0.1), (0.50015,)))
+    x0 = steady_state(1.0, 0.0)
+    tight = simulate(x0, s, T, solver=SolverConfig("DOP853", 1e-12, 1e-12))
+    np.testing.assert_allclose(simulate(x0, s, T), tight, rtol=0, atol=1e-6)

@@ -10,7 +10,13 @@ from reference_models.simulate import SolverConfig, simulate
 def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict) -> np.ndarray:
     """States [n, S, 4] for one chunk; takes plain data so it travels to any dask worker."""
     config = SolverConfig(**solver)
-    return np.stack([simulate(x0, Signal.from_dict(s), t, solver=config) for x0, s in zip(x0s, signal_dicts)])
+    states = []
+    for x0, s in zip(x0s, signal_dicts):
+        try:
+            states.append(simulate(x0, Signal.from_dict(s), t, solver=config))
+        except RuntimeError as exc:
+            raise RuntimeError(f"{exc} (x0 = {np.array2string(x0, precision=6)}, signal = {s})") from None
+    return np.stack(states)
 
 
 class SolveRunner:
