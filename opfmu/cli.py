@@ -54,6 +54,51 @@ def summary_table(meta: dict) -> str:
     return "\n".join(lines)
 
 
+def cmd_train(args) -> None:
+    import json
+
+    import torch
+
+    from surrogate.models import OperatorConfig
+    from surrogate.training import TrainConfig, TrainError, train
+
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    base = {}
+    if args.config:
+        try:
+            base = json.loads(Path(args.config).read_text())
+        except (OSError, ValueError) as exc:
+            raise UserError(f"cannot read training config {args.config}: {exc}") from None
+    flags = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs), ("optimizer", args.optimizer),
+                                ("lr", args.lr)) if v is not None}
+    try:
+        config = TrainConfig.from_dict({**base, **flags, "physics": args.physics or base.get("physics", False)})
+        config = _with_arch(config, args.arch, OperatorConfig)
+        result = train(args.data, config, args.out, progress=not args.quiet)
+    except (TrainError, ValueError, TypeError) as exc:
+        raise UserError(str(exc)) from None
+    print(f"trained {config.model.arch}{' (physics-informed)' if config.physics else ''}: {result.epochs} epochs "
+          f"in {result.wall_s:.1f} s, best validation MSE {result.best_val_mse:.3e} (standardised) at epoch "
+          f"{result.best_epoch}{', stopped early' if result.stopped_early else ''}; run: {args.out}")
+
+
+def _with_arch(config, arch, operator_config):
+    from dataclasses import replace
+
+    return replace(config, model=operator_config.from_dict({**config.model.to_dict(), "arch": arch}))
+
+
+def cmd_evaluate(args) -> None:
+    from surrogate.report import evaluate_runs
+
+    try:
+        report = evaluate_runs(args.runs, args.data, args.split, args.out)
+    except (ValueError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    print(report)
+
+
 def cmd_demo(args) -> None:
     """The main job on defaults, as far as the pipeline is built: a quick co-simulation dataset."""
     args.preset, args.seed, args.scheduler, args.quiet = "quick", 0, None, False
@@ -79,6 +124,31 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--scheduler", default=None, help="address of a running dask scheduler to use instead")
     data.add_argument("--quiet", action="store_true", help="no progress bars")
     data.set_defaults(func=cmd_data)
+
+    tr = sub.add_parser("train", help="train an operator (DeepONet or PINN) on a dataset",
+                        description="Train, or resume the run in --out, with SOAP and early stopping.")
+    tr.add_argument("--data", required=True, help="dataset directory (from `opfmu data`)")
+    tr.add_argument("--arch", default="unstacked", help="unstacked | stacked-n | pinn (default unstacked)")
+    tr.add_argument("--physics", action="store_true", help="add the physics losses (PI-DeepONet)")
+    tr.add_argument("--out", required=True, help="run directory (resumed if it holds a checkpoint)")
+    tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
+    tr.add_argument("--epochs", type=int, default=None, help="maximum epochs (default 10000)")
+    tr.add_argument("--optimizer", default=None, help="soap | adam (default soap)")
+    tr.add_argument("--lr", type=float, default=None, help="learning rate (default 3e-3)")
+    tr.add_argument("--config", default=None, help="JSON file of TrainConfig fields (flags override it)")
+    tr.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=cmd_train)
+
+    ev = sub.add_parser("evaluate", help="accuracy metrics and figures of trained runs",
+                        description="MSE, MAE, MaxAE (physical and standardised; overall, per state, per "
+                                    "time step) of one or more runs (e.g. seeds), their mean and spread, "
+                                    "and the paper's Fig. 3 and Fig. 4 as PNG.")
+    ev.add_argument("runs", nargs="+", help="run directories (several: aggregated, e.g. over seeds)")
+    ev.add_argument("--data", required=True, help="dataset directory to evaluate on")
+    ev.add_argument("--split", default="test", help="split (default test)")
+    ev.add_argument("--out", default=None, help="where metrics.json and figures go (default: the first run)")
+    ev.set_defaults(func=cmd_evaluate)
 
     demo = sub.add_parser("demo", help="run the main job end to end on defaults")
     demo.add_argument("--out", default="runs/demo", help="run directory (default runs/demo)")

@@ -1,0 +1,53 @@
+"""Evaluation of trained runs as a user sees it: metrics.json, a text table and the paper's figures."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from opfmu.files import write_json
+from reference_models.sm4 import STATE_NAMES
+
+from .data import load_split
+from .evaluation import aggregate, evaluate, plot_error_over_time, plot_trajectories, predict, to_jsonable
+from .training import load_model
+
+
+def evaluate_runs(runs, data_dir, split: str = "test", out=None) -> str:
+    """Evaluate each run's best model on `split` of `data_dir`; aggregate over runs (e.g. seeds).
+
+    Writes `metrics.json` (per run and aggregate), `trajectories.png` (Fig. 3) and
+    `error_over_time.png` (Fig. 4) into `out` (default: the first run); returns a text table.
+    """
+    runs = [Path(r) for r in runs]
+    for run in runs:
+        if not (run / "model.pt").exists():
+            raise ValueError(f"{run} holds no trained model (model.pt); run `opfmu train` first")
+    data = load_split(data_dir, split)
+    if "x" not in data:
+        raise ValueError(f"the {split} split has no reference states to evaluate against")
+    out = Path(out) if out else runs[0]
+    models = [load_model(run) for run in runs]
+    per_run = [evaluate(model, data) for model in models]
+    summary = aggregate(per_run)
+    write_json(out / "metrics.json", {"split": split, "data": str(data_dir), "runs": [str(r) for r in runs],
+                                      "per_run": [to_jsonable(m) for m in per_run], "aggregate": to_jsonable(summary)})
+    predictions = {"operator" if len(runs) == 1 else runs[0].name: predict(models[0], data["x0"], data["u"], data["t"])}
+    plot_trajectories(data, predictions, out / "trajectories.png")
+    plot_error_over_time(data, predictions, out / "error_over_time.png")
+    return format_table(summary, split, out)
+
+
+def format_table(summary: dict, split: str, out: Path) -> str:
+    """Mean (+- std over runs) of MSE, MAE, MaxAE, overall and per state, physical and standardised."""
+    mean, std = summary["mean"], summary["std"]
+    lines = [f"{summary['n']} run(s) on the {split} split; metrics.json and figures in {out}",
+             f"{'':<24}{'MSE':>22}{'MAE':>22}{'MaxAE':>22}"]
+
+    def row(label, m, s):
+        cells = "".join(f"{m[k]:>12.3e} ±{s[k]:.1e}" for k in ("mse", "mae", "maxae"))
+        lines.append(f"{label:<24}{cells}")
+
+    row("all (physical units)", mean["physical"], std["physical"])
+    row("all (standardised)", mean["standardised"], std["standardised"])
+    for name in STATE_NAMES:
+        row(f"  {name}", mean["per_state"][name], std["per_state"][name])
+    return "\n".join(lines)

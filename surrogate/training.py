@@ -1,0 +1,379 @@
+"""Full-batch training of an operator network on a dataset directory, with exact resume.
+
+A run directory holds
+    config.json      the TrainConfig and the dataset it trains on (path, fingerprint)
+    checkpoint.pt    model, optimizer, RNG, epoch and early-stopping state (written atomically)
+    model.pt         the best model so far by validation MSE, loadable with `load_model`
+    metrics.jsonl    one JSON line per epoch: epoch, loss (weighted total), data, physics_data and
+                     physics_collocation (when on), val_mse (standardised), wall_s (cumulative
+                     seconds spent in epochs)
+    result.json      summary, written when the run ends
+
+`train` on a directory with a checkpoint continues from it; the continued run gives the same
+parameters as one that was never interrupted (same machine and thread count). A resumed run may
+raise `epochs`; every other setting must match. A run that stopped early stays stopped. The
+learning rate is constant (as in the paper).
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from dataclasses import asdict, dataclass, field, fields, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from opfmu.files import atomic_path, write_json
+from reference_models.sm4 import rhs
+
+from .data import load_metadata, load_split
+from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, residual_scale,
+                     standardise)
+from .models import NormStats, OperatorConfig, OperatorModel, build_model
+
+OPTIMIZERS = ("soap", "adam")
+
+
+class TrainError(ValueError):
+    """A run that cannot be started or resumed as asked."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training settings (defaults: paper IV-C).
+
+    optimizer: "soap" (heavyball.SOAP; factors of size <= max_precond_dim are preconditioned, the
+        2006-wide branch input is not) or "adam" (AdamW: decoupled weight decay like SOAP's).
+    epochs: maximum number of full-batch epochs; early stopping ends the run when the validation
+        MSE (standardised states) has not improved by min_delta for `patience` epochs.
+    physics: add the physics losses (eqs. 6, 7) with `weights`; off, only the data loss is used.
+    time_points: if set, each epoch uses this many grid times drawn at random (without
+        replacement) for all terms; None uses the whole grid.
+    checkpoint_every: epochs between checkpoints (one is also written when the run ends).
+    """
+
+    model: OperatorConfig = field(default_factory=OperatorConfig)
+    optimizer: str = "soap"
+    lr: float = 3e-3
+    weight_decay: float = 0.01
+    max_precond_dim: int = 256
+    precondition_frequency: int = 10
+    epochs: int = 10_000
+    patience: int = 200
+    min_delta: float = 1e-6
+    seed: int = 0
+    physics: bool = False
+    weights: LossWeights = field(default_factory=LossWeights)
+    time_points: int | None = None
+    checkpoint_every: int = 100
+
+    def __post_init__(self):
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"unknown optimizer {self.optimizer!r} (known: {', '.join(OPTIMIZERS)})")
+        if self.epochs < 0 or self.patience < 1 or self.checkpoint_every < 1:
+            raise ValueError("epochs must be >= 0, patience and checkpoint_every >= 1")
+        if self.time_points is not None and self.time_points < 1:
+            raise ValueError("time_points must be >= 1 (or None for the whole grid)")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "TrainConfig":
+        known = {f.name for f in fields(cls)}
+        data = {k: v for k, v in data.items() if k in known}
+        if "model" in data:
+            data["model"] = OperatorConfig.from_dict(data["model"])
+        if "weights" in data:
+            data["weights"] = LossWeights(**data["weights"])
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    """How a run ended: epochs run, the best epoch and its validation MSE (standardised states)."""
+
+    run_dir: str
+    epochs: int
+    best_epoch: int
+    best_val_mse: float
+    stopped_early: bool
+    wall_s: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class _Tensors:
+    """The float32 tensors of one training run (shared grid t [S])."""
+
+    t: torch.Tensor
+    x0: torch.Tensor
+    u: torch.Tensor
+    y: torch.Tensor              # standardised reference states, [N, S, 4]
+    f_ref: torch.Tensor          # rhs at the reference states, [N, S, 4]
+    val_x0: torch.Tensor
+    val_u: torch.Tensor
+    val_y: torch.Tensor
+    col_x0: torch.Tensor | None
+    col_u: torch.Tensor | None
+    scale: torch.Tensor          # per-state residual scale [4]
+
+
+@dataclass
+class _State:
+    """Everything besides model and optimizer that an exact resume needs."""
+
+    epoch: int = 0
+    best_val: float = float("inf")
+    best_epoch: int = 0
+    best_state: dict | None = None
+    ref_val: float = float("inf")   # last value that improved by min_delta (patience reference)
+    bad_epochs: int = 0
+    wall_s: float = 0.0
+    stopped_early: bool = False
+
+
+def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> TrainResult:
+    """Train (or resume) a model on the dataset in `data_dir`; artefacts go to `run_dir`.
+
+    Raises TrainError when run_dir holds a checkpoint of another configuration or dataset, and
+    surrogate.data.DatasetError when data_dir is not a complete dataset.
+    """
+    data_dir, run_dir = Path(data_dir), Path(run_dir)
+    meta = load_metadata(data_dir)
+    data_info = {"dir": str(data_dir.resolve()), "fingerprint": meta.get("fingerprint")}
+    checkpoint_path = run_dir / "checkpoint.pt"
+    resuming = checkpoint_path.exists()
+    if resuming:
+        _check_resumable(run_dir, config, data_info)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    write_json(run_dir / "config.json", {"train": config.to_dict(), "data": data_info})
+
+    splits = _load_splits(data_dir, config)
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        model = build_model(config.model, NormStats.fit(splits["train"]))
+    tensors = _to_tensors(splits, model)
+    with _eager_heavyball():
+        optimizer = _make_optimizer(model, config)
+        generator = torch.Generator().manual_seed(config.seed)
+        state = _State()
+        if resuming:
+            state = _restore(checkpoint_path, model, optimizer, generator)
+        metrics_path = run_dir / "metrics.jsonl"
+        _truncate_metrics(metrics_path, state.epoch)
+        _loop(model, optimizer, generator, state, tensors, config, run_dir, progress)
+    result = TrainResult(str(run_dir), state.epoch, state.best_epoch, state.best_val, state.stopped_early,
+                         round(state.wall_s, 3))
+    write_json(run_dir / "result.json", result.to_dict())
+    return result
+
+
+def _loop(model, optimizer, generator, state: _State, tensors: _Tensors, config: TrainConfig, run_dir: Path,
+          progress: bool) -> None:
+    """Epochs until `config.epochs` or early stopping; checkpoints periodically and at the end."""
+    bar = tqdm(total=config.epochs, initial=state.epoch, desc="training", unit="epoch", disable=not progress)
+    with open(run_dir / "metrics.jsonl", "a") as log:
+        while state.epoch < config.epochs and not state.stopped_early:
+            started = time.perf_counter()
+            parts = _step(model, optimizer, generator, tensors, config)
+            val = validation_mse(model, tensors)
+            state.epoch += 1
+            state.wall_s += time.perf_counter() - started
+            _update_early_stopping(state, val, model, config)
+            line = {"epoch": state.epoch, **parts, "val_mse": val, "wall_s": round(state.wall_s, 4)}
+            log.write(json.dumps(line) + "\n")
+            log.flush()
+            bar.update(1)
+            bar.set_postfix(loss=f"{parts['loss']:.3e}", val=f"{val:.3e}", best=f"{state.best_val:.3e}")
+            if state.epoch % config.checkpoint_every == 0:
+                _save(run_dir, model, optimizer, generator, state, config)
+    bar.close()
+    _save(run_dir, model, optimizer, generator, state, config)
+
+
+def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -> dict:
+    """One optimizer step on the full batch; returns the loss terms as floats."""
+    model.train()
+    n_times = tensors.t.numel()
+    idx = None
+    if config.time_points is not None and config.time_points < n_times:
+        idx = torch.randperm(n_times, generator=generator)[:config.time_points].sort().values
+    pick = (lambda a: a) if idx is None else (lambda a: a[:, idx])  # noqa: E731
+    t = tensors.t if idx is None else tensors.t[idx]
+    w = config.weights
+    use_pd = config.physics and w.physics_data > 0
+    use_pc = config.physics and w.physics_collocation > 0 and tensors.col_x0 is not None
+
+    if use_pd:
+        y_hat, dydt_hat = model.standardised_with_rate(tensors.x0, tensors.u, t)
+    else:
+        y_hat = model.standardised(tensors.x0, tensors.u, t)
+    terms = {"data": data_loss(y_hat, pick(tensors.y))}
+    total = w.data * terms["data"]
+    if use_pd:
+        terms["physics_data"] = physics_data_loss(model.x_std * dydt_hat, pick(tensors.f_ref), tensors.scale)
+        total = total + w.physics_data * terms["physics_data"]
+    if use_pc:
+        yc_hat, dyc_hat = model.standardised_with_rate(tensors.col_x0, tensors.col_u, t)
+        terms["physics_collocation"] = physics_collocation_loss(
+            model.decode(yc_hat), model.x_std * dyc_hat, pick(tensors.col_u), tensors.scale)
+        total = total + w.physics_collocation * terms["physics_collocation"]
+    optimizer.zero_grad(set_to_none=True)
+    total.backward()
+    optimizer.step()
+    return {"loss": total.item(), **{k: v.item() for k, v in terms.items()}}
+
+
+def validation_mse(model: OperatorModel, tensors: _Tensors) -> float:
+    """Data loss (MSE of standardised states) on the validation split over the whole grid."""
+    model.eval()
+    with torch.no_grad():
+        return data_loss(model.standardised(tensors.val_x0, tensors.val_u, tensors.t), tensors.val_y).item()
+
+
+def _update_early_stopping(state: _State, val: float, model, config: TrainConfig) -> None:
+    """Keep the best model (any improvement); reset patience only on an improvement > min_delta."""
+    if val < state.best_val:
+        state.best_val, state.best_epoch = val, state.epoch
+        state.best_state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    if val < state.ref_val - config.min_delta:
+        state.ref_val, state.bad_epochs = val, 0
+    else:
+        state.bad_epochs += 1
+        state.stopped_early = state.bad_epochs >= config.patience
+
+
+def _load_splits(data_dir: Path, config: TrainConfig) -> dict:
+    """train, val and (if the collocation loss is on) collocation splits, checked for one time grid."""
+    names = ["train", "val"] + (["collocation"] if config.physics and config.weights.physics_collocation > 0 else [])
+    splits = {name: load_split(data_dir, name) for name in names}
+    for name, split in splits.items():
+        if not np.array_equal(split["t"], splits["train"]["t"]):
+            raise TrainError(f"the {name} split of {data_dir} has another time grid than the train split")
+    return splits
+
+
+def _to_tensors(splits: dict, model: OperatorModel) -> _Tensors:
+    """The splits as float32 tensors; reference states standardised with the model's normalisation."""
+    train_split, val_split, col = splits["train"], splits["val"], splits.get("collocation")
+    f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    t = f32(train_split["t"])
+    with torch.no_grad():
+        probe = model.standardised(f32(train_split["x0"][:1]), f32(train_split["u"][:1]), t)
+    target = lambda x: _laid_out_like(standardise(f32(x), model), probe)  # noqa: E731
+    f_ref = rhs(torch.as_tensor(train_split["x"]), torch.as_tensor(train_split["u"]))
+    return _Tensors(
+        t=t, x0=f32(train_split["x0"]), u=f32(train_split["u"]), y=target(train_split["x"]),
+        f_ref=_laid_out_like(f_ref.float(), probe),
+        val_x0=f32(val_split["x0"]), val_u=f32(val_split["u"]), val_y=target(val_split["x"]),
+        col_x0=None if col is None else f32(col["x0"]), col_u=None if col is None else f32(col["u"]),
+        scale=f32(residual_scale(train_split["x"], train_split["t"])),
+    )
+
+
+def _laid_out_like(a: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """`a` stored with the dimension order of `like`'s memory (a DeepONet's output is [N, M, 4] as a
+    view of [N, 4, M]), so the loss compares the two without strided access."""
+    order = sorted(range(like.dim()), key=lambda d: -like.stride(d))
+    inverse = sorted(range(len(order)), key=order.__getitem__)
+    return a.permute(order).contiguous().permute(inverse)
+
+
+def _make_optimizer(model, config: TrainConfig):
+    if config.optimizer == "adam":
+        return torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    import heavyball
+
+    return heavyball.SOAP(model.parameters(), lr=config.lr, weight_decay=config.weight_decay,
+                          max_precond_dim=config.max_precond_dim,
+                          precondition_frequency=config.precondition_frequency)
+
+
+@contextlib.contextmanager
+def _eager_heavyball():
+    """Run heavyball's kernels eagerly: its default torch.compile autotuning costs minutes on a CPU
+    and buys little for a model of this size. Restores the setting afterwards."""
+    try:
+        import heavyball.utils as hb
+    except ImportError:
+        yield
+        return
+    saved = hb.compile_mode
+    hb.compile_mode = None
+    try:
+        yield
+    finally:
+        hb.compile_mode = saved
+
+
+def _save(run_dir: Path, model, optimizer, generator, state: _State, config: TrainConfig) -> None:
+    """checkpoint.pt (everything to resume) and model.pt (the best model), each written atomically."""
+    checkpoint = {"model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                  "generator": generator.get_state(), "state": asdict(state)}
+    with atomic_path(run_dir / "checkpoint.pt") as tmp:
+        torch.save(checkpoint, tmp)
+    if state.best_state is not None:
+        save_model(run_dir / "model.pt", model, state.best_state, config,
+                   {"epoch": state.best_epoch, "val_mse": state.best_val})
+
+
+def _restore(path: Path, model, optimizer, generator) -> _State:
+    checkpoint = torch.load(path, weights_only=False)
+    model.load_state_dict(checkpoint["model"])
+    optimizer.load_state_dict(checkpoint["optimizer"])
+    generator.set_state(checkpoint["generator"])
+    return _State(**checkpoint["state"])
+
+
+def _check_resumable(run_dir: Path, config: TrainConfig, data_info: dict) -> None:
+    """Raise TrainError unless the run in `run_dir` trained with `config` (but for epochs) on this data."""
+    try:
+        saved = json.loads((run_dir / "config.json").read_text())
+        saved_config = TrainConfig.from_dict(saved["train"])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise TrainError(f"{run_dir} has a checkpoint but no readable config.json ({error})") from None
+    if saved.get("data", {}).get("fingerprint") != data_info["fingerprint"]:
+        raise TrainError(f"{run_dir} holds a run on another dataset; choose another run directory")
+    if replace(saved_config, epochs=config.epochs) != config:
+        a, b = saved_config.to_dict(), config.to_dict()
+        changed = sorted(k for k in a if k != "epochs" and a[k] != b[k])
+        raise TrainError(f"{run_dir} holds a run with other settings ({', '.join(changed)}); "
+                         "only epochs may change on resume")
+
+
+def _truncate_metrics(path: Path, epoch: int) -> None:
+    """Drop log lines past `epoch` (written after the checkpoint a resumed run restarts from)."""
+    if not path.exists():
+        return
+    lines = [line for line in path.read_text().splitlines() if line.strip()]
+    kept = [line for line in lines if json.loads(line)["epoch"] <= epoch]
+    if len(kept) != len(lines):
+        with atomic_path(path) as tmp:
+            tmp.write_text("".join(line + "\n" for line in kept))
+
+
+def save_model(path, model: OperatorModel, state_dict: dict, config: TrainConfig, info: dict) -> None:
+    """Write a model file: architecture, normalisation, weights and training info (atomically)."""
+    payload = {"model_config": config.model.to_dict(), "stats": model.stats().to_dict(), "state_dict": state_dict,
+               "train_config": config.to_dict(), "info": info}
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+
+
+def load_model(path) -> OperatorModel:
+    """The model in a run directory's model.pt (or a model file), in eval mode."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "model.pt"
+    if not path.exists():
+        raise TrainError(f"no trained model at {path}")
+    payload = torch.load(path, weights_only=False)
+    model = build_model(OperatorConfig.from_dict(payload["model_config"]), NormStats.from_dict(payload["stats"]))
+    model.load_state_dict(payload["state_dict"])
+    return model.eval()

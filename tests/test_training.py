@@ -1,0 +1,147 @@
+"""Training runs (learning, checkpoints, exact resume, early stopping) and evaluation metrics/figures."""
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import surrogate.training as training
+from surrogate.data import generate, load_split
+from surrogate.evaluation import (aggregate, error_metrics, evaluate, plot_error_over_time, plot_trajectories,
+                                  predict)
+from surrogate.models import OperatorConfig
+from surrogate.training import TrainConfig, TrainError, load_model, train
+
+from conftest import tiny
+
+SMALL = OperatorConfig(width=16, depth=2, latent=8)
+
+
+@pytest.fixture(scope="module")
+def learnable(tmp_path_factory):
+    """A paper-family dataset with enough training trajectories (40, on a 201-point grid) that
+    the validation loss can fall within a few dozen epochs."""
+    out = tmp_path_factory.mktemp("learnable")
+    recipe = tiny("paper", counts={"train": 40, "collocation": 4, "val": 8, "test": 4}, n_points=201, chunk_size=10)
+    generate(recipe, out, seed=5, progress=False)
+    return out
+
+
+def config(**changes):
+    return TrainConfig(**{"model": SMALL, "epochs": 12, "checkpoint_every": 4, **changes})
+
+
+def metrics_lines(run_dir):
+    return [json.loads(line) for line in (run_dir / "metrics.jsonl").read_text().splitlines()]
+
+
+def parameters(run_dir):
+    return torch.load(run_dir / "checkpoint.pt", weights_only=False)["model"]
+
+
+def assert_same_parameters(a, b):
+    assert a.keys() == b.keys()
+    for name in a:
+        torch.testing.assert_close(a[name], b[name], rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("optimizer", ["soap", "adam"])
+def test_short_training_lowers_the_validation_loss(learnable, tmp_path, optimizer):
+    result = train(learnable, config(model=OperatorConfig(), optimizer=optimizer, epochs=30), tmp_path, progress=False)
+    first = metrics_lines(tmp_path)[0]["val_mse"]
+    assert result.epochs == 30 and result.best_val_mse < 0.5 * first
+
+
+def test_physics_informed_training_logs_all_three_loss_terms(paper_tiny, tmp_path):
+    train(paper_tiny[1], config(physics=True, epochs=3), tmp_path, progress=False)
+    line = metrics_lines(tmp_path)[-1]
+    assert {"loss", "data", "physics_data", "physics_collocation", "val_mse", "wall_s"} <= line.keys()
+    assert all(np.isfinite(line[k]) for k in ("physics_data", "physics_collocation"))
+
+
+def test_run_directory_holds_config_checkpoint_best_model_metrics_and_result(paper_tiny, tmp_path):
+    result = train(paper_tiny[1], config(), tmp_path, progress=False)
+    saved = json.loads((tmp_path / "config.json").read_text())
+    assert TrainConfig.from_dict(saved["train"]) == config()
+    assert [m["epoch"] for m in metrics_lines(tmp_path)] == list(range(1, 13))
+    assert json.loads((tmp_path / "result.json").read_text()) == result.to_dict()
+    best = min(metrics_lines(tmp_path), key=lambda m: m["val_mse"])
+    assert (result.best_epoch, result.best_val_mse) == (best["epoch"], best["val_mse"])
+    model = load_model(tmp_path)
+    val = load_split(paper_tiny[1], "val")
+    assert evaluate(model, val)["standardised"]["mse"] == pytest.approx(best["val_mse"], rel=1e-4)
+
+
+def test_extending_a_finished_run_gives_the_parameters_of_an_uninterrupted_one(paper_tiny, tmp_path):
+    # physics and per-epoch time sampling on, so the optimizer and RNG states must both carry over
+    changes = dict(physics=True, time_points=50, weights=training.LossWeights(1.0, 1e-2, 1e-2))
+    train(paper_tiny[1], config(epochs=12, **changes), tmp_path / "straight", progress=False)
+    train(paper_tiny[1], config(epochs=6, **changes), tmp_path / "resumed", progress=False)
+    train(paper_tiny[1], config(epochs=12, **changes), tmp_path / "resumed", progress=False)
+    assert_same_parameters(parameters(tmp_path / "straight"), parameters(tmp_path / "resumed"))
+    assert [m["epoch"] for m in metrics_lines(tmp_path / "resumed")] == list(range(1, 13))
+
+
+def test_interrupted_run_resumes_from_its_last_checkpoint_exactly(paper_tiny, tmp_path, monkeypatch):
+    train(paper_tiny[1], config(time_points=50), tmp_path / "straight", progress=False)
+    step, calls = training._step, []
+
+    def crash_at_epoch_7(*args):
+        calls.append(1)
+        if len(calls) == 7:
+            raise KeyboardInterrupt
+        return step(*args)
+
+    monkeypatch.setattr(training, "_step", crash_at_epoch_7)
+    with pytest.raises(KeyboardInterrupt):
+        train(paper_tiny[1], config(time_points=50), tmp_path / "resumed", progress=False)
+    monkeypatch.setattr(training, "_step", step)
+    assert torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["state"]["epoch"] == 4
+    train(paper_tiny[1], config(time_points=50), tmp_path / "resumed", progress=False)
+    assert_same_parameters(parameters(tmp_path / "straight"), parameters(tmp_path / "resumed"))
+    assert [m["epoch"] for m in metrics_lines(tmp_path / "resumed")] == list(range(1, 13))
+
+
+def test_resuming_with_other_settings_is_refused_naming_them(paper_tiny, tmp_path):
+    train(paper_tiny[1], config(epochs=2), tmp_path, progress=False)
+    with pytest.raises(TrainError, match="lr"):
+        train(paper_tiny[1], config(epochs=4, lr=1e-4), tmp_path, progress=False)
+
+
+def test_early_stopping_ends_the_run_after_patience_epochs_without_improvement(paper_tiny, tmp_path):
+    result = train(paper_tiny[1], config(patience=2, min_delta=1e3, epochs=50), tmp_path, progress=False)
+    assert result.stopped_early and result.epochs == 3  # epoch 1 sets the reference, 2 and 3 fail to beat it
+
+
+def test_error_metrics_in_physical_and_standardised_units_per_state_and_per_time():
+    x = np.zeros((2, 5, 4))
+    x_hat = x.copy()
+    x_hat[0, :, 1] = 0.3  # omega off by 0.3 rad/s in one of two trajectories
+    m = error_metrics(x_hat, x, x_std=[1.0, 0.6, 1.0, 1.0])
+    assert m["physical"] == pytest.approx({"mse": 0.09 / 8, "mae": 0.3 / 8, "maxae": 0.3})
+    assert m["standardised"] == pytest.approx({"mse": 0.25 / 8, "mae": 0.5 / 8, "maxae": 0.5})
+    assert m["per_state"]["omega"] == pytest.approx({"mse": 0.045, "mae": 0.15, "maxae": 0.3})
+    assert m["per_state"]["delta"]["maxae"] == 0.0
+    assert m["per_time"]["mae"].shape == (5, 4)
+    np.testing.assert_allclose(m["per_time"]["mae"][:, 1], 0.15)
+    np.testing.assert_allclose(m["per_time"]["ae_std"][:, 1], 0.15)
+
+
+def test_aggregate_gives_mean_and_std_over_seeds_of_every_metric():
+    x = np.zeros((1, 3, 4))
+    runs = [error_metrics(x + e, x, [1.0] * 4) for e in (0.1, 0.3)]
+    summary = aggregate(runs)
+    assert summary["n"] == 2
+    assert summary["mean"]["physical"]["mae"] == pytest.approx(0.2)
+    assert summary["std"]["physical"]["mae"] == pytest.approx(0.1)
+    np.testing.assert_allclose(summary["mean"]["per_time"]["mae"], 0.2)
+
+
+def test_figures_of_trajectories_and_error_over_time_are_written_as_png(paper_tiny, tmp_path):
+    train(paper_tiny[1], config(epochs=2), tmp_path, progress=False)
+    test = load_split(paper_tiny[1], "test")
+    x_hat = predict(load_model(tmp_path), test["x0"], test["u"], test["t"])
+    plot_trajectories(test, {"unstacked": x_hat}, tmp_path / "fig3.png")
+    plot_error_over_time(test, {"unstacked": x_hat}, tmp_path / "fig4.png")
+    for name in ("fig3.png", "fig4.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
