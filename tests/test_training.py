@@ -73,8 +73,10 @@ def test_run_directory_holds_config_checkpoint_best_model_metrics_and_result(pap
 
 
 def test_extending_a_finished_run_gives_the_parameters_of_an_uninterrupted_one(paper_tiny, tmp_path):
-    # physics and per-epoch time sampling on, so the optimizer and RNG states must both carry over
-    changes = dict(physics=True, time_points=50, weights=training.LossWeights(1.0, 1e-2, 1e-2))
+    # physics and per-epoch time sampling on, so the optimizer and RNG states must both carry over;
+    # a constant rate, since a cosine schedule is stretched by the new epoch count
+    changes = dict(physics=True, time_points=50, weights=training.LossWeights(1.0, 1e-2, 1e-2),
+                   lr_schedule="constant")
     train(paper_tiny[1], config(epochs=12, **changes), tmp_path / "straight", progress=False)
     train(paper_tiny[1], config(epochs=6, **changes), tmp_path / "resumed", progress=False)
     train(paper_tiny[1], config(epochs=12, **changes), tmp_path / "resumed", progress=False)
@@ -106,6 +108,18 @@ def test_resuming_with_other_settings_is_refused_naming_them(paper_tiny, tmp_pat
     train(paper_tiny[1], config(epochs=2), tmp_path, progress=False)
     with pytest.raises(TrainError, match="lr"):
         train(paper_tiny[1], config(epochs=4, lr=1e-4), tmp_path, progress=False)
+
+
+def test_cosine_schedule_decays_from_lr_to_lr_times_lr_final():
+    cfg = TrainConfig(lr=3e-3, lr_final=0.01, epochs=101)
+    rates = [training.learning_rate(cfg, e) for e in range(101)]
+    assert rates[0] == pytest.approx(3e-3) and rates[50] == pytest.approx(3e-3 * 0.505)
+    assert rates[100] == pytest.approx(3e-5) and all(a >= b for a, b in zip(rates, rates[1:]))
+
+
+def test_constant_schedule_keeps_the_paper_rate():
+    cfg = TrainConfig(lr=3e-3, lr_schedule="constant", epochs=10)
+    assert {training.learning_rate(cfg, e) for e in range(10)} == {3e-3}
 
 
 def test_early_stopping_ends_the_run_after_patience_epochs_without_improvement(paper_tiny, tmp_path):
