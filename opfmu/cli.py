@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -55,8 +56,6 @@ def summary_table(meta: dict) -> str:
 
 
 def cmd_train(args) -> None:
-    import json
-
     import torch
 
     from surrogate.models import OperatorConfig
@@ -97,6 +96,20 @@ def cmd_evaluate(args) -> None:
     except (ValueError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
     print(report)
+
+
+def cmd_export(args) -> None:
+    from surrogate.onnx_export import ExportError, export_onnx
+    from surrogate.training import TrainError
+
+    try:
+        meta = export_onnx(args.run, args.output, data_dir=args.data)
+    except (ExportError, TrainError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    metrics = json.loads(meta["metrics"])["physical"]
+    print(f"wrote {args.output}: {json.loads(meta['architecture'])['arch']} operator, horizon {meta['horizon_s']} s, "
+          f"{meta['n_sensors']} sensors; test MSE {metrics['mse']:.3e}, MAE {metrics['mae']:.3e}, "
+          f"MaxAE {metrics['maxae']:.3e} (physical units); onnxruntime matches torch")
 
 
 def cmd_demo(args) -> None:
@@ -149,6 +162,12 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--split", default="test", help="split (default test)")
     ev.add_argument("--out", default=None, help="where metrics.json and figures go (default: the first run)")
     ev.set_defaults(func=cmd_evaluate)
+
+    ex = sub.add_parser("export", help="export a trained run to ONNX (checked against torch)")
+    ex.add_argument("run", help="run directory (from `opfmu train`)")
+    ex.add_argument("-o", "--output", required=True, help="the .onnx file to write")
+    ex.add_argument("--data", default=None, help="dataset for envelope and test metrics (default: the run's)")
+    ex.set_defaults(func=cmd_export)
 
     demo = sub.add_parser("demo", help="run the main job end to end on defaults")
     demo.add_argument("--out", default="runs/demo", help="run directory (default runs/demo)")

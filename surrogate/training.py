@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import warnings
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
@@ -188,7 +189,9 @@ def _loop(model, optimizer, generator, state: _State, tensors: _Tensors, config:
           progress: bool) -> None:
     """Epochs until `config.epochs` or early stopping; checkpoints periodically and at the end."""
     bar = tqdm(total=config.epochs, initial=state.epoch, desc="training", unit="epoch", disable=not progress)
-    with open(run_dir / "metrics.jsonl", "a") as log:
+    with open(run_dir / "metrics.jsonl", "a") as log, warnings.catch_warnings():
+        # heavyball notes every rate change of the schedule as "experimental"; it is supported here
+        warnings.filterwarnings("ignore", message="Learning rate changed between steps")
         while state.epoch < config.epochs and not state.stopped_early:
             started = time.perf_counter()
             for group in optimizer.param_groups:

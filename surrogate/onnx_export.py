@@ -1,0 +1,142 @@
+"""Export a trained operator to one ONNX file (DESIGN section 4), checked against torch.
+
+Graph: inputs x0 [N, 4], u [N, S, 2], t [M] (physical units, float32); output x [N, M, 4];
+normalisation inside; opset 17; N and M dynamic. metadata_props carry what an importer needs to
+use the file safely: component, names, horizon, sensor times, the training envelope, architecture,
+training summary, test metrics and the opfmu version.
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from opfmu import __version__
+from opfmu.files import atomic_path
+from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
+
+from .data import load_metadata, load_split
+from .evaluation import evaluate
+from .training import load_model
+
+OPSET = 17
+TOLERANCE = 1e-5  # max abs difference allowed between onnxruntime and torch
+
+
+class ExportError(ValueError):
+    """A model that cannot be exported as asked (or whose export disagrees with torch)."""
+
+
+def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -> dict:
+    """Write run_dir's best model to `out` (.onnx); returns the metadata written.
+
+    data_dir defaults to the dataset the run trained on (from its config.json); its metadata gives
+    the envelope and its test split the metrics. The file is written only if onnxruntime matches
+    torch to TOLERANCE on n_check random in-envelope inputs.
+    """
+    run_dir, out = Path(run_dir), Path(out)
+    model = load_model(run_dir)
+    run_config = json.loads((run_dir / "config.json").read_text())
+    data_dir = Path(data_dir or run_config["data"]["dir"])
+    data_meta = load_metadata(data_dir)
+    t_grid = np.linspace(0.0, data_meta["horizon_s"], data_meta["n_points"])
+    metadata = {
+        "component": "sm4",
+        "state_names": json.dumps(list(STATE_NAMES)),
+        "input_names": json.dumps(list(INPUT_NAMES)),
+        "horizon_s": repr(float(data_meta["horizon_s"])),
+        "n_sensors": str(len(t_grid)),
+        "sensor_times_s": json.dumps(t_grid.tolist()),
+        "envelope": json.dumps(data_meta["envelope"]),
+        "architecture": json.dumps(model.config.to_dict()),
+        "physics_informed": json.dumps(bool(run_config["train"]["physics"])),
+        "training": json.dumps(_training_summary(run_dir, run_config, data_meta)),
+        "metrics": json.dumps(_test_metrics(model, data_dir)),
+        "opfmu_version": __version__,
+    }
+    with atomic_path(out) as tmp:
+        _torch_export(model, len(t_grid), tmp)
+        _attach_metadata(tmp, metadata)
+        worst = check_against_torch(model, tmp, data_meta["envelope"], t_grid, n_check, seed)
+        if not worst <= TOLERANCE:
+            raise ExportError(f"onnxruntime differs from torch by {worst:.2e} (> {TOLERANCE:g}); not written")
+    return metadata
+
+
+def _torch_export(model, n_sensors: int, path: Path) -> None:
+    x0, u, t = torch.zeros(2, 4), torch.ones(2, n_sensors, 2), torch.linspace(0, 1, 5)
+    dynamic = {"x0": {0: "N"}, "u": {0: "N"}, "t": {0: "M"}, "x": {0: "N", 1: "M"}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
+        torch.onnx.export(model, (x0, u, t), str(path), input_names=["x0", "u", "t"], output_names=["x"],
+                          dynamic_axes=dynamic, opset_version=OPSET, dynamo=False)
+
+
+def _attach_metadata(path: Path, metadata: dict) -> None:
+    import onnx
+
+    proto = onnx.load(str(path))
+    output = proto.graph.output[0]  # the exporter leaves the state axis symbolic: declare [N, M, 4]
+    output.CopyFrom(onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, ["N", "M", 4]))
+    del proto.metadata_props[:]
+    for key, value in metadata.items():
+        proto.metadata_props.add(key=key, value=value)
+    proto.doc_string = "opfmu operator: x(t) of SM4 from x0 and u at the sensor times"
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(path))
+
+
+def random_inputs(envelope: dict, t_grid: np.ndarray, n: int, rng: np.random.Generator):
+    """In-envelope test inputs: x0 [n, 4] uniform in the box; u [n, S, 2] ramps between two random
+    levels per channel plus a random-amplitude sine, clipped to the box; t [M]: the grid and random times."""
+    lo_x = np.array([envelope["x0"][s][0] for s in STATE_NAMES])
+    hi_x = np.array([envelope["x0"][s][1] for s in STATE_NAMES])
+    lo_u = np.array([envelope["u"][s][0] for s in INPUT_NAMES])
+    hi_u = np.array([envelope["u"][s][1] for s in INPUT_NAMES])
+    x0 = rng.uniform(lo_x, hi_x, (n, 4))
+    frac = t_grid / t_grid[-1]
+    a, b = rng.uniform(lo_u, hi_u, (n, 2)), rng.uniform(lo_u, hi_u, (n, 2))
+    wiggle = 0.1 * (hi_u - lo_u) * rng.uniform(0, 1, (n, 1, 2)) * np.sin(2 * np.pi * rng.uniform(1, 8, (n, 1, 2)) * frac[None, :, None])
+    u = np.clip(a[:, None] + (b - a)[:, None] * frac[None, :, None] + wiggle, lo_u, hi_u)
+    t = np.sort(np.concatenate([t_grid, rng.uniform(0, t_grid[-1], 37)]))
+    return x0.astype(np.float32), u.astype(np.float32), t.astype(np.float32)
+
+
+def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0) -> float:
+    """Max abs difference [physical units] of onnxruntime against torch on random in-envelope inputs."""
+    import onnxruntime as ort
+
+    x0, u, t = random_inputs(envelope, t_grid, n, np.random.default_rng(seed))
+    session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    got = session.run(["x"], {"x0": x0, "u": u, "t": t})[0]
+    with torch.no_grad():
+        expected = model(torch.from_numpy(x0), torch.from_numpy(u), torch.from_numpy(t)).numpy()
+    return float(np.max(np.abs(got - expected)))
+
+
+def _training_summary(run_dir: Path, run_config: dict, data_meta: dict) -> dict:
+    result = json.loads((run_dir / "result.json").read_text()) if (run_dir / "result.json").exists() else {}
+    best_epoch = result.get("best_epoch")
+    losses = {}
+    log = run_dir / "metrics.jsonl"
+    if log.exists() and best_epoch:
+        for line in log.read_text().splitlines():
+            entry = json.loads(line)
+            if entry["epoch"] == best_epoch:
+                losses = {k: v for k, v in entry.items() if k not in ("epoch", "wall_s")}
+    train = run_config["train"]
+    return {"seed": train["seed"], "epochs": result.get("epochs"), "best_epoch": best_epoch,
+            "wall_s": result.get("wall_s"), "losses": losses, "optimizer": train["optimizer"],
+            "lr": train["lr"], "lr_schedule": train.get("lr_schedule"), "time_points": train.get("time_points"),
+            "weights": train["weights"], "dataset": {"preset": data_meta["preset"]["name"],
+                                                     "seed": data_meta["seed"], "fingerprint": data_meta["fingerprint"]}}
+
+
+def _test_metrics(model, data_dir: Path) -> dict:
+    """Physical and standardised MSE/MAE/MaxAE on the dataset's test split, and MaxAE per state."""
+    m = evaluate(model, load_split(data_dir, "test"))
+    return {"split": "test", "n_trajectories": m["n_trajectories"], "physical": m["physical"],
+            "standardised": m["standardised"], "maxae_per_state": {k: v["maxae"] for k, v in m["per_state"].items()}}

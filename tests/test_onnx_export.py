@@ -1,0 +1,128 @@
+"""ONNX export and onnxruntime inference: the contract of DESIGN section 4."""
+import json
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import onnx
+import pytest
+import torch
+
+from surrogate.data import load_metadata, load_split
+from surrogate.models import OperatorConfig
+from surrogate.onnx_export import export_onnx
+from surrogate.operator import EnvelopeWarning, Operator, OperatorInputError
+from surrogate.training import TrainConfig, load_model, train
+
+SMALL = OperatorConfig(width=16, depth=2, latent=8)
+
+
+@pytest.fixture(scope="module", params=["unstacked", "pinn"])
+def exported(request, paper_tiny, tmp_path_factory):
+    """(run directory, onnx path) of a briefly trained model of each kind."""
+    run = tmp_path_factory.mktemp(f"run_{request.param}")
+    config = TrainConfig(model=OperatorConfig(**{**SMALL.to_dict(), "arch": request.param}), epochs=3,
+                         time_points=20, physics=True)
+    train(paper_tiny[1], config, run, progress=False)
+    path = run / "model.onnx"
+    export_onnx(run, path)
+    return run, path
+
+
+def in_envelope_inputs(meta, n=3):
+    box = meta["envelope"]
+    x0 = np.array([[np.mean(box["x0"][s]) for s in ("delta", "omega", "Ed_p", "Eq_p")]] * n)
+    u = np.tile([np.mean(box["u"]["Vs"]), np.mean(box["u"]["theta_vs"])], (n, meta["n_points"], 1))
+    return x0, u
+
+
+def test_graph_has_the_contract_inputs_outputs_and_opset(exported):
+    model = onnx.load(str(exported[1]))
+    dims = lambda v: [d.dim_param or d.dim_value for d in v.type.tensor_type.shape.dim]  # noqa: E731
+    assert [(i.name, dims(i)) for i in model.graph.input] == [("x0", ["N", 4]), ("u", ["N", 1001, 2]), ("t", ["M"])]
+    assert [(o.name, dims(o)) for o in model.graph.output] == [("x", ["N", "M", 4])]
+    assert all(i.type.tensor_type.elem_type == onnx.TensorProto.FLOAT for i in model.graph.input)
+    assert max(o.version for o in model.opset_import if o.domain in ("", "ai.onnx")) >= 17
+
+
+def test_metadata_carries_the_contract_fields(exported, paper_tiny):
+    meta = {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}
+    assert meta["component"] == "sm4"
+    assert json.loads(meta["state_names"]) == ["delta", "omega", "Ed_p", "Eq_p"]
+    assert json.loads(meta["input_names"]) == ["Vs", "theta_vs"]
+    assert float(meta["horizon_s"]) == 1.0 and int(meta["n_sensors"]) == 1001
+    assert json.loads(meta["envelope"]) == load_metadata(paper_tiny[1])["envelope"]
+    assert json.loads(meta["physics_informed"]) is True
+    assert json.loads(meta["training"])["epochs"] == 3
+    assert set(json.loads(meta["metrics"])["physical"]) == {"mse", "mae", "maxae"}
+    assert meta["opfmu_version"] and json.loads(meta["architecture"])["arch"] in ("unstacked", "pinn")
+
+
+def test_onnxruntime_reproduces_torch_on_the_test_split(exported, paper_tiny):
+    data = load_split(paper_tiny[1], "test")
+    model = load_model(exported[0])
+    with torch.no_grad():
+        expected = model(*(torch.as_tensor(data[k], dtype=torch.float32) for k in ("x0", "u", "t"))).numpy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", EnvelopeWarning)
+        got = Operator.load(exported[1]).predict(data["x0"], data["u"], data["t"])
+    assert np.max(np.abs(got - expected)) <= 1e-5
+
+
+def test_deeponet_trunk_basis_is_cached_per_time_grid(exported, paper_tiny):
+    op = Operator.load(exported[1])
+    if not op.separable:
+        pytest.skip("the PINN has no trunk to cache")
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
+    t = np.linspace(0, 1, 11)
+    first = op.predict(x0, u, t)
+    np.testing.assert_array_equal(op.predict(x0, u, t), first)
+    op.predict(x0, u, np.linspace(0, 1, 7))
+    assert len(op._basis) == 2
+
+
+def test_predictions_at_any_query_times_match_the_whole_graph(exported, paper_tiny):
+    op = Operator.load(exported[1])
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
+    t = np.array([0.0, 0.0123, 0.5, 1.0], dtype=np.float32)
+    whole = op._full.run(["x"], {"x0": x0.astype(np.float32), "u": u.astype(np.float32), "t": t})[0]
+    np.testing.assert_allclose(op.predict(x0, u, t), whole, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(x0=np.zeros((2, 3))), "x0 must be \\[N, 4\\]"),
+    (dict(u=np.zeros((2, 10, 2))), "u must be \\[N, S, 2\\]"),
+    (dict(t=np.array([0.0, 1.5])), "t must lie in \\[0, 1\\]"),
+    (dict(t=np.array([np.nan])), "t holds NaN"),
+])
+def test_bad_inputs_are_refused_with_a_clear_message(exported, paper_tiny, bad, message):
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]), n=2)
+    args = {"x0": x0, "u": u, "t": np.linspace(0, 1, 5), **bad}
+    with pytest.raises(OperatorInputError, match=message):
+        Operator.load(exported[1]).predict(**args)
+
+
+def test_inputs_outside_the_envelope_warn_or_raise_when_strict(exported, paper_tiny):
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]), n=1)
+    u[0, 500:, 0] = 0.3  # a deep voltage dip the paper preset never saw
+    op = Operator.load(exported[1])
+    with pytest.warns(EnvelopeWarning, match="Vs in \\[0.3"):
+        op.predict(x0, u, np.linspace(0, 1, 5))
+    with pytest.raises(OperatorInputError, match="outside the training envelope"):
+        op.predict(x0, u, np.linspace(0, 1, 5), strict=True)
+
+
+def test_export_command_writes_the_file_and_reports_metrics(exported, tmp_path):
+    out = tmp_path / "op.onnx"
+    result = subprocess.run([sys.executable, "-m", "opfmu", "export", str(exported[0]), "-o", str(out)],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert out.exists() and "onnxruntime matches torch" in result.stdout
+
+
+def test_export_of_a_directory_without_a_model_is_a_one_line_error(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "opfmu", "export", str(tmp_path), "-o", str(tmp_path / "x.onnx")],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.onnx").exists()
