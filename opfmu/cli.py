@@ -70,7 +70,7 @@ def cmd_train(args) -> None:
         except (OSError, ValueError) as exc:
             raise UserError(f"cannot read training config {args.config}: {exc}") from None
     flags = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs), ("optimizer", args.optimizer),
-                                ("lr", args.lr)) if v is not None}
+                                ("lr", args.lr), ("time_points", args.time_points)) if v is not None}
     try:
         config = TrainConfig.from_dict({**base, **flags, "physics": args.physics or base.get("physics", False)})
         config = _with_arch(config, args.arch, OperatorConfig)
@@ -148,6 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--epochs", type=int, default=None, help="maximum epochs (default 10000)")
     tr.add_argument("--optimizer", default=None, help="soap | adam (default soap)")
     tr.add_argument("--lr", type=float, default=None, help="learning rate (default 3e-3)")
+    tr.add_argument("--time-points", type=int, default=None,
+                    help="grid times drawn per epoch (default: the whole grid)")
     tr.add_argument("--config", default=None, help="JSON file of TrainConfig fields (flags override it)")
     tr.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")

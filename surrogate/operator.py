@@ -17,6 +17,9 @@ import numpy as np
 from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
 
+DEFAULT_OPERATOR = Path(__file__).parent / "default" / "sm4_cosim.onnx"
+
+
 class OperatorInputError(ValueError):
     """Inputs that do not fit the operator (shape, time range, non-finite values, envelope if strict)."""
 
@@ -58,6 +61,11 @@ class Operator:
         self._basis = OrderedDict()
 
     load = classmethod(lambda cls, path, providers=None, threads=None: cls(path, providers, threads))
+
+    @classmethod
+    def default(cls, providers=None, threads: int | None = None) -> "Operator":
+        """The operator shipped with opfmu (SM4, trained on the `cosim` preset; see default/README.md)."""
+        return cls(DEFAULT_OPERATOR, providers, threads)
 
     @property
     def separable(self) -> bool:

@@ -126,3 +126,23 @@ def test_export_of_a_directory_without_a_model_is_a_one_line_error(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.onnx").exists()
+
+
+def test_shipped_default_operator_loads_and_its_envelope_holds_the_nominal_equilibrium():
+    from reference_models.sm4 import steady_state
+
+    op = Operator.default()
+    x_eq = steady_state(1.0, 0.0)
+    assert not op.outside_envelope(x_eq[None], np.tile([1.0, 0.0], (1, op.n_sensors, 1)))
+    meta = op.metadata
+    assert json.loads(meta["training"])["dataset"]["preset"] == "cosim"
+    assert json.loads(meta["metrics"])["physical"]["maxae"] < 0.5
+
+
+def test_shipped_default_operator_keeps_the_equilibrium_near_rest():
+    from reference_models.sm4 import steady_state
+
+    op = Operator.default()
+    x_eq = steady_state(1.0, 0.0)
+    x = op.predict(x_eq[None], np.tile([1.0, 0.0], (1, op.n_sensors, 1)), np.linspace(0, op.horizon, 101))
+    assert np.all(np.max(np.abs(x[0] - x_eq), axis=0) < [0.05, 0.05, 0.02, 0.02])
