@@ -146,3 +146,13 @@ def test_shipped_default_operator_keeps_the_equilibrium_near_rest():
     x_eq = steady_state(1.0, 0.0)
     x = op.predict(x_eq[None], np.tile([1.0, 0.0], (1, op.n_sensors, 1)), np.linspace(0, op.horizon, 101))
     assert np.all(np.max(np.abs(x[0] - x_eq), axis=0) < [0.05, 0.05, 0.02, 0.02])
+
+
+def test_checking_an_operator_against_a_dataset_writes_metrics_and_figures(cosim_tiny, tmp_path):
+    from surrogate.report import check_operator
+
+    table = check_operator(Operator.default(), cosim_tiny[1], tmp_path)
+    assert "MaxAE" in table and "omega" in table
+    saved = json.loads((tmp_path / "metrics.json").read_text())
+    assert saved["metrics"]["n_trajectories"] == 3 and saved["metrics"]["physical"]["mse"] < 1e-2
+    assert (tmp_path / "trajectories.png").exists() and (tmp_path / "error_over_time.png").exists()
