@@ -89,22 +89,26 @@ def rhs(x, u, p: SM4Params = SM4Params()):
     return stack(list(parts))
 
 
-def outputs(x, u, p: SM4Params = SM4Params()):
-    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 2].
+def derived(delta, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, sin, cos):
+    """(Id, Iq, I_re, I_im, P, Q) in pu; works on any numeric type.
 
     Bus current in the network frame: I = (Id + j Iq) exp(j (delta - pi/2));
     power into the bus: P + jQ = Vs exp(j theta_vs) conj(I).
     """
-    sin, cos, stack = _namespace(x)
-    delta, Ed_p, Eq_p, Vs, th = x[..., 0], x[..., 2], x[..., 3], u[..., 0], u[..., 1]
-    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, th, p, sin, cos)
+    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, sin, cos)
     # exp(j(delta - pi/2)) = sin(delta) - j cos(delta)
     I_re = Id * sin(delta) + Iq * cos(delta)
     I_im = Iq * sin(delta) - Id * cos(delta)
-    V_re, V_im = Vs * cos(th), Vs * sin(th)
+    V_re, V_im = Vs * cos(theta_vs), Vs * sin(theta_vs)
     P = V_re * I_re + V_im * I_im
     Q = V_im * I_re - V_re * I_im
-    return stack([Id, Iq, I_re, I_im, P, Q])
+    return Id, Iq, I_re, I_im, P, Q
+
+
+def outputs(x, u, p: SM4Params = SM4Params()):
+    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 2] (see `derived`)."""
+    sin, cos, stack = _namespace(x)
+    return stack(list(derived(x[..., 0], x[..., 2], x[..., 3], u[..., 0], u[..., 1], p, sin, cos)))
 
 
 def _steady_fluxes(angle, Vs, p: SM4Params):
