@@ -1,0 +1,206 @@
+"""C code for an exported operator, generated from its ONNX graph (no runtime needed).
+
+The graph is specialised to one trajectory and one query time (x0 [1, 4], u [1, S, 2], t [1]);
+shape inference then fixes every tensor's shape, and each node becomes a loop over fixed sizes.
+Only an explicit, checked subset of ONNX operators is supported; any other is refused by name.
+Weights stay float32 (as exported); arithmetic is in double.
+
+Generated entry point:
+    void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4]);
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+ELEMENTWISE = {"Add": "+", "Sub": "-", "Mul": "*", "Div": "/"}
+UNARY = {"Tanh": "tanh({})", "Exp": "exp({})", "Neg": "(-{})", "Sqrt": "sqrt({})", "Sin": "sin({})",
+         "Cos": "cos({})", "Relu": "({0} > 0.0 ? {0} : 0.0)", "Sigmoid": "(1.0 / (1.0 + exp(-{})))"}
+COPIES = {"Flatten", "Reshape", "Unsqueeze", "Squeeze", "Identity"}
+SUPPORTED = set(ELEMENTWISE) | set(UNARY) | COPIES | {"Gemm", "MatMul", "Transpose", "Concat", "Constant"}
+
+
+class UnsupportedGraph(ValueError):
+    """A graph with an operator (or a use of one) outside the supported subset."""
+
+
+def check_supported(proto) -> None:
+    """Raise UnsupportedGraph naming every operator outside SUPPORTED."""
+    unknown = sorted({n.op_type for n in proto.graph.node} - SUPPORTED)
+    if unknown:
+        raise UnsupportedGraph(f"the operator uses ONNX ops the C kernel does not support: {', '.join(unknown)} "
+                               f"(supported: {', '.join(sorted(SUPPORTED))})")
+
+
+def _specialised(proto, n_sensors: int):
+    """A copy with concrete input shapes (N = 1, M = 1) and every intermediate shape inferred."""
+    import onnx
+
+    proto = onnx.ModelProto.FromString(proto.SerializeToString())
+    shapes = {"x0": [1, 4], "u": [1, n_sensors, 2], "t": [1]}
+    for value in proto.graph.input:
+        dims = value.type.tensor_type.shape.dim
+        for dim, size in zip(dims, shapes[value.name]):
+            dim.Clear()
+            dim.dim_value = size
+    del proto.graph.value_info[:]
+    for out in proto.graph.output:
+        out.type.tensor_type.ClearField("shape")
+    return onnx.shape_inference.infer_shapes(proto, strict_mode=True)
+
+
+def _shape(value) -> tuple:
+    dims = value.type.tensor_type.shape.dim
+    if any(not d.HasField("dim_value") for d in dims):
+        raise UnsupportedGraph(f"shape of {value.name!r} is not fixed after specialisation")
+    return tuple(d.dim_value for d in dims)
+
+
+def _strides(shape) -> list[int]:
+    return [int(np.prod(shape[i + 1:])) for i in range(len(shape))]
+
+
+def _offset(index: str, out_shape, in_shape) -> str:
+    """C expression of the flat index into an input broadcast to out_shape, from the flat output index."""
+    in_shape = (1,) * (len(out_shape) - len(in_shape)) + tuple(in_shape)
+    out_strides, in_strides = _strides(out_shape), _strides(in_shape)
+    terms = []
+    for d, (o, i) in enumerate(zip(out_shape, in_shape)):
+        if i == 1 or in_strides[d] == 0:
+            continue
+        coordinate = f"({index} / {out_strides[d]})" if out_strides[d] > 1 else index
+        coordinate = f"({coordinate} % {o})" if d > 0 else coordinate
+        terms.append(coordinate if in_strides[d] == 1 else f"{coordinate} * {in_strides[d]}")
+    return " + ".join(terms) or "0"
+
+
+def _float_array(name: str, values: np.ndarray) -> str:
+    flat = np.asarray(values, dtype=np.float32).ravel()
+    body = ",".join(repr(float(v)) + "f" if math.isfinite(v) else "0.0f" for v in flat)
+    return f"static const float {name}[{max(flat.size, 1)}] = {{{body or '0.0f'}}};"
+
+
+def generate_kernel(proto, n_sensors: int) -> str:
+    """C source of the operator `proto` (an onnx.ModelProto) for S = n_sensors sensor times."""
+    from onnx import numpy_helper
+
+    check_supported(proto)
+    model = _specialised(proto, n_sensors)
+    graph = model.graph
+    shapes = {v.name: _shape(v) for v in list(graph.input) + list(graph.value_info) + list(graph.output)}
+    names, constants, declarations, body = {}, [], [], []
+
+    def c_name(tensor: str) -> str:
+        return names.setdefault(tensor, f"v{len(names)}")
+
+    for init in graph.initializer:
+        array = numpy_helper.to_array(init)
+        shapes[init.name] = array.shape
+        if array.dtype.kind == "f":
+            constants.append(_float_array(c_name(init.name), array))
+    inputs = {"x0": "x0", "u": "u", "t": "t_"}
+    names.update(inputs)
+
+    for node in graph.node:
+        op, out = node.op_type, node.output[0]
+        attrs = {a.name: a for a in node.attribute}
+        if op == "Constant":
+            array = numpy_helper.to_array(attrs["value"].t)
+            shapes[out] = array.shape
+            if array.dtype.kind == "f":
+                constants.append(_float_array(c_name(out), array))
+            continue
+        shape = shapes[out]
+        size = int(np.prod(shape))
+        dst = c_name(out)
+        declarations.append(f"    double {dst}[{max(size, 1)}];")
+        src = [c_name(i) for i in node.input]
+        if op in ELEMENTWISE:
+            a, b = node.input
+            body.append(f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {src[0]}[{_offset('i', shape, shapes[a])}] "
+                        f"{ELEMENTWISE[op]} {src[1]}[{_offset('i', shape, shapes[b])}];")
+        elif op in UNARY:
+            body.append(f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {UNARY[op].format(src[0] + '[i]')};")
+        elif op in COPIES:
+            body.append(f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {src[0]}[i];")
+        elif op == "Gemm":
+            body.append(_gemm(node, attrs, src, dst, shapes))
+        elif op == "MatMul":
+            body.append(_matmul(node, src, dst, shapes))
+        elif op == "Transpose":
+            body.append(_transpose(attrs, src[0], dst, shapes[node.input[0]], shape))
+        elif op == "Concat":
+            body.append(_concat(node, attrs, src, dst, shapes, shape))
+    result = c_name(graph.output[0].name)
+    return "\n".join([
+        "/* Generated by opfmu from an ONNX operator graph; do not edit. */",
+        "#include <math.h>",
+        f"#define OPFMU_N_SENSORS {n_sensors}",
+        *constants,
+        "",
+        "void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4])",
+        "{",
+        "    const double t_[1] = {t};",
+        *declarations,
+        *body,
+        f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];",
+        "}",
+        "",
+    ])
+
+
+def _gemm(node, attrs, src, dst, shapes) -> str:
+    alpha = attrs["alpha"].f if "alpha" in attrs else 1.0
+    beta = attrs["beta"].f if "beta" in attrs else 1.0
+    trans_a = attrs["transA"].i if "transA" in attrs else 0
+    trans_b = attrs["transB"].i if "transB" in attrs else 0
+    a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]
+    m, k = (a_shape[1], a_shape[0]) if trans_a else a_shape
+    n = b_shape[0] if trans_b else b_shape[1]
+    a_index = "p * {m} + r".format(m=m) if trans_a else f"r * {k} + p"
+    b_index = f"c * {k} + p" if trans_b else f"p * {n} + c"
+    bias = ""
+    if len(node.input) > 2 and node.input[2]:
+        bias = f" + {beta!r} * {src[2]}[{_offset('(r * %d + c)' % n, (m, n), shapes[node.input[2]])}]"
+    return (f"    for (int r = 0; r < {m}; ++r) for (int c = 0; c < {n}; ++c) {{\n"
+            f"        double s = 0.0;\n"
+            f"        for (int p = 0; p < {k}; ++p) s += (double){src[0]}[{a_index}] * (double){src[1]}[{b_index}];\n"
+            f"        {dst}[r * {n} + c] = {alpha!r} * s{bias};\n    }}")
+
+
+def _matmul(node, src, dst, shapes) -> str:
+    a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]
+    if len(a_shape) < 2 or len(b_shape) < 2:
+        raise UnsupportedGraph("MatMul with a 1-D operand is not supported")
+    m, k = a_shape[-2:]
+    n = b_shape[-1]
+    batch = np.broadcast_shapes(a_shape[:-2], b_shape[:-2])
+    n_batch = int(np.prod(batch)) if batch else 1
+    a_off = _offset("q", batch, a_shape[:-2]) if batch else "0"
+    b_off = _offset("q", batch, b_shape[:-2]) if batch else "0"
+    return (f"    for (int q = 0; q < {n_batch}; ++q) for (int r = 0; r < {m}; ++r) for (int c = 0; c < {n}; ++c) {{\n"
+            f"        double s = 0.0;\n"
+            f"        for (int p = 0; p < {k}; ++p) s += (double){src[0]}[({a_off}) * {m * k} + r * {k} + p] "
+            f"* (double){src[1]}[({b_off}) * {k * n} + p * {n} + c];\n"
+            f"        {dst}[q * {m * n} + r * {n} + c] = s;\n    }}")
+
+
+def _transpose(attrs, src, dst, in_shape, out_shape) -> str:
+    perm = list(attrs["perm"].ints) if "perm" in attrs else list(reversed(range(len(in_shape))))
+    in_strides, out_strides = _strides(in_shape), _strides(out_shape)
+    terms = [f"((i / {out_strides[d]}) % {out_shape[d]}) * {in_strides[perm[d]]}" for d in range(len(out_shape))]
+    return f"    for (int i = 0; i < {int(np.prod(out_shape))}; ++i) {dst}[i] = {src}[{' + '.join(terms) or '0'}];"
+
+
+def _concat(node, attrs, src, dst, shapes, out_shape) -> str:
+    axis = attrs["axis"].i % len(out_shape)
+    outer = int(np.prod(out_shape[:axis]))
+    out_block = int(np.prod(out_shape[axis:]))
+    lines, start = [], 0
+    for name, tensor in zip(src, node.input):
+        block = int(np.prod(shapes[tensor][axis:]))
+        lines.append(f"    for (int o = 0; o < {outer}; ++o) for (int j = 0; j < {block}; ++j) "
+                     f"{dst}[o * {out_block} + {start} + j] = {name}[o * {block} + j];")
+        start += block
+    return "\n".join(lines)

@@ -1,0 +1,56 @@
+"""The C kernel generated from an operator's ONNX graph computes what onnxruntime computes."""
+import ctypes
+import json
+import subprocess
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+import pytest
+from onnx import TensorProto, helper
+
+from fmu_export.onnx_to_c import UnsupportedGraph, generate_kernel
+from surrogate.models import OperatorConfig
+from surrogate.onnx_export import export_onnx, random_inputs
+from surrogate.training import TrainConfig, train
+
+DOUBLE_P = ctypes.POINTER(ctypes.c_double)
+
+
+@pytest.fixture(scope="module", params=["unstacked", "stacked-n", "pinn"])
+def kernel(request, paper_tiny, tmp_path_factory):
+    """(onnx path, compiled kernel library, envelope) for a briefly trained model of each architecture."""
+    run = tmp_path_factory.mktemp(f"c_{request.param}")
+    config = TrainConfig(model=OperatorConfig(arch=request.param, width=16, depth=2, latent=8), epochs=3, time_points=20)
+    train(paper_tiny[1], config, run, progress=False)
+    path = run / "op.onnx"
+    meta = export_onnx(run, path)
+    source = run / "kernel.c"
+    source.write_text(generate_kernel(onnx.load(str(path)), 1001))
+    library = run / "libkernel.so"
+    subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
+                   check=True)
+    return path, ctypes.CDLL(str(library)), json.loads(meta["envelope"])
+
+
+def test_kernel_matches_onnxruntime_on_random_in_envelope_inputs(kernel):
+    path, lib, envelope = kernel
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    x0, u, t = random_inputs(envelope, np.linspace(0, 1, 1001), 16, np.random.default_rng(3))
+    expected = session.run(["x"], {"x0": x0, "u": u, "t": t})[0]
+    for n in range(len(x0)):
+        x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
+        for m in (0, 1, 500, len(t) - 1):
+            out = np.zeros(4)
+            lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(t[m]),
+                               out.ctypes.data_as(DOUBLE_P))
+            np.testing.assert_allclose(out, expected[n, m], rtol=0, atol=1e-5)
+
+
+def test_graph_with_an_unsupported_op_is_refused_naming_it():
+    graph = helper.make_graph(
+        [helper.make_node("Softmax", ["x0"], ["y"]), helper.make_node("Erf", ["y"], ["x"])], "g",
+        [helper.make_tensor_value_info("x0", TensorProto.FLOAT, [1, 4])],
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4])])
+    with pytest.raises(UnsupportedGraph, match="does not support: Erf, Softmax"):
+        generate_kernel(helper.make_model(graph), 1001)
