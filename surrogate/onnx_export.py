@@ -3,7 +3,7 @@
 Graph: inputs x0 [N, 4], u [N, S, 2], t [M] (physical units, float32); output x [N, M, 4];
 normalisation inside; opset 17; N and M dynamic. metadata_props carry what an importer needs to
 use the file safely: component, names, horizon, sensor times, the training envelope, architecture,
-training summary, test metrics and the opfmu version.
+training summary, test metrics, the per-state residual scale and the opfmu version.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
 from .data import load_metadata, load_split
 from .evaluation import evaluate
+from .losses import residual_scale
 from .training import load_model
 
 OPSET = 17
@@ -55,6 +56,7 @@ def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -
         "physics_informed": json.dumps(bool(run_config["train"]["physics"])),
         "training": json.dumps(_training_summary(run_dir, run_config, data_meta)),
         "metrics": json.dumps(_test_metrics(model, data_dir)),
+        "residual_scale": json.dumps(_residual_scale(data_dir)),
         "opfmu_version": __version__,
     }
     with atomic_path(out) as tmp:
@@ -133,6 +135,13 @@ def _training_summary(run_dir: Path, run_config: dict, data_meta: dict) -> dict:
             "lr": train["lr"], "lr_schedule": train.get("lr_schedule"), "time_points": train.get("time_points"),
             "weights": train["weights"], "dataset": {"preset": data_meta["preset"]["name"],
                                                      "seed": data_meta["seed"], "fingerprint": data_meta["fingerprint"]}}
+
+
+def _residual_scale(data_dir: Path) -> list:
+    """Per-state scale [4] of physics residuals (std of the reference dx/dt over the train split):
+    what the FMU divides its residual by, as the physics losses do."""
+    train = load_split(data_dir, "train")
+    return residual_scale(train["x"], train["t"]).tolist()
 
 
 def _test_metrics(model, data_dir: Path) -> dict:

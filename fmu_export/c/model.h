@@ -1,0 +1,36 @@
+/* The interface between the FMI 2.0 co-simulation plumbing (fmi2_cs.c) and one model
+   (surrogate_model.c). A model's whole dynamic state is the plain struct ModelState, so the
+   plumbing can copy and serialise it byte for byte. */
+#ifndef OPFMU_MODEL_H
+#define OPFMU_MODEL_H
+
+#include "config.h"
+
+typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
+
+/* Variable kinds the plumbing checks writes against. */
+typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT } VarKind;
+
+typedef struct {
+    double Vs, theta_vs;          /* inputs [pu, rad], held over the next step */
+    double x_start[4];            /* parameters: initial state (delta, omega, Ed_p, Eq_p) */
+    double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
+    double time;                  /* current communication point [s] */
+    double x[4];                  /* state at `time` */
+    double window_start;          /* start time of the current operator window [s] */
+    double x_window[4];           /* state at the window start */
+    int in_envelope;              /* false once an input or a window start left the envelope */
+    double sensors[2 * OPFMU_N_SENSORS]; /* (Vs, theta_vs) at the window's sensor times */
+} ModelState;
+
+void model_defaults(ModelState *m);
+/* kind of a real variable, or -1 if vr names none */
+int model_real_kind(unsigned int vr);
+ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value);
+ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size);
+int model_boolean_exists(unsigned int vr);
+int model_get_boolean(const ModelState *m, unsigned int vr);
+ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size);
+ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size);
+
+#endif

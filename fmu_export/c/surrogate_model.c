@@ -1,0 +1,195 @@
+/* SM4 surrogate: the operator evaluated from a buffer of input sensors (DESIGN section 5).
+
+   A window starts at (window_start, x_window). The input held over a step is written into every
+   sensor slot from the current time on (slots not yet known hold the latest value), and the state
+   at t + h is the operator at t + h - window_start. When a window's horizon is reached, a new one
+   starts from the state there; a step that crosses the horizon is split at it. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "model.h"
+#include "sm4_equations.h"
+
+void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4]);
+
+enum {
+    VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
+    VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_COUNT
+};
+enum { VR_IN_ENVELOPE = 0 };
+
+static const double SENSOR_DT = OPFMU_HORIZON / (OPFMU_N_SENSORS - 1);
+static const double TIME_EPS = 1e-9;
+
+void model_defaults(ModelState *m)
+{
+    memset(m, 0, sizeof *m);
+    m->Vs = 1.0;
+    m->theta_vs = 0.0;
+    memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
+    m->rollover_horizon = OPFMU_HORIZON;
+    memcpy(m->x, m->x_start, sizeof m->x);
+    m->in_envelope = 1;
+}
+
+int model_real_kind(unsigned int vr)
+{
+    if (vr == VR_VS || vr == VR_THETA) return VAR_INPUT;
+    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON) return VAR_PARAMETER;
+    if (vr < VR_COUNT) return VAR_OUTPUT;
+    return -1;
+}
+
+/* d x/dt of the operator at window time tau, by a central difference (one-sided at the ends) */
+static void operator_rate(const ModelState *m, double tau, double rate[4])
+{
+    const double d = 1e-4;
+    double lo = fmax(tau - d, 0.0), hi = fmin(tau + d, OPFMU_HORIZON);
+    double a[4], b[4];
+    opfmu_operator(m->x_window, m->sensors, lo, a);
+    opfmu_operator(m->x_window, m->sensors, hi, b);
+    for (int i = 0; i < 4; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
+}
+
+static double residual(const ModelState *m)
+{
+    double rate[4], f[4], u[2] = {m->Vs, m->theta_vs}, sum = 0.0;
+    operator_rate(m, m->time - m->window_start, rate);
+    sm4_derivatives(m->x, u, f);
+    for (int i = 0; i < 4; ++i) {
+        double r = (rate[i] - f[i]) / OPFMU_RESIDUAL_SCALE[i];
+        sum += r * r;
+    }
+    return sqrt(sum / 4.0);
+}
+
+ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
+{
+    double u[2] = {m->Vs, m->theta_vs}, y[6];
+    switch (vr) {
+    case VR_VS: *value = m->Vs; return MODEL_OK;
+    case VR_THETA: *value = m->theta_vs; return MODEL_OK;
+    case VR_DELTA: case VR_OMEGA: case VR_ED: case VR_EQ: *value = m->x[vr - VR_DELTA]; return MODEL_OK;
+    case VR_ID: case VR_IQ: case VR_IRE: case VR_IIM: case VR_P: case VR_Q:
+        sm4_outputs(m->x, u, y);
+        *value = y[vr - VR_ID];
+        return MODEL_OK;
+    case VR_DELTA0: case VR_OMEGA0: case VR_ED0: case VR_EQ0: *value = m->x_start[vr - VR_DELTA0]; return MODEL_OK;
+    case VR_RESIDUAL: *value = residual(m); return MODEL_OK;
+    case VR_HORIZON: *value = m->rollover_horizon; return MODEL_OK;
+    default: return MODEL_ERROR;
+    }
+}
+
+ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size)
+{
+    if (!isfinite(value)) {
+        snprintf(message, size, "value reference %u: %g is not a finite number", vr, value);
+        return MODEL_ERROR;
+    }
+    switch (vr) {
+    case VR_VS:
+        if (value < 0.0) {
+            snprintf(message, size, "Vs = %g pu is negative", value);
+            return MODEL_ERROR;
+        }
+        m->Vs = value;
+        return MODEL_OK;
+    case VR_THETA: m->theta_vs = value; return MODEL_OK;
+    case VR_DELTA0: case VR_OMEGA0: case VR_ED0: case VR_EQ0: m->x_start[vr - VR_DELTA0] = value; return MODEL_OK;
+    case VR_HORIZON:
+        if (!(value >= 10 * SENSOR_DT && value <= OPFMU_HORIZON + TIME_EPS)) {
+            snprintf(message, size, "rollover_horizon = %g s must lie in [%g, %g] s (the trained horizon)",
+                     value, 10 * SENSOR_DT, OPFMU_HORIZON);
+            return MODEL_ERROR;
+        }
+        m->rollover_horizon = value;
+        return MODEL_OK;
+    default:
+        snprintf(message, size, "value reference %u is not a settable Real variable", vr);
+        return MODEL_ERROR;
+    }
+}
+
+int model_boolean_exists(unsigned int vr) { return vr == VR_IN_ENVELOPE; }
+
+int model_get_boolean(const ModelState *m, unsigned int vr) { (void)vr; return m->in_envelope; }
+
+static int outside(const double *v, const double *lo, const double *hi, int n)
+{
+    for (int i = 0; i < n; ++i)
+        if (v[i] < lo[i] - 1e-6 || v[i] > hi[i] + 1e-6) return 1;
+    return 0;
+}
+
+/* Checks a window start state and the held input against the envelope (sticky flag). */
+static ModelStatus check_envelope(ModelState *m, char *message, size_t size)
+{
+    double u[2] = {m->Vs, m->theta_vs};
+    if (!m->in_envelope) return MODEL_OK;
+    if (outside(u, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, 2)) {
+        m->in_envelope = 0;
+        snprintf(message, size, "t = %.6g s: input (Vs %.4g pu, theta_vs %.4g rad) left the trained envelope "
+                 "(Vs [%.4g, %.4g], theta_vs [%.4g, %.4g]); results are extrapolated", m->time, u[0], u[1],
+                 OPFMU_ENV_U_MIN[0], OPFMU_ENV_U_MAX[0], OPFMU_ENV_U_MIN[1], OPFMU_ENV_U_MAX[1]);
+        return MODEL_WARNING;
+    }
+    if (outside(m->x_window, OPFMU_ENV_X0_MIN, OPFMU_ENV_X0_MAX, 4)) {
+        m->in_envelope = 0;
+        snprintf(message, size, "t = %.6g s: window start state (%.4g, %.4g, %.4g, %.4g) left the trained "
+                 "envelope; results are extrapolated", m->window_start, m->x_window[0], m->x_window[1],
+                 m->x_window[2], m->x_window[3]);
+        return MODEL_WARNING;
+    }
+    return MODEL_OK;
+}
+
+static void start_window(ModelState *m)
+{
+    m->window_start = m->time;
+    memcpy(m->x_window, m->x, sizeof m->x);
+    for (int k = 0; k < OPFMU_N_SENSORS; ++k) {
+        m->sensors[2 * k] = m->Vs;
+        m->sensors[2 * k + 1] = m->theta_vs;
+    }
+}
+
+ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
+{
+    m->time = start_time;
+    memcpy(m->x, m->x_start, sizeof m->x);
+    m->in_envelope = 1;
+    start_window(m);
+    return check_envelope(m, message, size);
+}
+
+ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
+{
+    ModelStatus status = check_envelope(m, message, size);
+    double stop = m->time + h;
+    while (m->time < stop - TIME_EPS) {
+        double window_end = m->window_start + m->rollover_horizon;
+        double end = fmin(stop, window_end);
+        /* the held input from the current time on: the first slot at or after m->time */
+        int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
+        for (int k = first < 0 ? 0 : first; k < OPFMU_N_SENSORS; ++k) {
+            m->sensors[2 * k] = m->Vs;
+            m->sensors[2 * k + 1] = m->theta_vs;
+        }
+        opfmu_operator(m->x_window, m->sensors, fmin(end - m->window_start, OPFMU_HORIZON), m->x);
+        m->time = end;
+        for (int i = 0; i < 4; ++i) {
+            if (!isfinite(m->x[i])) {
+                snprintf(message, size, "t = %.6g s: the operator returned a non-finite state", m->time);
+                return MODEL_ERROR;
+            }
+        }
+        if (m->time >= window_end - TIME_EPS) {
+            start_window(m);
+            if (status == MODEL_OK) status = check_envelope(m, message, size);
+        }
+    }
+    m->time = stop;
+    return status;
+}

@@ -1,0 +1,286 @@
+"""The native surrogate FMU under fmpy: FMI 2.0 behaviour and the step semantics of DESIGN section 5."""
+import subprocess
+import sys
+import warnings
+import zipfile
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.validation import validate_fmu
+
+from fmu_export.builder import build_surrogate_fmu
+from reference_models.sm4 import steady_state
+from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
+
+VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
+      "residual": 16, "rollover_horizon": 17}
+STATES = [2, 3, 4, 5]
+DT = 1e-3  # sensor spacing of the shipped operator
+
+
+@pytest.fixture(scope="session")
+def fmu_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("fmu") / "SM4Surrogate.fmu"
+    build_surrogate_fmu(DEFAULT_OPERATOR, path)
+    return path
+
+
+@pytest.fixture(scope="session")
+def unzipped(fmu_path):
+    return extract(str(fmu_path)), read_model_description(str(fmu_path))
+
+
+class Slave:
+    """An initialized FMU instance that records log messages."""
+
+    def __init__(self, unzipped, name="a", init=True, **start):
+        directory, md = unzipped
+        self.messages = []
+        self.callbacks = fmi2CallbackFunctions()
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier="SM4Surrogate", instanceName=name)
+        self.fmu.instantiate(callbacks=self.callbacks)
+        self.t = 0.0
+        if init:
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+            for name_, value in start.items():
+                self.fmu.setReal([VR[name_]], [value])
+            self.fmu.exitInitializationMode()
+
+    def _log(self, env, instance, status, category, message):
+        self.messages.append((status, message.decode()))
+
+    def step(self, h, Vs=1.0, theta=0.0):
+        self.fmu.setReal([0, 1], [Vs, theta])
+        self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
+        self.t += h
+        return np.array(self.fmu.getReal(STATES))
+
+    def close(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def operator_reference(x0, steps, horizon=1.0):
+    """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime."""
+    op = Operator.load(DEFAULT_OPERATOR)
+    n = op.n_sensors
+    t, t_window, x_window, x = 0.0, 0.0, np.array(x0, dtype=np.float32), np.array(x0)
+    buffer = np.zeros((n, 2), np.float32)
+    buffer[:] = steps[0][1:]
+    out = []
+    for h, Vs, th in steps:
+        stop = t + h
+        while t < stop - 1e-9:
+            end = min(stop, t_window + horizon)
+            first = int(np.ceil((t - t_window) / DT - 1e-6))
+            buffer[first:] = (Vs, th)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", EnvelopeWarning)
+                x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0]
+            t = end
+            if t >= t_window + horizon - 1e-9:
+                t_window, x_window = t, x.astype(np.float32)
+                buffer[:] = (Vs, th)
+        out.append(x)
+    return np.array(out)
+
+
+def test_fmpy_validation_reports_no_problem(fmu_path):
+    assert validate_fmu(str(fmu_path)) == []
+
+
+def test_binary_needs_libc_and_libm_only(unzipped):
+    binary = f"{unzipped[0]}/binaries/linux64/SM4Surrogate.so"
+    libraries = {line.split()[0] for line in subprocess.run(["ldd", binary], capture_output=True, text=True,
+                                                             check=True).stdout.splitlines()}
+    assert {name.split(".so")[0] for name in libraries} <= {"linux-vdso", "libc", "libm", "/lib64/ld-linux-x86-64"}
+
+
+def test_fmu_carries_the_operator_and_its_sources(fmu_path):
+    names = zipfile.ZipFile(fmu_path).namelist()
+    assert "resources/model.onnx" in names and "sources/operator_kernel.c" in names
+
+
+def test_outputs_equal_the_operator_on_the_same_sensor_buffer(unzipped):
+    rng = np.random.default_rng(0)
+    steps = [(0.01, 1.0 + 0.05 * np.sin(k / 7), 0.1 * np.cos(k / 11)) for k in range(60)]
+    steps += [(float(h), float(v), float(a)) for h, v, a in
+              zip(rng.choice([0.001, 0.004, 0.02, 0.05], 30), rng.uniform(0.9, 1.1, 30), rng.uniform(-0.2, 0.2, 30))]
+    slave = Slave(unzipped)
+    got = np.array([slave.step(*s) for s in steps])
+    slave.close()
+    expected = operator_reference(steady_state(1.0, 0.0), steps)
+    assert sum(h for h, _, _ in steps) > 1.0  # the run crossed a window boundary
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-5)
+
+
+def test_machine_started_at_rest_stays_near_rest_over_three_windows(unzipped):
+    slave = Slave(unzipped)
+    states = np.array([slave.step(0.01) for _ in range(300)])
+    slave.close()
+    drift = np.abs(states - steady_state(1.0, 0.0)).max(axis=0)
+    assert np.all(drift < [0.01, 0.01, 0.005, 0.005]), drift
+
+
+def test_a_step_crossing_the_window_boundary_equals_one_split_at_it(unzipped):
+    a, b = Slave(unzipped, "a"), Slave(unzipped, "b")
+    for h in (0.3, 0.3, 0.3):
+        a.step(h, 0.95, 0.1)
+        b.step(h, 0.95, 0.1)
+    crossing = a.step(0.3, 0.95, 0.1)
+    b.step(0.1, 0.95, 0.1)
+    split = b.step(0.2, 0.95, 0.1)
+    a.close(), b.close()
+    np.testing.assert_allclose(crossing, split, rtol=0, atol=1e-12)
+
+
+def test_shorter_rollover_horizon_starts_windows_more_often(unzipped):
+    slave = Slave(unzipped, rollover_horizon=0.25)
+    states = [slave.step(0.05, 0.97, 0.05) for _ in range(20)]
+    horizon = slave.fmu.getReal([VR["rollover_horizon"]])[0]
+    slave.close()
+    expected = operator_reference(steady_state(1.0, 0.0), [(0.05, 0.97, 0.05)] * 20, horizon=0.25)
+    assert horizon == 0.25
+    np.testing.assert_allclose(states, expected, rtol=0, atol=2e-5)
+
+
+def test_get_and_set_fmu_state_reproduce_the_run(unzipped):
+    slave = Slave(unzipped)
+    for k in range(30):
+        slave.step(0.01, 1.0 - 0.002 * k)
+    saved, t_saved = slave.fmu.getFMUstate(), slave.t
+    first = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
+    slave.fmu.setFMUstate(saved)
+    slave.t = t_saved
+    again = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
+    slave.fmu.freeFMUstate(saved)
+    slave.close()
+    np.testing.assert_array_equal(first, again)
+
+
+def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped, tmp_path):
+    slave = Slave(unzipped)
+    for _ in range(50):
+        slave.step(0.01, 0.95, -0.1)
+    state = slave.fmu.getFMUstate()
+    (tmp_path / "state.bin").write_bytes(bytes(slave.fmu.serializeFMUstate(state)))
+    expected = [slave.step(0.01, 1.02, 0.0) for _ in range(80)]
+    slave.close()
+    script = f"""
+import numpy as np, sys
+sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
+from test_surrogate_fmu import Slave
+from fmpy import read_model_description
+slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})), init=False)
+slave.fmu.setupExperiment(startTime=0.0); slave.fmu.enterInitializationMode(); slave.fmu.exitInitializationMode()
+state = slave.fmu.deSerializeFMUstate(open({str(tmp_path / 'state.bin')!r}, 'rb').read())
+slave.fmu.setFMUstate(state)
+slave.t = 0.5
+np.save({str(tmp_path / 'out.npy')!r}, np.array([slave.step(0.01, 1.02, 0.0) for _ in range(80)]))
+"""
+    subprocess.run([sys.executable, "-c", script], check=True)
+    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), expected)
+
+
+def test_corrupt_serialized_state_is_refused_with_a_reason(unzipped):
+    slave = Slave(unzipped)
+    with pytest.raises(FMICallException):
+        slave.fmu.deSerializeFMUstate(b"\x00" * 64)
+    assert any("wrong size" in m or "corrupt" in m for _, m in slave.messages)
+    slave.close()
+
+
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_non_finite_input_is_an_error_with_a_logged_reason(unzipped, value):
+    slave = Slave(unzipped)
+    with pytest.raises(FMICallException):
+        slave.fmu.setReal([VR["Vs"]], [value])
+    assert any("not a finite number" in m for _, m in slave.messages)
+    assert slave.step(0.01)[0] == pytest.approx(steady_state(1.0, 0.0)[0], abs=1e-2)  # still usable
+    slave.close()
+
+
+@pytest.mark.parametrize("h", [0.0, -0.01])
+def test_non_positive_step_is_an_error_with_a_logged_reason(unzipped, h):
+    slave = Slave(unzipped)
+    with pytest.raises(FMICallException):
+        slave.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=h)
+    assert any("must be positive" in m for _, m in slave.messages)
+    slave.close()
+
+
+def test_step_before_initialization_is_an_error_with_a_logged_reason(unzipped):
+    slave = Slave(unzipped, init=False)
+    with pytest.raises(FMICallException):
+        slave.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
+    assert any("fmi2DoStep is not allowed" in m for _, m in slave.messages)
+    slave.fmu.freeInstance()
+
+
+def test_step_from_the_wrong_time_is_an_error(unzipped):
+    slave = Slave(unzipped)
+    with pytest.raises(FMICallException):
+        slave.fmu.doStep(currentCommunicationPoint=0.5, communicationStepSize=0.01)
+    assert any("is not the FMU's time" in m for _, m in slave.messages)
+    slave.close()
+
+
+def test_setting_a_parameter_after_initialization_is_an_error(unzipped):
+    slave = Slave(unzipped)
+    with pytest.raises(FMICallException):
+        slave.fmu.setReal([VR["delta0"]], [0.5])
+    assert any("fixed after initialization" in m for _, m in slave.messages)
+    slave.close()
+
+
+def test_input_outside_the_envelope_turns_in_envelope_false_and_warns(unzipped):
+    slave = Slave(unzipped)
+    slave.step(0.01)
+    assert slave.fmu.getBoolean([0]) == [True]
+    slave.step(0.01, Vs=0.05)
+    assert slave.fmu.getBoolean([0]) == [False]
+    assert any("left the trained envelope" in m for _, m in slave.messages)
+    slave.step(0.01)
+    assert slave.fmu.getBoolean([0]) == [False]  # sticky
+    slave.close()
+
+
+def test_reset_returns_to_the_start(unzipped):
+    slave = Slave(unzipped)
+    for _ in range(20):
+        slave.step(0.01, 0.9)
+    slave.fmu.reset()
+    slave.fmu.setupExperiment(startTime=0.0)
+    slave.fmu.enterInitializationMode()
+    slave.fmu.exitInitializationMode()
+    slave.t = 0.0
+    np.testing.assert_allclose(slave.fmu.getReal(STATES), steady_state(1.0, 0.0), atol=1e-12)
+    slave.close()
+
+
+def test_residual_is_small_at_rest_and_large_on_an_inconsistent_state(unzipped):
+    rest = Slave(unzipped)
+    rest.step(0.01)
+    small = rest.fmu.getReal([VR["residual"]])[0]
+    rest.close()
+    odd = Slave(unzipped, delta0=0.2)  # far from the equilibrium, with nominal voltage
+    odd.step(0.001)
+    odd.fmu.setReal([0], [0.5])  # an input the state does not belong to
+    large = odd.fmu.getReal([VR["residual"]])[0]
+    odd.close()
+    assert small < 0.5 < large
+
+
+def test_many_instances_live_side_by_side_and_reload(unzipped):
+    slaves = [Slave(unzipped, f"i{k}") for k in range(5)]
+    results = [s.step(0.01, 0.9 + 0.02 * k) for k, s in enumerate(slaves)]
+    for s in slaves:
+        s.close()
+    again = Slave(unzipped, "again")
+    np.testing.assert_array_equal(again.step(0.01, 0.9), results[0])
+    again.close()
