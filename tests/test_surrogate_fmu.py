@@ -284,3 +284,18 @@ def test_many_instances_live_side_by_side_and_reload(unzipped):
     again = Slave(unzipped, "again")
     np.testing.assert_array_equal(again.step(0.01, 0.9), results[0])
     again.close()
+
+
+@pytest.mark.skipif(not __import__("shutil").which("valgrind"), reason="valgrind is not installed")
+def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp_path):
+    from fmu_export.builder import fmi_headers
+
+    harness = tmp_path / "harness"
+    source = __file__.rsplit("/", 1)[0] + "/c/lifecycle_harness.c"
+    subprocess.run(["gcc", "-O1", "-g", "-I", str(fmi_headers()), source, "-o", str(harness), "-ldl"], check=True)
+    binary = f"{unzipped[0]}/binaries/linux64/SM4Surrogate.so"
+    result = subprocess.run(["valgrind", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect,possible",
+                             "--error-exitcode=3", str(harness), binary, unzipped[1].guid, "1000", "2"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "ERROR SUMMARY: 0 errors" in result.stderr
