@@ -49,7 +49,7 @@ def _c_array(values) -> str:
     return "{" + ", ".join(repr(float(v)) for v in values) + "}"
 
 
-def config_header(model_name: str, guid: str, meta: dict, residual_scale) -> str:
+def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int) -> str:
     envelope = json.loads(meta["envelope"])
     x_default = steady_state(1.0, 0.0)
     lines = [
@@ -59,6 +59,7 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale) -> str
         f'#define OPFMU_GUID "{guid}"',
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {float(meta['horizon_s'])!r}",
+        f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -97,16 +98,17 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         src.mkdir()
         for name in STATIC_SOURCES:
             shutil.copy(C_DIR / name, src / name)
-        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale))
+        kernel = generate_kernel(proto, n_sensors)
+        (src / "operator_kernel.c").write_text(kernel.source)
         (src / "sm4_equations.h").write_text(sm4_c_source())
-        (src / "operator_kernel.c").write_text(generate_kernel(proto, n_sensors))
-        binary = Path(tmp) / f"{model_name}.so"
-        command = ["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(src),
-                   str(src / "fmi2_cs.c"), str(src / "surrogate_model.c"), str(src / "operator_kernel.c"),
-                   "-o", str(binary), "-lm"]
-        result = subprocess.run(command, capture_output=True, text=True)
-        if result.returncode != 0:
-            raise BuildError(f"gcc failed: {result.stderr.strip().splitlines()[-1] if result.stderr else result.returncode}")
+        first_layer = kernel.first_layer
+        if first_layer:
+            probe = _compile(Path(tmp) / "probe.so", [src / "operator_kernel.c"], src)
+            suffix = sensor_suffix_sums(probe, n_sensors, first_layer)
+            first_layer = first_layer if suffix is not None else 0
+        (src / "sensor_sums.c").write_text(sensor_sums_source(suffix if first_layer else None, n_sensors, first_layer))
+        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer))
+        binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
         worst = check_kernel(binary, onnx_path, meta, n_check)
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
@@ -119,6 +121,58 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             for path in sorted(src.iterdir()):
                 fmu.write(path, f"sources/{path.name}")
     return {"guid": guid, "max_abs_diff": worst, "size_bytes": out.stat().st_size}
+
+
+C_FILES = ("fmi2_cs.c", "surrogate_model.c", "operator_kernel.c", "sensor_sums.c")
+
+
+def _compile(binary: Path, sources, include: Path) -> Path:
+    command = ["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
+               *map(str, sources), "-o", str(binary), "-lm"]
+    result = subprocess.run(command, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise BuildError(f"gcc failed: {result.stderr.strip().splitlines()[-1] if result.stderr else result.returncode}")
+    return binary
+
+
+def sensor_suffix_sums(library: Path, n_sensors: int, width: int):
+    """Suffix sums [S + 1, 2, H] over sensor slots of d z / d u, the sensor layer's response to each
+    slot, so that z(x0, u) = z(x0, 0) + sum_k (suffix[k] - suffix[k + 1]) . u_k; None when z is not
+    affine in u with a slope independent of x0 (then the FMU evaluates the whole kernel each step)."""
+    lib = ctypes.CDLL(str(library))
+    p = ctypes.POINTER(ctypes.c_double)
+    u = np.zeros(2 * n_sensors)
+    z = np.zeros(width)
+
+    def first_layer(x0, u_):
+        lib.opfmu_first_layer(x0.ctypes.data_as(p), u_.ctypes.data_as(p), z.ctypes.data_as(p))
+        return z.copy()
+
+    x0 = np.zeros(4)
+    base = first_layer(x0, u)
+    slope = np.empty((2 * n_sensors, width))
+    for i in range(2 * n_sensors):
+        u[i] = 1.0
+        slope[i] = first_layer(x0, u) - base
+        u[i] = 0.0
+    rng = np.random.default_rng(0)
+    for _ in range(3):  # affine, with a slope that does not depend on x0
+        x_r, u_r = rng.uniform(-1, 2, 4), rng.uniform(-1, 2, 2 * n_sensors)
+        predicted = first_layer(x_r, np.zeros_like(u_r)) + u_r @ slope
+        if not np.allclose(first_layer(x_r, u_r), predicted, rtol=1e-9, atol=1e-9):
+            return None
+    per_slot = slope.reshape(n_sensors, 2, width)
+    suffix = np.zeros((n_sensors + 1, 2, width))
+    suffix[:-1] = np.cumsum(per_slot[::-1], axis=0)[::-1]
+    return suffix
+
+
+def sensor_sums_source(suffix, n_sensors: int, width: int) -> str:
+    """C definition of OPFMU_SENSOR_SUFFIX [(S + 1) * 2 * H] (one zero when there is no split)."""
+    values = suffix.ravel() if suffix is not None else np.zeros(1)
+    body = ",\n".join(",".join(repr(float(v)) for v in values[i:i + 8]) for i in range(0, values.size, 8))
+    return ("/* Generated by opfmu: suffix sums over sensor slots of the sensor layer's slope. */\n"
+            f"const double OPFMU_SENSOR_SUFFIX[{values.size}] = {{\n{body}}};\n")
 
 
 def check_kernel(binary: Path, onnx_path: Path, meta: dict, n: int, seed: int = 0) -> float:

@@ -26,7 +26,9 @@ def kernel(request, paper_tiny, tmp_path_factory):
     path = run / "op.onnx"
     meta = export_onnx(run, path)
     source = run / "kernel.c"
-    source.write_text(generate_kernel(onnx.load(str(path)), 1001))
+    kernel = generate_kernel(onnx.load(str(path)), 1001)
+    assert kernel.first_layer == 16  # every architecture's sensors enter through one dense layer
+    source.write_text(kernel.source)
     library = run / "libkernel.so"
     subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
                    check=True)
@@ -45,6 +47,20 @@ def test_kernel_matches_onnxruntime_on_random_in_envelope_inputs(kernel):
             lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(t[m]),
                                out.ctypes.data_as(DOUBLE_P))
             np.testing.assert_allclose(out, expected[n, m], rtol=0, atol=1e-5)
+
+
+def test_evaluation_split_at_the_sensor_layer_equals_the_whole_kernel(kernel):
+    _, lib, envelope = kernel
+    x0, u, _ = random_inputs(envelope, np.linspace(0, 1, 1001), 4, np.random.default_rng(5))
+    for n in range(len(x0)):
+        x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
+        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(16)
+        lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.37),
+                           whole.ctypes.data_as(DOUBLE_P))
+        lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
+        lib.opfmu_from_first_layer(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.37),
+                                   split.ctypes.data_as(DOUBLE_P))
+        np.testing.assert_array_equal(split, whole)
 
 
 def test_graph_with_an_unsupported_op_is_refused_naming_it():

@@ -6,6 +6,8 @@
 
 #include "config.h"
 
+#define OPFMU_Z_SIZE (OPFMU_FIRST_LAYER > 0 ? OPFMU_FIRST_LAYER : 1)
+
 typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
 
 /* Variable kinds the plumbing checks writes against. */
@@ -21,6 +23,11 @@ typedef struct {
     double x_window[4];           /* state at the window start */
     int in_envelope;              /* false once an input or a window start left the envelope */
     double sensors[2 * OPFMU_N_SENSORS]; /* (Vs, theta_vs) at the window's sensor times */
+    /* the sensor layer's output z, tracked incrementally (OPFMU_FIRST_LAYER > 0): z = z_base (x0 part
+       and bias) + z_past (slots before `filled`, final) + the held input times the remaining slots */
+    double z_base[OPFMU_Z_SIZE], z_past[OPFMU_Z_SIZE];
+    int filled;                   /* slots before this index hold final values */
+    double last_u[2];             /* the input written from slot `filled` on */
 } ModelState;
 
 void model_defaults(ModelState *m);

@@ -12,6 +12,13 @@
 #include "sm4_equations.h"
 
 void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4]);
+#if OPFMU_FIRST_LAYER > 0
+void opfmu_first_layer(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double z[OPFMU_FIRST_LAYER]);
+void opfmu_from_first_layer(const double x0[4], const double z[OPFMU_FIRST_LAYER], double t, double x[4]);
+extern const double OPFMU_SENSOR_SUFFIX[(OPFMU_N_SENSORS + 1) * 2 * OPFMU_FIRST_LAYER];
+static const double ZERO_SENSORS[2 * OPFMU_N_SENSORS];
+#define SUFFIX(k, c, h) OPFMU_SENSOR_SUFFIX[((k) * 2 + (c)) * OPFMU_FIRST_LAYER + (h)]
+#endif
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
@@ -153,6 +160,36 @@ static void start_window(ModelState *m)
         m->sensors[2 * k] = m->Vs;
         m->sensors[2 * k + 1] = m->theta_vs;
     }
+    m->filled = 0;
+    m->last_u[0] = m->Vs;
+    m->last_u[1] = m->theta_vs;
+#if OPFMU_FIRST_LAYER > 0
+    opfmu_first_layer(m->x_window, ZERO_SENSORS, m->z_base);
+    memset(m->z_past, 0, sizeof m->z_past);
+#endif
+}
+
+/* The operator at window time tau after the held input was written from slot `first` on. Per step
+   this costs the network after its sensor layer plus O(layer width), not the whole sensor layer. */
+static void evaluate(ModelState *m, int first, double tau)
+{
+#if OPFMU_FIRST_LAYER > 0
+    double z[OPFMU_FIRST_LAYER];
+    if (first > m->filled) { /* slots [filled, first) keep the input they last got */
+        for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
+            for (int c = 0; c < 2; ++c)
+                m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * m->last_u[c];
+        m->filled = first;
+    }
+    m->last_u[0] = m->Vs;
+    m->last_u[1] = m->theta_vs;
+    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
+        z[h] = m->z_base[h] + m->z_past[h] + SUFFIX(first, 0, h) * m->Vs + SUFFIX(first, 1, h) * m->theta_vs;
+    opfmu_from_first_layer(m->x_window, z, tau, m->x);
+#else
+    (void)first;
+    opfmu_operator(m->x_window, m->sensors, tau, m->x);
+#endif
 }
 
 ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
@@ -173,11 +210,12 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         double end = fmin(stop, window_end);
         /* the held input from the current time on: the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
-        for (int k = first < 0 ? 0 : first; k < OPFMU_N_SENSORS; ++k) {
+        first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
+        for (int k = first; k < OPFMU_N_SENSORS; ++k) {
             m->sensors[2 * k] = m->Vs;
             m->sensors[2 * k + 1] = m->theta_vs;
         }
-        opfmu_operator(m->x_window, m->sensors, fmin(end - m->window_start, OPFMU_HORIZON), m->x);
+        evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
         m->time = end;
         for (int i = 0; i < 4; ++i) {
             if (!isfinite(m->x[i])) {
