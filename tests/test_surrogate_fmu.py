@@ -299,3 +299,22 @@ def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp
                             capture_output=True, text=True)
     assert result.returncode == 0, result.stderr[-3000:]
     assert "ERROR SUMMARY: 0 errors" in result.stderr
+
+
+def test_build_fmu_command_refuses_a_file_that_is_not_an_operator(tmp_path):
+    bogus = tmp_path / "bogus.onnx"
+    bogus.write_bytes(b"not onnx at all")
+    result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", str(bogus), "-o", str(tmp_path / "x.fmu")],
+                            capture_output=True, text=True)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "not a readable ONNX file" in result.stderr and not (tmp_path / "x.fmu").exists()
+
+
+def test_build_fmu_command_builds_the_shipped_operator_by_default(tmp_path):
+    out = tmp_path / "Machine.fmu"
+    result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", "-o", str(out), "--name", "Machine"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "matches onnxruntime" in result.stdout
+    assert read_model_description(str(out)).coSimulation.modelIdentifier == "Machine"
+    assert "binaries/linux64/Machine.so" in zipfile.ZipFile(out).namelist()
