@@ -23,13 +23,19 @@ from fmu_export.builder import build_surrogate_fmu
 from surrogate.operator import DEFAULT_OPERATOR
 
 
-def fmpy_loop(directory, md, h: float, steps: int) -> float:
+def started(directory, md) -> FMU2Slave:
+    """An instance in step mode at t = 0."""
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="bench")
     fmu.instantiate()
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
+    return fmu
+
+
+def fmpy_loop(directory, md, h: float, steps: int) -> float:
+    fmu = started(directory, md)
     start = time.perf_counter()
     t = 0.0
     for k in range(steps):
@@ -45,12 +51,7 @@ def fmpy_loop(directory, md, h: float, steps: int) -> float:
 
 def ctypes_loop(directory, md, h: float, steps: int) -> float:
     """DoStep alone, called through ctypes on the loaded binary (no fmpy wrappers)."""
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="bench")
-    fmu.instantiate()
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
+    fmu = started(directory, md)
     do_step = fmu.dll.fmi2DoStep
     do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
     component = fmu.component
