@@ -49,6 +49,8 @@ class Operator:
         self.horizon = float(self.metadata["horizon_s"])
         self.n_sensors = int(self.metadata["n_sensors"])
         self.envelope = json.loads(self.metadata["envelope"])
+        bounds = [self.envelope["x0"][n] for n in STATE_NAMES] + [self.envelope["u"][n] for n in INPUT_NAMES]
+        self._env_min, self._env_max = np.array(bounds).T
         options = ort.SessionOptions()
         if threads:
             options.intra_op_num_threads = threads
@@ -117,14 +119,11 @@ class Operator:
 
     def outside_envelope(self, x0: np.ndarray, u: np.ndarray) -> list[str]:
         """One line per quantity outside the envelope: its range against the trained range."""
-        lines = []
-        for group, values, names in (("x0", x0, STATE_NAMES), ("u", u.reshape(-1, 2), INPUT_NAMES)):
-            for i, name in enumerate(names):
-                lo, hi = self.envelope[group][name]
-                vmin, vmax = float(values[:, i].min()), float(values[:, i].max())
-                if vmin < lo - 1e-6 or vmax > hi + 1e-6:
-                    lines.append(f"{name} in [{vmin:.4g}, {vmax:.4g}], trained [{lo:.4g}, {hi:.4g}]")
-        return lines
+        values_min = np.concatenate([x0.min(0), u.reshape(-1, 2).min(0)])
+        values_max = np.concatenate([x0.max(0), u.reshape(-1, 2).max(0)])
+        outside = (values_min < self._env_min - 1e-6) | (values_max > self._env_max + 1e-6)
+        return [f"{name} in [{values_min[i]:.4g}, {values_max[i]:.4g}], trained [{self._env_min[i]:.4g}, "
+                f"{self._env_max[i]:.4g}]" for i, name in enumerate(STATE_NAMES + INPUT_NAMES) if outside[i]]
 
 
 def split_branch_trunk(proto):
