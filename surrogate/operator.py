@@ -104,12 +104,13 @@ class Operator:
                                      f"({', '.join(INPUT_NAMES)} at the sensor times), got shape {u.shape}")
         if t.ndim != 1 or t.size == 0:
             raise OperatorInputError(f"t must be a non-empty 1-D array of times, got shape {t.shape}")
-        for name, a in (("x0", x0), ("u", u), ("t", t)):
-            if not np.all(np.isfinite(a)):
+        low, high = self._ranges(x0, u)
+        for name, a in (("x0", np.concatenate([low[:4], high[:4]])), ("u", np.concatenate([low[4:], high[4:]])), ("t", t)):
+            if not np.all(np.isfinite(a)):  # NaN and inf propagate into the ranges
                 raise OperatorInputError(f"{name} holds NaN or inf")
         if t.min() < 0 or t.max() > self.horizon * (1 + 1e-6):
             raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t.min():g}, {t.max():g}]")
-        outside = self.outside_envelope(x0, u)
+        outside = self._outside(low, high)
         if outside:
             message = "outside the training envelope: " + "; ".join(outside)
             if strict:
@@ -119,11 +120,19 @@ class Operator:
 
     def outside_envelope(self, x0: np.ndarray, u: np.ndarray) -> list[str]:
         """One line per quantity outside the envelope: its range against the trained range."""
-        values_min = np.concatenate([x0.min(0), u.reshape(-1, 2).min(0)])
-        values_max = np.concatenate([x0.max(0), u.reshape(-1, 2).max(0)])
-        outside = (values_min < self._env_min - 1e-6) | (values_max > self._env_max + 1e-6)
-        return [f"{name} in [{values_min[i]:.4g}, {values_max[i]:.4g}], trained [{self._env_min[i]:.4g}, "
-                f"{self._env_max[i]:.4g}]" for i, name in enumerate(STATE_NAMES + INPUT_NAMES) if outside[i]]
+        return self._outside(*self._ranges(np.asarray(x0), np.asarray(u)))
+
+    @staticmethod
+    def _ranges(x0: np.ndarray, u: np.ndarray):
+        """(min, max) [6] of the four states in x0 and the two inputs in u (per-channel strided
+        reductions: a reduction over axis 0 of a [N*S, 2] array is an order of magnitude slower)."""
+        columns = [x0[:, i] for i in range(4)] + [u[..., c] for c in range(2)]
+        return np.array([c.min() for c in columns]), np.array([c.max() for c in columns])
+
+    def _outside(self, low: np.ndarray, high: np.ndarray) -> list[str]:
+        outside = (low < self._env_min - 1e-6) | (high > self._env_max + 1e-6)
+        return [f"{name} in [{low[i]:.4g}, {high[i]:.4g}], trained [{self._env_min[i]:.4g}, {self._env_max[i]:.4g}]"
+                for i, name in enumerate(STATE_NAMES + INPUT_NAMES) if outside[i]]
 
 
 def split_branch_trunk(proto):
