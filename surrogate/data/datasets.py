@@ -39,7 +39,9 @@ def time_grid(preset: Preset) -> np.ndarray:
 
 
 def fingerprint(preset: Preset, seed: int) -> str:
-    text = json.dumps({"preset": preset.to_dict(), "seed": seed, "format": FORMAT_VERSION}, sort_keys=True)
+    # the version too: finished chunks of another opfmu version are not mixed into a resumed run
+    text = json.dumps({"preset": preset.to_dict(), "seed": seed, "format": FORMAT_VERSION, "opfmu": __version__},
+                      sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
