@@ -26,6 +26,7 @@ time derivative for the physics losses (torch.func forward mode; training only, 
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
@@ -128,7 +129,7 @@ def mlp(n_in: int, width: int, depth: int, n_out: int, activation: str, out_acti
     return nn.Sequential(*layers)
 
 
-class OperatorModel(nn.Module):
+class OperatorModel(nn.Module, ABC):
     """Shared normalisation (buffers) and time features of every architecture."""
 
     def __init__(self, config: OperatorConfig, stats: NormStats):
@@ -172,9 +173,9 @@ class OperatorModel(nn.Module):
         """Standardised states [..., 4] -> physical units."""
         return self.x_mean + self.x_std * y
 
+    @abstractmethod
     def standardised(self, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """Standardised states [N, M, 4] (x - x_mean) / x_std: what the data loss compares."""
-        raise NotImplementedError
 
     def forward(self, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
         """States [N, M, 4] (physical units)."""
@@ -196,9 +197,9 @@ class DeepONet(OperatorModel):
         self.trunk_net = mlp(self.n_time_features, c.width, c.depth, c.latent, c.activation, out_activation=True)
         self.bias = nn.Parameter(torch.zeros(N_STATES))
 
+    @abstractmethod
     def branch(self, x0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
         """Coefficients [N, 4, p] for x0 [N, 4] and u [N, S, 2] (physical units)."""
-        raise NotImplementedError
 
     def trunk(self, t: torch.Tensor) -> torch.Tensor:
         """Basis functions [M, p] at times t [M] (s)."""

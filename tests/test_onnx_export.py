@@ -70,16 +70,16 @@ def test_onnxruntime_reproduces_torch_on_the_test_split(exported, paper_tiny):
     assert np.max(np.abs(got - expected)) <= 1e-5
 
 
-def test_deeponet_trunk_basis_is_cached_per_time_grid(exported, paper_tiny):
+def test_deeponet_trunk_basis_is_cached_per_time_grid_and_the_pinn_runs_whole(exported, paper_tiny):
     op = Operator.load(exported[1])
-    if not op.separable:
-        pytest.skip("the PINN has no trunk to cache")
+    is_pinn = json.loads(op.metadata["architecture"])["arch"] == "pinn"
+    assert op.separable is not is_pinn
     x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
     t = np.linspace(0, 1, 11)
     first = op.predict(x0, u, t)
     np.testing.assert_array_equal(op.predict(x0, u, t), first)
     op.predict(x0, u, np.linspace(0, 1, 7))
-    assert len(op._basis) == 2
+    assert len(op._basis) == (0 if is_pinn else 2)
 
 
 def test_predictions_at_any_query_times_match_the_whole_graph(exported, paper_tiny):
