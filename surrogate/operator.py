@@ -66,7 +66,10 @@ class Operator:
         self._parts = None if split is None else tuple(session(part) for part in split)
         self._basis = OrderedDict()
 
-    load = classmethod(lambda cls, path, providers=None, threads=None: cls(path, providers, threads))
+    @classmethod
+    def load(cls, path, providers=None, threads: int | None = None) -> "Operator":
+        """The operator in an exported .onnx file (see __init__)."""
+        return cls(path, providers, threads)
 
     @classmethod
     def default(cls, providers=None, threads: int | None = None) -> "Operator":
