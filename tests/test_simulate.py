@@ -43,3 +43,12 @@ def test_breakpoints_closer_than_the_output_grid_are_integrated_through():
     x0 = steady_state(1.0, 0.0)
     tight = simulate(x0, s, T, solver=SolverConfig("DOP853", 1e-12, 1e-12))
     np.testing.assert_allclose(simulate(x0, s, T), tight, rtol=0, atol=1e-6)
+
+
+def test_many_trajectories_are_the_single_solves_stacked():
+    from reference_models.simulate import simulate_many
+
+    fam = family("fast")
+    signals = fam.sample(np.random.default_rng(9).random((3, fam.dim)), 1.0)
+    x0s = np.array([steady_state(1.0, 0.0)] * 3)
+    np.testing.assert_array_equal(simulate_many(x0s, signals, T), np.stack([simulate(x0s[0], s, T) for s in signals]))
