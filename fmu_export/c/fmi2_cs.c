@@ -242,40 +242,23 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     return fmi2OK;
 }
 
+/* access to a variable type the FMU does not have: fine for an empty list, an error otherwise */
+static fmi2Status none_of(fmi2Component c, size_t nvr, const char *function)
+{
+    if (nvr == 0) return fmi2OK;
+    return fail((Instance *)c, fmi2Error, "%s: the FMU has no variable of this type to access", function);
+}
+
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Boolean value[])
-{
-    (void)vr; (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2SetBoolean: the FMU has no settable Boolean variable");
-}
-
+{ (void)vr; (void)value; return none_of(c, nvr, "fmi2SetBoolean"); }
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Integer value[])
-{
-    (void)vr; (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2GetInteger: the FMU has no Integer variable");
-}
-
+{ (void)vr; (void)value; return none_of(c, nvr, "fmi2GetInteger"); }
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer value[])
-{
-    (void)vr; (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2SetInteger: the FMU has no Integer variable");
-}
-
+{ (void)vr; (void)value; return none_of(c, nvr, "fmi2SetInteger"); }
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[])
-{
-    (void)vr; (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2GetString: the FMU has no String variable");
-}
-
+{ (void)vr; (void)value; return none_of(c, nvr, "fmi2GetString"); }
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[])
-{
-    (void)vr; (void)value;
-    if (nvr == 0) return fmi2OK;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2SetString: the FMU has no String variable");
-}
+{ (void)vr; (void)value; return none_of(c, nvr, "fmi2SetString"); }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint)

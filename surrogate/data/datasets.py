@@ -82,6 +82,7 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
             meta["reachable"] = reachable_summary(x, names)
             ic_box, pool = reachable_box(meta["reachable"]), x.reshape(-1, 4)
         meta["ic_box"] = {s: list(r) for s, r in ic_box.items()}
+        trained_on = []  # (x0, u) of the splits a model trains on: its envelope
         for split in SPLITS:
             x0, signals, names = sample_split(preset.counts[split], preset.families, ic_box, preset.horizon,
                                               rngs[split], pool, preset.reachable_fraction)
@@ -90,8 +91,11 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
             if LABELED[split]:
                 arrays["x"] = _solve(runner, split, x0, signals, t, preset, partial, progress)
             write_npz(out / f"{split}.npz", **arrays)
+            if split in ("train", "collocation"):
+                trained_on.append((arrays["x0"], arrays["u"]))
     meta["counts"] = {s: preset.counts[s] for s in SPLITS}
-    meta["envelope"] = envelope_of(out, ("train", "collocation"))
+    meta["envelope"] = envelope_of(np.concatenate([x for x, _ in trained_on]),
+                                   np.concatenate([u for _, u in trained_on]))
     meta["versions"] = _versions()
     meta["wall_time_s"] = round(time.perf_counter() - started, 2)
     write_json(meta_path, meta)
@@ -123,13 +127,11 @@ def _solve(runner, name, x0s, signals, t, preset, partial: Path, progress: bool)
     return np.concatenate([results[k] for k in sorted(results)])
 
 
-def envelope_of(out: Path, splits) -> dict:
-    """Min/max of every initial state and input over `splits`: what a model trained on them has seen."""
-    x0 = np.concatenate([np.load(out / f"{s}.npz")["x0"] for s in splits])
-    u = np.concatenate([np.load(out / f"{s}.npz")["u"].reshape(-1, 2) for s in splits])
+def envelope_of(x0: np.ndarray, u: np.ndarray) -> dict:
+    """Min/max of every initial state (x0 [N, 4]) and input (u [N, S, 2]): what a model trained on them has seen."""
     return {
         "x0": {n: [float(x0[:, i].min()), float(x0[:, i].max())] for i, n in enumerate(STATE_NAMES)},
-        "u": {n: [float(u[:, i].min()), float(u[:, i].max())] for i, n in enumerate(INPUT_NAMES)},
+        "u": {n: [float(u[..., i].min()), float(u[..., i].max())] for i, n in enumerate(INPUT_NAMES)},
     }
 
 
