@@ -1,8 +1,8 @@
 """Export a trained operator to one ONNX file (DESIGN section 4), checked against torch.
 
 Graph: inputs x0 [N, 4], u [N, S, 2], t [M] (physical units, float32); output x [N, M, 4];
-normalisation inside; opset 17; N and M dynamic. metadata_props carry what an importer needs to
-use the file safely: component, names, horizon, sensor times, the training envelope, architecture,
+normalisation inside, folded into the first and last linear layers (folding.py); opset 17; N and M
+dynamic. metadata_props carry what an importer needs to use the file safely: component, names, horizon, sensor times, the training envelope, architecture,
 training summary, test metrics, the per-state residual scale and the opfmu version.
 """
 from __future__ import annotations
@@ -20,6 +20,7 @@ from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
 from .data import load_metadata, load_split
 from .evaluation import evaluate
+from .folding import fold
 from .losses import residual_scale
 from .training import load_model
 
@@ -60,7 +61,7 @@ def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -
         "opfmu_version": __version__,
     }
     with atomic_path(out) as tmp:
-        _torch_export(model, len(t_grid), tmp)
+        _torch_export(fold(model), len(t_grid), tmp)
         _attach_metadata(tmp, metadata)
         worst = check_against_torch(model, tmp, data_meta["envelope"], t_grid, n_check, seed)
         if not worst <= TOLERANCE:

@@ -1,9 +1,13 @@
 """Inference on an exported operator with onnxruntime: `Operator.load(path).predict(x0, u, t)`.
 
-For a DeepONet the graph is split at the product of branch coefficients and trunk basis into
-three sessions: branch (x0, u -> B), trunk (t -> tau) and head (B, tau -> x). The trunk basis depends
-only on the query times, so it is cached per time grid: repeated predictions on one grid cost a
-branch evaluation and the small head. Graphs without that product (the PINN) run whole.
+For a DeepONet the graph is split at the product of branch coefficients and trunk basis: branch
+(x0, u -> B [N, 4, q]) and trunk (t -> tau^T [q, M]) run as onnxruntime sessions, and the trunk basis,
+which depends only on the query times, is cached per time grid. The head of an opfmu export is that
+product alone (the decoding is folded into B and tau, see folding.py), so it runs as one float32 GEMM
+in numpy, tau [M, q] @ B^T [q, 4 N], whose [M, N, 4] result is returned as the [N, M, 4] view x (no
+copy: x.transpose(1, 0, 2) is C-contiguous). Any other head runs as a third session. Repeated
+predictions on one grid thus cost a branch evaluation and one matrix product. Graphs without that
+product (the PINN) run whole.
 """
 from __future__ import annotations
 
@@ -32,10 +36,9 @@ class Operator:
     """An exported SM4 operator. predict(x0 [N, 4], u [N, S, 2], t [M]) -> x [N, M, 4] (float32)."""
 
     CACHE_SIZE = 8  # time grids whose trunk basis is kept
-    # batches at least this large run the whole graph: there the trunk is a negligible part and the
-    # split graph's extra session costs more than it saves (measured: 1000 trajectories, 113 ms split
-    # against 57 ms whole; 10 trajectories, 1.0 ms split against 1.3 ms whole)
-    SPLIT_BELOW = 100
+    # smaller batches run the branch on one thread: there the hand-off between threads costs more than
+    # it saves (measured, one trajectory: 0.031 ms on one thread, 0.068 ms on two)
+    SMALL_BATCH = 16
 
     def __init__(self, path, providers=None, threads: int | None = None):
         import onnx
@@ -55,15 +58,25 @@ class Operator:
         self.envelope = json.loads(self.metadata["envelope"])
         bounds = [self.envelope["x0"][n] for n in STATE_NAMES] + [self.envelope["u"][n] for n in INPUT_NAMES]
         self._env_min, self._env_max = np.array(bounds).T
-        options = ort.SessionOptions()
-        if threads:
-            options.intra_op_num_threads = threads
         available = ort.get_available_providers()
         providers = providers or [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in available]
-        session = lambda model: ort.InferenceSession(model.SerializeToString(), options, providers=providers)  # noqa: E731
+
+        def session(model, n_threads=threads):
+            options = ort.SessionOptions()
+            # no spin-waiting after a run: the numpy head follows at once and needs the cores
+            options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+            if n_threads:
+                options.intra_op_num_threads = n_threads
+            return ort.InferenceSession(model.SerializeToString(), options, providers=providers)
+
         self._full = session(proto)
         split = split_branch_trunk(proto)
-        self._parts = None if split is None else tuple(session(part) for part in split)
+        self._branch = self._branch_small = self._trunk_session = self._head = None
+        if split is not None:
+            branch, trunk, head = split
+            self._branch, self._branch_small = session(branch), session(branch, threads or 1)
+            self._trunk_session = session(trunk)
+            self._head = None if is_plain_product(head) else session(head)
         self._basis = OrderedDict()
 
     @classmethod
@@ -79,25 +92,30 @@ class Operator:
     @property
     def separable(self) -> bool:
         """True when the trunk basis is cached per time grid (DeepONets)."""
-        return self._parts is not None
+        return self._branch is not None
 
     def predict(self, x0, u, t, strict: bool = False) -> np.ndarray:
         """States x [N, M, 4] at times t [M] (s, within [0, horizon]) from x0 [N, 4] and inputs u [N, S, 2]
         at the operator's sensor times. Outside the training envelope: EnvelopeWarning, or
         OperatorInputError when strict."""
         x0, u, t = self._checked(x0, u, t, strict)
-        if self._parts is None or len(x0) >= self.SPLIT_BELOW:
+        if self._branch is None:
             return self._full.run(["x"], {"x0": x0, "u": u, "t": t})[0]
-        branch, trunk, head = self._parts
-        b = branch.run(None, {"x0": x0, "u": u})[0]
-        return head.run(["x"], {head.get_inputs()[0].name: b, head.get_inputs()[1].name: self._trunk(trunk, t)})[0]
+        branch = self._branch_small if len(x0) < self.SMALL_BATCH else self._branch
+        b = branch.run(None, {"x0": x0, "u": u})[0]  # [N, 4, q]
+        basis = self._trunk(t)  # tau^T [q, M]
+        if self._head is None:
+            return (basis.T @ b.reshape(-1, b.shape[-1]).T).reshape(len(t), len(x0), 4).transpose(1, 0, 2)
+        names = [i.name for i in self._head.get_inputs()]
+        return self._head.run(["x"], {names[0]: b, names[1]: basis})[0]
 
-    def _trunk(self, trunk, t: np.ndarray) -> np.ndarray:
+    def _trunk(self, t: np.ndarray) -> np.ndarray:
+        """The basis tau^T [q, M] at times t, from the cache or the trunk session."""
         key = t.tobytes()
         if key in self._basis:
             self._basis.move_to_end(key)
         else:
-            self._basis[key] = trunk.run(None, {"t": t})[0]
+            self._basis[key] = self._trunk_session.run(None, {"t": t})[0]
             if len(self._basis) > self.CACHE_SIZE:
                 self._basis.popitem(last=False)
         return self._basis[key]
@@ -112,11 +130,12 @@ class Operator:
         if t.ndim != 1 or t.size == 0:
             raise OperatorInputError(f"t must be a non-empty 1-D array of times, got shape {t.shape}")
         low, high = self._ranges(x0, u)
-        for name, a in (("x0", np.concatenate([low[:4], high[:4]])), ("u", np.concatenate([low[4:], high[4:]])), ("t", t)):
-            if not np.all(np.isfinite(a)):  # NaN and inf propagate into the ranges
-                raise OperatorInputError(f"{name} holds NaN or inf")
-        if t.min() < 0 or t.max() > self.horizon * (1 + 1e-6):
-            raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t.min():g}, {t.max():g}]")
+        t_low, t_high = t.min(), t.max()
+        if not np.isfinite([*low, *high, t_low, t_high]).all():  # NaN and inf propagate into the ranges
+            name = next(n for n, a in (("x0", x0), ("u", u), ("t", t)) if not np.isfinite(a).all())
+            raise OperatorInputError(f"{name} holds NaN or inf")
+        if t_low < 0 or t_high > self.horizon * (1 + 1e-6):
+            raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t_low:g}, {t_high:g}]")
         outside = self._outside(low, high)
         if outside:
             message = "outside the training envelope: " + "; ".join(outside)
@@ -131,13 +150,17 @@ class Operator:
 
     @staticmethod
     def _ranges(x0: np.ndarray, u: np.ndarray):
-        """(min, max) [6] of the four states in x0 and the two inputs in u (per-channel strided
-        reductions: a reduction over axis 0 of a [N*S, 2] array is an order of magnitude slower)."""
-        columns = [x0[:, i] for i in range(4)] + [u[..., c] for c in range(2)]
-        return np.array([c.min() for c in columns]), np.array([c.max() for c in columns])
+        """(min, max) [6] of the four states in x0 and the two inputs in u: a reduction over the
+        trajectories first (contiguous rows), then over the 2 S interleaved sensor values."""
+        flat = u.reshape(len(u), -1)
+        low, high = flat.min(0), flat.max(0)
+        return (np.array([*x0.min(0), low[0::2].min(), low[1::2].min()]),
+                np.array([*x0.max(0), high[0::2].max(), high[1::2].max()]))
 
     def _outside(self, low: np.ndarray, high: np.ndarray) -> list[str]:
         outside = (low < self._env_min - 1e-6) | (high > self._env_max + 1e-6)
+        if not outside.any():
+            return []
         return [f"{name} in [{low[i]:.4g}, {high[i]:.4g}], trained [{self._env_min[i]:.4g}, {self._env_max[i]:.4g}]"
                 for i, name in enumerate(STATE_NAMES + INPUT_NAMES) if outside[i]]
 
@@ -172,6 +195,17 @@ def split_branch_trunk(proto):
                 return (extractor.extract_model(["x0", "u"], [a]), extractor.extract_model(["t"], [b]),
                         extractor.extract_model([a, b], ["x"]))
     return None
+
+
+def is_plain_product(head) -> bool:
+    """True when the head graph (B [N, 4, q], tau^T [q, M]) -> x is MatMul then a swap of the last two axes."""
+    nodes = list(head.graph.node)
+    if [n.op_type for n in nodes] != ["MatMul", "Transpose"]:
+        return False
+    matmul, transpose = nodes
+    perm = [list(a.ints) for a in transpose.attribute if a.name == "perm"]
+    return (list(matmul.input) == [i.name for i in head.graph.input] and transpose.input[0] == matmul.output[0]
+            and perm == [[0, 2, 1]] and transpose.output[0] == head.graph.output[0].name)
 
 
 def _with_value_info(proto, names):

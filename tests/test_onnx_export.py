@@ -11,7 +11,7 @@ import torch
 
 from surrogate.data import load_metadata, load_split
 from surrogate.models import OperatorConfig
-from surrogate.onnx_export import export_onnx
+from surrogate.onnx_export import _attach_metadata, _torch_export, export_onnx
 from surrogate.operator import EnvelopeWarning, Operator, OperatorInputError
 from surrogate.training import TrainConfig, load_model, train
 
@@ -82,6 +82,24 @@ def test_deeponet_trunk_basis_is_cached_per_time_grid_and_the_pinn_runs_whole(ex
     assert len(op._basis) == (0 if is_pinn else 2)
 
 
+def test_an_exported_deeponet_head_is_one_product_computed_without_a_session(exported):
+    assert Operator.load(exported[1])._head is None
+
+
+def test_a_graph_with_the_decoding_after_the_product_runs_its_head_as_a_session(exported, paper_tiny, tmp_path):
+    model = load_model(exported[0])
+    if model.config.arch == "pinn":
+        pytest.skip("the PINN has no head")
+    unfolded = tmp_path / "unfolded.onnx"
+    _torch_export(model, model.n_sensors, unfolded)
+    _attach_metadata(unfolded, {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props})
+    op, reference = Operator.load(unfolded), Operator.load(exported[1])
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
+    t = np.linspace(0, 1, 9)
+    assert op.separable and op._head is not None
+    np.testing.assert_allclose(op.predict(x0, u, t), reference.predict(x0, u, t), rtol=0, atol=1e-5)
+
+
 def test_predictions_at_any_query_times_match_the_whole_graph(exported, paper_tiny):
     op = Operator.load(exported[1])
     x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
@@ -95,6 +113,8 @@ def test_predictions_at_any_query_times_match_the_whole_graph(exported, paper_ti
     (dict(u=np.zeros((2, 10, 2))), "u must be \\[N, S, 2\\]"),
     (dict(t=np.array([0.0, 1.5])), "t must lie in \\[0, 1\\]"),
     (dict(t=np.array([np.nan])), "t holds NaN"),
+    (dict(u=np.full((2, 1001, 2), np.inf)), "u holds NaN or inf"),
+    (dict(x0=np.full((2, 4), np.nan)), "x0 holds NaN"),
 ])
 def test_bad_inputs_are_refused_with_a_clear_message(exported, paper_tiny, bad, message):
     x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]), n=2)

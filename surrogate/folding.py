@@ -1,0 +1,148 @@
+"""The inference form of a trained operator: the same function with its normalisation folded away.
+
+`fold(model)` returns a module with the signature of the model, (x0 [N, 4], u [N, S, 2], t [M]) ->
+x [N, M, 4] in physical units, that computes without any elementwise normalisation pass:
+
+* the standardisation of x0 and of the sensors (and the sensor scale) is folded into the weights and
+  bias of the first linear layer that reads them, so the raw [x0, u] go straight into one Gemm;
+* the decoding x = x_mean + x_std * y is folded into the last linear layer of the output path. For a
+  DeepONet the per-state offset (x_mean + x_std * bias) becomes one more coefficient per state, whose
+  basis function is the constant 1 appended to the trunk, so that the head is a single product
+  x[n, :, k] = tau_aug [M, p + 1] @ B_aug[n, k] [p + 1] and nothing else.
+
+The export writes this form (see onnx_export.py) and checks it against the trained model; on 1000
+trajectories it halves the work outside the two matrix products (benchmarks/inference_speed.py).
+Folding is done in float64 and rounded once to float32.
+"""
+from __future__ import annotations
+
+import copy
+
+import torch
+from torch import nn
+
+from .models import N_STATES, PINN, DeepONet, OperatorModel, StackedNDeepONet, UnstackedDeepONet
+
+
+def fold(model: OperatorModel) -> nn.Module:
+    """The inference form of `model` (a copy; the model is left as it is)."""
+    for kind, folded in ((UnstackedDeepONet, FoldedUnstacked), (StackedNDeepONet, FoldedStackedN), (PINN, FoldedPINN)):
+        if isinstance(model, kind):
+            return folded(copy.deepcopy(model).eval())
+    raise TypeError(f"no inference form for {type(model).__name__}")
+
+
+def fold_input(linear: nn.Linear, mean: torch.Tensor, scale: torch.Tensor) -> nn.Linear:
+    """A layer computing linear((v - mean) * scale) from v; mean, scale [in_features]."""
+    w, b = linear.weight.double(), linear.bias.double()
+    mean, scale = mean.double(), scale.double()
+    return _linear(w * scale, b - (w * scale) @ mean)
+
+
+def fold_output(linear: nn.Linear, gain: torch.Tensor, offset: torch.Tensor) -> nn.Linear:
+    """A layer computing offset + gain * linear(h); gain, offset [out_features]."""
+    w, b = linear.weight.double(), linear.bias.double()
+    gain, offset = gain.double(), offset.double()
+    return _linear(gain[:, None] * w, offset + gain * b)
+
+
+def with_constant_coefficient(linear: nn.Linear, latent: int, constants: torch.Tensor) -> nn.Linear:
+    """A layer whose output, seen as [4, latent + 1], is linear's [4, latent] plus one more column
+    holding constants [4] whatever the input (zero weights, bias = the constant)."""
+    w = linear.weight.double().reshape(N_STATES, latent, -1)
+    b = linear.bias.double().reshape(N_STATES, latent)
+    w = torch.cat([w, torch.zeros(N_STATES, 1, w.shape[-1], dtype=w.dtype)], 1).reshape(N_STATES * (latent + 1), -1)
+    b = torch.cat([b, constants.double().reshape(N_STATES, 1)], 1).reshape(-1)
+    return _linear(w, b)
+
+
+def _linear(weight: torch.Tensor, bias: torch.Tensor) -> nn.Linear:
+    layer = nn.Linear(weight.shape[1], weight.shape[0])
+    with torch.no_grad():
+        layer.weight.copy_(weight.float())
+        layer.bias.copy_(bias.float())
+    return layer
+
+
+def _replace(sequential: nn.Sequential, index: int, layer: nn.Module) -> nn.Sequential:
+    layers = list(sequential)
+    layers[index] = layer
+    return nn.Sequential(*layers)
+
+
+def _input_normalisation(model: OperatorModel, with_state: bool):
+    """(mean, scale) of the raw inputs [x0 (4) if with_state, sensors flattened time-major (2 S)]."""
+    s = model.n_sensors
+    mean = model.u_mean.repeat(s)
+    scale = (model.sensor_scale / model.u_std).repeat(s)
+    if with_state:
+        mean = torch.cat([model.x_mean, mean])
+        scale = torch.cat([1.0 / model.x_std, scale])
+    return mean, scale
+
+
+def _per_coefficient(per_state: torch.Tensor, latent: int) -> torch.Tensor:
+    """[4] -> [4 * latent]: each state's value repeated over its coefficients (state-major)."""
+    return per_state.repeat_interleave(latent)
+
+
+class FoldedDeepONet(nn.Module):
+    """Shared head of the folded DeepONets: x = (B_aug @ tau_aug^T) transposed to [N, M, 4]."""
+
+    def __init__(self, model: DeepONet):
+        super().__init__()
+        self.model = model  # its time features and trunk are used as they are
+        self.latent = model.config.latent
+
+    def offsets(self, model: DeepONet) -> torch.Tensor:
+        """Per-state offset [4] of the decoded output: x_mean + x_std * bias."""
+        return model.x_mean + model.x_std * model.bias.detach()
+
+    def trunk(self, t: torch.Tensor) -> torch.Tensor:
+        """Basis [M, p + 1]: the trained basis and the constant 1."""
+        tau = self.model.trunk(t)
+        return torch.cat([tau, t.unsqueeze(-1) * 0.0 + 1.0], dim=-1)
+
+    def forward(self, x0, u, t):
+        b = self.branch(x0, u).reshape(-1, N_STATES, self.latent + 1)
+        return torch.matmul(b, self.trunk(t).transpose(0, 1)).transpose(1, 2)
+
+
+class FoldedUnstacked(FoldedDeepONet):
+    def __init__(self, model: UnstackedDeepONet):
+        super().__init__(model)
+        p = self.latent
+        net = _replace(model.branch_net, 0, fold_input(model.branch_net[0], *_input_normalisation(model, True)))
+        last = fold_output(net[-1], _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
+        self.branch_net = _replace(net, -1, with_constant_coefficient(last, p, self.offsets(model)))
+
+    def branch(self, x0, u):
+        return self.branch_net(torch.cat([x0, torch.flatten(u, 1)], dim=-1))
+
+
+class FoldedStackedN(FoldedDeepONet):
+    def __init__(self, model: StackedNDeepONet):
+        super().__init__(model)
+        p = self.latent
+        state = _replace(model.state_net, 0, fold_input(model.state_net[0], model.x_mean, 1.0 / model.x_std))
+        last = fold_output(state[-1], _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
+        self.state_net = _replace(state, -1, with_constant_coefficient(last, p, self.offsets(model)))
+        inputs = _replace(model.input_net, 0, fold_input(model.input_net[0], *_input_normalisation(model, False)))
+        self.input_net = _replace(inputs, -1, with_constant_coefficient(inputs[-1], p, torch.ones(N_STATES)))
+
+    def branch(self, x0, u):
+        return self.state_net(x0) * self.input_net(torch.flatten(u, 1))
+
+
+class FoldedPINN(nn.Module):
+    def __init__(self, model: PINN):
+        super().__init__()
+        self.model = model
+        self.input_layer = fold_input(model.input_layer, *_input_normalisation(model, True))
+        self.hidden = _replace(model.hidden, -1, fold_output(model.hidden[-1], model.x_std, model.x_mean))
+
+    def forward(self, x0, u, t):
+        m = self.model
+        h = self.input_layer(torch.cat([x0, torch.flatten(u, 1)], dim=-1)).unsqueeze(1)
+        h = h + m.time_layer(m.time_features(t)).unsqueeze(0)
+        return self.hidden(m.activation(h))
