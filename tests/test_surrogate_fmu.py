@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
-from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.validation import validate_fmu
 
 from fmu_export.builder import build_surrogate_fmu
+from fmu_slave import Slave
 from reference_models.sm4 import steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
@@ -31,38 +31,6 @@ def fmu_path(tmp_path_factory):
 @pytest.fixture(scope="session")
 def unzipped(fmu_path):
     return extract(str(fmu_path)), read_model_description(str(fmu_path))
-
-
-class Slave:
-    """An initialized FMU instance that records log messages."""
-
-    def __init__(self, unzipped, name="a", init=True, **start):
-        directory, md = unzipped
-        self.messages = []
-        self.callbacks = fmi2CallbackFunctions()
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier="SM4Surrogate", instanceName=name)
-        self.fmu.instantiate(callbacks=self.callbacks)
-        self.t = 0.0
-        if init:
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-            for name_, value in start.items():
-                self.fmu.setReal([VR[name_]], [value])
-            self.fmu.exitInitializationMode()
-
-    def _log(self, env, instance, status, category, message):
-        self.messages.append((status, message.decode()))
-
-    def step(self, h, Vs=1.0, theta=0.0):
-        self.fmu.setReal([0, 1], [Vs, theta])
-        self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
-        self.t += h
-        return np.array(self.fmu.getReal(STATES))
-
-    def close(self):
-        self.fmu.terminate()
-        self.fmu.freeInstance()
 
 
 def operator_reference(x0, steps, horizon=1.0):
@@ -174,7 +142,7 @@ def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped
     script = f"""
 import numpy as np, sys
 sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
-from test_surrogate_fmu import Slave
+from fmu_slave import Slave
 from fmpy import read_model_description
 slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})), init=False)
 slave.fmu.setupExperiment(startTime=0.0); slave.fmu.enterInitializationMode(); slave.fmu.exitInitializationMode()
