@@ -127,7 +127,7 @@ C_FILES = ("fmi2_cs.c", "surrogate_model.c", "operator_kernel.c", "sensor_sums.c
 
 
 def _compile(binary: Path, sources, include: Path) -> Path:
-    command = ["gcc", "-O2", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
+    command = ["gcc", "-O3", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
                *map(str, sources), "-o", str(binary), "-lm"]
     result = subprocess.run(command, capture_output=True, text=True)
     if result.returncode != 0:

@@ -111,8 +111,19 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
     def c_name(tensor: str) -> str:
         return names.setdefault(tensor, f"v{len(names)}")
 
+    # weights a Gemm reads transposed (transB = 1) are stored transposed, so its inner loop reads them
+    # contiguously; each such weight must feed that one Gemm only
+    uses = {}
+    for node in graph.node:
+        for i in node.input:
+            uses[i] = uses.get(i, 0) + 1
+    initializers = {init.name for init in graph.initializer}
+    stored_transposed = {n.input[1] for n in graph.node if n.op_type == "Gemm" and n.input[1] in initializers
+                         and uses[n.input[1]] == 1 and any(a.name == "transB" and a.i for a in n.attribute)}
     for init in graph.initializer:
         array = numpy_helper.to_array(init)
+        if init.name in stored_transposed:
+            array = array.T
         shapes[init.name] = array.shape
         if array.dtype.kind == "f":
             constants.append(_float_array(c_name(init.name), array))
@@ -140,6 +151,8 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
         elif op in COPIES:
             code = f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {src[0]}[i];"
         elif op == "Gemm":
+            if node.input[1] in stored_transposed:
+                attrs = {k: v for k, v in attrs.items() if k != "transB"}
             code = _gemm(node, attrs, src, dst, shapes)
         elif op == "MatMul":
             code = _matmul(node, src, dst, shapes)
@@ -214,6 +227,9 @@ def _ancestors(producer: dict, tensor: str, cut: str | None = None) -> set:
 
 
 def _gemm(node, attrs, src, dst, shapes) -> str:
+    """Y = alpha A' B' + beta C as an outer-product accumulation: for each row, Y[r, :] starts at the
+    bias and gains alpha A'[r, p] B'[p, :] for p in order. The innermost loop runs over independent
+    outputs (no reduction chain), so it vectorises and pipelines; the sum over p keeps its order."""
     alpha = attrs["alpha"].f if "alpha" in attrs else 1.0
     beta = attrs["beta"].f if "beta" in attrs else 1.0
     trans_a = attrs["transA"].i if "transA" in attrs else 0
@@ -221,18 +237,22 @@ def _gemm(node, attrs, src, dst, shapes) -> str:
     a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]
     m, k = (a_shape[1], a_shape[0]) if trans_a else a_shape
     n = b_shape[0] if trans_b else b_shape[1]
-    a_index = "p * {m} + r".format(m=m) if trans_a else f"r * {k} + p"
+    a_index = f"p * {m} + r" if trans_a else f"r * {k} + p"
     b_index = f"c * {k} + p" if trans_b else f"p * {n} + c"
-    bias = ""
+    bias = "0.0"
     if len(node.input) > 2 and node.input[2]:
-        bias = f" + {beta!r} * {src[2]}[{_offset('(r * %d + c)' % n, (m, n), shapes[node.input[2]])}]"
-    return (f"    for (int r = 0; r < {m}; ++r) for (int c = 0; c < {n}; ++c) {{\n"
-            f"        double s = 0.0;\n"
-            f"        for (int p = 0; p < {k}; ++p) s += (double){src[0]}[{a_index}] * (double){src[1]}[{b_index}];\n"
-            f"        {dst}[r * {n} + c] = {alpha!r} * s{bias};\n    }}")
+        bias = f"{beta!r} * {src[2]}[{_offset('(r * %d + c)' % n, (m, n), shapes[node.input[2]])}]"
+    return (f"    for (int r = 0; r < {m}; ++r) {{\n"
+            f"        double *y = {dst} + r * {n};\n"
+            f"        for (int c = 0; c < {n}; ++c) y[c] = {bias};\n"
+            f"        for (int p = 0; p < {k}; ++p) {{\n"
+            f"            const double a = {alpha!r} * (double){src[0]}[{a_index}];\n"
+            f"            for (int c = 0; c < {n}; ++c) y[c] += a * (double){src[1]}[{b_index}];\n"
+            f"        }}\n    }}")
 
 
 def _matmul(node, src, dst, shapes) -> str:
+    """Batched A @ B, accumulated row by row as in _gemm."""
     a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]
     if len(a_shape) < 2 or len(b_shape) < 2:
         raise UnsupportedGraph("MatMul with a 1-D operand is not supported")
@@ -242,11 +262,13 @@ def _matmul(node, src, dst, shapes) -> str:
     n_batch = int(np.prod(batch)) if batch else 1
     a_off = _offset("q", batch, a_shape[:-2]) if batch else "0"
     b_off = _offset("q", batch, b_shape[:-2]) if batch else "0"
-    return (f"    for (int q = 0; q < {n_batch}; ++q) for (int r = 0; r < {m}; ++r) for (int c = 0; c < {n}; ++c) {{\n"
-            f"        double s = 0.0;\n"
-            f"        for (int p = 0; p < {k}; ++p) s += (double){src[0]}[({a_off}) * {m * k} + r * {k} + p] "
-            f"* (double){src[1]}[({b_off}) * {k * n} + p * {n} + c];\n"
-            f"        {dst}[q * {m * n} + r * {n} + c] = s;\n    }}")
+    return (f"    for (int q = 0; q < {n_batch}; ++q) for (int r = 0; r < {m}; ++r) {{\n"
+            f"        double *y = {dst} + q * {m * n} + r * {n};\n"
+            f"        for (int c = 0; c < {n}; ++c) y[c] = 0.0;\n"
+            f"        for (int p = 0; p < {k}; ++p) {{\n"
+            f"            const double a = (double){src[0]}[({a_off}) * {m * k} + r * {k} + p];\n"
+            f"            for (int c = 0; c < {n}; ++c) y[c] += a * (double){src[1]}[({b_off}) * {k * n} + p * {n} + c];\n"
+            f"        }}\n    }}")
 
 
 def _transpose(attrs, src, dst, in_shape, out_shape) -> str:

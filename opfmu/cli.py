@@ -127,18 +127,57 @@ def cmd_build_fmu(args) -> None:
           f"compiled kernel matches onnxruntime to {info['max_abs_diff']:.1e}")
 
 
-def cmd_demo(args) -> None:
-    """The main job on defaults, as far as the pipeline is built: a quick co-simulation dataset
-    (fresh reference trajectories) and the shipped operator checked against it, with figures."""
-    from surrogate.operator import Operator
-    from surrogate.report import check_operator
+def cmd_build_reference_fmu(args) -> None:
+    from reference_models.reference_fmu import ReferenceBuildError, build_reference_fmu
 
-    args.preset, args.seed, args.scheduler, args.quiet = "quick", args.seed, None, False
+    try:
+        info = build_reference_fmu(args.output, model_name=args.name)
+    except (ValueError, ReferenceBuildError) as exc:
+        raise UserError(str(exc)) from None
+    print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, model {args.name}, guid {info['guid']}); "
+          "fmpy validates it")
+
+
+def cmd_compare(args) -> None:
+    import tempfile
+    import zipfile
+
+    from fmpy import extract
+
+    from opfmu.compare import CompareError, compare, csv_inputs, format_table, plot_comparison, scenario_inputs, summary
+    from opfmu.files import write_json
+
+    for path in (args.surrogate, args.reference):
+        if not zipfile.is_zipfile(path):
+            raise UserError(f"{path} is not an FMU (no such file, or not a zip archive)")
+    try:
+        if args.scenario:
+            inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step)
+            stop_time = inputs.times[-1]
+        else:
+            inputs = csv_inputs(args.inputs)
+            stop_time = args.stop_time or float(inputs.times[-1])
+        with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
+            result = compare(extract(args.surrogate, unzipdir=f"{tmp}/surrogate"),
+                             extract(args.reference, unzipdir=f"{tmp}/reference"), inputs, stop_time, args.step)
+    except (CompareError, ValueError) as exc:
+        raise UserError(str(exc)) from None
     out = Path(args.out)
-    args.out = str(out / "data")
-    cmd_data(args)
-    print(check_operator(Operator.default(), out / "data", out))
-    print(f"demo run directory: {out}")
+    stem = args.scenario or Path(args.inputs).stem
+    plots = plot_comparison(result, out, stem)
+    write_json(out / f"{stem}.json", summary(result))
+    print(format_table(result))
+    print(f"plots: {', '.join(str(p) for p in plots)}; summary: {out / f'{stem}.json'}")
+
+
+def cmd_demo(args) -> None:
+    from opfmu.demo import DemoConfig, run_demo
+
+    if args.epochs < 1 or args.workers < 0:
+        raise UserError("--epochs must be >= 1 and --workers >= 0")
+    report = run_demo(DemoConfig(Path(args.out), train=args.train, epochs=args.epochs, workers=args.workers,
+                                 seed=args.seed))
+    print(f"report: {report}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -199,10 +238,39 @@ def build_parser() -> argparse.ArgumentParser:
     fmu.add_argument("--name", default="SM4Surrogate", help="model name and identifier (default SM4Surrogate)")
     fmu.set_defaults(func=cmd_build_fmu)
 
-    demo = sub.add_parser("demo", help="run the main job end to end on defaults")
+    ref = sub.add_parser("build-reference-fmu", help="build the reference RK45 FMU (pythonfmu)",
+                         description="An FMI 2.0 co-simulation FMU of SM4 that integrates the ODE over each "
+                                     "step with scipy's RK45; same variables as the surrogate FMU.")
+    ref.add_argument("-o", "--output", default="SM4Reference.fmu", help="FMU file (default SM4Reference.fmu)")
+    ref.add_argument("--name", default="SM4Reference", help="model name and identifier (default SM4Reference)")
+    ref.set_defaults(func=cmd_build_reference_fmu)
+
+    from reference_models.scenarios import SCENARIOS
+
+    cmp = sub.add_parser("compare", help="run the surrogate and the reference FMU on the same inputs",
+                         description="fmpy simulates both FMUs on one input signal; prints MAE, RMSE and MaxAE "
+                                     "per output, wall times and the speedup, and writes plots.")
+    cmp.add_argument("--surrogate", required=True, help="surrogate FMU")
+    cmp.add_argument("--reference", required=True, help="reference FMU")
+    source = cmp.add_mutually_exclusive_group(required=True)
+    source.add_argument("--scenario", choices=SCENARIOS, help="built-in scenario")
+    source.add_argument("--inputs", help="CSV with columns time, Vs, theta_vs")
+    cmp.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
+    cmp.add_argument("--stop-time", type=float, default=None,
+                     help="seconds (default: 10 for a scenario, the last CSV time for --inputs)")
+    cmp.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
+    cmp.add_argument("--out", default="comparison", help="directory for plots and the summary (default comparison)")
+    cmp.set_defaults(func=cmd_compare)
+
+    demo = sub.add_parser("demo", help="run the main job end to end on defaults",
+                          description="Build the surrogate FMU (shipped operator, or --train a quick one) and the "
+                                      "reference FMU, compare them on every built-in scenario and write report.md.")
     demo.add_argument("--out", default="runs/demo", help="run directory (default runs/demo)")
-    demo.add_argument("--workers", type=int, default=_cores(), help="dask worker processes (default: all cores)")
-    demo.add_argument("--seed", type=int, default=1, help="dataset seed (default 1: not the operator's training seed)")
+    demo.add_argument("--train", action="store_true", help="generate a quick dataset and train the operator first")
+    demo.add_argument("--epochs", type=int, default=300, help="training epochs with --train (default 300)")
+    demo.add_argument("--workers", type=int, default=0,
+                      help="dask workers for the --train dataset (default 0: in this process)")
+    demo.add_argument("--seed", type=int, default=0, help="scenario (and --train dataset) seed (default 0)")
     demo.set_defaults(func=cmd_demo)
     return parser
 

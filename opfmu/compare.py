@@ -1,0 +1,215 @@
+"""The surrogate FMU against the reference FMU: fmpy runs both on the same inputs.
+
+Both FMUs are simulated by `fmpy.simulate_fmu` from the same input table (time, Vs, theta_vs) with
+communication step h: at each communication point fmpy sets the table's value there and the FMU holds
+it over the step. Both start from the same state (the parameters delta0..Eq_p0: the equilibrium of the
+first input value). Outputs are recorded at every communication point; the errors are the surrogate
+minus the reference over all of them. Wall times are of `simulate_fmu` alone, on FMUs extracted
+beforehand, in this process, one after the other.
+"""
+from __future__ import annotations
+
+import csv
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from reference_models.scenarios import rest_state, scenario
+from reference_models.sm4 import INPUT_NAMES, OUTPUT_NAMES, STATE_NAMES, STATE_UNITS
+
+OUTPUTS = STATE_NAMES + OUTPUT_NAMES
+UNITS = dict(zip(STATE_NAMES, STATE_UNITS)) | {name: "pu" for name in OUTPUT_NAMES}
+DIAGNOSTICS = ("residual", "in_envelope")  # surrogate only
+
+
+class CompareError(ValueError):
+    """Inputs or FMUs that cannot be compared (bad CSV, wrong variables, a failed simulation)."""
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """What both FMUs are driven with: rows (time [s], Vs [pu], theta_vs [rad]) and the start state [4]."""
+
+    label: str
+    times: np.ndarray
+    values: np.ndarray
+    x0: np.ndarray
+
+    def table(self) -> np.ndarray:
+        """The structured array fmpy takes as `input`."""
+        rows = np.zeros(len(self.times), dtype=[("time", float)] + [(n, float) for n in INPUT_NAMES])
+        rows["time"] = self.times
+        for i, name in enumerate(INPUT_NAMES):
+            rows[name] = self.values[:, i]
+        return rows
+
+
+def scenario_inputs(name: str, seed: int, stop_time: float, step: float) -> Inputs:
+    """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h."""
+    s = scenario(name, seed, stop_time)
+    times = communication_points(stop_time, step)
+    return Inputs(f"{name} (seed {seed})", times, s.inputs(times), s.initial_state())
+
+
+def communication_points(stop_time: float, step: float) -> np.ndarray:
+    if not (step > 0 and stop_time > 0):
+        raise CompareError(f"step and stop time must be positive, got step {step}, stop time {stop_time}")
+    n = int(round(stop_time / step))
+    if n < 1 or abs(n * step - stop_time) > 1e-9 * max(1.0, stop_time):
+        raise CompareError(f"stop time {stop_time} s is not a whole number of steps of {step} s")
+    return np.arange(n + 1) * step
+
+
+def csv_inputs(path) -> Inputs:
+    """Inputs from a CSV file with the columns time, Vs, theta_vs (seconds, pu, rad; a header row;
+    times non-decreasing from 0; a repeated time is a jump, as fmpy reads it)."""
+    path = Path(path)
+    try:
+        with path.open(newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CompareError(f"cannot read inputs {path}: {exc}") from None
+    columns = ("time",) + INPUT_NAMES
+    if not rows or any(c not in rows[0] for c in columns):
+        raise CompareError(f"inputs {path} need a header with the columns {', '.join(columns)} and at least one row")
+    try:
+        data = np.array([[float(r[c]) for c in columns] for r in rows])
+    except (TypeError, ValueError) as exc:
+        raise CompareError(f"inputs {path}: not a number ({exc})") from None
+    if not np.all(np.isfinite(data)):
+        raise CompareError(f"inputs {path} hold NaN or inf")
+    times = data[:, 0]
+    if times[0] != 0 or np.any(np.diff(times) < 0):
+        raise CompareError(f"inputs {path}: times must start at 0 and never decrease")
+    return Inputs(path.name, times, data[:, 1:], rest_state(*data[0, 1:]))
+
+
+@dataclass
+class Run:
+    """One FMU's simulation: recorded outputs by name [T], its wall time [s] and what it logged."""
+
+    outputs: dict
+    wall_s: float
+    messages: list = field(default_factory=list)
+
+
+def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names) -> Run:
+    """Simulate an extracted FMU (directory) under fmpy; records `names` at every communication point."""
+    from fmpy import read_model_description, simulate_fmu
+
+    md = read_model_description(str(fmu_dir))
+    known = {v.name for v in md.modelVariables}
+    missing = [n for n in list(names) + [f"{s}0" for s in STATE_NAMES] + list(INPUT_NAMES) if n not in known]
+    if missing:
+        raise CompareError(f"{md.modelName} lacks the variables {', '.join(missing)}: not an SM4 FMU")
+    messages = []
+
+    def logger(_env, _instance, status, category, message):
+        messages.append(f"{category.decode(errors='replace')}: {message.decode(errors='replace')}")
+
+    start_values = {f"{s}0": float(v) for s, v in zip(STATE_NAMES, inputs.x0)}
+    started = time.perf_counter()
+    try:
+        result = simulate_fmu(str(fmu_dir), validate=False, model_description=md, start_time=0.0, stop_time=stop_time,
+                              output_interval=step, input=inputs.table(), output=list(names),
+                              start_values=start_values, debug_logging=True, logger=logger)
+    except Exception as exc:  # fmpy raises plain Exceptions for failed FMI calls
+        said = f" ({messages[-1]})" if messages else ""
+        raise CompareError(f"{md.modelName} failed: {exc}{said}") from None
+    wall = time.perf_counter() - started
+    return Run({n: np.asarray(result[n], dtype=float) for n in ["time", *names]}, wall, messages)
+
+
+def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step: float) -> dict:
+    """Both FMUs on `inputs`; returns the comparison (metrics, timings, trajectories)."""
+    reference = simulate(reference_dir, inputs, stop_time, step, OUTPUTS)
+    surrogate = simulate(surrogate_dir, inputs, stop_time, step, OUTPUTS + DIAGNOSTICS)
+    if len(reference.outputs["time"]) != len(surrogate.outputs["time"]):
+        raise CompareError("the two FMUs recorded different numbers of communication points")
+    return {
+        "inputs": inputs.label, "stop_time_s": stop_time, "step_s": step, "x0": inputs.x0.tolist(),
+        "metrics": error_metrics(reference.outputs, surrogate.outputs),
+        "wall_s": {"surrogate": surrogate.wall_s, "reference": reference.wall_s},
+        "speedup": reference.wall_s / surrogate.wall_s,
+        "max_residual": float(np.max(surrogate.outputs["residual"])),
+        "in_envelope": bool(np.all(surrogate.outputs["in_envelope"] > 0.5)),
+        "messages": {"surrogate": surrogate.messages, "reference": reference.messages},
+        "trajectories": {"reference": reference.outputs, "surrogate": surrogate.outputs,
+                         "inputs": np.array([np.interp(reference.outputs["time"], inputs.times, inputs.values[:, i])
+                                             for i in range(2)]).T},
+    }
+
+
+def error_metrics(reference: dict, surrogate: dict) -> dict:
+    """MAE, RMSE and MaxAE of surrogate - reference per output (physical units)."""
+    out = {}
+    for name in OUTPUTS:
+        e = np.abs(surrogate[name] - reference[name])
+        out[name] = {"mae": float(e.mean()), "rmse": float(np.sqrt(np.mean(e ** 2))), "maxae": float(e.max())}
+    return out
+
+
+def format_table(result: dict) -> str:
+    """Per-output errors, then wall times and the speedup, as text."""
+    lines = [f"{result['inputs']}: {result['stop_time_s']:g} s at h = {result['step_s'] * 1e3:g} ms",
+             f"{'output':<10}{'unit':<7}{'MAE':>11}{'RMSE':>11}{'MaxAE':>11}"]
+    for name, m in result["metrics"].items():
+        lines.append(f"{name:<10}{UNITS[name]:<7}{m['mae']:>11.3e}{m['rmse']:>11.3e}{m['maxae']:>11.3e}")
+    wall = result["wall_s"]
+    lines.append(f"wall time: surrogate {wall['surrogate']:.3f} s, reference {wall['reference']:.3f} s; "
+                 f"speedup {result['speedup']:.1f}x")
+    lines.append(f"surrogate diagnostics: max residual {result['max_residual']:.3g}, "
+                 f"in envelope throughout: {'yes' if result['in_envelope'] else 'NO'}")
+    return "\n".join(lines)
+
+
+def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
+    """Two PNGs: the inputs and the four states, and the six currents and powers; each output with
+    both curves (left) and the surrogate's error (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    traj = result["trajectories"]
+    t = traj["reference"]["time"]
+    paths = []
+    for suffix, names in (("states", STATE_NAMES), ("currents_powers", OUTPUT_NAMES)):
+        rows = len(names) + (1 if suffix == "states" else 0)
+        fig, axes = plt.subplots(rows, 2, figsize=(11, 2.1 * rows), sharex=True, squeeze=False)
+        row = 0
+        if suffix == "states":
+            for i, (name, unit) in enumerate(zip(INPUT_NAMES, ("pu", "rad"))):
+                axes[0, i].plot(t, traj["inputs"][:, i], color="tab:gray", drawstyle="steps-post")
+                axes[0, i].set_ylabel(f"{name} [{unit}]")
+                axes[0, i].set_title("input" if i == 0 else "")
+            row = 1
+        for name in names:
+            ref, sur = traj["reference"][name], traj["surrogate"][name]
+            axes[row, 0].plot(t, ref, label="reference (RK45)", color="black", lw=1.2)
+            axes[row, 0].plot(t, sur, label="surrogate", color="tab:red", lw=1.0, ls="--")
+            axes[row, 0].set_ylabel(f"{name} [{UNITS[name]}]")
+            axes[row, 1].plot(t, sur - ref, color="tab:red", lw=0.9)
+            axes[row, 1].set_ylabel(f"error [{UNITS[name]}]")
+            row += 1
+        axes[1 if suffix == "states" else 0, 0].legend(loc="best", fontsize=8)
+        for ax in axes[-1]:
+            ax.set_xlabel("time [s]")
+        for ax in axes.ravel():
+            ax.grid(alpha=0.3)
+        fig.suptitle(f"{result['inputs']}, h = {result['step_s'] * 1e3:g} ms: surrogate FMU against reference FMU")
+        fig.tight_layout()
+        path = out_dir / f"{stem}_{suffix}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def summary(result: dict) -> dict:
+    """The comparison without its trajectories (what comparison JSON files hold)."""
+    return {k: v for k, v in result.items() if k != "trajectories"}

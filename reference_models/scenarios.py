@@ -1,0 +1,54 @@
+"""Built-in co-simulation scenarios: one bus-voltage signal over a whole run, drawn with a seed.
+
+A scenario is a signal of one input family (families.py) sampled over the run's length instead of one
+operator window: `slow` and `fast` are the paper's families (their transients settle within the
+first seconds), `dip` is a fault (Vs drops to 0.2-0.9 pu for 20-300 ms, then recovers, with an angle
+jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the run. The machine starts
+at rest: at the equilibrium of the first input value (or, below the lowest bus voltage that has an
+equilibrium, of that voltage).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .families import family
+from .signals import Signal
+from .sm4 import min_voltage_with_equilibrium, steady_state
+
+SCENARIOS = ("slow", "fast", "dip", "step", "ramp")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named input signal over [0, stop_time] s and the state the machine starts from."""
+
+    name: str
+    seed: int
+    stop_time: float
+    signal: Signal
+
+    def inputs(self, times: np.ndarray) -> np.ndarray:
+        """(Vs [pu], theta_vs [rad]) [T, 2] at times [T] (s)."""
+        return np.asarray(self.signal(np.asarray(times, dtype=float)), dtype=float)
+
+    def initial_state(self) -> np.ndarray:
+        """The equilibrium [4] at the first input value."""
+        return rest_state(*self.inputs(np.array([0.0]))[0])
+
+
+def rest_state(Vs: float, theta_vs: float) -> np.ndarray:
+    """Equilibrium [4] at (Vs, theta_vs), Vs raised to the lowest voltage that has one."""
+    return steady_state(max(float(Vs), min_voltage_with_equilibrium()), float(theta_vs))
+
+
+def scenario(name: str, seed: int = 0, stop_time: float = 10.0) -> Scenario:
+    """The built-in scenario `name` (one of SCENARIOS) drawn with `seed` over stop_time seconds."""
+    if name not in SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r} (built in: {', '.join(SCENARIOS)})")
+    if not stop_time > 0:
+        raise ValueError(f"stop time must be positive, got {stop_time}")
+    fam = family(name)
+    unit = np.random.default_rng(seed).uniform(size=(1, fam.dim))
+    return Scenario(name, seed, float(stop_time), fam.sample(unit, stop_time)[0])
