@@ -49,7 +49,7 @@ def _c_array(values) -> str:
     return "{" + ", ".join(repr(float(v)) for v in values) + "}"
 
 
-def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int) -> str:
+def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int, trunk_size: int) -> str:
     envelope = json.loads(meta["envelope"])
     x_default = steady_state(1.0, 0.0)
     lines = [
@@ -60,6 +60,7 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {float(meta['horizon_s'])!r}",
         f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
+        f"#define OPFMU_TRUNK_SIZE {trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -86,11 +87,6 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
     if meta.get("component") != "sm4" or not {"envelope", "n_sensors", "horizon_s"} <= set(meta):
         raise BuildError(f"{onnx_path} is not an opfmu SM4 operator (metadata component/envelope missing)")
     residual_scale = json.loads(meta.get("residual_scale", "[1, 1, 1, 1]"))
-    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode())
-    for name in STATIC_SOURCES:
-        digest.update((C_DIR / name).read_bytes())
-    h = digest.hexdigest()
-    guid = f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
     n_sensors = int(meta["n_sensors"])
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -99,6 +95,7 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         for name in STATIC_SOURCES:
             shutil.copy(C_DIR / name, src / name)
         kernel = generate_kernel(proto, n_sensors)
+        guid = _guid(onnx_path, model_name, kernel.source)
         (src / "operator_kernel.c").write_text(kernel.source)
         (src / "sm4_equations.h").write_text(sm4_c_source())
         first_layer = kernel.first_layer
@@ -107,7 +104,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             suffix = sensor_suffix_sums(probe, n_sensors, first_layer)
             first_layer = first_layer if suffix is not None else 0
         (src / "sensor_sums.c").write_text(sensor_sums_source(suffix if first_layer else None, n_sensors, first_layer))
-        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer))
+        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer,
+                                                      kernel.trunk_size))
         binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
         worst = check_kernel(binary, onnx_path, meta, n_check)
         if not worst <= TOLERANCE:
@@ -121,6 +119,15 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             for path in sorted(src.iterdir()):
                 fmu.write(path, f"sources/{path.name}")
     return {"guid": guid, "max_abs_diff": worst, "size_bytes": out.stat().st_size}
+
+
+def _guid(onnx_path: Path, model_name: str, kernel_source: str) -> str:
+    """A GUID that changes with everything compiled into the binary: operator, name and C sources."""
+    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode() + kernel_source.encode())
+    for name in STATIC_SOURCES:
+        digest.update((C_DIR / name).read_bytes())
+    h = digest.hexdigest()
+    return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
 
 
 C_FILES = ("fmi2_cs.c", "surrogate_model.c", "operator_kernel.c", "sensor_sums.c")

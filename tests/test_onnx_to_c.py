@@ -28,6 +28,7 @@ def kernel(request, paper_tiny, tmp_path_factory):
     source = run / "kernel.c"
     kernel = generate_kernel(onnx.load(str(path)), 1001)
     assert kernel.first_layer == 16  # every architecture's sensors enter through one dense layer
+    assert kernel.trunk_size == (16 if request.param == "pinn" else 9)  # time layer output; basis and constant
     source.write_text(kernel.source)
     library = run / "libkernel.so"
     subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
@@ -60,6 +61,22 @@ def test_evaluation_split_at_the_sensor_layer_equals_the_whole_kernel(kernel):
         lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
         lib.opfmu_from_first_layer(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.37),
                                    split.ctypes.data_as(DOUBLE_P))
+        np.testing.assert_array_equal(split, whole)
+
+
+def test_evaluation_from_the_sensor_layer_and_a_kept_trunk_equals_the_whole_kernel(kernel):
+    _, lib, envelope = kernel
+    x0, u, _ = random_inputs(envelope, np.linspace(0, 1, 1001), 3, np.random.default_rng(6))
+    tau = np.zeros(64)  # room for any of the three architectures' trunk tensors
+    lib.opfmu_trunk(ctypes.c_double(0.61), tau.ctypes.data_as(DOUBLE_P))
+    for n in range(len(x0)):
+        x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
+        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(16)
+        lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.61),
+                           whole.ctypes.data_as(DOUBLE_P))
+        lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
+        lib.opfmu_from_first_layer_trunk(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P),
+                                         tau.ctypes.data_as(DOUBLE_P), split.ctypes.data_as(DOUBLE_P))
         np.testing.assert_array_equal(split, whole)
 
 

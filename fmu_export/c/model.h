@@ -7,6 +7,8 @@
 #include "config.h"
 
 #define OPFMU_Z_SIZE (OPFMU_FIRST_LAYER > 0 ? OPFMU_FIRST_LAYER : 1)
+#define OPFMU_TRUNK_SLOTS (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS : 1)
+#define OPFMU_TRUNK_CACHE (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS * OPFMU_TRUNK_SIZE : 1)
 
 typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
 
@@ -28,6 +30,10 @@ typedef struct {
     double z_base[OPFMU_Z_SIZE], z_past[OPFMU_Z_SIZE];
     int filled;                   /* slots before this index hold final values */
     double last_u[2];             /* the input written from slot `filled` on */
+    /* the trunk values at each sensor time, computed when first needed (OPFMU_TRUNK_SIZE > 0): they
+       depend on the window time alone, so every window after the first reuses them */
+    unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];
+    double trunk[OPFMU_TRUNK_CACHE];
 } ModelState;
 
 void model_defaults(ModelState *m);

@@ -19,6 +19,11 @@ extern const double OPFMU_SENSOR_SUFFIX[(OPFMU_N_SENSORS + 1) * 2 * OPFMU_FIRST_
 static const double ZERO_SENSORS[2 * OPFMU_N_SENSORS];
 #define SUFFIX(k, c, h) OPFMU_SENSOR_SUFFIX[((k) * 2 + (c)) * OPFMU_FIRST_LAYER + (h)]
 #endif
+#if OPFMU_TRUNK_SIZE > 0
+void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
+void opfmu_from_first_layer_trunk(const double x0[4], const double z[OPFMU_FIRST_LAYER],
+                                  const double tau[OPFMU_TRUNK_SIZE], double x[4]);
+#endif
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
@@ -169,6 +174,25 @@ static void start_window(ModelState *m)
 #endif
 }
 
+#if OPFMU_TRUNK_SIZE > 0
+/* The trunk values at window time tau: kept per sensor time (a step that ends on the sensor grid, as
+   steps of whole milliseconds do, reuses them), computed into `scratch` for any other time. */
+static const double *trunk_at(ModelState *m, double tau, double scratch[OPFMU_TRUNK_SIZE])
+{
+    double slot = tau / SENSOR_DT;
+    long k = lround(slot);
+    if (k < 0 || k >= OPFMU_N_SENSORS || fabs(slot - (double)k) > 1e-6) {
+        opfmu_trunk(tau, scratch);
+        return scratch;
+    }
+    if (!m->trunk_ready[k]) {
+        opfmu_trunk((double)k * SENSOR_DT, m->trunk + k * OPFMU_TRUNK_SIZE);
+        m->trunk_ready[k] = 1;
+    }
+    return m->trunk + k * OPFMU_TRUNK_SIZE;
+}
+#endif
+
 /* The operator at window time tau after the held input was written from slot `first` on. Per step
    this costs the network after its sensor layer plus O(layer width), not the whole sensor layer. */
 static void evaluate(ModelState *m, int first, double tau)
@@ -185,7 +209,12 @@ static void evaluate(ModelState *m, int first, double tau)
     m->last_u[1] = m->theta_vs;
     for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
         z[h] = m->z_base[h] + m->z_past[h] + SUFFIX(first, 0, h) * m->Vs + SUFFIX(first, 1, h) * m->theta_vs;
+#if OPFMU_TRUNK_SIZE > 0
+    double scratch[OPFMU_TRUNK_SIZE];
+    opfmu_from_first_layer_trunk(m->x_window, z, trunk_at(m, tau, scratch), m->x);
+#else
     opfmu_from_first_layer(m->x_window, z, tau, m->x);
+#endif
 #else
     (void)first;
     opfmu_operator(m->x_window, m->sensors, tau, m->x);
