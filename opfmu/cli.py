@@ -173,10 +173,20 @@ def cmd_compare(args) -> None:
 def cmd_demo(args) -> None:
     from opfmu.demo import DemoConfig, run_demo
 
+    from opfmu.compare import CompareError, communication_points
+
     if args.epochs < 1 or args.workers < 0:
         raise UserError("--epochs must be >= 1 and --workers >= 0")
-    report = run_demo(DemoConfig(Path(args.out), train=args.train, epochs=args.epochs, workers=args.workers,
-                                 seed=args.seed))
+    try:
+        communication_points(args.stop_time, args.step)
+        if args.train:
+            from surrogate.data.presets import load_preset
+
+            load_preset(args.preset)
+    except (CompareError, ValueError) as exc:
+        raise UserError(str(exc)) from None
+    report = run_demo(DemoConfig(Path(args.out), train=args.train, preset=args.preset, epochs=args.epochs,
+                                 workers=args.workers, seed=args.seed, stop_time=args.stop_time, step=args.step))
     print(f"report: {report}")
 
 
@@ -267,10 +277,13 @@ def build_parser() -> argparse.ArgumentParser:
                                       "reference FMU, compare them on every built-in scenario and write report.md.")
     demo.add_argument("--out", default="runs/demo", help="run directory (default runs/demo)")
     demo.add_argument("--train", action="store_true", help="generate a quick dataset and train the operator first")
+    demo.add_argument("--preset", default="quick", help="dataset preset (name or JSON file) with --train (default quick)")
     demo.add_argument("--epochs", type=int, default=300, help="training epochs with --train (default 300)")
     demo.add_argument("--workers", type=int, default=0,
                       help="dask workers for the --train dataset (default 0: in this process)")
     demo.add_argument("--seed", type=int, default=0, help="scenario (and --train dataset) seed (default 0)")
+    demo.add_argument("--stop-time", type=float, default=10.0, help="seconds per scenario (default 10)")
+    demo.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
     demo.set_defaults(func=cmd_demo)
     return parser
 

@@ -21,11 +21,13 @@ GOAL_MAXAE = {"delta": 0.01, "omega": 0.01, "Ed_p": 0.005, "Eq_p": 0.005}
 
 @dataclass(frozen=True)
 class DemoConfig:
-    """out: run directory; train: train a quick operator instead of using the shipped one (epochs,
-    workers for its dataset); seed: scenario (and dataset) seed; stop_time [s], step [s]: each comparison."""
+    """out: run directory; train: train an operator instead of using the shipped one (on a dataset of
+    `preset`, a name or JSON file; epochs; dask workers for the dataset); seed: scenario (and dataset)
+    seed; stop_time [s], step [s]: each comparison."""
 
     out: Path
     train: bool = False
+    preset: str = "quick"
     epochs: int = 300
     workers: int = 0
     seed: int = 0
@@ -57,7 +59,7 @@ def run_demo(config: DemoConfig, say=print) -> Path:
 def train_operator(config: DemoConfig, say) -> Path:
     """Quick dataset, PI-DeepONet training and export into the run directory; returns the .onnx."""
     from surrogate.data import generate
-    from surrogate.data.presets import preset
+    from surrogate.data.presets import load_preset
     from surrogate.data.runner import SolveRunner
     from surrogate.onnx_export import export_onnx
     from surrogate.operator import Operator
@@ -65,8 +67,8 @@ def train_operator(config: DemoConfig, say) -> Path:
     from surrogate.training import TrainConfig, train
 
     out = Path(config.out)
-    generate(preset("quick"), out / "data", seed=config.seed, runner=SolveRunner(config.workers))
-    say(f"quick dataset in {out / 'data'}")
+    generate(load_preset(config.preset), out / "data", seed=config.seed, runner=SolveRunner(config.workers))
+    say(f"{config.preset} dataset in {out / 'data'}")
     result = train(out / "data", TrainConfig(epochs=config.epochs, physics=True, time_points=200), out / "train")
     say(f"trained a PI-DeepONet: {result.epochs} epochs in {result.wall_s:.0f} s")
     onnx_path = out / "operator.onnx"

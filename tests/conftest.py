@@ -1,4 +1,4 @@
-"""Small dataset recipes shared by the tests."""
+"""Small dataset recipes and the two SM4 FMUs, shared by the tests."""
 import json
 from dataclasses import replace
 
@@ -35,3 +35,24 @@ def cosim_tiny(tmp_path_factory):
     out = tmp_path_factory.mktemp("cosim_tiny")
     generate(recipe, out, seed=3, progress=False)
     return recipe, out
+
+
+@pytest.fixture(scope="session")
+def fmu_path(tmp_path_factory):
+    """The surrogate FMU of the shipped operator, built once."""
+    from fmu_export.builder import build_surrogate_fmu
+    from surrogate.operator import DEFAULT_OPERATOR
+
+    path = tmp_path_factory.mktemp("fmu") / "SM4Surrogate.fmu"
+    build_surrogate_fmu(DEFAULT_OPERATOR, path)
+    return path
+
+
+@pytest.fixture(scope="session")
+def reference_path(tmp_path_factory):
+    """The reference RK45 FMU, built once."""
+    from reference_models.reference_fmu import build_reference_fmu
+
+    path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"
+    build_reference_fmu(path)
+    return path

@@ -10,18 +10,10 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
-from reference_models.reference_fmu import build_reference_fmu
 from fmu_slave import STATES, Slave
 from reference_models.sm4 import outputs, rhs, steady_state
 
 STEPS = [(0.01, 1.0, 0.0)] * 5 + [(0.02, 0.6, 0.1)] * 10 + [(0.005, 0.95, 0.25)] * 40 + [(0.05, 1.05, 0.2)] * 6
-
-
-@pytest.fixture(scope="session")
-def reference_path(tmp_path_factory):
-    path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"
-    build_reference_fmu(path)
-    return path
 
 
 @pytest.fixture(scope="session")

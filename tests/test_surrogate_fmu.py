@@ -10,7 +10,6 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import build_surrogate_fmu
 from fmu_slave import Slave
 from reference_models.sm4 import steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
@@ -19,13 +18,6 @@ VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id"
       "residual": 16, "rollover_horizon": 17}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
-
-
-@pytest.fixture(scope="session")
-def fmu_path(tmp_path_factory):
-    path = tmp_path_factory.mktemp("fmu") / "SM4Surrogate.fmu"
-    build_surrogate_fmu(DEFAULT_OPERATOR, path)
-    return path
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,132 @@
+"""`opfmu compare` and `opfmu demo`: fmpy runs the surrogate and the reference FMU on the same inputs."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract
+
+from opfmu.compare import CompareError, compare, csv_inputs, scenario_inputs
+from reference_models.scenarios import SCENARIOS, scenario
+from reference_models.sm4 import SM4Params, derivatives, min_voltage_with_equilibrium
+
+from conftest import preset_file, tiny
+from test_cli import assert_one_line_error, opfmu
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def extracted(fmu_path, reference_path, tmp_path_factory):
+    root = tmp_path_factory.mktemp("extracted")
+    return extract(str(fmu_path), unzipdir=str(root / "s")), extract(str(reference_path), unzipdir=str(root / "r"))
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_every_scenario_starts_the_machine_at_rest_and_is_reproducible_from_its_seed(name):
+    s = scenario(name, seed=4, stop_time=10.0)
+    x0, u0 = s.initial_state(), s.inputs(np.array([0.0]))[0]
+    rate = derivatives(*x0, max(u0[0], min_voltage_with_equilibrium()), u0[1], SM4Params(), np.sin, np.cos)
+    assert np.max(np.abs(rate)) < 1e-8
+    t = np.linspace(0, 10, 1001)
+    np.testing.assert_array_equal(scenario(name, seed=4).inputs(t), s.inputs(t))
+    assert not np.array_equal(scenario(name, seed=5).inputs(t), s.inputs(t))
+
+
+def test_the_dip_scenario_is_a_fault_that_drops_holds_and_recovers():
+    u = scenario("dip", seed=0).inputs(np.arange(0, 10, 0.001))[:, 0]
+    assert u.min() < u[0] - 0.05 and abs(u[-1] - u[0]) < 0.06
+
+
+def test_comparison_reports_every_output_and_both_timings(extracted):
+    inputs = scenario_inputs("slow", 0, 2.0, 0.01)
+    result = compare(*extracted, inputs, 2.0, 0.01)
+    assert set(result["metrics"]) == {"delta", "omega", "Ed_p", "Eq_p", "Id", "Iq", "I_re", "I_im", "P", "Q"}
+    assert len(result["trajectories"]["reference"]["time"]) == 201
+    assert result["metrics"]["delta"]["maxae"] < 0.02  # the shipped operator on a slow scenario
+    assert all(result[k]["surrogate"] > 0 and result[k]["reference"] > 0 for k in ("wall_s", "do_step_s"))
+    assert result["in_envelope"]
+
+
+def test_reference_run_is_the_held_input_solution_so_the_surrogate_error_is_measured_against_rk45(extracted):
+    from scipy.integrate import solve_ivp
+
+    from reference_models.sm4 import rhs
+
+    inputs = scenario_inputs("step", 3, 1.0, 0.05)
+    result = compare(*extracted, inputs, 1.0, 0.05)
+    x = inputs.x0.copy()
+    for u in inputs.values[:-1]:
+        x = solve_ivp(lambda _t, y: rhs(y, u), (0, 0.05), x, rtol=1e-11, atol=1e-12, method="DOP853").y[:, -1]
+    ref = result["trajectories"]["reference"]
+    np.testing.assert_allclose([ref[n][-1] for n in ("delta", "omega", "Ed_p", "Eq_p")], x, atol=1e-6)
+
+
+def test_csv_inputs_with_a_missing_column_are_refused(tmp_path):
+    path = tmp_path / "in.csv"
+    path.write_text("time,Vs\n0,1\n1,1\n")
+    with pytest.raises(CompareError, match="columns time, Vs, theta_vs"):
+        csv_inputs(path)
+
+
+def test_csv_inputs_whose_time_goes_back_are_refused(tmp_path):
+    path = tmp_path / "in.csv"
+    path.write_text("time,Vs,theta_vs\n0,1,0\n0.5,1,0\n0.2,1,0\n")
+    with pytest.raises(CompareError, match="never decrease"):
+        csv_inputs(path)
+
+
+def test_compare_command_on_a_csv_writes_plots_and_a_summary(fmu_path, reference_path, tmp_path):
+    csv = tmp_path / "fault.csv"
+    csv.write_text("time,Vs,theta_vs\n0,1.0,0.0\n0.3,1.0,0.0\n0.3,0.5,0.1\n0.4,0.5,0.1\n0.4,1.0,0.05\n1.5,1.0,0.05\n")
+    result = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(reference_path), "--inputs", str(csv),
+                   "--step", "0.01", "--out", str(tmp_path / "out"))
+    assert result.returncode == 0, result.stderr
+    assert "MaxAE" in result.stdout and "speedup" in result.stdout
+    summary = json.loads((tmp_path / "out" / "fault.json").read_text())
+    assert summary["stop_time_s"] == 1.5 and summary["metrics"]["omega"]["maxae"] > 0
+    for name in ("fault_states.png", "fault_currents_powers.png"):
+        assert (tmp_path / "out" / name).stat().st_size > 10_000
+
+
+def test_compare_command_refuses_a_file_that_is_not_an_fmu(reference_path, tmp_path):
+    bogus = tmp_path / "x.fmu"
+    bogus.write_text("no zip")
+    result = opfmu("compare", "--surrogate", str(bogus), "--reference", str(reference_path), "--scenario", "dip")
+    assert_one_line_error(result, "is not an FMU")
+
+
+def test_compare_command_refuses_a_stop_time_that_is_not_whole_steps(fmu_path, reference_path, tmp_path):
+    result = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(reference_path), "--scenario", "dip",
+                   "--stop-time", "1.005", "--step", "0.01", "--out", str(tmp_path))
+    assert_one_line_error(result, "not a whole number of steps")
+
+
+def test_demo_builds_both_fmus_compares_every_scenario_and_writes_the_report(tmp_path):
+    result = opfmu("demo", "--out", str(tmp_path), "--stop-time", "2")
+    assert result.returncode == 0, result.stderr
+    report = (tmp_path / "report.md").read_text()
+    assert str(tmp_path / "report.md") in result.stdout
+    for name in SCENARIOS:
+        assert f"| {name} |" in report
+        assert (tmp_path / name / "comparison.json").exists() and (tmp_path / name / f"{name}_states.png").exists()
+    assert (tmp_path / "SM4Surrogate.fmu").exists() and (tmp_path / "SM4Reference.fmu").exists()
+
+
+def test_demo_with_train_trains_exports_and_compares_its_own_operator(tmp_path):
+    recipe = preset_file(tmp_path / "tiny.json", tiny("quick", probes_per_family=1))
+    result = opfmu("demo", "--train", "--preset", str(recipe), "--epochs", "3", "--out", str(tmp_path / "run"),
+                   "--stop-time", "1")
+    assert result.returncode == 0, result.stderr
+    assert (tmp_path / "run" / "operator.onnx").exists() and (tmp_path / "run" / "check" / "metrics.json").exists()
+    assert "operator.onnx" in (tmp_path / "run" / "report.md").read_text()
+
+
+def test_example_script_compares_the_two_fmus_with_plain_fmpy(fmu_path, reference_path, tmp_path):
+    result = subprocess.run([sys.executable, str(REPO / "examples" / "compare_with_fmpy.py"), str(fmu_path),
+                             str(reference_path), "--plot", str(tmp_path / "example.png")],
+                            capture_output=True, text=True, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "max abs error" in result.stdout and (tmp_path / "example.png").exists()
