@@ -8,7 +8,8 @@ Every row solves the same trajectories (the test split, repeated to size) in thi
 high precision (rtol 1e-9, atol 1e-12) and at scipy's defaults, one trajectory after another on one
 core; each operator through torch, through a plain onnxruntime session of the whole graph, and
 through `Operator.predict` (trunk basis cached per grid). Times are medians over repeats (RK45 at
-1000 trajectories: one pass); speedups are against high-precision RK45 of the same size. A CUDA
+1000 trajectories: one pass), each method timed after a pause so that the thread pools of the one
+before have stopped spinning; speedups are against high-precision RK45 of the same size. A CUDA
 column is added when torch sees a GPU.
 """
 from __future__ import annotations
@@ -38,7 +39,10 @@ SOLVERS = {"RK45 (rtol 1e-9, atol 1e-12)": SolverConfig("RK45", 1e-9, 1e-12),
 
 
 def median_time(fn, repeats: int) -> float:
-    fn()  # warm-up: sessions, caches, allocator
+    """Median wall time of fn over `repeats` calls, after a warm-up call (sessions, caches, allocator)
+    and a pause in which the thread pools of the previous method stop spinning."""
+    time.sleep(0.5)
+    fn()
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
@@ -58,12 +62,14 @@ def main() -> None:
     parser.add_argument("--model", action="append", default=[], metavar="NAME=RUN_DIR",
                         help="a trained run to time (repeatable)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 10, 1000])
-    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--repeats", type=int, default=7, help="repeats at 100 trajectories or more (default 7)")
+    parser.add_argument("--small-repeats", type=int, default=101, help="repeats below 100 trajectories (default 101)")
     parser.add_argument("--out", default="inference_speed.json")
     args = parser.parse_args()
     warnings.simplefilter("ignore", EnvelopeWarning)
 
     data = load_split(args.data, "test")
+    repeats = lambda n: args.repeats if n >= 100 else args.small_repeats  # noqa: E731
     rows, sizes = {}, args.sizes
     for label, solver in SOLVERS.items():
         rows[label] = {}
@@ -71,7 +77,7 @@ def main() -> None:
             b = batch(data, n)
             signals = [Signal.from_dict(json.loads(s)) for s in b["signal"]]
             run = lambda: [simulate(x0, s, b["t"], solver=solver) for x0, s in zip(b["x0"], signals)]  # noqa: E731
-            rows[label][n] = median_time(run, 1 if n >= 100 else args.repeats)
+            rows[label][n] = median_time(run, 1 if n >= 100 else args.repeats)  # RK45: long enough as it is
     cuda = torch.cuda.is_available()
     with tempfile.TemporaryDirectory() as tmp:
         for spec in args.model:
@@ -93,19 +99,20 @@ def main() -> None:
                             m(*tensors)
                         if device == "cuda":
                             torch.cuda.synchronize()
-                    rows[f"{name} torch ({device})"][n] = median_time(run, args.repeats)
+                    rows[f"{name} torch ({device})"][n] = median_time(run, repeats(n))
             rows[f"{name} onnxruntime, whole graph"] = {}
             rows[f"{name} Operator.predict (cached basis)"] = {}
             for n in sizes:
                 b = batch(data, n)
                 feed = {k: np.asarray(b[k], dtype=np.float32) for k in ("x0", "u", "t")}
-                rows[f"{name} onnxruntime, whole graph"][n] = median_time(lambda: op._full.run(["x"], feed), args.repeats)
+                rows[f"{name} onnxruntime, whole graph"][n] = median_time(lambda: op._full.run(["x"], feed), repeats(n))
                 rows[f"{name} Operator.predict (cached basis)"][n] = median_time(
-                    lambda: op.predict(feed["x0"], feed["u"], feed["t"]), args.repeats)
+                    lambda: op.predict(feed["x0"], feed["u"], feed["t"]), repeats(n))
 
     reference = rows["RK45 (rtol 1e-9, atol 1e-12)"]
     print(f"{len(data['t'])} points per trajectory; {os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}"
-          f"{', GPU: ' + torch.cuda.get_device_name() if cuda else ', no GPU'}; medians of {args.repeats}")
+          f"{', GPU: ' + torch.cuda.get_device_name() if cuda else ', no GPU'}; medians of {args.small_repeats} "
+          f"(fewer than 100 trajectories) or {args.repeats} calls; RK45 at 1000 trajectories: one pass")
     header = "".join(f"{f'{n} traj [ms]':>15}{'speedup':>10}" for n in sizes)
     print(f"{'method':<48}{header}")
     for label, times in rows.items():
