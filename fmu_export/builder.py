@@ -28,6 +28,9 @@ from .model_description import model_description, sm4_variables
 from .onnx_to_c import generate_kernel
 
 C_DIR = Path(__file__).parent / "c"
+# residual above which the FMU warns, for an operator whose metadata names none (measured on the
+# shipped operator: see README, "When to distrust the surrogate")
+DEFAULT_RESIDUAL_LIMIT = 1.0
 STATIC_SOURCES = ("fmi2_cs.c", "surrogate_model.c", "model.h")
 
 
@@ -49,7 +52,7 @@ def _c_array(values) -> str:
     return "{" + ", ".join(repr(float(v)) for v in values) + "}"
 
 
-def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int, trunk_size: int) -> str:
+def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int, kernel) -> str:
     envelope = json.loads(meta["envelope"])
     x_default = steady_state(1.0, 0.0)
     lines = [
@@ -60,7 +63,9 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {float(meta['horizon_s'])!r}",
         f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
-        f"#define OPFMU_TRUNK_SIZE {trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
+        f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
+        f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
+        f"#define OPFMU_RESIDUAL_LIMIT {residual_limit(meta)!r} /* default of the parameter residual_limit */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -70,6 +75,12 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         "#endif", "",
     ]
     return "\n".join(lines)
+
+
+def residual_limit(meta: dict) -> float:
+    """The default residual_limit: the operator's own (metadata `residual_limit`, set by the export
+    from its test split), else DEFAULT_RESIDUAL_LIMIT."""
+    return float(json.loads(meta.get("residual_limit", "null")) or DEFAULT_RESIDUAL_LIMIT)
 
 
 def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_check: int = 32) -> dict:
@@ -104,13 +115,13 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             suffix = sensor_suffix_sums(probe, n_sensors, first_layer)
             first_layer = first_layer if suffix is not None else 0
         (src / "sensor_sums.c").write_text(sensor_sums_source(suffix if first_layer else None, n_sensors, first_layer))
-        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer,
-                                                      kernel.trunk_size))
+        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer, kernel))
         binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
         worst = check_kernel(binary, onnx_path, meta, n_check)
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
-        xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), float(meta["horizon_s"]), True),
+        xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), float(meta["horizon_s"]), True,
+                                                residual_limit=residual_limit(meta)),
                                 "SM4 synchronous machine: PI-DeepONet surrogate evaluated from buffered input sensors")
         with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
             fmu.writestr("modelDescription.xml", xml)

@@ -24,9 +24,11 @@ class Variable:
     direct_inputs: bool = False  # output depending directly on the inputs within a step
 
 
-def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple = ()) -> list[Variable]:
+def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple = (),
+                  residual_limit: float | None = None) -> list[Variable]:
     """The variable list; x_start [4] are the default initial-state parameters, horizon the default
-    rollover horizon (surrogate only); extra: further (parameter) variables of the reference FMU."""
+    rollover horizon and residual_limit the default warning level (surrogate only); extra: further
+    (parameter) variables of the reference FMU."""
     names = [("Vs", "bus voltage magnitude", "pu"), ("theta_vs", "bus voltage angle", "rad")]
     states = [("delta", "rotor angle", "rad"), ("omega", "rotor speed deviation", "rad/s"),
               ("Ed_p", "d-axis transient voltage", "pu"), ("Eq_p", "q-axis transient voltage", "pu")]
@@ -45,6 +47,8 @@ def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple 
                             "s", horizon))
         out.append(Variable("in_envelope", 0, "output", "false once an input or window start state left the "
                             "trained envelope", kind="Boolean"))
+        out.append(Variable("residual_limit", 18, "parameter", "residual above which a warning is logged once per "
+                            "excursion (0: no check)", start=residual_limit))
     out += list(extra)
     return out
 

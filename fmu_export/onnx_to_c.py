@@ -100,8 +100,8 @@ def _float_array(name: str, values: np.ndarray) -> str:
 
 @dataclass(frozen=True)
 class Kernel:
-    """Generated C source; first_layer is the width H of the split point (0 if none); trunk_size the
-    length T of the trunk tensors the rest reads (0 if none; see _trunk_functions).
+    """Generated C source; first_layer is the width H of the split point (0 if none); trunk_size and
+    coef_size the lengths T and C of the trunk values and coefficients (0 if none; see _trunk_functions).
 
     With a split point, the source also defines
         void opfmu_first_layer(const double x0[4], const double u[2 * S], double z[H]);
@@ -114,6 +114,7 @@ class Kernel:
     source: str
     first_layer: int
     trunk_size: int = 0
+    coef_size: int = 0
 
 
 def generate_kernel(proto, n_sensors: int) -> Kernel:
@@ -204,16 +205,18 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
     lines += _function(f"void opfmu_from_first_layer(const double x0[4], const double z[{width}], double t, double x[4])",
                        [(None, f"    const double *{z} = z;", "")] + rest,
                        f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
-    trunk_size, trunk_lines = _trunk_functions(rest, shapes, c_name, z, width, result)
-    return Kernel("\n".join(lines + trunk_lines), width, trunk_size)
+    trunk_size, coef_size, trunk_lines = _trunk_functions(rest, shapes, c_name, z, width, result)
+    return Kernel("\n".join(lines + trunk_lines), width, trunk_size, coef_size)
 
 
 def _trunk_functions(rest, shapes, c_name, z: str, width: int, result: str):
-    """(size T, source lines) of the evaluation after the sensor layer split once more, at the tensors
-    computed from t alone that the rest reads (the trunk basis, for a DeepONet):
-        void opfmu_trunk(double t, double tau[T]);
-        void opfmu_from_first_layer_trunk(const double x0[4], const double z[H], const double tau[T], double x[4]);
-    so a caller can keep tau per query time. (0, []) when no such tensor exists."""
+    """(T, C, source lines): the evaluation after the sensor layer split into three parts,
+        void opfmu_trunk(double t, double tau[T]);            what depends on t alone
+        void opfmu_coefficients(const double x0[4], const double z[H], double c[C]);   on x0, z alone
+        void opfmu_head(const double c[C], const double tau[T], double x[4]);          the rest
+    (for a DeepONet: the basis, the coefficients B and their product), so a caller can keep tau per
+    query time and evaluate the state at other times from the same coefficients for the price of the
+    head. (0, 0, []) when the graph does not split so."""
     producer = {n.output[0]: n for n, _, _ in rest}
     from_t = {"t"}
     for tensor, node in producer.items():  # topological order
@@ -224,19 +227,34 @@ def _trunk_functions(rest, shapes, c_name, z: str, width: int, result: str):
     trunk = [entry for entry in rest if entry[0].output[0] in from_t]
     others = [entry for entry in rest if entry[0].output[0] not in from_t]
     boundary = list(dict.fromkeys(i for node, _, _ in others for i in node.input if i in from_t and i != "t"))
-    if not trunk or not boundary or any("t" in node.input for node, _, _ in others):
-        return 0, []
-    sizes = [int(np.prod(shapes[b])) for b in boundary]
-    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
-    copy_out = "\n".join(f"    for (int i = 0; i < {size}; ++i) tau[{offset} + i] = {c_name(b)}[i];"
-                         for b, size, offset in zip(boundary, sizes, offsets))
-    lines = _function(f"void opfmu_trunk(double t, double tau[{offsets[-1]}])", trunk, copy_out)
-    views = [(None, f"    const double *{c_name(b)} = tau + {offset};", "") for b, offset in zip(boundary, offsets)]
-    lines += _function(f"void opfmu_from_first_layer_trunk(const double x0[4], const double z[{width}], "
-                       f"const double tau[{offsets[-1]}], double x[4])",
-                       [(None, f"    const double *{z} = z;", "")] + views + others,
-                       f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
-    return int(offsets[-1]), lines
+    after_tau = set(boundary)
+    for node, _, _ in others:
+        if any(i in after_tau for i in node.input):
+            after_tau.add(node.output[0])
+    head = [entry for entry in others if entry[0].output[0] in after_tau]
+    coefficients = [entry for entry in others if entry[0].output[0] not in after_tau]
+    coef_out = {node.output[0] for node, _, _ in coefficients}
+    handed = list(dict.fromkeys(i for node, _, _ in head for i in node.input if i in coef_out))
+    if (not trunk or not boundary or not handed or any("t" in node.input for node, _, _ in others)
+            or any(i in ("x0", z) for node, _, _ in head for i in node.input)):
+        return 0, 0, []
+
+    def packed(tensors, array):
+        sizes = [int(np.prod(shapes[b])) for b in tensors]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+        copy_out = "\n".join(f"    for (int i = 0; i < {size}; ++i) {array}[{offset} + i] = {c_name(b)}[i];"
+                             for b, size, offset in zip(tensors, sizes, offsets))
+        views = [(None, f"    const double *{c_name(b)} = {array} + {offset};", "") for b, offset in zip(tensors, offsets)]
+        return int(offsets[-1]), copy_out, views
+
+    n_tau, tau_out, tau_views = packed(boundary, "tau")
+    n_coef, coef_copy, coef_views = packed(handed, "c")
+    lines = _function(f"void opfmu_trunk(double t, double tau[{n_tau}])", trunk, tau_out)
+    lines += _function(f"void opfmu_coefficients(const double x0[4], const double z[{width}], double c[{n_coef}])",
+                       [(None, f"    const double *{z} = z;", "")] + coefficients, coef_copy)
+    lines += _function(f"void opfmu_head(const double c[{n_coef}], const double tau[{n_tau}], double x[4])",
+                       coef_views + tau_views + head, f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
+    return n_tau, n_coef, lines
 
 
 def _function(signature: str, nodes, tail: str) -> list[str]:

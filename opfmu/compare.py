@@ -99,8 +99,9 @@ class Run:
     messages: list = field(default_factory=list)
 
 
-def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names) -> Run:
-    """Simulate an extracted FMU (directory) under fmpy; records `names` at every communication point."""
+def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, parameters=None) -> Run:
+    """Simulate an extracted FMU (directory) under fmpy; records `names` at every communication point.
+    parameters: further start values by name (e.g. the surrogate's rollover_horizon)."""
     from fmpy import instantiate_fmu, read_model_description, simulate_fmu
 
     md = read_model_description(str(fmu_dir))
@@ -125,7 +126,7 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names) -> R
             in_step[0] += time.perf_counter() - begin
 
     fmu.doStep = timed_step
-    start_values = {f"{s}0": float(v) for s, v in zip(STATE_NAMES, inputs.x0)}
+    start_values = {f"{s}0": float(v) for s, v in zip(STATE_NAMES, inputs.x0)} | dict(parameters or {})
     try:
         result = simulate_fmu(str(fmu_dir), validate=False, model_description=md, fmu_instance=fmu, start_time=0.0,
                               stop_time=stop_time, output_interval=step, input=inputs.table(), output=list(names),
@@ -140,10 +141,12 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names) -> R
     return Run({n: np.asarray(result[n], dtype=float) for n in ["time", *names]}, wall, in_step[0], messages)
 
 
-def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step: float) -> dict:
-    """Both FMUs on `inputs`; returns the comparison (metrics, timings, trajectories)."""
+def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step: float,
+            surrogate_parameters=None) -> dict:
+    """Both FMUs on `inputs`; returns the comparison (metrics, timings, trajectories).
+    surrogate_parameters: start values of the surrogate's own parameters (rollover_horizon)."""
     reference = simulate(reference_dir, inputs, stop_time, step, OUTPUTS)
-    surrogate = simulate(surrogate_dir, inputs, stop_time, step, OUTPUTS + DIAGNOSTICS)
+    surrogate = simulate(surrogate_dir, inputs, stop_time, step, OUTPUTS + DIAGNOSTICS, surrogate_parameters)
     if len(reference.outputs["time"]) != len(surrogate.outputs["time"]):
         raise CompareError("the two FMUs recorded different numbers of communication points")
     return {

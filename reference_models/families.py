@@ -2,7 +2,8 @@
 
 Each family maps points of the unit hypercube (from Latin hypercube sampling) to signals, one
 parameter per dimension, each uniform in its range. The paper's `slow` and `fast` families are
-exactly section IV-A.2; `step`, `dip`, `ramp` and `zoh` are the inputs a co-simulation master sends.
+exactly section IV-A.2; `step`, `dip`, `ramp`, `zoh` and `mix` are the inputs a co-simulation master
+sends (`mix`: levels held for a while, changed now and then, one change in five a fault).
 """
 from __future__ import annotations
 
@@ -117,7 +118,38 @@ RAMP = Family(
     _ramp,
 )
 
-BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP)}
+def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fault_share: float = 0.2,
+                vs_levels=(0.9, 1.1)) -> Signal:
+    """Piecewise-constant bus voltage over [0, stop_time] s: levels held for `dwell` seconds (Vs in
+    vs_levels pu; theta_vs moving by up to 0.3 rad within [-0.5, 0.5] rad, at half the changes); a
+    `fault_share` of the changes are faults (Vs at 0.2-0.9 pu for 20-200 ms, then a new level)."""
+    times, vs, theta = [], [float(rng.uniform(*vs_levels))], [float(rng.uniform(-0.3, 0.3))]
+    t = float(rng.uniform(*dwell))
+    while t < stop_time:
+        jump = float(np.clip(theta[-1] + rng.uniform(-0.3, 0.3), *THETA_RANGE))
+        if rng.uniform() < fault_share:
+            clear = t + float(rng.uniform(0.02, 0.2))
+            times += [t, clear]
+            vs += [float(rng.uniform(0.2, 0.9)), float(rng.uniform(*vs_levels))]
+            theta += [jump, jump]
+            t = clear
+        else:
+            times.append(t)
+            vs.append(float(rng.uniform(*vs_levels)))
+            theta.append(jump if rng.uniform() < 0.5 else theta[-1])
+        t += float(rng.uniform(*dwell))
+    return Signal(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)))
+
+
+def _mix(p, horizon):
+    """held_levels over one window, changing every 5-40% of it, drawn from the seed parameter."""
+    rng = np.random.default_rng(int(p["seed"] * 2**31))
+    return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), vs_levels=(0.85, 1.15))
+
+
+MIX = Family("mix", {"seed": (0.0, 1.0)}, _mix)
+
+BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX)}
 HOLD_RANGE = (0.001, 0.05)  # s, communication steps a ZOH family holds at (log-uniform)
 
 

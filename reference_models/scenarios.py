@@ -3,9 +3,11 @@
 A scenario is a signal of one input family (families.py) sampled over the run's length instead of one
 operator window: `slow` and `fast` are the paper's families (their transients settle within the
 first seconds), `dip` is a fault (Vs drops to 0.2-0.9 pu for 20-300 ms, then recovers, with an angle
-jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the run. The machine starts
-at rest: at the equilibrium of the first input value (or, below the lowest bus voltage that has an
-equilibrium, of that voltage).
+jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the run. `mix` is what a
+grid tool sends over a long run: levels held for 0.2-0.8 s each (Vs in [0.9, 1.1] pu, theta_vs
+moving by up to 0.3 rad within [-0.5, 0.5] rad), one change in five a fault (Vs down to 0.2-0.9 pu
+for 20-200 ms). The machine starts at rest: at the equilibrium of the first input value (or, below
+the lowest bus voltage that has an equilibrium, of that voltage).
 """
 from __future__ import annotations
 
@@ -13,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import family
+from .families import family, held_levels
 from .signals import Signal
 from .sm4 import min_voltage_with_equilibrium, steady_state
 
-SCENARIOS = ("slow", "fast", "dip", "step", "ramp")
+SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,8 @@ def scenario(name: str, seed: int = 0, stop_time: float = 10.0) -> Scenario:
         raise ValueError(f"unknown scenario {name!r} (built in: {', '.join(SCENARIOS)})")
     if not stop_time > 0:
         raise ValueError(f"stop time must be positive, got {stop_time}")
+    if name == "mix":
+        return Scenario(name, seed, float(stop_time), held_levels(np.random.default_rng(seed), stop_time))
     fam = family(name)
     unit = np.random.default_rng(seed).uniform(size=(1, fam.dim))
     return Scenario(name, seed, float(stop_time), fam.sample(unit, stop_time)[0])

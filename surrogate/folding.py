@@ -6,8 +6,9 @@ x [N, M, 4] in physical units, that computes without any elementwise normalisati
 * the standardisation of x0 and of the sensors (and the sensor scale) is folded into the weights and
   bias of the first linear layer that reads them, so the raw [x0, u] go straight into one Gemm;
 * the decoding x = x_mean + x_std * y is folded into the last linear layer of the output path. For a
-  DeepONet the per-state offset (x_mean + x_std * bias) becomes one more coefficient per state, whose
-  basis function is the constant 1 appended to the trunk, so that the head is a single product
+  DeepONet the per-state offset (x_mean + x_std * bias; anchored: x0 - x_std B tau(0), with tau(0)
+  a constant) becomes one more coefficient per state, whose basis function is the constant 1
+  appended to the trunk, so that the head is a single product
   x[n, :, k] = tau_aug [M, p + 1] @ B_aug[n, k] [p + 1] and nothing else.
 
 The export writes this form (see onnx_export.py) and checks it against the trained model; on 1000
@@ -87,34 +88,52 @@ def _per_coefficient(per_state: torch.Tensor, latent: int) -> torch.Tensor:
 
 
 class FoldedDeepONet(nn.Module):
-    """Shared head of the folded DeepONets: x = (B_aug @ tau_aug^T) transposed to [N, M, 4]."""
+    """Shared head of the folded DeepONets: x = (B_aug @ tau_aug^T) transposed to [N, M, 4].
+
+    Free form: B_aug = [x_std B, x_mean + x_std bias] straight from the branch's last layer. Anchored:
+    the branch gives x_std B, and the constant coefficient x0 - x_std B tau(0) is appended to it."""
 
     def __init__(self, model: DeepONet):
         super().__init__()
         self.model = model  # its time features and trunk are used as they are
         self.latent = model.config.latent
+        self.anchored = model.config.anchored
+        if self.anchored:
+            with torch.no_grad():
+                tau0 = model.trunk(torch.zeros(1))  # [1, p]
+            self.register_buffer("tau0", tau0.transpose(0, 1).contiguous())  # [p, 1]
 
     def offsets(self, model: DeepONet) -> torch.Tensor:
-        """Per-state offset [4] of the decoded output: x_mean + x_std * bias."""
+        """Per-state offset [4] of the decoded free-form output: x_mean + x_std * bias."""
         return model.x_mean + model.x_std * model.bias.detach()
+
+    def last_layer(self, linear: nn.Linear, model: DeepONet) -> nn.Linear:
+        """The branch's last layer with the decoding folded in: [4 p] (anchored) or [4 (p + 1)] outputs."""
+        p = self.latent
+        scaled = fold_output(linear, _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
+        return scaled if self.anchored else with_constant_coefficient(scaled, p, self.offsets(model))
 
     def trunk(self, t: torch.Tensor) -> torch.Tensor:
         """Basis [M, p + 1]: the trained basis and the constant 1."""
         tau = self.model.trunk(t)
         return torch.cat([tau, t.unsqueeze(-1) * 0.0 + 1.0], dim=-1)
 
+    def coefficients(self, x0, u) -> torch.Tensor:
+        """B_aug [N, 4, p + 1]."""
+        if not self.anchored:
+            return self.branch(x0, u).reshape(-1, N_STATES, self.latent + 1)
+        b = self.branch(x0, u).reshape(-1, N_STATES, self.latent)
+        return torch.cat([b, x0.unsqueeze(-1) - torch.matmul(b, self.tau0)], dim=-1)
+
     def forward(self, x0, u, t):
-        b = self.branch(x0, u).reshape(-1, N_STATES, self.latent + 1)
-        return torch.matmul(b, self.trunk(t).transpose(0, 1)).transpose(1, 2)
+        return torch.matmul(self.coefficients(x0, u), self.trunk(t).transpose(0, 1)).transpose(1, 2)
 
 
 class FoldedUnstacked(FoldedDeepONet):
     def __init__(self, model: UnstackedDeepONet):
         super().__init__(model)
-        p = self.latent
         net = _replace(model.branch_net, 0, fold_input(model.branch_net[0], *_input_normalisation(model, True)))
-        last = fold_output(net[-1], _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
-        self.branch_net = _replace(net, -1, with_constant_coefficient(last, p, self.offsets(model)))
+        self.branch_net = _replace(net, -1, self.last_layer(net[-1], model))
 
     def branch(self, x0, u):
         return self.branch_net(torch.cat([x0, torch.flatten(u, 1)], dim=-1))
@@ -125,10 +144,11 @@ class FoldedStackedN(FoldedDeepONet):
         super().__init__(model)
         p = self.latent
         state = _replace(model.state_net, 0, fold_input(model.state_net[0], model.x_mean, 1.0 / model.x_std))
-        last = fold_output(state[-1], _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
-        self.state_net = _replace(state, -1, with_constant_coefficient(last, p, self.offsets(model)))
+        self.state_net = _replace(state, -1, self.last_layer(state[-1], model))
         inputs = _replace(model.input_net, 0, fold_input(model.input_net[0], *_input_normalisation(model, False)))
-        self.input_net = _replace(inputs, -1, with_constant_coefficient(inputs[-1], p, torch.ones(N_STATES)))
+        if not self.anchored:
+            inputs = _replace(inputs, -1, with_constant_coefficient(inputs[-1], p, torch.ones(N_STATES)))
+        self.input_net = inputs
 
     def branch(self, x0, u):
         return self.state_net(x0) * self.input_net(torch.flatten(u, 1))

@@ -53,14 +53,24 @@ def standardise(x: torch.Tensor, model) -> torch.Tensor:
     return (x - model.x_mean) / model.x_std
 
 
-def data_loss(y_hat: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """Eq. 5 on standardised states y_hat, y [N, M, 4]: mean of (y_hat - y)^2 over all entries."""
-    return torch.nn.functional.mse_loss(y_hat, y)
+def masked_mean(squares: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean of squares [N, M, 4] over all entries, or over the (n, m) where mask [N, M] is true."""
+    if mask is None:
+        return squares.mean()
+    weights = mask.to(squares.dtype).unsqueeze(-1)
+    return (squares * weights).sum() / (weights.sum() * squares.shape[-1]).clamp_min(1.0)
 
 
-def physics_data_loss(dxdt_hat: torch.Tensor, f_ref: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-    """Eq. 6: mean of ((d x_hat/dt - f(x, u)) / scale)^2; f_ref = rhs at the reference states [N, M, 4]."""
-    return (((dxdt_hat - f_ref) / scale) ** 2).mean()
+def data_loss(y_hat: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Eq. 5 on standardised states y_hat, y [N, M, 4]: mean of (y_hat - y)^2 (where mask [N, M])."""
+    return masked_mean((y_hat - y) ** 2, mask)
+
+
+def physics_data_loss(dxdt_hat: torch.Tensor, f_ref: torch.Tensor, scale: torch.Tensor,
+                      mask: torch.Tensor | None = None) -> torch.Tensor:
+    """Eq. 6: mean of ((d x_hat/dt - f(x, u)) / scale)^2 (where mask [N, M]); f_ref = rhs at the
+    reference states [N, M, 4]."""
+    return masked_mean(((dxdt_hat - f_ref) / scale) ** 2, mask)
 
 
 def physics_collocation_loss(x_hat: torch.Tensor, dxdt_hat: torch.Tensor, u: torch.Tensor, scale: torch.Tensor,

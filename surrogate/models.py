@@ -16,8 +16,8 @@ normalisation is part of the model as buffers, fitted from the training split (`
   transient at the start of every window is that fast).
 
 DeepONet output: the branch gives p coefficients per state, [N, 4, p]; the trunk gives p basis
-functions of time shared by the four states, [M, p]; x = x_mean + x_std * (B @ tau^T + b0). A shared
-basis is enough because the states share their time scales (d delta/dt = omega carries the omega
+functions of time shared by the four states, [M, p]; x = x_mean + x_std * (B @ tau^T + b0), or
+anchored x = x0 + x_std * B @ (tau - tau(0))^T (exactly x0 at t = 0). A shared basis is enough because the states share their time scales (d delta/dt = omega carries the omega
 transient into delta) and it keeps the trunk, and its time derivative, at p columns.
 
 The forward pass uses plain tensor ops only (ONNX-exportable); `standardised_with_rate` gives the
@@ -49,6 +49,9 @@ class OperatorConfig:
     latent: p, basis functions per state (DeepONets only).
     time_taus: time constants [s] of the exp(-t/tau) time features.
     sensor_gain: extra factor on the sqrt(4/S) sensor scale.
+    anchored: DeepONets only: x(t) = x0 + B (tau(t) - tau(0)), so the operator returns x0 exactly at
+        t = 0 (no jump when a co-simulation starts a new window from the state reached) and has no
+        bias term; otherwise x(t) = B tau(t) + bias, free at t = 0 (the paper's form).
     """
 
     arch: str = "unstacked"
@@ -58,12 +61,15 @@ class OperatorConfig:
     activation: str = "tanh"
     time_taus: tuple = (0.01, 0.03, 0.1)
     sensor_gain: float = 1.0
+    anchored: bool = False
 
     def __post_init__(self):
         if self.arch not in ARCHITECTURES:
             raise ValueError(f"unknown architecture {self.arch!r} (known: {', '.join(ARCHITECTURES)})")
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"unknown activation {self.activation!r} (known: {', '.join(ACTIVATIONS)})")
+        if self.anchored and self.arch == "pinn":
+            raise ValueError("anchored applies to the DeepONets (unstacked, stacked-n), not the pinn")
         if min(self.width, self.depth, self.latent) < 1 or any(tau <= 0 for tau in self.time_taus):
             raise ValueError("width, depth, latent and every time tau must be positive")
         object.__setattr__(self, "time_taus", tuple(float(tau) for tau in self.time_taus))
@@ -189,13 +195,15 @@ class OperatorModel(nn.Module, ABC):
 
 
 class DeepONet(OperatorModel):
-    """Branch coefficients [N, 4, p] times a shared trunk basis [M, p], plus a bias per state."""
+    """Branch coefficients [N, 4, p] times a shared trunk basis [M, p], plus a bias per state; or,
+    anchored, the standardised x0 plus the coefficients times the basis' change since t = 0."""
 
     def __init__(self, config: OperatorConfig, stats: NormStats):
         super().__init__(config, stats)
         c = config
         self.trunk_net = mlp(self.n_time_features, c.width, c.depth, c.latent, c.activation, out_activation=True)
-        self.bias = nn.Parameter(torch.zeros(N_STATES))
+        if not c.anchored:
+            self.bias = nn.Parameter(torch.zeros(N_STATES))
 
     @abstractmethod
     def branch(self, x0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
@@ -205,15 +213,23 @@ class DeepONet(OperatorModel):
         """Basis functions [M, p] at times t [M] (s)."""
         return self.trunk_net(self.time_features(t))
 
+    def offset(self, x0: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        """What is added to B tau^T [N, 4, M]: the bias [4, 1], or anchored y0 - B tau(0) [N, 4, 1]."""
+        if not self.config.anchored:
+            return self.bias.unsqueeze(-1)
+        tau0 = self.trunk(torch.zeros(1, dtype=x0.dtype, device=x0.device))  # [1, p]
+        return self.encode_state(x0).unsqueeze(-1) - torch.matmul(b, tau0.transpose(0, 1))
+
     def standardised(self, x0, u, t):
-        y = torch.matmul(self.branch(x0, u), self.trunk(t).transpose(0, 1)) + self.bias.unsqueeze(-1)  # [N, 4, M]
+        b = self.branch(x0, u)
+        y = torch.matmul(b, self.trunk(t).transpose(0, 1)) + self.offset(x0, b)  # [N, 4, M]
         return y.transpose(1, 2)
 
     def standardised_with_rate(self, x0, u, t):
         """As OperatorModel's, with d/dt through the trunk only: dy/dt = B @ (d tau/dt)^T."""
         tau, dtau = torch.func.jvp(self.trunk, (t,), (torch.ones_like(t),))  # [M, p] each
         b = self.branch(x0, u)
-        y = torch.matmul(b, tau.transpose(0, 1)) + self.bias.unsqueeze(-1)
+        y = torch.matmul(b, tau.transpose(0, 1)) + self.offset(x0, b)
         return y.transpose(1, 2), torch.matmul(b, dtau.transpose(0, 1)).transpose(1, 2)
 
 

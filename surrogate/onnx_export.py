@@ -58,6 +58,7 @@ def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -
         "training": json.dumps(_training_summary(run_dir, run_config, data_meta)),
         "metrics": json.dumps(_test_metrics(model, data_dir)),
         "residual_scale": json.dumps(_residual_scale(data_dir)),
+        "residual_limit": json.dumps(residual_limit(model, data_dir)),
         "opfmu_version": __version__,
     }
     with atomic_path(out) as tmp:
@@ -143,6 +144,26 @@ def _residual_scale(data_dir: Path) -> list:
     what the FMU divides its residual by, as the physics losses do."""
     train = load_split(data_dir, "train")
     return residual_scale(train["x"], train["t"]).tolist()
+
+
+# the warning level of the FMU's residual, in multiples of its 99.9th percentile on the test split
+RESIDUAL_LIMIT_FACTOR = 3.0
+
+
+def residual_limit(model, data_dir: Path) -> float:
+    """RESIDUAL_LIMIT_FACTOR x the 99.9th percentile over the test split's (trajectory, time) points
+    of the residual the FMU reports: RMS over states of (d x_hat/dt - f(x_hat, u)) / residual_scale."""
+    from reference_models.sm4 import rhs
+
+    test = load_split(data_dir, "test")
+    scale = torch.as_tensor(_residual_scale(data_dir), dtype=torch.float32)
+    f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    x0, u, t = f32(test["x0"]), f32(test["u"]), f32(test["t"])
+    with torch.no_grad():
+        y, dydt = model.standardised_with_rate(x0, u, t)
+        x_hat, dxdt = model.decode(y), model.x_std * dydt
+        r = torch.sqrt((((dxdt - rhs(x_hat, u)) / scale) ** 2).mean(-1))
+    return float(RESIDUAL_LIMIT_FACTOR * np.quantile(r.numpy(), 0.999))
 
 
 def _test_metrics(model, data_dir: Path) -> dict:

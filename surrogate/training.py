@@ -60,6 +60,12 @@ class TrainConfig:
     lr_schedule: "constant" (the paper) or "cosine": lr decays along a half cosine to lr * lr_final
         at `epochs`. A constant rate leaves the validation MSE jumping by orders of magnitude late
         in training, which also fires early stopping while the model still improves.
+    causal: train the operator as a co-simulation FMU uses it. Each epoch every trajectory gets a
+        random cut time; its input after the cut is replaced by the value at the cut (held, as the
+        FMU fills the sensor slots it does not know yet), and the data and labeled-physics terms
+        count only up to the cut, where the reference states are those of the held input too. The
+        collocation term, which needs no labels, uses cut inputs over the whole window. The operator
+        thus learns states that do not depend on inputs after their time.
     """
 
     model: OperatorConfig = field(default_factory=OperatorConfig)
@@ -78,6 +84,7 @@ class TrainConfig:
     weights: LossWeights = field(default_factory=LossWeights)
     time_points: int | None = None
     checkpoint_every: int = 100
+    causal: bool = False
 
     def __post_init__(self):
         if self.lr_schedule not in LR_SCHEDULES:
@@ -233,24 +240,36 @@ def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -
     use_pd = config.physics and w.physics_data > 0
     use_pc = config.physics and w.physics_collocation > 0 and tensors.col_x0 is not None
 
+    u, col_u, mask = tensors.u, tensors.col_u, None
+    if config.causal:
+        cut = torch.randint(0, n_times, (len(u),), generator=generator)
+        u, mask = held_after(u, cut), pick(torch.arange(n_times)[None, :] <= cut[:, None])
+        if use_pc:
+            col_u = held_after(col_u, torch.randint(0, n_times, (len(col_u),), generator=generator))
     if use_pd:
-        y_hat, dydt_hat = model.standardised_with_rate(tensors.x0, tensors.u, t)
+        y_hat, dydt_hat = model.standardised_with_rate(tensors.x0, u, t)
     else:
-        y_hat = model.standardised(tensors.x0, tensors.u, t)
-    terms = {"data": data_loss(y_hat, pick(tensors.y))}
+        y_hat = model.standardised(tensors.x0, u, t)
+    terms = {"data": data_loss(y_hat, pick(tensors.y), mask)}
     total = w.data * terms["data"]
     if use_pd:
-        terms["physics_data"] = physics_data_loss(model.x_std * dydt_hat, pick(tensors.f_ref), tensors.scale)
+        terms["physics_data"] = physics_data_loss(model.x_std * dydt_hat, pick(tensors.f_ref), tensors.scale, mask)
         total = total + w.physics_data * terms["physics_data"]
     if use_pc:
-        yc_hat, dyc_hat = model.standardised_with_rate(tensors.col_x0, tensors.col_u, t)
+        yc_hat, dyc_hat = model.standardised_with_rate(tensors.col_x0, col_u, t)
         terms["physics_collocation"] = physics_collocation_loss(
-            model.decode(yc_hat), model.x_std * dyc_hat, pick(tensors.col_u), tensors.scale)
+            model.decode(yc_hat), model.x_std * dyc_hat, pick(col_u), tensors.scale)
         total = total + w.physics_collocation * terms["physics_collocation"]
     optimizer.zero_grad(set_to_none=True)
     total.backward()
     optimizer.step()
     return {"loss": total.item(), **{k: v.item() for k, v in terms.items()}}
+
+
+def held_after(u: torch.Tensor, cut: torch.Tensor) -> torch.Tensor:
+    """u [N, S, 2] with every sensor after index cut[n] set to the value at cut[n] (held)."""
+    index = torch.minimum(torch.arange(u.shape[1])[None, :], cut[:, None])
+    return torch.gather(u, 1, index.unsqueeze(-1).expand(-1, -1, u.shape[2]))
 
 
 def validation_mse(model: OperatorModel, tensors: _Tensors) -> float:

@@ -149,7 +149,7 @@ def test_cosim_splits_mix_the_cosimulation_families(tmp_path):
     from surrogate.data.presets import preset
 
     names = {n for n, _ in preset("cosim").families}
-    assert {"step", "dip", "ramp"} <= names and any(n.startswith("zoh-") for n in names)
+    assert {"step", "dip", "ramp", "mix"} <= names and any(n.startswith("zoh-") for n in names)
 
 
 def test_an_existing_dask_scheduler_runs_the_solves(paper_tiny, tmp_path):

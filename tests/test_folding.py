@@ -18,12 +18,13 @@ def random_inputs(n=5, m=7, seed=0):
     return x0, u, torch.rand(m, generator=g)
 
 
-@pytest.mark.parametrize("arch", ["unstacked", "stacked-n", "pinn"])
-def test_folded_form_computes_the_trained_function(arch):
+@pytest.mark.parametrize("arch, anchored", [("unstacked", False), ("stacked-n", False), ("pinn", False),
+                                           ("unstacked", True), ("stacked-n", True)])
+def test_folded_form_computes_the_trained_function(arch, anchored):
     torch.manual_seed(0)
-    model = build_model(OperatorConfig(arch=arch, width=16, depth=2, latent=8), STATS)
+    model = build_model(OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=anchored), STATS)
     with torch.no_grad():
-        if arch != "pinn":
+        if arch != "pinn" and not anchored:
             model.bias.add_(0.3)  # a per-state bias: folded into the constant coefficient
         expected = model(*random_inputs())
         got = fold(model)(*random_inputs())
@@ -44,3 +45,16 @@ def test_folded_deeponet_basis_ends_with_the_constant_one():
         basis = folded.trunk(torch.linspace(0, 1, 6))
     assert basis.shape == (6, 9)
     assert torch.all(basis[:, -1] == 1.0)
+
+
+@pytest.mark.parametrize("arch", ["unstacked", "stacked-n"])
+def test_an_anchored_operator_returns_the_initial_state_at_time_zero(arch):
+    torch.manual_seed(1)
+    model = build_model(OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=True), STATS)
+    x0, u, _ = random_inputs()
+    with torch.no_grad():
+        x = model(x0, u, torch.tensor([0.0, 0.5]))
+        folded = fold(model)(x0, u, torch.tensor([0.0, 0.5]))
+    np.testing.assert_allclose(x[:, 0].numpy(), x0.numpy(), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(folded[:, 0].numpy(), x0.numpy(), rtol=0, atol=1e-6)
+    assert not torch.allclose(x[:, 1], x0)

@@ -17,11 +17,14 @@ from surrogate.training import TrainConfig, train
 DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 
 
-@pytest.fixture(scope="module", params=["unstacked", "stacked-n", "pinn"])
+@pytest.fixture(scope="module", params=["unstacked", "stacked-n", "pinn", "anchored"])
 def kernel(request, paper_tiny, tmp_path_factory):
-    """(onnx path, compiled kernel library, envelope) for a briefly trained model of each architecture."""
+    """(onnx path, compiled kernel library, envelope) for a briefly trained model of each architecture
+    (anchored: an anchored Unstacked DeepONet)."""
     run = tmp_path_factory.mktemp(f"c_{request.param}")
-    config = TrainConfig(model=OperatorConfig(arch=request.param, width=16, depth=2, latent=8), epochs=3, time_points=20)
+    arch, anchored = ("unstacked", True) if request.param == "anchored" else (request.param, False)
+    config = TrainConfig(model=OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=anchored), epochs=3,
+                         time_points=20)
     train(paper_tiny[1], config, run, progress=False)
     path = run / "op.onnx"
     meta = export_onnx(run, path)
@@ -29,6 +32,7 @@ def kernel(request, paper_tiny, tmp_path_factory):
     kernel = generate_kernel(onnx.load(str(path)), 1001)
     assert kernel.first_layer == 16  # every architecture's sensors enter through one dense layer
     assert kernel.trunk_size == (16 if request.param == "pinn" else 9)  # time layer output; basis and constant
+    assert kernel.coef_size == (16 if request.param == "pinn" else 36)  # input layer output; B_aug [4, 9]
     source.write_text(kernel.source)
     library = run / "libkernel.so"
     subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
@@ -64,7 +68,7 @@ def test_evaluation_split_at_the_sensor_layer_equals_the_whole_kernel(kernel):
         np.testing.assert_array_equal(split, whole)
 
 
-def test_evaluation_from_the_sensor_layer_and_a_kept_trunk_equals_the_whole_kernel(kernel):
+def test_evaluation_from_coefficients_and_a_kept_trunk_equals_the_whole_kernel(kernel):
     _, lib, envelope = kernel
     x0, u, _ = random_inputs(envelope, np.linspace(0, 1, 1001), 3, np.random.default_rng(6))
     tau = np.zeros(64)  # room for any of the three architectures' trunk tensors
@@ -75,8 +79,9 @@ def test_evaluation_from_the_sensor_layer_and_a_kept_trunk_equals_the_whole_kern
         lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.61),
                            whole.ctypes.data_as(DOUBLE_P))
         lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
-        lib.opfmu_from_first_layer_trunk(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P),
-                                         tau.ctypes.data_as(DOUBLE_P), split.ctypes.data_as(DOUBLE_P))
+        c = np.zeros(64)
+        lib.opfmu_coefficients(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P), c.ctypes.data_as(DOUBLE_P))
+        lib.opfmu_head(c.ctypes.data_as(DOUBLE_P), tau.ctypes.data_as(DOUBLE_P), split.ctypes.data_as(DOUBLE_P))
         np.testing.assert_array_equal(split, whole)
 
 

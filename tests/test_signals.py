@@ -62,7 +62,7 @@ def test_dip_drops_holds_and_recovers():
     np.testing.assert_allclose(s.breakpoints(1.0), [0.2, 0.3])
 
 
-@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-fast", "zoh-ramp"])
+@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-fast", "zoh-ramp", "mix"])
 def test_signal_round_trips_through_json(name):
     for s in sample(family(name), 3):
         back = Signal.from_dict(json.loads(json.dumps(s.to_dict())))
@@ -85,3 +85,13 @@ def test_zoh_family_holds_at_steps_between_1_and_50_ms():
 def test_unknown_family_is_refused_with_the_known_names():
     with pytest.raises(ValueError, match="unknown input family 'sine'.*slow, fast"):
         family("sine")
+
+
+def test_mix_family_holds_levels_and_faults_within_one_window():
+    signals = family("mix").sample(np.linspace(0.05, 0.95, 20)[:, None], 1.0)
+    changes = [len(s.Vs.times) for s in signals]
+    assert min(changes) >= 1 and max(changes) >= 3
+    t = np.linspace(0, 1, 1001)
+    values = np.array([s(t) for s in signals])
+    assert values[..., 0].min() < 0.9 and values[..., 0].max() <= 1.15  # some fault; levels <= 1.15 pu
+    assert np.abs(values[..., 1]).max() <= 0.5

@@ -15,7 +15,7 @@ from reference_models.sm4 import steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
-      "residual": 16, "rollover_horizon": 17}
+      "residual": 16, "rollover_horizon": 17, "residual_limit": 18}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
 
@@ -234,6 +234,31 @@ def test_residual_is_small_at_rest_and_large_on_an_inconsistent_state(unzipped):
     large = odd.fmu.getReal([VR["residual"]])[0]
     odd.close()
     assert small < 0.5 < large
+
+
+def warnings_logged(slave):
+    return [m for status, m in slave.messages if status == 1 and "residual" in m]
+
+
+def test_a_residual_above_the_limit_logs_one_warning_per_excursion(unzipped):
+    slave = Slave(unzipped, residual_limit=1e-9)  # every state is "in trouble" at this limit
+    slave.step(0.01)
+    slave.step(0.01)
+    assert len(warnings_logged(slave)) == 1
+    assert "exceeds residual_limit 1e-09" in warnings_logged(slave)[0]
+    slave.close()
+
+
+def test_the_default_residual_limit_stays_quiet_on_a_quiet_run_and_zero_turns_the_check_off(unzipped):
+    quiet = Slave(unzipped)
+    for k in range(200):
+        quiet.step(0.01, 1.0 + 0.02 * np.sin(k / 20))
+    assert warnings_logged(quiet) == [] and quiet.fmu.getReal([VR["residual_limit"]])[0] > 0
+    quiet.close()
+    off = Slave(unzipped, residual_limit=0.0, delta0=0.2)
+    off.step(0.01, 0.5)
+    assert warnings_logged(off) == []
+    off.close()
 
 
 def test_many_instances_live_side_by_side_and_reload(unzipped):

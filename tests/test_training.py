@@ -159,3 +159,37 @@ def test_figures_of_trajectories_and_error_over_time_are_written_as_png(paper_ti
     plot_error_over_time(test, {"unstacked": x_hat}, tmp_path / "fig4.png")
     for name in ("fig3.png", "fig4.png"):
         assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_held_after_keeps_inputs_up_to_the_cut_and_holds_the_value_at_the_cut_after_it():
+    u = torch.arange(12, dtype=torch.float32).reshape(2, 3, 2)
+    held = training.held_after(u, torch.tensor([0, 1]))
+    torch.testing.assert_close(held[0], u[0, :1].expand(3, 2))
+    torch.testing.assert_close(held[1], torch.stack([u[1, 0], u[1, 1], u[1, 1]]))
+
+
+def test_masked_data_loss_counts_only_the_times_before_the_cut():
+    from surrogate.losses import data_loss
+
+    y = torch.zeros(1, 4, 4)
+    y_hat = torch.zeros(1, 4, 4)
+    y_hat[0, 2:] = 5.0  # wrong only after the cut
+    mask = torch.tensor([[True, True, False, False]])
+    assert data_loss(y_hat, y, mask).item() == 0.0
+    assert data_loss(y_hat, y).item() > 0.0
+
+
+def test_causal_anchored_training_runs_resumes_exactly_and_logs_every_term(paper_tiny, tmp_path):
+    causal = config(model=OperatorConfig(width=16, depth=2, latent=8, anchored=True), causal=True, physics=True,
+                    time_points=50, lr_schedule="constant")  # constant: a cosine one stretches with epochs
+    train(paper_tiny[1], causal, tmp_path / "whole", progress=False)
+    train(paper_tiny[1], TrainConfig.from_dict({**causal.to_dict(), "epochs": 8}), tmp_path / "split", progress=False)
+    train(paper_tiny[1], causal, tmp_path / "split", progress=False)
+    assert_same_parameters(parameters(tmp_path / "whole"), parameters(tmp_path / "split"))
+    assert {"data", "physics_data", "physics_collocation"} <= set(metrics_lines(tmp_path / "whole")[-1])
+    assert "bias" not in parameters(tmp_path / "whole")
+
+
+def test_the_pinn_cannot_be_anchored():
+    with pytest.raises(ValueError, match="anchored"):
+        OperatorConfig(arch="pinn", anchored=True)

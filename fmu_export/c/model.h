@@ -9,6 +9,7 @@
 #define OPFMU_Z_SIZE (OPFMU_FIRST_LAYER > 0 ? OPFMU_FIRST_LAYER : 1)
 #define OPFMU_TRUNK_SLOTS (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS : 1)
 #define OPFMU_TRUNK_CACHE (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS * OPFMU_TRUNK_SIZE : 1)
+#define OPFMU_COEF_CAP (OPFMU_COEF_SIZE > 0 ? OPFMU_COEF_SIZE : 1)
 
 typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
 
@@ -19,6 +20,8 @@ typedef struct {
     double Vs, theta_vs;          /* inputs [pu, rad], held over the next step */
     double x_start[4];            /* parameters: initial state (delta, omega, Ed_p, Eq_p) */
     double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
+    double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
+    int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
     double window_start;          /* start time of the current operator window [s] */
@@ -34,6 +37,7 @@ typedef struct {
        depend on the window time alone, so every window after the first reuses them */
     unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];
     double trunk[OPFMU_TRUNK_CACHE];
+    double coef[OPFMU_COEF_CAP];  /* the operator's coefficients at the last evaluation (residual) */
 } ModelState;
 
 void model_defaults(ModelState *m);

@@ -21,13 +21,14 @@ static const double ZERO_SENSORS[2 * OPFMU_N_SENSORS];
 #endif
 #if OPFMU_TRUNK_SIZE > 0
 void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
-void opfmu_from_first_layer_trunk(const double x0[4], const double z[OPFMU_FIRST_LAYER],
-                                  const double tau[OPFMU_TRUNK_SIZE], double x[4]);
+void opfmu_coefficients(const double x0[4], const double z[OPFMU_FIRST_LAYER], double c[OPFMU_COEF_SIZE]);
+void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SIZE], double x[4]);
+static void start_coefficients(ModelState *m);
 #endif
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
-    VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_COUNT
+    VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_RESIDUAL_LIMIT, VR_COUNT
 };
 enum { VR_IN_ENVELOPE = 0 };
 
@@ -41,6 +42,7 @@ void model_defaults(ModelState *m)
     m->theta_vs = 0.0;
     memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
     m->rollover_horizon = OPFMU_HORIZON;
+    m->residual_limit = OPFMU_RESIDUAL_LIMIT;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
 }
@@ -48,11 +50,36 @@ void model_defaults(ModelState *m)
 int model_real_kind(unsigned int vr)
 {
     if (vr == VR_VS || vr == VR_THETA) return VAR_INPUT;
-    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON) return VAR_PARAMETER;
+    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT) return VAR_PARAMETER;
     if (vr < VR_COUNT) return VAR_OUTPUT;
     return -1;
 }
 
+#if OPFMU_TRUNK_SIZE > 0
+/* The trunk values at window time tau: those kept for the sensor time tau is on, if any, else
+   computed into `scratch`. */
+static const double *trunk_seen(const ModelState *m, double tau, double scratch[OPFMU_TRUNK_SIZE])
+{
+    double slot = tau / SENSOR_DT;
+    long k = lround(slot);
+    if (k >= 0 && k < OPFMU_N_SENSORS && fabs(slot - (double)k) <= 1e-6 && m->trunk_ready[k])
+        return m->trunk + k * OPFMU_TRUNK_SIZE;
+    opfmu_trunk(tau, scratch);
+    return scratch;
+}
+
+/* d x/dt of the operator at window time tau with the coefficients of the last evaluation, by a
+   central difference over one sensor interval (one-sided at the ends): two products with kept trunk
+   values, not two network evaluations */
+static void operator_rate(const ModelState *m, double tau, double rate[4])
+{
+    double lo = fmax(tau - SENSOR_DT, 0.0), hi = fmin(tau + SENSOR_DT, OPFMU_HORIZON);
+    double a[4], b[4], scratch[OPFMU_TRUNK_SIZE];
+    opfmu_head(m->coef, trunk_seen(m, lo, scratch), a);
+    opfmu_head(m->coef, trunk_seen(m, hi, scratch), b);
+    for (int i = 0; i < 4; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
+}
+#else
 /* d x/dt of the operator at window time tau, by a central difference (one-sided at the ends) */
 static void operator_rate(const ModelState *m, double tau, double rate[4])
 {
@@ -63,6 +90,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[4])
     opfmu_operator(m->x_window, m->sensors, hi, b);
     for (int i = 0; i < 4; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
 }
+#endif
 
 static double residual(const ModelState *m)
 {
@@ -90,6 +118,7 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     case VR_DELTA0: case VR_OMEGA0: case VR_ED0: case VR_EQ0: *value = m->x_start[vr - VR_DELTA0]; return MODEL_OK;
     case VR_RESIDUAL: *value = residual(m); return MODEL_OK;
     case VR_HORIZON: *value = m->rollover_horizon; return MODEL_OK;
+    case VR_RESIDUAL_LIMIT: *value = m->residual_limit; return MODEL_OK;
     default: return MODEL_ERROR;
     }
 }
@@ -117,6 +146,13 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
             return MODEL_ERROR;
         }
         m->rollover_horizon = value;
+        return MODEL_OK;
+    case VR_RESIDUAL_LIMIT:
+        if (value < 0.0) {
+            snprintf(message, size, "residual_limit = %g must be >= 0 (0 turns the check off)", value);
+            return MODEL_ERROR;
+        }
+        m->residual_limit = value;
         return MODEL_OK;
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
@@ -172,6 +208,9 @@ static void start_window(ModelState *m)
     opfmu_first_layer(m->x_window, ZERO_SENSORS, m->z_base);
     memset(m->z_past, 0, sizeof m->z_past);
 #endif
+#if OPFMU_TRUNK_SIZE > 0
+    start_coefficients(m); /* so the residual at the window start is the new window's */
+#endif
 }
 
 #if OPFMU_TRUNK_SIZE > 0
@@ -193,6 +232,17 @@ static const double *trunk_at(ModelState *m, double tau, double scratch[OPFMU_TR
 }
 #endif
 
+#if OPFMU_TRUNK_SIZE > 0
+/* The coefficients of a window just started: every sensor slot holds the current input. */
+static void start_coefficients(ModelState *m)
+{
+    double z[OPFMU_FIRST_LAYER];
+    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
+        z[h] = m->z_base[h] + SUFFIX(0, 0, h) * m->Vs + SUFFIX(0, 1, h) * m->theta_vs;
+    opfmu_coefficients(m->x_window, z, m->coef);
+}
+#endif
+
 /* The operator at window time tau after the held input was written from slot `first` on. Per step
    this costs the network after its sensor layer plus O(layer width), not the whole sensor layer. */
 static void evaluate(ModelState *m, int first, double tau)
@@ -211,7 +261,8 @@ static void evaluate(ModelState *m, int first, double tau)
         z[h] = m->z_base[h] + m->z_past[h] + SUFFIX(first, 0, h) * m->Vs + SUFFIX(first, 1, h) * m->theta_vs;
 #if OPFMU_TRUNK_SIZE > 0
     double scratch[OPFMU_TRUNK_SIZE];
-    opfmu_from_first_layer_trunk(m->x_window, z, trunk_at(m, tau, scratch), m->x);
+    opfmu_coefficients(m->x_window, z, m->coef);
+    opfmu_head(m->coef, trunk_at(m, tau, scratch), m->x);
 #else
     opfmu_from_first_layer(m->x_window, z, tau, m->x);
 #endif
@@ -258,5 +309,24 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         }
     }
     m->time = stop;
+    if (m->residual_limit > 0.0) {
+#if OPFMU_TRUNK_SIZE > 0
+        double tau = m->time - m->window_start, scratch[OPFMU_TRUNK_SIZE]; /* keep the trunk values the rate needs */
+        trunk_at(m, fmax(tau - SENSOR_DT, 0.0), scratch);
+        trunk_at(m, fmin(tau + SENSOR_DT, OPFMU_HORIZON), scratch);
+#endif
+        double r = residual(m);
+        if (r > m->residual_limit && !m->residual_alarm) {
+            m->residual_alarm = 1;
+            if (status == MODEL_OK) {
+                snprintf(message, size, "t = %.6g s: physics residual %.3g exceeds residual_limit %.3g: the surrogate "
+                         "is likely leaving the reference here (an input or state it was not trained for)",
+                         m->time, r, m->residual_limit);
+                status = MODEL_WARNING;
+            }
+        } else if (r < 0.5 * m->residual_limit) {
+            m->residual_alarm = 0; /* warn again at the next excursion */
+        }
+    }
     return status;
 }

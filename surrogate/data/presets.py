@@ -43,8 +43,8 @@ class Preset:
 
 
 COSIM_FAMILIES = (
-    ("slow", 0.15), ("fast", 0.15), ("step", 0.15), ("dip", 0.2), ("ramp", 0.1),
-    ("zoh-slow", 0.05), ("zoh-fast", 0.1), ("zoh-ramp", 0.1),
+    ("slow", 0.1), ("fast", 0.1), ("step", 0.15), ("dip", 0.2), ("ramp", 0.1),
+    ("zoh-slow", 0.05), ("zoh-fast", 0.05), ("zoh-ramp", 0.05), ("mix", 0.2),
 )
 
 PRESETS = {

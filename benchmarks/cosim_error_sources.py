@@ -1,0 +1,129 @@
+"""Where the surrogate FMU's error comes from, per scenario: one run split into its sources.
+
+    python benchmarks/cosim_error_sources.py [--operator OP.onnx] [--surrogate A.fmu] [--reference B.fmu]
+        [--stop-time 10] [--step 0.01] [--scenarios ...] [--seeds 0] [--out error_sources.json]
+
+For each run (both FMUs under fmpy, as `opfmu compare`), the operator is also evaluated in Python
+(onnxruntime) window by window, each window restarted from the reference state at its start:
+
+* FMU: the surrogate FMU as a user runs it (errors carried over from window to window);
+* restarted, held future: every communication point evaluated as the FMU does (sensor slots after the
+  current step hold its input), but from the reference window-start state: the error the FMU would
+  have without what earlier windows left behind;
+* restarted, known future: the same windows with every sensor slot at the input that really comes
+  (hindsight): the operator's own error on that input.
+
+So FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
+knowing the future input, and known is the operator's accuracy on these inputs. Also reported: the
+first window alone (the start from rest), and how many window-start states or inputs left the
+training envelope.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+from fmpy import extract
+
+from opfmu.compare import compare, scenario_inputs
+from opfmu.files import write_json
+from reference_models.scenarios import SCENARIOS
+from reference_models.sm4 import STATE_NAMES
+from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
+
+
+def zoh(inputs_times: np.ndarray, inputs: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The input held from each communication point to the next, at `times` [T] -> [T, 2]."""
+    index = np.searchsorted(inputs_times, times + 1e-9, side="right") - 1
+    return inputs[np.clip(index, 0, len(inputs) - 1)]
+
+
+def restarted(op: Operator, times: np.ndarray, inputs: np.ndarray, reference: np.ndarray, h: float):
+    """(held, known): states [T, 4] at the communication points, each window restarted from the
+    reference; held evaluates every point with later sensor slots at the current input, known with
+    the true input throughout."""
+    sensor_t = np.linspace(0.0, op.horizon, op.n_sensors)
+    per_window = int(round(op.horizon / h))
+    held, known = reference.copy(), reference.copy()
+    for start in range(0, len(times) - 1, per_window):
+        steps = np.arange(start, min(start + per_window, len(times) - 1))  # steps whose end is in this window
+        t0, x0 = times[start], reference[start][None].astype(np.float32)
+        u_true = zoh(times, inputs, t0 + sensor_t)
+        ends = times[steps + 1] - t0
+        known[steps + 1] = op.predict(x0, u_true[None], ends)[0]
+        # held future: for the step from times[i], slots from times[i] on carry inputs[i]
+        u_held = np.repeat(u_true[None], len(steps), axis=0)
+        for row, i in enumerate(steps):
+            u_held[row, t0 + sensor_t >= times[i] - 1e-9] = inputs[i]
+        x = op.predict(np.repeat(x0, len(steps), axis=0), u_held, ends)
+        held[steps + 1] = x[np.arange(len(steps)), np.arange(len(steps))]
+    return held, known
+
+
+def maxae(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.abs(a - b).max(axis=0)
+
+
+def rollover(args) -> dict:
+    return {} if args.rollover is None else {"rollover_horizon": args.rollover}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--operator", default=str(DEFAULT_OPERATOR))
+    parser.add_argument("--surrogate", help="surrogate FMU of that operator (default: build it)")
+    parser.add_argument("--reference", help="reference FMU (default: build it)")
+    parser.add_argument("--stop-time", type=float, default=10.0)
+    parser.add_argument("--step", type=float, default=0.01)
+    parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--rollover", type=float, default=None, help="surrogate rollover_horizon [s] (default: its own)")
+    parser.add_argument("--out", default="error_sources.json")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore", EnvelopeWarning)
+    op = Operator.load(args.operator)
+
+    with tempfile.TemporaryDirectory(prefix="opfmu_sources_") as tmp:
+        tmp = Path(tmp)
+        surrogate, reference = args.surrogate, args.reference
+        if surrogate is None:
+            from fmu_export.builder import build_surrogate_fmu
+
+            surrogate = tmp / "s.fmu"
+            build_surrogate_fmu(args.operator, surrogate)
+        if reference is None:
+            from reference_models.reference_fmu import build_reference_fmu
+
+            reference = tmp / "SM4Reference.fmu"
+            build_reference_fmu(reference)
+        dirs = extract(str(surrogate), unzipdir=str(tmp / "s")), extract(str(reference), unzipdir=str(tmp / "r"))
+        print(f"{args.stop_time:g} s at h = {args.step * 1e3:g} ms; MaxAE of delta [rad] / omega [rad/s] / Eq_p [pu]")
+        print(f"{'scenario':<8}{'seed':>5}{'FMU':>26}{'restarted, held':>26}{'restarted, known':>26}"
+              f"{'first window':>26}{'outside':>9}")
+        rows = []
+        for name in args.scenarios:
+            for seed in args.seeds:
+                inputs = scenario_inputs(name, seed, args.stop_time, args.step)
+                result = compare(*dirs, inputs, args.stop_time, args.step, rollover(args))
+                ref = np.stack([result["trajectories"]["reference"][s] for s in STATE_NAMES], axis=1)
+                fmu = np.stack([result["trajectories"]["surrogate"][s] for s in STATE_NAMES], axis=1)
+                held, known = restarted(op, inputs.times, inputs.values, ref, args.step)
+                first = int(round(op.horizon / args.step)) + 1
+                starts = ref[:: int(round(op.horizon / args.step))]
+                outside = sum(bool(op.outside_envelope(x[None], inputs.values[None, :1])) for x in starts)
+                outside += bool(op.outside_envelope(ref[:1], inputs.values[None]))
+                parts = {"fmu": maxae(fmu, ref), "held": maxae(held, ref), "known": maxae(known, ref),
+                         "first_window": maxae(fmu[:first], ref[:first])}
+                cells = "".join(f"{p[0]:>9.2e}/{p[1]:.2e}/{p[3]:.1e}" for p in parts.values())
+                print(f"{name:<8}{seed:>5}{cells}{outside:>9}", flush=True)
+                rows.append({"scenario": name, "seed": seed, "outside": outside,
+                             **{k: dict(zip(STATE_NAMES, v.tolist())) for k, v in parts.items()}})
+        write_json(args.out, {"stop_time_s": args.stop_time, "step_s": args.step, "operator": args.operator,
+                              "rows": rows})
+
+
+if __name__ == "__main__":
+    main()
