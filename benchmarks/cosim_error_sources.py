@@ -67,8 +67,9 @@ def maxae(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.abs(a - b).max(axis=0)
 
 
-def rollover(args) -> dict:
-    return {} if args.rollover is None else {"rollover_horizon": args.rollover}
+def surrogate_parameters(args) -> dict:
+    """The surrogate parameters given with --param."""
+    return {name: float(value) for name, value in (p.split("=", 1) for p in args.param)}
 
 
 def main() -> None:
@@ -80,7 +81,8 @@ def main() -> None:
     parser.add_argument("--step", type=float, default=0.01)
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
-    parser.add_argument("--rollover", type=float, default=None, help="surrogate rollover_horizon [s] (default: its own)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="a surrogate parameter, e.g. rollover_horizon=0.5 or restart_jump=0.02 (repeatable)")
     parser.add_argument("--out", default="error_sources.json")
     args = parser.parse_args()
     warnings.simplefilter("ignore", EnvelopeWarning)
@@ -107,7 +109,7 @@ def main() -> None:
         for name in args.scenarios:
             for seed in args.seeds:
                 inputs = scenario_inputs(name, seed, args.stop_time, args.step)
-                result = compare(*dirs, inputs, args.stop_time, args.step, rollover(args))
+                result = compare(*dirs, inputs, args.stop_time, args.step, surrogate_parameters(args))
                 ref = np.stack([result["trajectories"]["reference"][s] for s in STATE_NAMES], axis=1)
                 fmu = np.stack([result["trajectories"]["surrogate"][s] for s in STATE_NAMES], axis=1)
                 held, known = restarted(op, inputs.times, inputs.values, ref, args.step)

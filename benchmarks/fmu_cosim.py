@@ -34,8 +34,9 @@ def rollover_share(result: dict, horizon: float = 1.0) -> tuple[float, float]:
     return float(err[near].max(initial=0.0)), float(err[~near].max(initial=0.0))
 
 
-def rollover(args) -> dict:
-    return {} if args.rollover is None else {"rollover_horizon": args.rollover}
+def surrogate_parameters(args) -> dict:
+    """The surrogate parameters given with --param."""
+    return {name: float(value) for name, value in (p.split("=", 1) for p in args.param)}
 
 
 def main() -> None:
@@ -46,7 +47,8 @@ def main() -> None:
     parser.add_argument("--stop-time", type=float, default=10.0)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--scenarios", nargs="+", default=list(SCENARIOS))
-    parser.add_argument("--rollover", type=float, default=None, help="surrogate rollover_horizon [s] (default: its own)")
+    parser.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                        help="a surrogate parameter, e.g. rollover_horizon=0.5 or restart_jump=0.02 (repeatable)")
     parser.add_argument("--out", default="fmu_cosim.json")
     args = parser.parse_args()
 
@@ -74,7 +76,7 @@ def main() -> None:
         for name in args.scenarios:
             for seed in args.seeds:
                 for h in args.steps:
-                    result = compare(*dirs, scenario_inputs(name, seed, args.stop_time, h), args.stop_time, h, rollover(args))
+                    result = compare(*dirs, scenario_inputs(name, seed, args.stop_time, h), args.stop_time, h, surrogate_parameters(args))
                     m = result["metrics"]
                     near, far = rollover_share(result)
                     met = all(m[s]["maxae"] <= limit for s, limit in GOAL_MAXAE.items())

@@ -31,6 +31,8 @@ C_DIR = Path(__file__).parent / "c"
 # residual above which the FMU warns, for an operator whose metadata names none (measured on the
 # shipped operator: see README, "When to distrust the surrogate")
 DEFAULT_RESIDUAL_LIMIT = 1.0
+# input change (pu for Vs, rad for theta_vs) that starts a new operator window at once
+DEFAULT_RESTART_JUMP = 0.02
 STATIC_SOURCES = ("fmi2_cs.c", "surrogate_model.c", "model.h")
 
 
@@ -66,6 +68,7 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
         f"#define OPFMU_RESIDUAL_LIMIT {residual_limit(meta)!r} /* default of the parameter residual_limit */",
+        f"#define OPFMU_RESTART_JUMP {DEFAULT_RESTART_JUMP!r} /* default of the parameter restart_jump */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -121,7 +124,7 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
         xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), float(meta["horizon_s"]), True,
-                                                residual_limit=residual_limit(meta)),
+                                                residual_limit=residual_limit(meta), restart_jump=DEFAULT_RESTART_JUMP),
                                 "SM4 synchronous machine: PI-DeepONet surrogate evaluated from buffered input sensors")
         with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
             fmu.writestr("modelDescription.xml", xml)

@@ -150,6 +150,7 @@ def cmd_compare(args) -> None:
     for path in (args.surrogate, args.reference):
         if not zipfile.is_zipfile(path):
             raise UserError(f"{path} is not an FMU (no such file, or not a zip archive)")
+    parameters = _parameters(args.param)
     try:
         if args.scenario:
             inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step)
@@ -159,7 +160,8 @@ def cmd_compare(args) -> None:
             stop_time = args.stop_time or float(inputs.times[-1])
         with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
             result = compare(extract(args.surrogate, unzipdir=f"{tmp}/surrogate"),
-                             extract(args.reference, unzipdir=f"{tmp}/reference"), inputs, stop_time, args.step)
+                             extract(args.reference, unzipdir=f"{tmp}/reference"), inputs, stop_time, args.step,
+                             parameters)
     except (CompareError, ValueError) as exc:
         raise UserError(str(exc)) from None
     out = Path(args.out)
@@ -168,6 +170,18 @@ def cmd_compare(args) -> None:
     write_json(out / f"{stem}.json", summary(result))
     print(format_table(result))
     print(f"plots: {', '.join(str(p) for p in plots)}; summary: {out / f'{stem}.json'}")
+
+
+def _parameters(specs) -> dict:
+    """NAME=VALUE strings -> {name: float}."""
+    parameters = {}
+    for spec in specs:
+        name, _, value = spec.partition("=")
+        try:
+            parameters[name.strip()] = float(value)
+        except ValueError:
+            raise UserError(f"--param needs NAME=NUMBER, got {spec!r}") from None
+    return parameters
 
 
 def cmd_demo(args) -> None:
@@ -269,6 +283,8 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--stop-time", type=float, default=None,
                      help="seconds (default: 10 for a scenario, the last CSV time for --inputs)")
     cmp.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
+    cmp.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                     help="a surrogate parameter, e.g. restart_jump=0 or rollover_horizon=0.5 (repeatable)")
     cmp.add_argument("--out", default="comparison", help="directory for plots and the summary (default comparison)")
     cmp.set_defaults(func=cmd_compare)
 

@@ -10,12 +10,13 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
+from fmu_export.builder import DEFAULT_RESTART_JUMP
 from fmu_slave import Slave
 from reference_models.sm4 import steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
-      "residual": 16, "rollover_horizon": 17, "residual_limit": 18}
+      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
 
@@ -25,15 +26,20 @@ def unzipped(fmu_path):
     return extract(str(fmu_path)), read_model_description(str(fmu_path))
 
 
-def operator_reference(x0, steps, horizon=1.0):
-    """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime."""
+def operator_reference(x0, steps, horizon=1.0, restart_jump=DEFAULT_RESTART_JUMP):
+    """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime; an
+    input change above restart_jump starts a new window (as the FMU's parameter of that name)."""
     op = Operator.load(DEFAULT_OPERATOR)
     n = op.n_sensors
     t, t_window, x_window, x = 0.0, 0.0, np.array(x0, dtype=np.float32), np.array(x0)
     buffer = np.zeros((n, 2), np.float32)
     buffer[:] = steps[0][1:]
-    out = []
+    out, last = [], steps[0][1:]
     for h, Vs, th in steps:
+        if restart_jump > 0 and t > t_window + 1e-9 and max(abs(Vs - last[0]), abs(th - last[1])) > restart_jump:
+            t_window, x_window = t, np.asarray(x, dtype=np.float32)
+            buffer[:] = (Vs, th)
+        last = (Vs, th)
         stop = t + h
         while t < stop - 1e-9:
             end = min(stop, t_window + horizon)
@@ -85,6 +91,27 @@ def test_machine_started_at_rest_stays_near_rest_over_three_windows(unzipped):
     slave.close()
     drift = np.abs(states - steady_state(1.0, 0.0)).max(axis=0)
     assert np.all(drift < [0.01, 0.01, 0.005, 0.005]), drift
+
+
+def test_an_input_jump_above_restart_jump_starts_a_new_window_from_the_state_reached(unzipped):
+    steps = [(0.01, 1.0, 0.0)] * 30 + [(0.01, 0.6, 0.1)] * 20 + [(0.01, 1.0, 0.1)] * 30
+    slave = Slave(unzipped)
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    x0 = steady_state(1.0, 0.0)
+    np.testing.assert_allclose(got, operator_reference(x0, steps), rtol=0, atol=1e-5)
+    without = operator_reference(x0, steps, restart_jump=0.0)
+    np.testing.assert_allclose(got[:30], without[:30], rtol=0, atol=1e-5)
+    assert np.abs(got[30:] - without[30:]).max() > 1e-4
+
+
+def test_restart_jump_zero_keeps_windows_at_the_rollover_horizon(unzipped):
+    steps = [(0.01, 1.0, 0.0)] * 30 + [(0.01, 0.6, 0.1)] * 20
+    slave = Slave(unzipped, restart_jump=0.0)
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    np.testing.assert_allclose(got, operator_reference(steady_state(1.0, 0.0), steps, restart_jump=0.0),
+                               rtol=0, atol=1e-5)
 
 
 def test_a_step_crossing_the_window_boundary_equals_one_split_at_it(unzipped):

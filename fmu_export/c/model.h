@@ -22,6 +22,7 @@ typedef struct {
     double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
     double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
     int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */
+    double restart_jump;          /* parameter [pu, rad]: an input change larger than this starts a window */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
     double window_start;          /* start time of the current operator window [s] */

@@ -28,7 +28,8 @@ static void start_coefficients(ModelState *m);
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
-    VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_RESIDUAL_LIMIT, VR_COUNT
+    VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_RESIDUAL_LIMIT,
+    VR_RESTART_JUMP, VR_COUNT
 };
 enum { VR_IN_ENVELOPE = 0 };
 
@@ -43,6 +44,7 @@ void model_defaults(ModelState *m)
     memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
     m->rollover_horizon = OPFMU_HORIZON;
     m->residual_limit = OPFMU_RESIDUAL_LIMIT;
+    m->restart_jump = OPFMU_RESTART_JUMP;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
 }
@@ -50,7 +52,8 @@ void model_defaults(ModelState *m)
 int model_real_kind(unsigned int vr)
 {
     if (vr == VR_VS || vr == VR_THETA) return VAR_INPUT;
-    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT) return VAR_PARAMETER;
+    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT || vr == VR_RESTART_JUMP)
+        return VAR_PARAMETER;
     if (vr < VR_COUNT) return VAR_OUTPUT;
     return -1;
 }
@@ -119,6 +122,7 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     case VR_RESIDUAL: *value = residual(m); return MODEL_OK;
     case VR_HORIZON: *value = m->rollover_horizon; return MODEL_OK;
     case VR_RESIDUAL_LIMIT: *value = m->residual_limit; return MODEL_OK;
+    case VR_RESTART_JUMP: *value = m->restart_jump; return MODEL_OK;
     default: return MODEL_ERROR;
     }
 }
@@ -153,6 +157,13 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
             return MODEL_ERROR;
         }
         m->residual_limit = value;
+        return MODEL_OK;
+    case VR_RESTART_JUMP:
+        if (value < 0.0) {
+            snprintf(message, size, "restart_jump = %g must be >= 0 (0: windows start at the rollover horizon only)", value);
+            return MODEL_ERROR;
+        }
+        m->restart_jump = value;
         return MODEL_OK;
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
@@ -285,6 +296,11 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
     ModelStatus status = check_envelope(m, message, size);
     double stop = m->time + h;
+    /* an input jump starts a new window here, so the jump is at window time 0, where the operator
+       learned its transients (every training window starts with one) */
+    if (m->restart_jump > 0.0 && m->time > m->window_start + TIME_EPS &&
+        (fabs(m->Vs - m->last_u[0]) > m->restart_jump || fabs(m->theta_vs - m->last_u[1]) > m->restart_jump))
+        start_window(m);
     while (m->time < stop - TIME_EPS) {
         double window_end = m->window_start + m->rollover_horizon;
         double end = fmin(stop, window_end);
@@ -296,6 +312,8 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
             m->sensors[2 * k + 1] = m->theta_vs;
         }
         evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
+        m->last_u[0] = m->Vs;
+        m->last_u[1] = m->theta_vs;
         m->time = end;
         for (int i = 0; i < 4; ++i) {
             if (!isfinite(m->x[i])) {
