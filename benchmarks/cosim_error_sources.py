@@ -26,9 +26,9 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract
 
 from opfmu.compare import compare, scenario_inputs
+from fmu_pair import extracted_pair, surrogate_parameters
 from opfmu.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import STATE_NAMES
@@ -67,11 +67,6 @@ def maxae(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.abs(a - b).max(axis=0)
 
 
-def surrogate_parameters(args) -> dict:
-    """The surrogate parameters given with --param."""
-    return {name: float(value) for name, value in (p.split("=", 1) for p in args.param)}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--operator", default=str(DEFAULT_OPERATOR))
@@ -90,18 +85,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="opfmu_sources_") as tmp:
         tmp = Path(tmp)
-        surrogate, reference = args.surrogate, args.reference
-        if surrogate is None:
-            from fmu_export.builder import build_surrogate_fmu
-
-            surrogate = tmp / "s.fmu"
-            build_surrogate_fmu(args.operator, surrogate)
-        if reference is None:
-            from reference_models.reference_fmu import build_reference_fmu
-
-            reference = tmp / "SM4Reference.fmu"
-            build_reference_fmu(reference)
-        dirs = extract(str(surrogate), unzipdir=str(tmp / "s")), extract(str(reference), unzipdir=str(tmp / "r"))
+        dirs = extracted_pair(args.surrogate, args.reference, tmp, args.operator)
         print(f"{args.stop_time:g} s at h = {args.step * 1e3:g} ms; MaxAE of delta [rad] / omega [rad/s] / Eq_p [pu]")
         print(f"{'scenario':<8}{'seed':>5}{'FMU':>26}{'restarted, held':>26}{'restarted, known':>26}"
               f"{'first window':>26}{'outside':>9}")
@@ -109,7 +93,7 @@ def main() -> None:
         for name in args.scenarios:
             for seed in args.seeds:
                 inputs = scenario_inputs(name, seed, args.stop_time, args.step)
-                result = compare(*dirs, inputs, args.stop_time, args.step, surrogate_parameters(args))
+                result = compare(*dirs, inputs, args.stop_time, args.step, surrogate_parameters(args.param))
                 ref = np.stack([result["trajectories"]["reference"][s] for s in STATE_NAMES], axis=1)
                 fmu = np.stack([result["trajectories"]["surrogate"][s] for s in STATE_NAMES], axis=1)
                 held, known = restarted(op, inputs.times, inputs.values, ref, args.step)

@@ -16,10 +16,10 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract
 
 from opfmu.compare import compare, scenario_inputs, summary
 from opfmu.demo import GOAL_MAXAE
+from fmu_pair import extracted_pair, surrogate_parameters
 from opfmu.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import OUTPUT_NAMES, STATE_NAMES
@@ -32,11 +32,6 @@ def rollover_share(result: dict, horizon: float = 1.0) -> tuple[float, float]:
     phase = np.mod(t, horizon)
     near = (phase < 0.02 + 1e-9) & (t > horizon / 2)
     return float(err[near].max(initial=0.0)), float(err[~near].max(initial=0.0))
-
-
-def surrogate_parameters(args) -> dict:
-    """The surrogate parameters given with --param."""
-    return {name: float(value) for name, value in (p.split("=", 1) for p in args.param)}
 
 
 def main() -> None:
@@ -54,19 +49,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="opfmu_cosim_") as tmp:
         tmp = Path(tmp)
-        surrogate, reference = args.surrogate, args.reference
-        if surrogate is None:
-            from fmu_export.builder import build_surrogate_fmu
-            from surrogate.operator import DEFAULT_OPERATOR
-
-            surrogate = tmp / "SM4Surrogate.fmu"
-            build_surrogate_fmu(DEFAULT_OPERATOR, surrogate)
-        if reference is None:
-            from reference_models.reference_fmu import build_reference_fmu
-
-            reference = tmp / "SM4Reference.fmu"
-            build_reference_fmu(reference)
-        dirs = extract(str(surrogate), unzipdir=str(tmp / "s")), extract(str(reference), unzipdir=str(tmp / "r"))
+        dirs = extracted_pair(args.surrogate, args.reference, tmp)
         rows = []
         header = (f"{'scenario':<8}{'seed':>5}{'h [ms]':>7}" + "".join(f"{'MaxAE ' + n:>13}" for n in STATE_NAMES)
                   + f"{'derived':>10}{'rollover':>10}{'elsewhere':>10}{'fmpy x':>8}{'doStep x':>9}{'goal':>7}")
@@ -76,7 +59,8 @@ def main() -> None:
         for name in args.scenarios:
             for seed in args.seeds:
                 for h in args.steps:
-                    result = compare(*dirs, scenario_inputs(name, seed, args.stop_time, h), args.stop_time, h, surrogate_parameters(args))
+                    inputs = scenario_inputs(name, seed, args.stop_time, h)
+                    result = compare(*dirs, inputs, args.stop_time, h, surrogate_parameters(args.param))
                     m = result["metrics"]
                     near, far = rollover_share(result)
                     met = all(m[s]["maxae"] <= limit for s, limit in GOAL_MAXAE.items())

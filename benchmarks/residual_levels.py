@@ -15,9 +15,10 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 
 from opfmu.compare import Inputs, communication_points, compare, scenario_inputs
+from fmu_pair import extracted_pair
 from opfmu.files import write_json
 from reference_models.scenarios import SCENARIOS, rest_state
 
@@ -48,19 +49,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory(prefix="opfmu_residual_") as tmp:
         tmp = Path(tmp)
-        surrogate, reference = args.surrogate, args.reference
-        if surrogate is None:
-            from fmu_export.builder import build_surrogate_fmu
-            from surrogate.operator import DEFAULT_OPERATOR
-
-            surrogate = tmp / "SM4Surrogate.fmu"
-            build_surrogate_fmu(DEFAULT_OPERATOR, surrogate)
-        if reference is None:
-            from reference_models.reference_fmu import build_reference_fmu
-
-            reference = tmp / "SM4Reference.fmu"
-            build_reference_fmu(reference)
-        dirs = extract(str(surrogate), unzipdir=str(tmp / "s")), extract(str(reference), unzipdir=str(tmp / "r"))
+        dirs = extracted_pair(args.surrogate, args.reference, tmp)
         md = read_model_description(dirs[0])
         limit = next(float(v.start) for v in md.modelVariables if v.name == "residual_limit")
         runs = [scenario_inputs(n, seed, args.stop_time, args.step) for n in SCENARIOS for seed in args.seeds]

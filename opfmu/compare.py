@@ -186,8 +186,10 @@ def format_table(result: dict) -> str:
                  f"speedup {result['speedup']:.1f}x")
     lines.append(f"time inside fmi2DoStep: surrogate {inside['surrogate']:.3f} s, reference {inside['reference']:.3f} s; "
                  f"speedup {result['do_step_speedup']:.1f}x")
+    said = result["messages"]["surrogate"]
     lines.append(f"surrogate diagnostics: max residual {result['max_residual']:.3g}, "
-                 f"in envelope throughout: {'yes' if result['in_envelope'] else 'NO'}")
+                 f"in envelope throughout: {'yes' if result['in_envelope'] else 'NO'}, warnings logged: {len(said)}")
+    lines += [f"  {message}" for message in said[:5]]
     return "\n".join(lines)
 
 

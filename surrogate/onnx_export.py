@@ -146,13 +146,15 @@ def _residual_scale(data_dir: Path) -> list:
     return residual_scale(train["x"], train["t"]).tolist()
 
 
-# the warning level of the FMU's residual, in multiples of its 99.9th percentile on the test split
-RESIDUAL_LIMIT_FACTOR = 3.0
+# the FMU's warning level: this quantile of the residual over the test split's (trajectory, time)
+# points. In co-simulation runs inside the envelope the shipped operator stays below half of it; a
+# fault deeper than the trained ones goes above it (README, "When to distrust the surrogate").
+RESIDUAL_LIMIT_QUANTILE = 0.99
 
 
 def residual_limit(model, data_dir: Path) -> float:
-    """RESIDUAL_LIMIT_FACTOR x the 99.9th percentile over the test split's (trajectory, time) points
-    of the residual the FMU reports: RMS over states of (d x_hat/dt - f(x_hat, u)) / residual_scale."""
+    """The RESIDUAL_LIMIT_QUANTILE quantile over the test split's (trajectory, time) points of the
+    residual the FMU reports: RMS over states of (d x_hat/dt - f(x_hat, u)) / residual_scale."""
     from reference_models.sm4 import rhs
 
     test = load_split(data_dir, "test")
@@ -163,7 +165,7 @@ def residual_limit(model, data_dir: Path) -> float:
         y, dydt = model.standardised_with_rate(x0, u, t)
         x_hat, dxdt = model.decode(y), model.x_std * dydt
         r = torch.sqrt((((dxdt - rhs(x_hat, u)) / scale) ** 2).mean(-1))
-    return float(RESIDUAL_LIMIT_FACTOR * np.quantile(r.numpy(), 0.999))
+    return float(np.quantile(r.numpy(), RESIDUAL_LIMIT_QUANTILE))
 
 
 def _test_metrics(model, data_dir: Path) -> dict:

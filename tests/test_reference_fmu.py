@@ -94,16 +94,6 @@ def test_non_positive_step_is_refused_with_a_reason_logged_when_logging_is_on(un
     slave.close()
 
 
-def test_many_instances_live_side_by_side_and_the_fmu_reloads(unzipped):
-    slaves = [Slave(unzipped, f"i{k}") for k in range(4)]
-    results = [s.step(0.01, 0.9 + 0.02 * k) for k, s in enumerate(slaves)]
-    for s in slaves:
-        s.close()
-    again = Slave(unzipped, "again")
-    np.testing.assert_array_equal(again.step(0.01, 0.9), results[0])
-    again.close()
-
-
 def test_load_free_load_cycles_in_one_process_do_not_crash(reference_path, tmp_path):
     script = f"""
 import sys

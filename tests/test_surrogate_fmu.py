@@ -288,16 +288,6 @@ def test_the_default_residual_limit_stays_quiet_on_a_quiet_run_and_zero_turns_th
     off.close()
 
 
-def test_many_instances_live_side_by_side_and_reload(unzipped):
-    slaves = [Slave(unzipped, f"i{k}") for k in range(5)]
-    results = [s.step(0.01, 0.9 + 0.02 * k) for k, s in enumerate(slaves)]
-    for s in slaves:
-        s.close()
-    again = Slave(unzipped, "again")
-    np.testing.assert_array_equal(again.step(0.01, 0.9), results[0])
-    again.close()
-
-
 @pytest.mark.skipif(not __import__("shutil").which("valgrind"), reason="valgrind is not installed")
 def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp_path):
     from fmu_export.builder import fmi_headers
