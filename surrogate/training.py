@@ -56,9 +56,6 @@ class TrainConfig:
     physics: add the physics losses (eqs. 6, 7) with `weights`; off, only the data loss is used.
     time_points: if set, each epoch uses this many grid times drawn at random (without
         replacement) for all terms; None uses the whole grid.
-    early_time: with time_points, every grid time up to this many seconds is used every epoch
-        besides the drawn ones: the transient after an input jump at the window start (where a
-        co-simulation FMU that starts a window at a jump needs the operator most) is always trained.
     checkpoint_every: epochs between checkpoints (one is also written when the run ends).
     lr_schedule: "constant" (the paper) or "cosine": lr decays along a half cosine to lr * lr_final
         at `epochs`. A constant rate leaves the validation MSE jumping by orders of magnitude late
@@ -88,7 +85,6 @@ class TrainConfig:
     time_points: int | None = None
     checkpoint_every: int = 100
     causal: bool = False
-    early_time: float = 0.0
 
     def __post_init__(self):
         if self.lr_schedule not in LR_SCHEDULES:
@@ -237,10 +233,7 @@ def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -
     n_times = tensors.t.numel()
     idx = None
     if config.time_points is not None and config.time_points < n_times:
-        idx = torch.randperm(n_times, generator=generator)[:config.time_points]
-        if config.early_time > 0:
-            idx = torch.unique(torch.cat([idx, torch.nonzero(tensors.t <= config.early_time).flatten()]))
-        idx = idx.sort().values
+        idx = torch.randperm(n_times, generator=generator)[:config.time_points].sort().values
     pick = (lambda a: a) if idx is None else (lambda a: a[:, idx])  # noqa: E731
     t = tensors.t if idx is None else tensors.t[idx]
     w = config.weights
