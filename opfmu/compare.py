@@ -109,6 +109,9 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     missing = [n for n in list(names) + [f"{s}0" for s in STATE_NAMES] + list(INPUT_NAMES) if n not in known]
     if missing:
         raise CompareError(f"{md.modelName} lacks the variables {', '.join(missing)}: not an SM4 FMU")
+    unknown = sorted(set(parameters or {}) - known)
+    if unknown:
+        raise CompareError(f"{md.modelName} has no parameter {', '.join(unknown)}")
     messages, in_step = [], [0.0]
 
     def logger(_env, _instance, status, category, message):

@@ -98,6 +98,23 @@ def test_compare_command_refuses_a_file_that_is_not_an_fmu(reference_path, tmp_p
     assert_one_line_error(result, "is not an FMU")
 
 
+def test_compare_command_refuses_a_parameter_the_surrogate_does_not_have(fmu_path, reference_path, tmp_path):
+    result = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(reference_path), "--scenario", "dip",
+                   "--param", "no_such=1", "--stop-time", "0.1", "--out", str(tmp_path))
+    assert_one_line_error(result, "has no parameter no_such")
+
+
+def test_compare_command_passes_surrogate_parameters_on(fmu_path, reference_path, tmp_path):
+    runs = {}
+    for jump in ("0", "0.02"):
+        result = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(reference_path), "--scenario",
+                       "step", "--seed", "1", "--param", f"restart_jump={jump}", "--stop-time", "3",
+                       "--out", str(tmp_path / jump))
+        assert result.returncode == 0, result.stderr
+        runs[jump] = json.loads((tmp_path / jump / "step.json").read_text())["metrics"]["omega"]["maxae"]
+    assert runs["0"] != runs["0.02"]
+
+
 def test_compare_command_refuses_a_stop_time_that_is_not_whole_steps(fmu_path, reference_path, tmp_path):
     result = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(reference_path), "--scenario", "dip",
                    "--stop-time", "1.005", "--step", "0.01", "--out", str(tmp_path))
