@@ -90,12 +90,13 @@ def csv_inputs(path) -> Inputs:
 
 @dataclass
 class Run:
-    """One FMU's simulation: recorded outputs by name [T]; wall_s, the whole simulate_fmu call [s];
-    step_s, the time spent inside fmi2DoStep alone [s]; what the FMU logged."""
+    """One FMU's simulation: recorded outputs by name [T]; wall_s, the whole simulation with fmpy
+    (instantiation to freeing) [s]; do_step_s, the time spent inside fmi2DoStep alone [s]; what the
+    FMU logged."""
 
     outputs: dict
     wall_s: float
-    step_s: float
+    do_step_s: float
     messages: list = field(default_factory=list)
 
 
@@ -157,8 +158,8 @@ def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step
         "metrics": error_metrics(reference.outputs, surrogate.outputs),
         "wall_s": {"surrogate": surrogate.wall_s, "reference": reference.wall_s},
         "speedup": reference.wall_s / surrogate.wall_s,
-        "do_step_s": {"surrogate": surrogate.step_s, "reference": reference.step_s},
-        "do_step_speedup": reference.step_s / surrogate.step_s,
+        "do_step_s": {"surrogate": surrogate.do_step_s, "reference": reference.do_step_s},
+        "do_step_speedup": reference.do_step_s / surrogate.do_step_s,
         "max_residual": float(np.max(surrogate.outputs["residual"])),
         "in_envelope": bool(np.all(surrogate.outputs["in_envelope"] > 0.5)),
         "messages": {"surrogate": surrogate.messages, "reference": reference.messages},
