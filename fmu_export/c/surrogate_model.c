@@ -61,11 +61,18 @@ int model_real_kind(unsigned int vr)
 #if OPFMU_TRUNK_SIZE > 0
 /* The trunk values at window time tau: those kept for the sensor time tau is on, if any, else
    computed into `scratch`. */
-static const double *trunk_seen(const ModelState *m, double tau, double scratch[OPFMU_TRUNK_SIZE])
+/* The sensor slot window time tau is on, or -1 when it lies between sensor times. */
+static long sensor_slot(double tau)
 {
     double slot = tau / SENSOR_DT;
     long k = lround(slot);
-    if (k >= 0 && k < OPFMU_N_SENSORS && fabs(slot - (double)k) <= 1e-6 && m->trunk_ready[k])
+    return k >= 0 && k < OPFMU_N_SENSORS && fabs(slot - (double)k) <= 1e-6 ? k : -1;
+}
+
+static const double *trunk_seen(const ModelState *m, double tau, double scratch[OPFMU_TRUNK_SIZE])
+{
+    long k = sensor_slot(tau);
+    if (k >= 0 && m->trunk_ready[k])
         return m->trunk + k * OPFMU_TRUNK_SIZE;
     opfmu_trunk(tau, scratch);
     return scratch;
@@ -229,9 +236,8 @@ static void start_window(ModelState *m)
    steps of whole milliseconds do, reuses them), computed into `scratch` for any other time. */
 static const double *trunk_at(ModelState *m, double tau, double scratch[OPFMU_TRUNK_SIZE])
 {
-    double slot = tau / SENSOR_DT;
-    long k = lround(slot);
-    if (k < 0 || k >= OPFMU_N_SENSORS || fabs(slot - (double)k) > 1e-6) {
+    long k = sensor_slot(tau);
+    if (k < 0) {
         opfmu_trunk(tau, scratch);
         return scratch;
     }
