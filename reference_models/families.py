@@ -3,7 +3,8 @@
 Each family maps points of the unit hypercube (from Latin hypercube sampling) to signals, one
 parameter per dimension, each uniform in its range. The paper's `slow` and `fast` families are
 exactly section IV-A.2; `step`, `dip`, `ramp`, `zoh` and `mix` are the inputs a co-simulation master
-sends (`mix`: levels held for a while, changed now and then, one change in five a fault).
+sends (`mix`: levels held for a while, changed now and then, one change in five a fault; `jump`: the
+same starting with a change at t = 0, which is how the surrogate FMU meets a jump: it starts a window there).
 """
 from __future__ import annotations
 
@@ -119,12 +120,14 @@ RAMP = Family(
 )
 
 def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fault_share: float = 0.2,
-                vs_levels=(0.9, 1.1)) -> Signal:
+                vs_levels=(0.9, 1.1), change_at_start: bool = False) -> Signal:
     """Piecewise-constant bus voltage over [0, stop_time] s: levels held for `dwell` seconds (Vs in
     vs_levels pu; theta_vs moving by up to 0.3 rad within [-0.5, 0.5] rad, at half the changes); a
-    `fault_share` of the changes are faults (Vs at 0.2-0.9 pu for 20-200 ms, then a new level)."""
+    `fault_share` of the changes are faults (Vs at 0.2-0.9 pu for 20-200 ms, then a new level).
+    change_at_start: the signal starts with a change (a fault or a new level) at t = 0, the way a
+    window of the surrogate FMU starts at an input jump."""
     times, vs, theta = [], [float(rng.uniform(*vs_levels))], [float(rng.uniform(-0.3, 0.3))]
-    t = float(rng.uniform(*dwell))
+    t = 0.0 if change_at_start else float(rng.uniform(*dwell))
     while t < stop_time:
         jump = float(np.clip(theta[-1] + rng.uniform(-0.3, 0.3), *THETA_RANGE))
         if rng.uniform() < fault_share:
@@ -138,6 +141,8 @@ def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fa
             vs.append(float(rng.uniform(*vs_levels)))
             theta.append(jump if rng.uniform() < 0.5 else theta[-1])
         t += float(rng.uniform(*dwell))
+    if change_at_start:  # the level before t = 0 is never seen: drop it and the breakpoint at 0
+        times, vs, theta = times[1:], vs[1:], theta[1:]
     return Signal(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)))
 
 
@@ -147,9 +152,17 @@ def _mix(p, horizon):
     return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), vs_levels=(0.85, 1.15))
 
 
-MIX = Family("mix", {"seed": (0.0, 1.0)}, _mix)
+def _jump(p, horizon):
+    """_mix with its first change at t = 0, a fault two times in five (drawn from the seed parameter)."""
+    rng = np.random.default_rng(int(p["seed"] * 2**31))
+    return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), fault_share=0.4,
+                       vs_levels=(0.85, 1.15), change_at_start=True)
 
-BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX)}
+
+MIX = Family("mix", {"seed": (0.0, 1.0)}, _mix)
+JUMP = Family("jump", {"seed": (0.0, 1.0)}, _jump)
+
+BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP)}
 HOLD_RANGE = (0.001, 0.05)  # s, communication steps a ZOH family holds at (log-uniform)
 
 

@@ -62,7 +62,7 @@ def test_dip_drops_holds_and_recovers():
     np.testing.assert_allclose(s.breakpoints(1.0), [0.2, 0.3])
 
 
-@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-fast", "zoh-ramp", "mix"])
+@pytest.mark.parametrize("name", ["slow", "fast", "step", "dip", "ramp", "zoh-fast", "zoh-ramp", "mix", "jump"])
 def test_signal_round_trips_through_json(name):
     for s in sample(family(name), 3):
         back = Signal.from_dict(json.loads(json.dumps(s.to_dict())))
@@ -95,3 +95,11 @@ def test_mix_family_holds_levels_and_faults_within_one_window():
     values = np.array([s(t) for s in signals])
     assert values[..., 0].min() < 0.9 and values[..., 0].max() <= 1.15  # some fault; levels <= 1.15 pu
     assert np.abs(values[..., 1]).max() <= 0.5
+
+
+def test_jump_family_starts_each_window_with_a_change_a_fault_two_times_in_five():
+    signals = family("jump").sample(np.linspace(0.01, 0.99, 60)[:, None], 1.0)
+    assert all(s.Vs.times[0] > 0.0 for s in signals)  # the change is at t = 0: no breakpoint there
+    first = np.array([s.at(0.0)[0] for s in signals])
+    assert first.min() >= 0.2 and first.max() <= 1.15
+    assert 0.2 <= np.mean(first < 0.85) <= 0.6  # faults (0.2-0.9 pu) start about two windows in five

@@ -42,9 +42,10 @@ class Preset:
         return asdict(self)
 
 
+# `jump` windows start at an input change, as the FMU's windows do at a jump (restart_jump)
 COSIM_FAMILIES = (
-    ("slow", 0.1), ("fast", 0.1), ("step", 0.15), ("dip", 0.2), ("ramp", 0.1),
-    ("zoh-slow", 0.05), ("zoh-fast", 0.05), ("zoh-ramp", 0.05), ("mix", 0.2),
+    ("slow", 0.1), ("fast", 0.1), ("step", 0.1), ("dip", 0.15), ("ramp", 0.1),
+    ("zoh-slow", 0.05), ("zoh-fast", 0.05), ("zoh-ramp", 0.05), ("mix", 0.1), ("jump", 0.2),
 )
 
 PRESETS = {
