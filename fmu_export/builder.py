@@ -33,6 +33,7 @@ C_DIR = Path(__file__).parent / "c"
 DEFAULT_RESIDUAL_LIMIT = 1.0
 # input change (pu for Vs, rad for theta_vs) that starts a new operator window at once
 DEFAULT_RESTART_JUMP = 0.02
+DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (surrogate_model.c: the rest correction)
 STATIC_SOURCES = ("fmi2_cs.c", "surrogate_model.c", "model.h")
 
 
@@ -64,11 +65,13 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         f'#define OPFMU_GUID "{guid}"',
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {float(meta['horizon_s'])!r}",
+        f"#define OPFMU_ROLLOVER_HORIZON {rollover_horizon(meta)!r} /* default of the parameter rollover_horizon */",
         f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
         f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
         f"#define OPFMU_RESIDUAL_LIMIT {residual_limit(meta)!r} /* default of the parameter residual_limit */",
         f"#define OPFMU_RESTART_JUMP {DEFAULT_RESTART_JUMP!r} /* default of the parameter restart_jump */",
+        f"#define OPFMU_REST_RADIUS {DEFAULT_REST_RADIUS!r} /* default of the parameter rest_radius */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -84,6 +87,12 @@ def residual_limit(meta: dict) -> float:
     """The default residual_limit: the operator's own (metadata `residual_limit`, set by the export
     from its test split), else DEFAULT_RESIDUAL_LIMIT."""
     return float(json.loads(meta.get("residual_limit", "null")) or DEFAULT_RESIDUAL_LIMIT)
+
+
+def rollover_horizon(meta: dict) -> float:
+    """The default rollover_horizon [s]: the operator's own (metadata `rollover_horizon_s`, set by the
+    export: shorter than the horizon for a causally trained operator), else its whole horizon."""
+    return float(meta.get("rollover_horizon_s", meta["horizon_s"]))
 
 
 def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_check: int = 32) -> dict:
@@ -123,8 +132,9 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         worst = check_kernel(binary, onnx_path, meta, n_check)
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
-        xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), float(meta["horizon_s"]), True,
-                                                residual_limit=residual_limit(meta), restart_jump=DEFAULT_RESTART_JUMP),
+        xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), rollover_horizon(meta), True,
+                                                residual_limit=residual_limit(meta), restart_jump=DEFAULT_RESTART_JUMP,
+                                                rest_radius=DEFAULT_REST_RADIUS),
                                 "SM4 synchronous machine: PI-DeepONet surrogate evaluated from buffered input sensors")
         with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
             fmu.writestr("modelDescription.xml", xml)

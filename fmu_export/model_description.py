@@ -25,7 +25,8 @@ class Variable:
 
 
 def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple = (),
-                  residual_limit: float | None = None, restart_jump: float | None = None) -> list[Variable]:
+                  residual_limit: float | None = None, restart_jump: float | None = None,
+                  rest_radius: float | None = None) -> list[Variable]:
     """The variable list; x_start [4] are the default initial-state parameters, horizon the default
     rollover horizon and residual_limit the default warning level (surrogate only); extra: further
     (parameter) variables of the reference FMU."""
@@ -51,6 +52,8 @@ def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple 
                             "excursion (0: no check)", start=residual_limit))
         out.append(Variable("restart_jump", 19, "parameter", "an input change larger than this (pu, rad) starts a "
                             "new operator window at once (0: only at the rollover horizon)", start=restart_jump))
+        out.append(Variable("rest_radius", 20, "parameter", "reach of the rest correction, which removes the "
+                            "operator's error at the equilibrium of the held input (0: off)", start=rest_radius))
     out += list(extra)
     return out
 

@@ -59,6 +59,21 @@ def test_metadata_carries_the_contract_fields(exported, paper_tiny):
     assert meta["opfmu_version"] and json.loads(meta["architecture"])["arch"] in ("unstacked", "pinn")
 
 
+def test_a_freely_trained_operator_rolls_over_at_its_whole_horizon(exported):
+    meta = {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}
+    assert float(meta["rollover_horizon_s"]) == float(meta["horizon_s"])
+
+
+def test_a_causally_trained_operator_rolls_over_before_its_least_trained_end(paper_tiny, tmp_path):
+    from surrogate.onnx_export import CAUSAL_ROLLOVER_SHARE
+
+    causal = TrainConfig(model=OperatorConfig(**{**SMALL.to_dict(), "anchored": True}), epochs=2, time_points=20,
+                         causal=True)
+    train(paper_tiny[1], causal, tmp_path / "causal", progress=False)
+    meta = export_onnx(tmp_path / "causal", tmp_path / "causal.onnx")
+    assert float(meta["rollover_horizon_s"]) == pytest.approx(CAUSAL_ROLLOVER_SHARE * float(meta["horizon_s"]))
+
+
 def test_onnxruntime_reproduces_torch_on_the_test_split(exported, paper_tiny):
     data = load_split(paper_tiny[1], "test")
     model = load_model(exported[0])

@@ -10,15 +10,16 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import DEFAULT_RESTART_JUMP
+from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP
 from fmu_slave import Slave
 from reference_models.sm4 import steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
-      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19}
+      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19, "rest_radius": 20}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
+REST_RADIUS = np.array([0.5, 0.25, 0.1, 0.1])  # reach of the rest correction at rest_radius = 1 (surrogate_model.c)
 
 
 @pytest.fixture(scope="session")
@@ -26,18 +27,36 @@ def unzipped(fmu_path):
     return extract(str(fmu_path)), read_model_description(str(fmu_path))
 
 
-def operator_reference(x0, steps, horizon=1.0, restart_jump=DEFAULT_RESTART_JUMP):
+def rest_correction(op, x_window, u, tau, rest_radius):
+    """What the FMU subtracts at window time tau (see surrogate_model.c): the operator's error from the
+    equilibrium of the input u held over the window's first step, weighted by the window start's distance from it."""
+    try:
+        rest = steady_state(*u)
+    except ValueError:
+        return 0.0
+    distance = np.max(np.abs(x_window - rest) / (rest_radius * REST_RADIUS)) if rest_radius > 0 else np.inf
+    if distance >= 1.0:
+        return 0.0
+    held = np.tile(np.asarray(u, np.float32), (op.n_sensors, 1))
+    at_rest = op.predict(rest[None].astype(np.float32), held[None], np.array([tau]))[0, 0]
+    return (1.0 - distance) * (at_rest - rest)
+
+
+def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUMP, rest_radius=DEFAULT_REST_RADIUS):
     """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime; an
-    input change above restart_jump starts a new window (as the FMU's parameter of that name)."""
+    input change above restart_jump starts a new window, and each window gets the rest correction (as
+    the FMU's parameters of those names). horizon: the rollover horizon (default: the operator's)."""
     op = Operator.load(DEFAULT_OPERATOR)
+    horizon = horizon or float(op.metadata["rollover_horizon_s"])
     n = op.n_sensors
     t, t_window, x_window, x = 0.0, 0.0, np.array(x0, dtype=np.float32), np.array(x0)
+    u_window = None  # the input held over the window's first step
     buffer = np.zeros((n, 2), np.float32)
     buffer[:] = steps[0][1:]
     out, last = [], steps[0][1:]
     for h, Vs, th in steps:
         if restart_jump > 0 and t > t_window + 1e-9 and max(abs(Vs - last[0]), abs(th - last[1])) > restart_jump:
-            t_window, x_window = t, np.asarray(x, dtype=np.float32)
+            t_window, x_window, u_window = t, np.asarray(x, dtype=np.float32), None
             buffer[:] = (Vs, th)
         last = (Vs, th)
         stop = t + h
@@ -45,12 +64,14 @@ def operator_reference(x0, steps, horizon=1.0, restart_jump=DEFAULT_RESTART_JUMP
             end = min(stop, t_window + horizon)
             first = int(np.ceil((t - t_window) / DT - 1e-6))
             buffer[first:] = (Vs, th)
+            u_window = u_window or (Vs, th)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", EnvelopeWarning)
                 x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0]
+                x = x - rest_correction(op, x_window.astype(float), u_window, end - t_window, rest_radius)
             t = end
             if t >= t_window + horizon - 1e-9:
-                t_window, x_window = t, x.astype(np.float32)
+                t_window, x_window, u_window = t, x.astype(np.float32), None
                 buffer[:] = (Vs, th)
         out.append(x)
     return np.array(out)
@@ -85,12 +106,45 @@ def test_outputs_equal_the_operator_on_the_same_sensor_buffer(unzipped):
     np.testing.assert_allclose(got, expected, rtol=0, atol=2e-5)
 
 
-def test_machine_started_at_rest_stays_near_rest_over_three_windows(unzipped):
+def test_machine_at_rest_under_its_held_input_stays_exactly_at_rest(unzipped):
     slave = Slave(unzipped)
+    states = np.array([slave.step(0.01) for _ in range(300)])  # over three windows
+    slave.close()
+    np.testing.assert_allclose(states, np.tile(steady_state(1.0, 0.0), (300, 1)), rtol=0, atol=1e-6)
+
+
+def test_without_the_rest_correction_the_machine_at_rest_moves_by_the_operators_error(unzipped):
+    slave = Slave(unzipped, rest_radius=0.0)
     states = np.array([slave.step(0.01) for _ in range(300)])
     slave.close()
-    drift = np.abs(states - steady_state(1.0, 0.0)).max(axis=0)
-    assert np.all(drift < [0.01, 0.01, 0.005, 0.005]), drift
+    np.testing.assert_allclose(states, operator_reference(steady_state(1.0, 0.0), [(0.01, 1.0, 0.0)] * 300,
+                                                          rest_radius=0.0), rtol=0, atol=2e-5)
+    assert np.abs(states - steady_state(1.0, 0.0)).max() > 1e-5
+
+
+def test_the_rest_correction_fades_with_the_distance_from_rest(unzipped):
+    x0 = steady_state(1.0, 0.0) + np.array([0.1, 0.0, 0.0, 0.02])  # weight 1 - 0.2 = 0.8 at the start
+    steps = [(0.01, 1.0, 0.0)] * 120
+    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)})
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    np.testing.assert_allclose(got, operator_reference(x0, steps), rtol=0, atol=2e-5)
+    assert np.abs(got - operator_reference(x0, steps, rest_radius=0.0)).max() > 1e-5
+
+
+def test_a_negative_rest_radius_is_refused_with_a_reason(unzipped):
+    slave = Slave(unzipped, init=False)
+    with pytest.raises(FMICallException):
+        slave.fmu.setReal([VR["rest_radius"]], [-1.0])
+    assert any("rest_radius" in m for _, m in slave.messages)
+    slave.fmu.freeInstance()
+
+
+def test_rollover_horizon_defaults_to_the_operators_own(unzipped):
+    slave = Slave(unzipped)
+    horizon = slave.fmu.getReal([VR["rollover_horizon"]])[0]
+    slave.close()
+    assert horizon == float(Operator.load(DEFAULT_OPERATOR).metadata["rollover_horizon_s"]) == 0.8
 
 
 def test_an_input_jump_above_restart_jump_starts_a_new_window_from_the_state_reached(unzipped):
@@ -268,9 +322,9 @@ def warnings_logged(slave):
 
 
 def test_a_residual_above_the_limit_logs_one_warning_per_excursion(unzipped):
-    slave = Slave(unzipped, residual_limit=1e-9)  # every state is "in trouble" at this limit
-    slave.step(0.01)
-    slave.step(0.01)
+    slave = Slave(unzipped, residual_limit=1e-9)  # every moving state is "in trouble" at this limit
+    slave.step(0.01, 0.9)
+    slave.step(0.01, 0.9)
     assert len(warnings_logged(slave)) == 1
     assert "exceeds residual_limit 1e-09" in warnings_logged(slave)[0]
     slave.close()

@@ -23,6 +23,7 @@ typedef struct {
     double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
     int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */
     double restart_jump;          /* parameter [pu, rad]: an input change larger than this starts a window */
+    double rest_radius;           /* parameter: scale of the rest correction's reach (0: no correction) */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
     double window_start;          /* start time of the current operator window [s] */
@@ -39,6 +40,10 @@ typedef struct {
     unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];
     double trunk[OPFMU_TRUNK_CACHE];
     double coef[OPFMU_COEF_CAP];  /* the operator's coefficients at the last evaluation (residual) */
+    /* the rest correction of the current window (surrogate_model.c): the equilibrium x_rest of the
+       input at the window start, the operator's coefficients from there under that input held, and
+       the weight the correction gets (0: none) */
+    double x_rest[4], rest_coef[OPFMU_COEF_CAP], rest_weight;
 } ModelState;
 
 void model_defaults(ModelState *m);

@@ -3,7 +3,17 @@
    A window starts at (window_start, x_window). The input held over a step is written into every
    sensor slot from the current time on (slots not yet known hold the latest value), and the state
    at t + h is the operator at t + h - window_start. When a window's horizon is reached, a new one
-   starts from the state there; a step that crosses the horizon is split at it. */
+   starts from the state there; a step that crosses the horizon is split at it.
+
+   Rest correction (DeepONet kernels): rolled over window after window, the operator's small error at
+   a state of rest does not stay small. The co-simulation settles where one window maps the state onto
+   itself, which lies off the true equilibrium by about that error / (1 - exp(-T / 11 s)), 12 times it
+   for T = 1 s (the slowest mode, -0.09 1/s, hardly decays within a window). So each window also
+   evaluates the operator from the equilibrium x_rest of its first step's input, held, where the true answer
+   is x_rest itself, and subtracts that error: x = G(x_window, u) - w (G(x_rest, u_start) - x_rest).
+   The weight w falls from 1 at x_rest to 0 at REST_RADIUS (times the parameter rest_radius) from it,
+   since the error at rest says little about the error far from rest. A machine at rest under a held
+   input thus stays exactly at rest. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -24,17 +34,20 @@ void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
 void opfmu_coefficients(const double x0[4], const double z[OPFMU_FIRST_LAYER], double c[OPFMU_COEF_SIZE]);
 void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SIZE], double x[4]);
 static void start_coefficients(ModelState *m);
+static void start_rest_correction(ModelState *m);
 #endif
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
     VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_RESIDUAL_LIMIT,
-    VR_RESTART_JUMP, VR_COUNT
+    VR_RESTART_JUMP, VR_REST_RADIUS, VR_COUNT
 };
 enum { VR_IN_ENVELOPE = 0 };
 
 static const double SENSOR_DT = OPFMU_HORIZON / (OPFMU_N_SENSORS - 1);
 static const double TIME_EPS = 1e-9;
+/* how far from x_rest the rest correction reaches (rad, rad/s, pu, pu), times rest_radius */
+static const double REST_RADIUS[4] = {0.5, 0.25, 0.1, 0.1};
 
 void model_defaults(ModelState *m)
 {
@@ -42,9 +55,10 @@ void model_defaults(ModelState *m)
     m->Vs = 1.0;
     m->theta_vs = 0.0;
     memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
-    m->rollover_horizon = OPFMU_HORIZON;
+    m->rollover_horizon = OPFMU_ROLLOVER_HORIZON;
     m->residual_limit = OPFMU_RESIDUAL_LIMIT;
     m->restart_jump = OPFMU_RESTART_JUMP;
+    m->rest_radius = OPFMU_REST_RADIUS;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
 }
@@ -52,7 +66,8 @@ void model_defaults(ModelState *m)
 int model_real_kind(unsigned int vr)
 {
     if (vr == VR_VS || vr == VR_THETA) return VAR_INPUT;
-    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT || vr == VR_RESTART_JUMP)
+    if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT || vr == VR_RESTART_JUMP ||
+        vr == VR_REST_RADIUS)
         return VAR_PARAMETER;
     if (vr < VR_COUNT) return VAR_OUTPUT;
     return -1;
@@ -84,10 +99,15 @@ static const double *trunk_seen(const ModelState *m, double tau, double scratch[
 static void operator_rate(const ModelState *m, double tau, double rate[4])
 {
     double lo = fmax(tau - SENSOR_DT, 0.0), hi = fmin(tau + SENSOR_DT, OPFMU_HORIZON);
-    double a[4], b[4], scratch[OPFMU_TRUNK_SIZE];
+    double a[4], b[4], ra[4], rb[4], scratch[OPFMU_TRUNK_SIZE];
     opfmu_head(m->coef, trunk_seen(m, lo, scratch), a);
     opfmu_head(m->coef, trunk_seen(m, hi, scratch), b);
     for (int i = 0; i < 4; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
+    if (m->rest_weight > 0.0) { /* the rest correction moves with window time too */
+        opfmu_head(m->rest_coef, trunk_seen(m, lo, scratch), ra);
+        opfmu_head(m->rest_coef, trunk_seen(m, hi, scratch), rb);
+        for (int i = 0; i < 4; ++i) rate[i] -= m->rest_weight * (rb[i] - ra[i]) / (hi - lo);
+    }
 }
 #else
 /* d x/dt of the operator at window time tau, by a central difference (one-sided at the ends) */
@@ -130,6 +150,7 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     case VR_HORIZON: *value = m->rollover_horizon; return MODEL_OK;
     case VR_RESIDUAL_LIMIT: *value = m->residual_limit; return MODEL_OK;
     case VR_RESTART_JUMP: *value = m->restart_jump; return MODEL_OK;
+    case VR_REST_RADIUS: *value = m->rest_radius; return MODEL_OK;
     default: return MODEL_ERROR;
     }
 }
@@ -171,6 +192,13 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
             return MODEL_ERROR;
         }
         m->restart_jump = value;
+        return MODEL_OK;
+    case VR_REST_RADIUS:
+        if (value < 0.0) {
+            snprintf(message, size, "rest_radius = %g must be >= 0 (0 turns the rest correction off)", value);
+            return MODEL_ERROR;
+        }
+        m->rest_radius = value;
         return MODEL_OK;
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
@@ -228,6 +256,7 @@ static void start_window(ModelState *m)
 #endif
 #if OPFMU_TRUNK_SIZE > 0
     start_coefficients(m); /* so the residual at the window start is the new window's */
+    start_rest_correction(m);
 #endif
 }
 
@@ -260,6 +289,71 @@ static void start_coefficients(ModelState *m)
 }
 #endif
 
+/* The equilibrium of the SM4 under the held input u nearest `x` (Newton on the right-hand side with a
+   central-difference Jacobian, from x); 0 if Newton does not converge within 30 iterations. */
+static int equilibrium(const double x[4], const double u[2], double rest[4])
+{
+    memcpy(rest, x, 4 * sizeof *rest);
+    for (int iteration = 0; iteration < 30; ++iteration) {
+        double f[4], J[4][5];
+        sm4_derivatives(rest, u, f);
+        double norm = fabs(f[0]) + fabs(f[1]) + fabs(f[2]) + fabs(f[3]);
+        if (!isfinite(norm)) return 0;
+        if (norm < 1e-12) return 1;
+        for (int j = 0; j < 4; ++j) {
+            double d = 1e-6 * fmax(1.0, fabs(rest[j])), hi[4], lo[4], fh[4], fl[4];
+            memcpy(hi, rest, sizeof hi);
+            memcpy(lo, rest, sizeof lo);
+            hi[j] += d;
+            lo[j] -= d;
+            sm4_derivatives(hi, u, fh);
+            sm4_derivatives(lo, u, fl);
+            for (int i = 0; i < 4; ++i) J[i][j] = (fh[i] - fl[i]) / (2.0 * d);
+        }
+        for (int i = 0; i < 4; ++i) J[i][4] = -f[i];
+        for (int c = 0; c < 4; ++c) { /* Gaussian elimination with partial pivoting */
+            int pivot = c;
+            for (int r = c + 1; r < 4; ++r)
+                if (fabs(J[r][c]) > fabs(J[pivot][c])) pivot = r;
+            if (fabs(J[pivot][c]) < 1e-14) return 0;
+            for (int k = 0; k < 5; ++k) {
+                double swap = J[c][k];
+                J[c][k] = J[pivot][k];
+                J[pivot][k] = swap;
+            }
+            for (int r = c + 1; r < 4; ++r) {
+                double factor = J[r][c] / J[c][c];
+                for (int k = c; k < 5; ++k) J[r][k] -= factor * J[c][k];
+            }
+        }
+        for (int c = 3; c >= 0; --c) {
+            double v = J[c][4];
+            for (int k = c + 1; k < 4; ++k) v -= J[c][k] * J[k][4];
+            J[c][4] = v / J[c][c];
+            rest[c] += J[c][4];
+        }
+    }
+    return 0;
+}
+
+/* The rest correction of a window just started (see the top of this file): x_rest, its weight and the
+   operator's coefficients from x_rest under the start input held. */
+static void start_rest_correction(ModelState *m)
+{
+    double u[2] = {m->Vs, m->theta_vs}, distance = 0.0;
+    m->rest_weight = 0.0;
+    if (m->rest_radius <= 0.0 || !equilibrium(m->x_window, u, m->x_rest)) return;
+    for (int i = 0; i < 4; ++i)
+        distance = fmax(distance, fabs(m->x_window[i] - m->x_rest[i]) / (m->rest_radius * REST_RADIUS[i]));
+    if (distance >= 1.0) return;
+    m->rest_weight = 1.0 - distance;
+    double base[OPFMU_FIRST_LAYER], z[OPFMU_FIRST_LAYER];
+    opfmu_first_layer(m->x_rest, ZERO_SENSORS, base);
+    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
+        z[h] = base[h] + SUFFIX(0, 0, h) * m->Vs + SUFFIX(0, 1, h) * m->theta_vs;
+    opfmu_coefficients(m->x_rest, z, m->rest_coef);
+}
+
 /* The operator at window time tau after the held input was written from slot `first` on. Per step
    this costs the network after its sensor layer plus O(layer width), not the whole sensor layer. */
 static void evaluate(ModelState *m, int first, double tau)
@@ -278,8 +372,14 @@ static void evaluate(ModelState *m, int first, double tau)
         z[h] = m->z_base[h] + m->z_past[h] + SUFFIX(first, 0, h) * m->Vs + SUFFIX(first, 1, h) * m->theta_vs;
 #if OPFMU_TRUNK_SIZE > 0
     double scratch[OPFMU_TRUNK_SIZE];
+    const double *basis = trunk_at(m, tau, scratch);
     opfmu_coefficients(m->x_window, z, m->coef);
-    opfmu_head(m->coef, trunk_at(m, tau, scratch), m->x);
+    opfmu_head(m->coef, basis, m->x);
+    if (m->rest_weight > 0.0) {
+        double at_rest[4];
+        opfmu_head(m->rest_coef, basis, at_rest);
+        for (int i = 0; i < 4; ++i) m->x[i] -= m->rest_weight * (at_rest[i] - m->x_rest[i]);
+    }
 #else
     opfmu_from_first_layer(m->x_window, z, tau, m->x);
 #endif
@@ -312,6 +412,10 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         double end = fmin(stop, window_end);
         /* the held input from the current time on: the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
+#if OPFMU_TRUNK_SIZE > 0
+        if (m->time < m->window_start + TIME_EPS)
+            start_rest_correction(m); /* from the input held over the window's first step */
+#endif
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
         for (int k = first; k < OPFMU_N_SENSORS; ++k) {
             m->sensors[2 * k] = m->Vs;
