@@ -61,9 +61,14 @@ def masked_mean(squares: torch.Tensor, mask: torch.Tensor | None) -> torch.Tenso
     return (squares * weights).sum() / (weights.sum() * squares.shape[-1]).clamp_min(1.0)
 
 
-def data_loss(y_hat: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-    """Eq. 5 on standardised states y_hat, y [N, M, 4]: mean of (y_hat - y)^2 (where mask [N, M])."""
-    return masked_mean((y_hat - y) ** 2, mask)
+def data_loss(y_hat: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None,
+              state_weights: torch.Tensor | None = None) -> torch.Tensor:
+    """Eq. 5 on standardised states y_hat, y [N, M, 4]: mean of (y_hat - y)^2 (where mask [N, M]),
+    each state's square times state_weights [4] / their mean if given."""
+    squares = (y_hat - y) ** 2
+    if state_weights is not None:
+        squares = squares * (state_weights / state_weights.mean())
+    return masked_mean(squares, mask)
 
 
 def physics_data_loss(dxdt_hat: torch.Tensor, f_ref: torch.Tensor, scale: torch.Tensor,

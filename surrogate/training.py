@@ -66,6 +66,7 @@ class TrainConfig:
         count only up to the cut, where the reference states are those of the held input too. The
         collocation term, which needs no labels, uses cut inputs over the whole window. The operator
         thus learns states that do not depend on inputs after their time.
+    state_weights: weights of delta, omega, Ed_p, Eq_p in the data loss (divided by their mean).
     """
 
     model: OperatorConfig = field(default_factory=OperatorConfig)
@@ -85,6 +86,7 @@ class TrainConfig:
     time_points: int | None = None
     checkpoint_every: int = 100
     causal: bool = False
+    state_weights: tuple = (1.0, 1.0, 1.0, 1.0)
 
     def __post_init__(self):
         if self.lr_schedule not in LR_SCHEDULES:
@@ -95,6 +97,9 @@ class TrainConfig:
             raise ValueError("epochs must be >= 0, patience and checkpoint_every >= 1")
         if self.time_points is not None and self.time_points < 1:
             raise ValueError("time_points must be >= 1 (or None for the whole grid)")
+        if len(self.state_weights) != 4 or min(self.state_weights) < 0 or max(self.state_weights) <= 0:
+            raise ValueError(f"state_weights must be 4 weights >= 0, not all 0; got {self.state_weights}")
+        object.__setattr__(self, "state_weights", tuple(float(w) for w in self.state_weights))
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -250,7 +255,7 @@ def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -
         y_hat, dydt_hat = model.standardised_with_rate(tensors.x0, u, t)
     else:
         y_hat = model.standardised(tensors.x0, u, t)
-    terms = {"data": data_loss(y_hat, pick(tensors.y), mask)}
+    terms = {"data": data_loss(y_hat, pick(tensors.y), mask, torch.tensor(config.state_weights))}
     total = w.data * terms["data"]
     if use_pd:
         terms["physics_data"] = physics_data_loss(model.x_std * dydt_hat, pick(tensors.f_ref), tensors.scale, mask)

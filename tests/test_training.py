@@ -168,6 +168,22 @@ def test_held_after_keeps_inputs_up_to_the_cut_and_holds_the_value_at_the_cut_af
     torch.testing.assert_close(held[1], torch.stack([u[1, 0], u[1, 1], u[1, 1]]))
 
 
+def test_state_weights_scale_each_states_share_of_the_data_loss():
+    from surrogate.losses import data_loss
+
+    y, y_hat = torch.zeros(2, 3, 4), torch.zeros(2, 3, 4)
+    y_hat[..., 1] = 1.0  # wrong in omega only
+    assert data_loss(y_hat, y).item() == pytest.approx(0.25)
+    assert data_loss(y_hat, y, state_weights=torch.tensor([1.0, 0.0, 1.0, 1.0])).item() == 0.0
+    assert data_loss(y_hat, y, state_weights=torch.tensor([1.0, 4.0, 1.0, 1.0])).item() == pytest.approx(4 / 7)
+
+
+@pytest.mark.parametrize("weights", [(1.0, 1.0, 1.0), (1.0, -1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.0)])
+def test_state_weights_must_be_four_non_negative_numbers_not_all_zero(weights):
+    with pytest.raises(ValueError, match="state_weights"):
+        TrainConfig(state_weights=weights)
+
+
 def test_masked_data_loss_counts_only_the_times_before_the_cut():
     from surrogate.losses import data_loss
 
