@@ -142,7 +142,8 @@ def _training_summary(run_dir: Path, run_config: dict, data_meta: dict) -> dict:
     return {"seed": train["seed"], "epochs": result.get("epochs"), "best_epoch": best_epoch,
             "wall_s": result.get("wall_s"), "losses": losses, "optimizer": train["optimizer"],
             "lr": train["lr"], "lr_schedule": train.get("lr_schedule"), "time_points": train.get("time_points"),
-            "weights": train["weights"], "dataset": {"preset": data_meta["preset"]["name"],
+            "weights": train["weights"], "causal": train.get("causal", False),
+            "state_weights": train.get("state_weights", [1.0] * 4), "dataset": {"preset": data_meta["preset"]["name"],
                                                      "seed": data_meta["seed"], "fingerprint": data_meta["fingerprint"]}}
 
 
@@ -154,9 +155,11 @@ def _residual_scale(data_dir: Path) -> list:
 
 
 # the FMU's warning level: this quantile of the residual over the test split's (trajectory, time)
-# points. In co-simulation runs inside the envelope the shipped operator stays below half of it; a
-# fault deeper than the trained ones goes above it (README, "When to distrust the surrogate").
-RESIDUAL_LIMIT_QUANTILE = 0.99
+# points. The test split's residual is inflated by inputs held at 1-50 ms steps (f jumps, the
+# operator's rate does not), so its 99th percentile (1.37 for the shipped operator) let a fault to
+# 0.05 pu (0.70) pass; the 95th (0.64) flags it and is still 3.8 times the largest residual of the
+# in-envelope co-simulation runs (README, "When to distrust the surrogate").
+RESIDUAL_LIMIT_QUANTILE = 0.95
 
 
 def residual_limit(model, data_dir: Path) -> float:
