@@ -155,6 +155,18 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     }
 }
 
+/* Sets a parameter that must be >= 0 (zero_means: what 0 does, for the refusal message). */
+static ModelStatus set_nonnegative(double *field, double value, const char *name, const char *zero_means,
+                                   char *message, size_t size)
+{
+    if (value < 0.0) {
+        snprintf(message, size, "%s = %g must be >= 0 (%s)", name, value, zero_means);
+        return MODEL_ERROR;
+    }
+    *field = value;
+    return MODEL_OK;
+}
+
 ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size)
 {
     if (!isfinite(value)) {
@@ -180,26 +192,12 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
         m->rollover_horizon = value;
         return MODEL_OK;
     case VR_RESIDUAL_LIMIT:
-        if (value < 0.0) {
-            snprintf(message, size, "residual_limit = %g must be >= 0 (0 turns the check off)", value);
-            return MODEL_ERROR;
-        }
-        m->residual_limit = value;
-        return MODEL_OK;
+        return set_nonnegative(&m->residual_limit, value, "residual_limit", "0 turns the check off", message, size);
     case VR_RESTART_JUMP:
-        if (value < 0.0) {
-            snprintf(message, size, "restart_jump = %g must be >= 0 (0: windows start at the rollover horizon only)", value);
-            return MODEL_ERROR;
-        }
-        m->restart_jump = value;
-        return MODEL_OK;
+        return set_nonnegative(&m->restart_jump, value, "restart_jump",
+                               "0: windows start at the rollover horizon only", message, size);
     case VR_REST_RADIUS:
-        if (value < 0.0) {
-            snprintf(message, size, "rest_radius = %g must be >= 0 (0 turns the rest correction off)", value);
-            return MODEL_ERROR;
-        }
-        m->rest_radius = value;
-        return MODEL_OK;
+        return set_nonnegative(&m->rest_radius, value, "rest_radius", "0 turns the rest correction off", message, size);
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
         return MODEL_ERROR;
