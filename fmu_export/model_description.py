@@ -26,7 +26,7 @@ class Variable:
 
 def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple = (),
                   residual_limit: float | None = None, restart_jump: float | None = None,
-                  rest_radius: float | None = None) -> list[Variable]:
+                  rest_radius: float | None = None, slow_weight: float | None = None) -> list[Variable]:
     """The variable list; x_start [4] are the default initial-state parameters, horizon the default
     rollover horizon and residual_limit the default warning level (surrogate only); extra: further
     (parameter) variables of the reference FMU."""
@@ -54,6 +54,8 @@ def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple 
                             "new operator window at once (0: only at the rollover horizon)", start=restart_jump))
         out.append(Variable("rest_radius", 20, "parameter", "reach of the rest correction, which removes the "
                             "operator's error at the equilibrium of the held input (0: off)", start=rest_radius))
+        out.append(Variable("slow_weight", 21, "parameter", "weight in [0, 1] of the slow-mode correction, which "
+                            "integrates the slowest mode from the physics (0: off)", start=slow_weight))
     out += list(extra)
     return out
 

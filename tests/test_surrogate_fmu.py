@@ -10,13 +10,16 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP
+from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP, DEFAULT_SLOW_WEIGHT
 from fmu_slave import Slave
-from reference_models.sm4 import steady_state
+from reference_models.signals import Piecewise, Signal
+from reference_models.simulate import simulate
+from reference_models.sm4 import min_voltage_with_equilibrium, rhs, steady_state
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
-      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19, "rest_radius": 20}
+      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19, "rest_radius": 20,
+      "slow_weight": 21}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
 REST_RADIUS = np.array([0.5, 0.25, 0.1, 0.1])  # reach of the rest correction at rest_radius = 1 (surrogate_model.c)
@@ -42,10 +45,30 @@ def rest_correction(op, x_window, u, tau, rest_radius):
     return (1.0 - distance) * (at_rest - rest)
 
 
-def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUMP, rest_radius=DEFAULT_REST_RADIUS):
+def f(x, u):
+    """The SM4 right-hand side [4] at state x [4] under input u [2]."""
+    return np.asarray(rhs(np.asarray(x, float)[None], np.asarray(u, float)[None]))[0]
+
+
+def slow_mode(x, u):
+    """(l, r): left and right eigenvectors (l . r = 1) of the slowest mode of the Jacobian at (x, u), or
+    None when that mode is not real and clearly slower than the next (see surrogate_model.c)."""
+    J = np.column_stack([(f(x + d, u) - f(x - d, u)) / (2 * d.max()) for d in 1e-6 * np.eye(4) * np.maximum(1, np.abs(x))])
+    values, right = np.linalg.eig(J)
+    first, second = np.argsort(np.abs(values))[:2]
+    if abs(values[first].imag) > 0 or abs(values[first]) > 0.5 * abs(values[second]):
+        return None
+    left_values, left = np.linalg.eig(J.T)
+    r, l = right[:, first].real, left[:, np.argmin(np.abs(left_values - values[first]))].real
+    return l / (l @ r), r
+
+
+def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUMP, rest_radius=DEFAULT_REST_RADIUS,
+                       slow_weight=DEFAULT_SLOW_WEIGHT):
     """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime; an
-    input change above restart_jump starts a new window, and each window gets the rest correction (as
-    the FMU's parameters of those names). horizon: the rollover horizon (default: the operator's)."""
+    input change above restart_jump starts a new window, and each window gets the rest and slow-mode
+    corrections (as the FMU's parameters of those names). horizon: the rollover horizon (default: the
+    operator's)."""
     op = Operator.load(DEFAULT_OPERATOR)
     horizon = horizon or float(op.metadata["rollover_horizon_s"])
     n = op.n_sensors
@@ -64,11 +87,19 @@ def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUM
             end = min(stop, t_window + horizon)
             first = int(np.ceil((t - t_window) / DT - 1e-6))
             buffer[first:] = (Vs, th)
-            u_window = u_window or (Vs, th)
+            if u_window is None:
+                u_window = (Vs, th)
+                slow = slow_mode(x_window.astype(float), u_window) if slow_weight > 0 else None
+                slow_integral = 0.0
+            rate_start = slow[0] @ f(x, (Vs, th)) if slow else 0.0
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", EnvelopeWarning)
-                x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0]
+                x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0].astype(float)
                 x = x - rest_correction(op, x_window.astype(float), u_window, end - t_window, rest_radius)
+            if slow:
+                l, r = slow
+                slow_integral += 0.5 * (end - t) * (rate_start + l @ f(x, (Vs, th)))
+                x = x + slow_weight * (l @ x_window + slow_integral - l @ x) * r
             t = end
             if t >= t_window + horizon - 1e-9:
                 t_window, x_window, u_window = t, x.astype(np.float32), None
@@ -140,6 +171,46 @@ def test_a_negative_rest_radius_is_refused_with_a_reason(unzipped):
     slave.fmu.freeInstance()
 
 
+def undervoltage_run(unzipped, seconds=15.0, Vs=0.84, **parameters):
+    """(FMU states, RK45 states) [n, 4] every 10 ms of a machine held at Vs below the lowest voltage with
+    an equilibrium, from the equilibrium at that voltage: it slowly slips (delta rises by 0.14 rad)."""
+    x0 = steady_state(min_voltage_with_equilibrium(), 0.0)
+    n = int(round(seconds / 0.01))
+    reference = simulate(x0, Signal(Piecewise((Vs,), ()), Piecewise((0.0,), ())), np.arange(n + 1) * 0.01)[1:]
+    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)},
+                  **parameters)
+    got = np.array([slave.step(0.01, Vs, 0.0) for _ in range(n)])
+    slave.close()
+    return got, reference
+
+
+def test_the_slow_mode_correction_keeps_a_slow_drift_on_the_rk45_solution(unzipped):
+    corrected, reference = undervoltage_run(unzipped)
+    uncorrected, _ = undervoltage_run(unzipped, slow_weight=0.0)
+    error, error_without = np.abs(corrected - reference).max(0), np.abs(uncorrected - reference).max(0)
+    assert error[0] < 0.5 * error_without[0] and error[3] < 0.5 * error_without[3]  # delta, Eq_p
+
+
+def test_slow_weight_zero_is_the_operator_with_the_rest_correction_only(unzipped):
+    x0 = steady_state(1.0, 0.0) + np.array([0.1, 0.0, 0.0, 0.02])
+    steps = [(0.01, 0.95, 0.05)] * 120
+    slave = Slave(unzipped, slow_weight=0.0,
+                  **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)})
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    np.testing.assert_allclose(got, operator_reference(x0, steps, slow_weight=0.0), rtol=0, atol=2e-5)
+    assert np.abs(got - operator_reference(x0, steps)).max() > 1e-5
+
+
+@pytest.mark.parametrize("value", [-0.1, 1.5])
+def test_a_slow_weight_outside_zero_to_one_is_refused_with_a_reason(unzipped, value):
+    slave = Slave(unzipped, init=False)
+    with pytest.raises(FMICallException):
+        slave.fmu.setReal([VR["slow_weight"]], [value])
+    assert any("slow_weight" in m for _, m in slave.messages)
+    slave.fmu.freeInstance()
+
+
 def test_rollover_horizon_defaults_to_the_operators_own(unzipped):
     slave = Slave(unzipped)
     horizon = slave.fmu.getReal([VR["rollover_horizon"]])[0]
@@ -169,7 +240,8 @@ def test_restart_jump_zero_keeps_windows_at_the_rollover_horizon(unzipped):
 
 
 def test_a_step_crossing_the_window_boundary_equals_one_split_at_it(unzipped):
-    a, b = Slave(unzipped, "a"), Slave(unzipped, "b")
+    # without the slow-mode correction, whose trapezoid integral depends on how steps are cut
+    a, b = Slave(unzipped, "a", slow_weight=0.0), Slave(unzipped, "b", slow_weight=0.0)
     for h in (0.3, 0.3, 0.3):
         a.step(h, 0.95, 0.1)
         b.step(h, 0.95, 0.1)

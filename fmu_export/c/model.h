@@ -24,6 +24,7 @@ typedef struct {
     int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */
     double restart_jump;          /* parameter [pu, rad]: an input change larger than this starts a window */
     double rest_radius;           /* parameter: scale of the rest correction's reach (0: no correction) */
+    double slow_weight;           /* parameter in [0, 1]: weight of the slow-mode correction (0: none) */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
     double window_start;          /* start time of the current operator window [s] */
@@ -44,6 +45,11 @@ typedef struct {
        input at the window start, the operator's coefficients from there under that input held, and
        the weight the correction gets (0: none) */
     double x_rest[4], rest_coef[OPFMU_COEF_CAP], rest_weight;
+    /* the slow-mode correction of the current window (surrogate_model.c): the slowest mode's left and
+       right eigenvectors (left . right = 1), the slow coordinate left . x at the window start and the
+       integral of left . f since then; slow_on: the window has one */
+    double slow_left[4], slow_right[4], slow_start, slow_integral;
+    int slow_on;
 } ModelState;
 
 void model_defaults(ModelState *m);

@@ -13,7 +13,17 @@
    is x_rest itself, and subtracts that error: x = G(x_window, u) - w (G(x_rest, u_start) - x_rest).
    The weight w falls from 1 at x_rest to 0 at REST_RADIUS (times the parameter rest_radius) from it,
    since the error at rest says little about the error far from rest. A machine at rest under a held
-   input thus stays exactly at rest. */
+   input thus stays exactly at rest.
+
+   Slow-mode correction (any kernel): away from rest the same accumulation remains along the slowest
+   mode. Each window takes the Jacobian of the right-hand side at its start state and input, and its
+   slowest eigenvalue's left and right eigenvectors l and r (l . r = 1), found by inverse iteration; the
+   correction applies when that iteration converges (the mode is real and clearly slower than the
+   next; along the built-in scenarios its eigenvalue is at most 0.18 times the next one's). The slow
+   coordinate l . x then follows the physics: its rate l . f(x, u) is integrated over each step by the
+   trapezoid rule, and the operator's state is moved along r by slow_weight times its difference from
+   that integral. l . f is insensitive to errors in the fast directions (l J = lambda l), so the
+   operator's fast dynamics carry the integral while the physics carries the slow drift. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -36,11 +46,12 @@ void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SI
 static void start_coefficients(ModelState *m);
 static void start_rest_correction(ModelState *m);
 #endif
+static void start_slow_correction(ModelState *m);
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
     VR_DELTA0, VR_OMEGA0, VR_ED0, VR_EQ0, VR_RESIDUAL, VR_HORIZON, VR_RESIDUAL_LIMIT,
-    VR_RESTART_JUMP, VR_REST_RADIUS, VR_COUNT
+    VR_RESTART_JUMP, VR_REST_RADIUS, VR_SLOW_WEIGHT, VR_COUNT
 };
 enum { VR_IN_ENVELOPE = 0 };
 
@@ -59,6 +70,7 @@ void model_defaults(ModelState *m)
     m->residual_limit = OPFMU_RESIDUAL_LIMIT;
     m->restart_jump = OPFMU_RESTART_JUMP;
     m->rest_radius = OPFMU_REST_RADIUS;
+    m->slow_weight = OPFMU_SLOW_WEIGHT;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
 }
@@ -67,7 +79,7 @@ int model_real_kind(unsigned int vr)
 {
     if (vr == VR_VS || vr == VR_THETA) return VAR_INPUT;
     if ((vr >= VR_DELTA0 && vr <= VR_EQ0) || vr == VR_HORIZON || vr == VR_RESIDUAL_LIMIT || vr == VR_RESTART_JUMP ||
-        vr == VR_REST_RADIUS)
+        vr == VR_REST_RADIUS || vr == VR_SLOW_WEIGHT)
         return VAR_PARAMETER;
     if (vr < VR_COUNT) return VAR_OUTPUT;
     return -1;
@@ -122,11 +134,17 @@ static void operator_rate(const ModelState *m, double tau, double rate[4])
 }
 #endif
 
+static double dot4(const double a[4], const double b[4]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]; }
+
 static double residual(const ModelState *m)
 {
     double rate[4], f[4], u[2] = {m->Vs, m->theta_vs}, sum = 0.0;
     operator_rate(m, m->time - m->window_start, rate);
     sm4_derivatives(m->x, u, f);
+    if (m->slow_on) { /* the slow coordinate moves at l . f (slow_weight of it) */
+        double shift = m->slow_weight * (dot4(m->slow_left, f) - dot4(m->slow_left, rate));
+        for (int i = 0; i < 4; ++i) rate[i] += shift * m->slow_right[i];
+    }
     for (int i = 0; i < 4; ++i) {
         double r = (rate[i] - f[i]) / OPFMU_RESIDUAL_SCALE[i];
         sum += r * r;
@@ -151,6 +169,7 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     case VR_RESIDUAL_LIMIT: *value = m->residual_limit; return MODEL_OK;
     case VR_RESTART_JUMP: *value = m->restart_jump; return MODEL_OK;
     case VR_REST_RADIUS: *value = m->rest_radius; return MODEL_OK;
+    case VR_SLOW_WEIGHT: *value = m->slow_weight; return MODEL_OK;
     default: return MODEL_ERROR;
     }
 }
@@ -198,6 +217,13 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
                                "0: windows start at the rollover horizon only", message, size);
     case VR_REST_RADIUS:
         return set_nonnegative(&m->rest_radius, value, "rest_radius", "0 turns the rest correction off", message, size);
+    case VR_SLOW_WEIGHT:
+        if (!(value >= 0.0 && value <= 1.0)) {
+            snprintf(message, size, "slow_weight = %g must lie in [0, 1] (0 turns the slow-mode correction off)", value);
+            return MODEL_ERROR;
+        }
+        m->slow_weight = value;
+        return MODEL_OK;
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
         return MODEL_ERROR;
@@ -256,6 +282,7 @@ static void start_window(ModelState *m)
     start_coefficients(m); /* so the residual at the window start is the new window's */
     start_rest_correction(m);
 #endif
+    start_slow_correction(m);
 }
 
 #if OPFMU_TRUNK_SIZE > 0
@@ -287,51 +314,141 @@ static void start_coefficients(ModelState *m)
 }
 #endif
 
-/* The equilibrium of the SM4 under the held input u nearest `x` (Newton on the right-hand side with a
-   central-difference Jacobian, from x); 0 if Newton does not converge within 30 iterations. */
+/* d f / d x of the SM4 at (x, u) [4 x 4], by central differences */
+static void jacobian(const double x[4], const double u[2], double J[4][4])
+{
+    for (int j = 0; j < 4; ++j) {
+        double d = 1e-6 * fmax(1.0, fabs(x[j])), hi[4], lo[4], fh[4], fl[4];
+        memcpy(hi, x, sizeof hi);
+        memcpy(lo, x, sizeof lo);
+        hi[j] += d;
+        lo[j] -= d;
+        sm4_derivatives(hi, u, fh);
+        sm4_derivatives(lo, u, fl);
+        for (int i = 0; i < 4; ++i) J[i][j] = (fh[i] - fl[i]) / (2.0 * d);
+    }
+}
+
+/* LU factors of A in place (partial pivoting; row i of the factors is row perm[i] of A); 0 if singular */
+static int lu_factor(double A[4][4], int perm[4])
+{
+    for (int i = 0; i < 4; ++i) perm[i] = i;
+    for (int c = 0; c < 4; ++c) {
+        int pivot = c;
+        for (int r = c + 1; r < 4; ++r)
+            if (fabs(A[r][c]) > fabs(A[pivot][c])) pivot = r;
+        if (!(fabs(A[pivot][c]) >= 1e-14)) return 0;
+        if (pivot != c) {
+            for (int k = 0; k < 4; ++k) {
+                double swap = A[c][k];
+                A[c][k] = A[pivot][k];
+                A[pivot][k] = swap;
+            }
+            int swap = perm[c];
+            perm[c] = perm[pivot];
+            perm[pivot] = swap;
+        }
+        for (int r = c + 1; r < 4; ++r) {
+            A[r][c] /= A[c][c];
+            for (int k = c + 1; k < 4; ++k) A[r][k] -= A[r][c] * A[c][k];
+        }
+    }
+    return 1;
+}
+
+/* x = A^-1 b from the factors of lu_factor (x and b distinct) */
+static void lu_solve(const double F[4][4], const int perm[4], const double b[4], double x[4])
+{
+    for (int i = 0; i < 4; ++i) {
+        x[i] = b[perm[i]];
+        for (int k = 0; k < i; ++k) x[i] -= F[i][k] * x[k];
+    }
+    for (int i = 3; i >= 0; --i) {
+        for (int k = i + 1; k < 4; ++k) x[i] -= F[i][k] * x[k];
+        x[i] /= F[i][i];
+    }
+}
+
+/* The equilibrium of the SM4 under the held input u nearest `x` (Newton on the right-hand side from
+   x); 0 if Newton does not converge within 30 iterations. */
 static int equilibrium(const double x[4], const double u[2], double rest[4])
 {
     memcpy(rest, x, 4 * sizeof *rest);
     for (int iteration = 0; iteration < 30; ++iteration) {
-        double f[4], J[4][5];
+        double f[4], J[4][4], step[4];
+        int perm[4];
         sm4_derivatives(rest, u, f);
         double norm = fabs(f[0]) + fabs(f[1]) + fabs(f[2]) + fabs(f[3]);
         if (!isfinite(norm)) return 0;
         if (norm < 1e-12) return 1;
-        for (int j = 0; j < 4; ++j) {
-            double d = 1e-6 * fmax(1.0, fabs(rest[j])), hi[4], lo[4], fh[4], fl[4];
-            memcpy(hi, rest, sizeof hi);
-            memcpy(lo, rest, sizeof lo);
-            hi[j] += d;
-            lo[j] -= d;
-            sm4_derivatives(hi, u, fh);
-            sm4_derivatives(lo, u, fl);
-            for (int i = 0; i < 4; ++i) J[i][j] = (fh[i] - fl[i]) / (2.0 * d);
-        }
-        for (int i = 0; i < 4; ++i) J[i][4] = -f[i];
-        for (int c = 0; c < 4; ++c) { /* Gaussian elimination with partial pivoting */
-            int pivot = c;
-            for (int r = c + 1; r < 4; ++r)
-                if (fabs(J[r][c]) > fabs(J[pivot][c])) pivot = r;
-            if (fabs(J[pivot][c]) < 1e-14) return 0;
-            for (int k = 0; k < 5; ++k) {
-                double swap = J[c][k];
-                J[c][k] = J[pivot][k];
-                J[pivot][k] = swap;
-            }
-            for (int r = c + 1; r < 4; ++r) {
-                double factor = J[r][c] / J[c][c];
-                for (int k = c; k < 5; ++k) J[r][k] -= factor * J[c][k];
-            }
-        }
-        for (int c = 3; c >= 0; --c) {
-            double v = J[c][4];
-            for (int k = c + 1; k < 4; ++k) v -= J[c][k] * J[k][4];
-            J[c][4] = v / J[c][c];
-            rest[c] += J[c][4];
-        }
+        jacobian(rest, u, J);
+        if (!lu_factor(J, perm)) return 0;
+        lu_solve(J, perm, f, step);
+        for (int i = 0; i < 4; ++i) rest[i] -= step[i];
     }
     return 0;
+}
+
+/* The eigenvector v [4] of A's eigenvalue of least magnitude, by 60 steps of inverse iteration with
+   A's LU factors F; 1 if it converged (|A v - lambda v| <= 1e-6 |lambda|), which needs that
+   eigenvalue real and clearly smaller in magnitude than the next one. */
+static int slowest_mode(const double A[4][4], const double F[4][4], const int perm[4], double v[4])
+{
+    const double start[4] = {1.0, 0.7, 0.4, 0.1};
+    memcpy(v, start, sizeof start);
+    for (int iteration = 0; iteration < 60; ++iteration) {
+        double w[4];
+        lu_solve(F, perm, v, w);
+        int big = 0;
+        for (int i = 1; i < 4; ++i)
+            if (fabs(w[i]) > fabs(w[big])) big = i;
+        if (!isfinite(w[big]) || w[big] == 0.0) return 0;
+        for (int i = 0; i < 4; ++i) v[i] = w[i] / w[big]; /* signed: no flip from a negative eigenvalue */
+    }
+    double Av[4], lambda, miss = 0.0;
+    for (int i = 0; i < 4; ++i) Av[i] = dot4(A[i], v);
+    lambda = dot4(v, Av) / dot4(v, v);
+    for (int i = 0; i < 4; ++i) miss = fmax(miss, fabs(Av[i] - lambda * v[i]));
+    return miss <= 1e-6 * fabs(lambda);
+}
+
+/* The slow-mode correction of a window just started (see the top of this file). */
+static void start_slow_correction(ModelState *m)
+{
+    double u[2] = {m->Vs, m->theta_vs}, J[4][4], Jt[4][4], F[4][4], Ft[4][4];
+    int perm[4], perm_t[4];
+    m->slow_on = 0;
+    if (m->slow_weight <= 0.0) return;
+    jacobian(m->x_window, u, J);
+    for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) Jt[i][j] = J[j][i];
+    memcpy(F, J, sizeof F);
+    memcpy(Ft, Jt, sizeof Ft);
+    if (!lu_factor(F, perm) || !lu_factor(Ft, perm_t)) return;
+    if (!slowest_mode(J, F, perm, m->slow_right) || !slowest_mode(Jt, Ft, perm_t, m->slow_left)) return;
+    double overlap = dot4(m->slow_left, m->slow_right);
+    if (!(fabs(overlap) > 1e-9)) return;
+    for (int i = 0; i < 4; ++i) m->slow_left[i] /= overlap;
+    m->slow_start = dot4(m->slow_left, m->x_window);
+    m->slow_integral = 0.0;
+    m->slow_on = 1;
+}
+
+/* l . f(x, u): the rate of the slow coordinate under the held input */
+static double slow_rate(const ModelState *m, const double x[4])
+{
+    double f[4], u[2] = {m->Vs, m->theta_vs};
+    sm4_derivatives(x, u, f);
+    return dot4(m->slow_left, f);
+}
+
+/* After a step of length h that started at slow rate `rate_start`: adds the step's trapezoid integral
+   and moves the state along r by slow_weight times its slow coordinate's miss of the integral. */
+static void slow_correct(ModelState *m, double h, double rate_start)
+{
+    m->slow_integral += 0.5 * h * (rate_start + slow_rate(m, m->x));
+    double shift = m->slow_weight * (m->slow_start + m->slow_integral - dot4(m->slow_left, m->x));
+    for (int i = 0; i < 4; ++i) m->x[i] += shift * m->slow_right[i];
 }
 
 /* The rest correction of a window just started (see the top of this file): x_rest, its weight and the
@@ -410,16 +527,20 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         double end = fmin(stop, window_end);
         /* the held input from the current time on: the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
+        if (m->time < m->window_start + TIME_EPS) { /* from the input held over the window's first step */
 #if OPFMU_TRUNK_SIZE > 0
-        if (m->time < m->window_start + TIME_EPS)
-            start_rest_correction(m); /* from the input held over the window's first step */
+            start_rest_correction(m);
 #endif
+            start_slow_correction(m);
+        }
+        double rate_start = m->slow_on ? slow_rate(m, m->x) : 0.0;
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
         for (int k = first; k < OPFMU_N_SENSORS; ++k) {
             m->sensors[2 * k] = m->Vs;
             m->sensors[2 * k + 1] = m->theta_vs;
         }
         evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
+        if (m->slow_on) slow_correct(m, end - m->time, rate_start);
         m->last_u[0] = m->Vs;
         m->last_u[1] = m->theta_vs;
         m->time = end;

@@ -1,6 +1,8 @@
 """Runs reference solves chunk by chunk: in-process, on a local dask cluster, or on a dask scheduler."""
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from reference_models.signals import Signal
@@ -43,7 +45,9 @@ class SolveRunner:
 
             self._cluster = LocalCluster(
                 n_workers=self.workers, threads_per_worker=1, processes=True,
-                dashboard_address=None, silence_logs=40,
+                # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as an
+                # error with a traceback; a failing solve still raises through its future
+                dashboard_address=None, silence_logs=logging.CRITICAL,
             )
             self._client = Client(self._cluster)
         return self
