@@ -4,7 +4,8 @@ ctypes loop over the FMI functions, at several step sizes, in one run.
     python benchmarks/fmu_step.py [FMU] [--steps 2000] [--sizes 0.001 0.01]
 
 Without an FMU argument, builds one from the shipped operator. Also prints the cost of one
-operator (kernel) evaluation, the floor a step cannot go below.
+operator (kernel) evaluation, the floor a step cannot go below, and the DoStep cost with the rest
+and slow-mode corrections turned off (rest_radius = slow_weight = 0): what the corrections cost.
 """
 from __future__ import annotations
 
@@ -23,11 +24,17 @@ from fmu_export.builder import build_surrogate_fmu
 from surrogate.operator import DEFAULT_OPERATOR
 
 
-def started(directory, md) -> FMU2Slave:
-    """An instance in step mode at t = 0."""
+CORRECTIONS_OFF = {"rest_radius": 0.0, "slow_weight": 0.0}
+
+
+def started(directory, md, parameters=None) -> FMU2Slave:
+    """An instance in step mode at t = 0, with `parameters` {name: value} set."""
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="bench")
     fmu.instantiate()
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    for name, value in (parameters or {}).items():
+        fmu.setReal([vr[name]], [value])
     fmu.setupExperiment(startTime=0.0)
     fmu.enterInitializationMode()
     fmu.exitInitializationMode()
@@ -49,9 +56,9 @@ def fmpy_loop(directory, md, h: float, steps: int) -> float:
     return elapsed / steps * 1e6
 
 
-def ctypes_loop(directory, md, h: float, steps: int) -> float:
+def ctypes_loop(directory, md, h: float, steps: int, parameters=None) -> float:
     """DoStep alone, called through ctypes on the loaded binary (no fmpy wrappers)."""
-    fmu = started(directory, md)
+    fmu = started(directory, md, parameters)
     do_step = fmu.dll.fmi2DoStep
     do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
     component = fmu.component
@@ -92,10 +99,11 @@ def main() -> None:
         directory, md = extract(path), read_model_description(path)
         print(f"{Path(path).name}: {Path(path).stat().st_size / 1e6:.2f} MB; one operator evaluation "
               f"{kernel_call(directory):.1f} us")
-        print(f"{'h [s]':>8}{'fmpy loop [us/step]':>22}{'ctypes DoStep [us/step]':>26}")
+        print(f"{'h [s]':>8}{'fmpy loop [us/step]':>22}{'ctypes DoStep [us/step]':>26}{'corrections off':>18}")
         for h in args.sizes:
             print(f"{h:>8g}{statistics.median(fmpy_loop(directory, md, h, args.steps) for _ in range(3)):>22.1f}"
-                  f"{statistics.median(ctypes_loop(directory, md, h, args.steps) for _ in range(3)):>26.1f}")
+                  f"{statistics.median(ctypes_loop(directory, md, h, args.steps) for _ in range(3)):>26.1f}"
+                  f"{statistics.median(ctypes_loop(directory, md, h, args.steps, CORRECTIONS_OFF) for _ in range(3)):>18.1f}")
 
 
 if __name__ == "__main__":

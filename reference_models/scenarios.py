@@ -6,7 +6,9 @@ first seconds), `dip` is a fault (Vs drops to 0.2-0.9 pu for 20-300 ms, then rec
 jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the run. `mix` is what a
 grid tool sends over a long run: levels held for 0.2-0.8 s each (Vs in [0.9, 1.1] pu, theta_vs
 moving by up to 0.3 rad within [-0.5, 0.5] rad), one change in five a fault (Vs down to 0.2-0.9 pu
-for 20-200 ms). Every scenario ends at a bus voltage of at least SETTLED_VS. The machine starts at
+for 20-200 ms). Every scenario ends at a bus voltage of at least SETTLED_VS, and in none does the
+machine lose synchronism (a voltage held far below the lowest one with an equilibrium for tens of
+seconds makes it slip poles: a loss of the machine, no test of a surrogate). The machine starts at
 rest: at the equilibrium of the first input value (or, below the lowest bus voltage that has an
 equilibrium, of that voltage).
 """
@@ -18,6 +20,7 @@ import numpy as np
 
 from .families import family, held_levels
 from .signals import Signal
+from .simulate import simulate
 from .sm4 import min_voltage_with_equilibrium, steady_state
 
 SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
@@ -58,7 +61,16 @@ def scenario(name: str, seed: int = 0, stop_time: float = 10.0) -> Scenario:
     if name == "mix":
         return Scenario(name, seed, float(stop_time), held_levels(np.random.default_rng(seed), stop_time))
     fam, rng = family(name), np.random.default_rng(seed)
-    while True:  # a run must end where the machine has an equilibrium (see SETTLED_VS)
+    while True:  # a run must end where the machine has an equilibrium (see SETTLED_VS), in step
         signal = fam.sample(rng.uniform(size=(1, fam.dim)), stop_time)[0]
-        if signal(np.array([stop_time]))[0, 0] >= SETTLED_VS:
-            return Scenario(name, seed, float(stop_time), signal)
+        drawn = Scenario(name, seed, float(stop_time), signal)
+        if signal(np.array([stop_time]))[0, 0] >= SETTLED_VS and keeps_synchronism(drawn):
+            return drawn
+
+
+def keeps_synchronism(s: Scenario, every: float = 0.05) -> bool:
+    """True if the rotor angle stays within pi of the bus angle over the whole run (RK45, checked
+    every `every` seconds): the machine slips no pole."""
+    t = np.linspace(0.0, s.stop_time, int(round(s.stop_time / every)) + 1)
+    angle = simulate(s.initial_state(), s.signal, t)[:, 0] - s.inputs(t)[:, 1]
+    return bool(np.all(np.abs(angle) < np.pi))

@@ -10,6 +10,7 @@ from fmpy import extract
 
 from opfmu.compare import CompareError, compare, csv_inputs, scenario_inputs
 from reference_models.scenarios import SCENARIOS, scenario
+from reference_models.simulate import simulate
 from reference_models.sm4 import SM4Params, derivatives, min_voltage_with_equilibrium
 
 from conftest import preset_file, tiny
@@ -33,6 +34,14 @@ def test_every_scenario_starts_the_machine_at_rest_and_is_reproducible_from_its_
     t = np.linspace(0, 10, 1001)
     np.testing.assert_array_equal(scenario(name, seed=4).inputs(t), s.inputs(t))
     assert not np.array_equal(scenario(name, seed=5).inputs(t), s.inputs(t))
+
+
+def test_no_scenario_makes_the_machine_slip_a_pole():
+    # seed 6 of `step` first drew 0.70 pu held for 50 s: the machine slipped poles after 13 s
+    s = scenario("step", seed=6, stop_time=60.0)
+    t = np.linspace(0, 60, 1201)
+    angle = simulate(s.initial_state(), s.signal, t)[:, 0] - s.inputs(t)[:, 1]
+    assert np.abs(angle).max() < np.pi
 
 
 def test_the_dip_scenario_is_a_fault_that_drops_holds_and_recovers():
