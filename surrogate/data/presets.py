@@ -56,7 +56,7 @@ PRESETS = {
     ),
     "cosim": Preset(
         name="cosim",
-        counts={"train": 2000, "collocation": 2000, "val": 200, "test": 200},
+        counts={"train": 4000, "collocation": 2000, "val": 200, "test": 200},
         families=COSIM_FAMILIES,
         ic="reachable",
         reachable_fraction=0.75,
