@@ -50,6 +50,7 @@ typedef struct {
        integral of left . f since then; slow_on: the window has one */
     double slow_left[4], slow_right[4], slow_start, slow_integral;
     int slow_on;
+    double corrected_for[2];      /* the input both corrections of the current window were computed for */
 } ModelState;
 
 void model_defaults(ModelState *m);

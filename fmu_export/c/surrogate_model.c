@@ -47,6 +47,7 @@ static void start_coefficients(ModelState *m);
 static void start_rest_correction(ModelState *m);
 #endif
 static void start_slow_correction(ModelState *m);
+static void start_corrections(ModelState *m, int always);
 
 enum {
     VR_VS, VR_THETA, VR_DELTA, VR_OMEGA, VR_ED, VR_EQ, VR_ID, VR_IQ, VR_IRE, VR_IIM, VR_P, VR_Q,
@@ -280,9 +281,8 @@ static void start_window(ModelState *m)
 #endif
 #if OPFMU_TRUNK_SIZE > 0
     start_coefficients(m); /* so the residual at the window start is the new window's */
-    start_rest_correction(m);
 #endif
-    start_slow_correction(m);
+    start_corrections(m, 1);
 }
 
 #if OPFMU_TRUNK_SIZE > 0
@@ -434,6 +434,20 @@ static void start_slow_correction(ModelState *m)
     m->slow_on = 1;
 }
 
+/* The rest and slow-mode corrections of a window just started, for the current input; unless `always`,
+   only if they were computed for another input (a window starts at the end of a step, before the
+   input of its first step is known). */
+static void start_corrections(ModelState *m, int always)
+{
+    if (!always && m->corrected_for[0] == m->Vs && m->corrected_for[1] == m->theta_vs) return;
+    m->corrected_for[0] = m->Vs;
+    m->corrected_for[1] = m->theta_vs;
+#if OPFMU_TRUNK_SIZE > 0
+    start_rest_correction(m);
+#endif
+    start_slow_correction(m);
+}
+
 /* l . f(x, u): the rate of the slow coordinate under the held input */
 static double slow_rate(const ModelState *m, const double x[4])
 {
@@ -527,12 +541,8 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         double end = fmin(stop, window_end);
         /* the held input from the current time on: the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
-        if (m->time < m->window_start + TIME_EPS) { /* from the input held over the window's first step */
-#if OPFMU_TRUNK_SIZE > 0
-            start_rest_correction(m);
-#endif
-            start_slow_correction(m);
-        }
+        if (m->time < m->window_start + TIME_EPS)
+            start_corrections(m, 0); /* for the input held over the window's first step */
         double rate_start = m->slow_on ? slow_rate(m, m->x) : 0.0;
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
         for (int k = first; k < OPFMU_N_SENSORS; ++k) {
