@@ -19,7 +19,7 @@
    mode. Each window takes the Jacobian of the right-hand side at its start state and input, and its
    slowest eigenvalue's left and right eigenvectors l and r (l . r = 1), found by inverse iteration; the
    correction applies when that iteration converges (the mode is real and clearly slower than the
-   next; along the built-in scenarios its eigenvalue is at most 0.18 times the next one's). The slow
+   next; in the built-in scenarios it is real and at most 0.19 times the next one). The slow
    coordinate l . x then follows the physics: its rate l . f(x, u) is integrated over each step by the
    trapezoid rule, and the operator's state is moved along r by slow_weight times its difference from
    that integral. l . f is insensitive to errors in the fast directions (l J = lambda l), so the
