@@ -35,6 +35,7 @@ DEFAULT_RESIDUAL_LIMIT = 1.0
 DEFAULT_RESTART_JUMP = 0.02
 DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (surrogate_model.c: the rest correction)
 DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (surrogate_model.c: the slow-mode correction)
+DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (surrogate_model.c: the exact swing step)
 STATIC_SOURCES = ("fmi2_cs.c", "surrogate_model.c", "model.h")
 
 
@@ -74,6 +75,7 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
         f"#define OPFMU_RESTART_JUMP {DEFAULT_RESTART_JUMP!r} /* default of the parameter restart_jump */",
         f"#define OPFMU_REST_RADIUS {DEFAULT_REST_RADIUS!r} /* default of the parameter rest_radius */",
         f"#define OPFMU_SLOW_WEIGHT {DEFAULT_SLOW_WEIGHT!r} /* default of the parameter slow_weight */",
+        f"#define OPFMU_SWING_WEIGHT {DEFAULT_SWING_WEIGHT!r} /* default of the parameter swing_weight */",
         f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
         f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
         f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
@@ -136,7 +138,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
         xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), rollover_horizon(meta), True,
                                                 residual_limit=residual_limit(meta), restart_jump=DEFAULT_RESTART_JUMP,
-                                                rest_radius=DEFAULT_REST_RADIUS, slow_weight=DEFAULT_SLOW_WEIGHT),
+                                                rest_radius=DEFAULT_REST_RADIUS, slow_weight=DEFAULT_SLOW_WEIGHT,
+                                                swing_weight=DEFAULT_SWING_WEIGHT),
                                 "SM4 synchronous machine: PI-DeepONet surrogate evaluated from buffered input sensors")
         with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
             fmu.writestr("modelDescription.xml", xml)

@@ -26,7 +26,8 @@ class Variable:
 
 def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple = (),
                   residual_limit: float | None = None, restart_jump: float | None = None,
-                  rest_radius: float | None = None, slow_weight: float | None = None) -> list[Variable]:
+                  rest_radius: float | None = None, slow_weight: float | None = None,
+                  swing_weight: float | None = None) -> list[Variable]:
     """The variable list; x_start [4] are the default initial-state parameters, horizon the default
     rollover horizon and residual_limit the default warning level (surrogate only); extra: further
     (parameter) variables of the reference FMU."""
@@ -56,6 +57,9 @@ def sm4_variables(x_start, horizon: float | None, surrogate: bool, extra: tuple 
                             "operator's error at the equilibrium of the held input (0: off)", start=rest_radius))
         out.append(Variable("slow_weight", 21, "parameter", "weight in [0, 1] of the slow-mode correction, which "
                             "integrates the slowest mode from the physics (0: off)", start=slow_weight))
+        out.append(Variable("swing_weight", 22, "parameter", "weight in [0, 1] of the exact swing step, which "
+                            "integrates omega from the swing equation over each step (0: the operator's omega)",
+                            start=swing_weight))
     out += list(extra)
     return out
 

@@ -99,15 +99,16 @@ def cmd_evaluate(args) -> None:
 
 
 def cmd_export(args) -> None:
+    from surrogate.ensemble import describe
     from surrogate.onnx_export import ExportError, export_onnx
     from surrogate.training import TrainError
 
     try:
-        meta = export_onnx(args.run, args.output, data_dir=args.data)
+        meta = export_onnx(args.runs, args.output, data_dir=args.data)
     except (ExportError, TrainError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
     metrics = json.loads(meta["metrics"])["physical"]
-    print(f"wrote {args.output}: {json.loads(meta['architecture'])['arch']} operator, horizon {meta['horizon_s']} s, "
+    print(f"wrote {args.output}: {describe(json.loads(meta['architecture']))} operator, horizon {meta['horizon_s']} s, "
           f"{meta['n_sensors']} sensors; test MSE {metrics['mse']:.3e}, MAE {metrics['mae']:.3e}, "
           f"MaxAE {metrics['maxae']:.3e} (physical units); onnxruntime matches torch")
 
@@ -248,8 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", default=None, help="where metrics.json and figures go (default: the first run)")
     ev.set_defaults(func=cmd_evaluate)
 
-    ex = sub.add_parser("export", help="export a trained run to ONNX (checked against torch)")
-    ex.add_argument("run", help="run directory (from `opfmu train`)")
+    ex = sub.add_parser("export", help="export a trained run, or the mean of several, to ONNX (checked against torch)")
+    ex.add_argument("runs", nargs="+", help="run directory (from `opfmu train`); several: their mean (an ensemble "
+                                            "of anchored Unstacked DeepONets of one shape) as one operator")
     ex.add_argument("-o", "--output", required=True, help="the .onnx file to write")
     ex.add_argument("--data", default=None, help="dataset for envelope and test metrics (default: the run's)")
     ex.set_defaults(func=cmd_export)

@@ -104,10 +104,12 @@ def write_report(out: Path, operator: Path, config: DemoConfig, results: dict) -
     """report.md in `out`: the operator, the overview table, the goal check, each scenario in full."""
     import onnx
 
+    from surrogate.ensemble import describe
+
     meta = {p.key: p.value for p in onnx.load(str(operator)).metadata_props}
     metrics = json.loads(meta.get("metrics", "{}")).get("physical", {})
     lines = ["# opfmu demo: surrogate FMU against reference FMU", "",
-             f"Operator: `{operator}` ({json.loads(meta['architecture'])['arch']}, "
+             f"Operator: `{operator}` ({describe(json.loads(meta['architecture']))}, "
              f"{'physics-informed' if json.loads(meta.get('physics_informed', 'false')) else 'data-only'}, "
              f"horizon {float(meta['horizon_s']):g} s); on its dataset's test split MSE {metrics.get('mse', float('nan')):.3g}, "
              f"MAE {metrics.get('mae', float('nan')):.3g}, MaxAE {metrics.get('maxae', float('nan')):.3g}.", "",

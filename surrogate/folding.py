@@ -22,12 +22,14 @@ import copy
 import torch
 from torch import nn
 
+from .ensemble import Ensemble
 from .models import N_STATES, PINN, DeepONet, OperatorModel, StackedNDeepONet, UnstackedDeepONet
 
 
-def fold(model: OperatorModel) -> nn.Module:
+def fold(model: OperatorModel | Ensemble) -> nn.Module:
     """The inference form of `model` (a copy; the model is left as it is)."""
-    for kind, folded in ((UnstackedDeepONet, FoldedUnstacked), (StackedNDeepONet, FoldedStackedN), (PINN, FoldedPINN)):
+    for kind, folded in ((UnstackedDeepONet, FoldedUnstacked), (StackedNDeepONet, FoldedStackedN), (PINN, FoldedPINN),
+                         (Ensemble, FoldedEnsemble)):
         if isinstance(model, kind):
             return folded(copy.deepcopy(model).eval())
     raise TypeError(f"no inference form for {type(model).__name__}")
@@ -152,6 +154,47 @@ class FoldedStackedN(FoldedDeepONet):
 
     def branch(self, x0, u):
         return self.state_net(x0) * self.input_net(torch.flatten(u, 1))
+
+
+class FoldedEnsemble(FoldedDeepONet):
+    """An Ensemble's mean as one anchored DeepONet with latent size K p (K members of latent p).
+
+    x = x0 + sum_k B_k (tau_k(t) - tau_k(0)) / K is a DeepONet whose basis is the members' bases side
+    by side [M, K p] and whose coefficients are theirs divided by K, so the head is FoldedDeepONet's.
+    The branch keeps the members apart without block-diagonal waste:
+    * the members' first layers (normalisation folded in) are stacked into one Gemm [4 + 2 S -> K H]:
+      the one sensor layer the FMU updates incrementally;
+    * every later layer is one batched MatMul over the members, [N, K, 1, H] @ [K, H, H'] + [K, 1, H'];
+    * the last (decoding and 1/K folded in) gives [N, K, 1, 4 p], reordered to [N, 4, K p] state-major."""
+
+    def __init__(self, ensemble: Ensemble):
+        nn.Module.__init__(self)
+        members = [FoldedUnstacked(m) for m in ensemble.members]
+        self.k, self.p = len(members), members[0].latent
+        self.latent, self.anchored = self.k * self.p, True
+        self.members = nn.ModuleList(f.model for f in members)  # their time features and trunks
+        self.register_buffer("tau0", torch.cat([f.tau0 for f in members]))  # [K p, 1]
+        nets = [list(f.branch_net) for f in members]
+        linears = [i for i, layer in enumerate(nets[0]) if isinstance(layer, nn.Linear)]
+        self.width = nets[0][linears[0]].out_features
+        self.first_layer = _linear(torch.cat([net[linears[0]].weight.double() for net in nets]),
+                                   torch.cat([net[linears[0]].bias.double() for net in nets]))
+        self.activation = nets[0][linears[0] + 1]
+        gain = [1.0] * (len(linears) - 2) + [1.0 / self.k]
+        for j, (i, g) in enumerate(zip(linears[1:], gain)):
+            self.register_buffer(f"weight{j}", torch.stack([net[i].weight.double().T * g for net in nets]).float())
+            self.register_buffer(f"bias{j}", torch.stack([net[i].bias.double()[None] * g for net in nets]).float())
+        self.n_later = len(linears) - 1
+
+    def trunk(self, t: torch.Tensor) -> torch.Tensor:
+        """Basis [M, K p + 1]: the members' bases and the constant 1."""
+        return torch.cat([m.trunk(t) for m in self.members] + [t.unsqueeze(-1) * 0.0 + 1.0], dim=-1)
+
+    def branch(self, x0, u):
+        h = self.first_layer(torch.cat([x0, torch.flatten(u, 1)], dim=-1)).reshape(-1, self.k, 1, self.width)
+        for j in range(self.n_later):
+            h = torch.matmul(self.activation(h), getattr(self, f"weight{j}")) + getattr(self, f"bias{j}")
+        return h.reshape(-1, self.k, N_STATES, self.p).transpose(1, 2).reshape(-1, N_STATES * self.latent)
 
 
 class FoldedPINN(nn.Module):

@@ -20,6 +20,7 @@ from opfmu.files import atomic_path
 from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
 from .data import load_metadata, load_split
+from .ensemble import Ensemble, EnsembleError, architecture
 from .evaluation import evaluate
 from .folding import fold
 from .losses import residual_scale
@@ -37,19 +38,32 @@ class ExportError(ValueError):
     """A model that cannot be exported as asked (or whose export disagrees with torch)."""
 
 
-def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -> dict:
-    """Write run_dir's best model to `out` (.onnx); returns the metadata written.
+def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> dict:
+    """Write the best model of a run directory, or the mean of several runs' (ensemble.py), to `out`
+    (.onnx); returns the metadata written.
 
-    data_dir defaults to the dataset the run trained on (from its config.json); its metadata gives
-    the envelope and its test split the metrics. The file is written only if onnxruntime matches
-    torch to TOLERANCE on n_check random in-envelope inputs.
+    data_dir defaults to the dataset the (first) run trained on (from its config.json); its metadata
+    gives the envelope and its test split the metrics. An ensemble's envelope is that intersected with
+    every member's training dataset's: each member is trusted only where it was trained. The file is
+    written only if onnxruntime matches torch to TOLERANCE on n_check random in-envelope inputs.
     """
-    run_dir, out = Path(run_dir), Path(out)
-    model = load_model(run_dir)
-    run_config = json.loads((run_dir / "config.json").read_text())
-    data_dir = Path(data_dir or run_config["data"]["dir"])
+    run_dirs = [Path(runs)] if isinstance(runs, (str, Path)) else [Path(r) for r in runs]
+    out = Path(out)
+    models = [load_model(r) for r in run_dirs]
+    try:
+        model = models[0] if len(models) == 1 else Ensemble(models)
+    except EnsembleError as exc:
+        raise ExportError(str(exc)) from None
+    run_configs = [json.loads((r / "config.json").read_text()) for r in run_dirs]
+    data_dir = Path(data_dir or run_configs[0]["data"]["dir"])
     data_meta = load_metadata(data_dir)
+    envelope = data_meta["envelope"]
+    if len(models) > 1:
+        envelope = _intersection([envelope] + [_training_envelope(c) for c in run_configs])
     t_grid = np.linspace(0.0, data_meta["horizon_s"], data_meta["n_points"])
+    summaries = [_training_summary(r, c, load_metadata(Path(c["data"]["dir"])) if len(models) > 1 else data_meta)
+                 for r, c in zip(run_dirs, run_configs)]
+    causal = all(c["train"].get("causal") for c in run_configs)
     metadata = {
         "component": "sm4",
         "state_names": json.dumps(list(STATE_NAMES)),
@@ -57,24 +71,42 @@ def export_onnx(run_dir, out, data_dir=None, n_check: int = 64, seed: int = 0) -
         "horizon_s": repr(float(data_meta["horizon_s"])),
         "n_sensors": str(len(t_grid)),
         "sensor_times_s": json.dumps(t_grid.tolist()),
-        "envelope": json.dumps(data_meta["envelope"]),
-        "architecture": json.dumps(model.config.to_dict()),
-        "physics_informed": json.dumps(bool(run_config["train"]["physics"])),
-        "training": json.dumps(_training_summary(run_dir, run_config, data_meta)),
+        "envelope": json.dumps(envelope),
+        "architecture": json.dumps(architecture(model)),
+        "physics_informed": json.dumps(all(bool(c["train"]["physics"]) for c in run_configs)),
+        "training": json.dumps(summaries[0] if len(models) == 1 else {"ensemble": summaries}),
         "metrics": json.dumps(_test_metrics(model, data_dir)),
         "residual_scale": json.dumps(_residual_scale(data_dir)),
         "residual_limit": json.dumps(residual_limit(model, data_dir)),
-        "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if run_config["train"].get("causal")
-                                                                  else 1.0)),
+        "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if causal else 1.0)),
         "opfmu_version": __version__,
     }
     with atomic_path(out) as tmp:
         _torch_export(fold(model), len(t_grid), tmp)
         _attach_metadata(tmp, metadata)
-        worst = check_against_torch(model, tmp, data_meta["envelope"], t_grid, n_check, seed)
+        worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed)
         if not worst <= TOLERANCE:
             raise ExportError(f"onnxruntime differs from torch by {worst:.2e} (> {TOLERANCE:g}); not written")
     return metadata
+
+
+def _training_envelope(run_config: dict) -> dict:
+    """The envelope of the dataset a run trained on."""
+    data_dir = Path(run_config["data"]["dir"])
+    if not (data_dir / "metadata.json").exists():
+        raise ExportError(f"the dataset a member trained on is gone ({data_dir}): its envelope is needed")
+    return load_metadata(data_dir)["envelope"]
+
+
+def _intersection(envelopes: list) -> dict:
+    """The box every envelope contains: per group and name, [max of the lows, min of the highs]."""
+    box = {group: {name: [max(e[group][name][0] for e in envelopes), min(e[group][name][1] for e in envelopes)]
+                   for name in names} for group, names in envelopes[0].items()}
+    empty = [name for names in box.values() for name, (low, high) in names.items() if low > high]
+    if empty:
+        raise ExportError(f"the members were trained on envelopes that do not overlap in {', '.join(empty)}: "
+                          "no input is inside all of them")
+    return box
 
 
 def _torch_export(model, n_sensors: int, path: Path) -> None:

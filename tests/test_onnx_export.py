@@ -9,9 +9,9 @@ import onnx
 import pytest
 import torch
 
-from surrogate.data import load_metadata, load_split
+from surrogate.data import generate, load_metadata, load_split
 from surrogate.models import OperatorConfig
-from surrogate.onnx_export import _attach_metadata, _torch_export, export_onnx
+from surrogate.onnx_export import ExportError, _attach_metadata, _torch_export, export_onnx
 from surrogate.operator import EnvelopeWarning, Operator, OperatorInputError
 from surrogate.training import TrainConfig, load_model, train
 
@@ -161,6 +161,67 @@ def test_export_of_a_directory_without_a_model_is_a_one_line_error(tmp_path):
                             capture_output=True, text=True)
     assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "x.onnx").exists()
+
+
+@pytest.fixture(scope="module")
+def anchored_runs(paper_tiny, cosim_tiny, tmp_path_factory):
+    """Four briefly trained anchored causal Unstacked DeepONets: seeds 0 and 1 on the paper dataset,
+    seed 2 on the cosim dataset, seed 3 on another cosim dataset."""
+    other_cosim = tmp_path_factory.mktemp("other_cosim")
+    generate(cosim_tiny[0], other_cosim, seed=4, progress=False)
+    runs = []
+    for seed, data in ((0, paper_tiny[1]), (1, paper_tiny[1]), (2, cosim_tiny[1]), (3, other_cosim)):
+        run = tmp_path_factory.mktemp(f"anchored{seed}")
+        config = TrainConfig(model=OperatorConfig(**{**SMALL.to_dict(), "anchored": True}), epochs=2, time_points=20,
+                             causal=True, physics=True, seed=seed)
+        train(data, config, run, progress=False)
+        runs.append(run)
+    return runs
+
+
+def test_an_exported_ensemble_computes_the_mean_of_its_members(anchored_runs, paper_tiny, tmp_path):
+    for i, run in enumerate(anchored_runs[:2]):
+        export_onnx(run, tmp_path / f"member{i}.onnx")
+    meta = export_onnx(anchored_runs[:2], tmp_path / "mean.onnx")
+    x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
+    t = np.linspace(0, 1, 21)
+    members = [Operator.load(tmp_path / f"member{i}.onnx").predict(x0, u, t) for i in range(2)]
+    np.testing.assert_allclose(Operator.load(tmp_path / "mean.onnx").predict(x0, u, t), (members[0] + members[1]) / 2,
+                               rtol=0, atol=1e-5)
+    assert json.loads(meta["architecture"])["ensemble"] == 2
+    assert [m["seed"] for m in json.loads(meta["training"])["ensemble"]] == [0, 1]
+
+
+def test_an_ensembles_envelope_is_where_every_member_was_trained(anchored_runs, tmp_path):
+    meta = export_onnx(anchored_runs[2:], tmp_path / "mean.onnx")
+    boxes = [load_metadata(json.loads((run / "config.json").read_text())["data"]["dir"])["envelope"]
+             for run in anchored_runs[2:]]
+    assert boxes[0] != boxes[1]
+    for group, names in json.loads(meta["envelope"]).items():
+        for name, (low, high) in names.items():
+            assert low == max(b[group][name][0] for b in boxes) and high == min(b[group][name][1] for b in boxes)
+
+
+def test_members_trained_on_envelopes_that_do_not_overlap_are_refused(anchored_runs, tmp_path):
+    with pytest.raises(ExportError, match="do not overlap in Ed_p"):  # the paper's box holds Ed_p at 0
+        export_onnx([anchored_runs[0], anchored_runs[2]], tmp_path / "mean.onnx")
+    assert not (tmp_path / "mean.onnx").exists()
+
+
+def test_export_command_writes_the_mean_of_several_runs(anchored_runs, tmp_path):
+    out = tmp_path / "mean.onnx"
+    result = subprocess.run([sys.executable, "-m", "opfmu", "export", *map(str, anchored_runs[:2]), "-o", str(out)],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "mean of 2 unstacked operator" in result.stdout and out.exists()
+
+
+def test_runs_that_cannot_be_averaged_are_a_one_line_error_and_write_nothing(exported, anchored_runs, tmp_path):
+    out = tmp_path / "mean.onnx"
+    result = subprocess.run([sys.executable, "-m", "opfmu", "export", str(anchored_runs[0]), str(exported[0]),
+                             "-o", str(out)], capture_output=True, text=True)
+    assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+    assert "only anchored Unstacked DeepONets" in result.stderr and not out.exists()
 
 
 def test_shipped_default_operator_loads_and_its_envelope_holds_the_nominal_equilibrium():

@@ -17,22 +17,29 @@ from surrogate.training import TrainConfig, train
 DOUBLE_P = ctypes.POINTER(ctypes.c_double)
 
 
-@pytest.fixture(scope="module", params=["unstacked", "stacked-n", "pinn", "anchored"])
+# per kind: (width of the sensor layer, trunk values, coefficients)
+SIZES = {"unstacked": (16, 9, 36), "stacked-n": (16, 9, 36), "pinn": (16, 16, 16), "anchored": (16, 9, 36),
+         "ensemble": (32, 17, 68)}
+
+
+@pytest.fixture(scope="module", params=list(SIZES))
 def kernel(request, paper_tiny, tmp_path_factory):
     """(onnx path, compiled kernel library, envelope) for a briefly trained model of each architecture
-    (anchored: an anchored Unstacked DeepONet)."""
+    (anchored: an anchored Unstacked DeepONet; ensemble: the mean of two)."""
     run = tmp_path_factory.mktemp(f"c_{request.param}")
-    arch, anchored = ("unstacked", True) if request.param == "anchored" else (request.param, False)
-    config = TrainConfig(model=OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=anchored), epochs=3,
-                         time_points=20)
-    train(paper_tiny[1], config, run, progress=False)
+    arch, anchored = (request.param, False) if request.param in ("unstacked", "stacked-n", "pinn") else ("unstacked", True)
+    runs = [run / f"member{seed}" for seed in range(2 if request.param == "ensemble" else 1)]
+    for seed, member in enumerate(runs):
+        config = TrainConfig(model=OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=anchored), epochs=3,
+                             time_points=20, seed=seed)
+        train(paper_tiny[1], config, member, progress=False)
     path = run / "op.onnx"
-    meta = export_onnx(run, path)
+    meta = export_onnx(runs, path)
     source = run / "kernel.c"
     kernel = generate_kernel(onnx.load(str(path)), 1001)
-    assert kernel.first_layer == 16  # every architecture's sensors enter through one dense layer
-    assert kernel.trunk_size == (16 if request.param == "pinn" else 9)  # time layer output; basis and constant
-    assert kernel.coef_size == (16 if request.param == "pinn" else 36)  # input layer output; B_aug [4, 9]
+    # every architecture's sensors enter through one dense layer; the DeepONets' trunk values are the
+    # basis and the constant, their coefficients B_aug [4, p + 1]
+    assert (kernel.first_layer, kernel.trunk_size, kernel.coef_size) == SIZES[request.param]
     source.write_text(kernel.source)
     library = run / "libkernel.so"
     subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
@@ -59,7 +66,7 @@ def test_evaluation_split_at_the_sensor_layer_equals_the_whole_kernel(kernel):
     x0, u, _ = random_inputs(envelope, np.linspace(0, 1, 1001), 4, np.random.default_rng(5))
     for n in range(len(x0)):
         x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
-        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(16)
+        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(256)  # z: room for any sensor layer
         lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.37),
                            whole.ctypes.data_as(DOUBLE_P))
         lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
@@ -71,15 +78,15 @@ def test_evaluation_split_at_the_sensor_layer_equals_the_whole_kernel(kernel):
 def test_evaluation_from_coefficients_and_a_kept_trunk_equals_the_whole_kernel(kernel):
     _, lib, envelope = kernel
     x0, u, _ = random_inputs(envelope, np.linspace(0, 1, 1001), 3, np.random.default_rng(6))
-    tau = np.zeros(64)  # room for any of the three architectures' trunk tensors
+    tau = np.zeros(256)  # room for any kind's trunk values
     lib.opfmu_trunk(ctypes.c_double(0.61), tau.ctypes.data_as(DOUBLE_P))
     for n in range(len(x0)):
         x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
-        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(16)
+        whole, split, z = np.zeros(4), np.zeros(4), np.zeros(256)  # z: room for any sensor layer
         lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(0.61),
                            whole.ctypes.data_as(DOUBLE_P))
         lib.opfmu_first_layer(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P))
-        c = np.zeros(64)
+        c = np.zeros(256)  # room for any kind's coefficients
         lib.opfmu_coefficients(x0_n.ctypes.data_as(DOUBLE_P), z.ctypes.data_as(DOUBLE_P), c.ctypes.data_as(DOUBLE_P))
         lib.opfmu_head(c.ctypes.data_as(DOUBLE_P), tau.ctypes.data_as(DOUBLE_P), split.ctypes.data_as(DOUBLE_P))
         np.testing.assert_array_equal(split, whole)

@@ -10,7 +10,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP, DEFAULT_SLOW_WEIGHT
+from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP, DEFAULT_SLOW_WEIGHT, DEFAULT_SWING_WEIGHT
 from fmu_slave import Slave
 from reference_models.signals import Piecewise, Signal
 from reference_models.simulate import simulate
@@ -19,7 +19,7 @@ from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
       "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19, "rest_radius": 20,
-      "slow_weight": 21}
+      "slow_weight": 21, "swing_weight": 22}
 STATES = [2, 3, 4, 5]
 DT = 1e-3  # sensor spacing of the shipped operator
 REST_RADIUS = np.array([0.5, 0.25, 0.1, 0.1])  # reach of the rest correction at rest_radius = 1 (surrogate_model.c)
@@ -63,12 +63,23 @@ def slow_mode(x, u):
     return l / (l @ r), r
 
 
+def swing_omega(x_start, x_end, u, h):
+    """omega at the end of a step of h: the exact solution of d omega/dt = g - k omega from x_start's
+    omega, with g linear in time between its values at x_start and x_end (see surrogate_model.c);
+    g is d omega/dt at omega = 0, k its drop from omega = 0 to 1."""
+    def g(x):
+        return f(np.array([x[0], 0.0, x[2], x[3]]), u)[1]
+    k = g(x_end) - f(np.array([x_end[0], 1.0, x_end[2], x_end[3]]), u)[1]
+    reach = -np.expm1(-k * h) / k
+    return np.exp(-k * h) * x_start[1] + g(x_start) * reach + (g(x_end) - g(x_start)) * (h - reach) / (k * h)
+
+
 def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUMP, rest_radius=DEFAULT_REST_RADIUS,
-                       slow_weight=DEFAULT_SLOW_WEIGHT):
+                       slow_weight=DEFAULT_SLOW_WEIGHT, swing_weight=DEFAULT_SWING_WEIGHT):
     """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime; an
-    input change above restart_jump starts a new window, and each window gets the rest and slow-mode
-    corrections (as the FMU's parameters of those names). horizon: the rollover horizon (default: the
-    operator's)."""
+    input change above restart_jump starts a new window, each window gets the rest and slow-mode
+    corrections and each step the exact swing step (as the FMU's parameters of those names). horizon:
+    the rollover horizon (default: the operator's)."""
     op = Operator.load(DEFAULT_OPERATOR)
     horizon = horizon or float(op.metadata["rollover_horizon_s"])
     n = op.n_sensors
@@ -92,6 +103,7 @@ def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUM
                 slow = slow_mode(x_window.astype(float), u_window) if slow_weight > 0 else None
                 slow_integral = 0.0
             rate_start = slow[0] @ f(x, (Vs, th)) if slow else 0.0
+            x_start = np.array(x, dtype=float)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", EnvelopeWarning)
                 x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0].astype(float)
@@ -100,6 +112,9 @@ def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUM
                 l, r = slow
                 slow_integral += 0.5 * (end - t) * (rate_start + l @ f(x, (Vs, th)))
                 x = x + slow_weight * (l @ x_window + slow_integral - l @ x) * r
+            if swing_weight > 0:
+                exact = swing_omega(x_start, x, (Vs, th), end - t)
+                x[1] += swing_weight * (exact - x[1])
             t = end
             if t >= t_window + horizon - 1e-9:
                 t_window, x_window, u_window = t, x.astype(np.float32), None
@@ -202,13 +217,45 @@ def test_slow_weight_zero_is_the_operator_with_the_rest_correction_only(unzipped
     assert np.abs(got - operator_reference(x0, steps)).max() > 1e-5
 
 
+@pytest.mark.parametrize("name", ["slow_weight", "swing_weight"])
 @pytest.mark.parametrize("value", [-0.1, 1.5])
-def test_a_slow_weight_outside_zero_to_one_is_refused_with_a_reason(unzipped, value):
+def test_a_weight_outside_zero_to_one_is_refused_with_a_reason(unzipped, name, value):
     slave = Slave(unzipped, init=False)
     with pytest.raises(FMICallException):
-        slave.fmu.setReal([VR["slow_weight"]], [value])
-    assert any("slow_weight" in m for _, m in slave.messages)
+        slave.fmu.setReal([VR[name]], [value])
+    assert any(f"{name} = {value:g} must lie in [0, 1]" in m for _, m in slave.messages)
     slave.fmu.freeInstance()
+
+
+def deep_fault_run(unzipped, **parameters):
+    """(FMU states, RK45 states) [n, 4] every 10 ms from the equilibrium at Vs = 1: 0.3 s at rest, a
+    fault to Vs = 0.2 pu with an angle jump of 0.25 rad for 150 ms, then 0.55 s at Vs = 1.05 pu."""
+    x0 = steady_state(1.0, 0.0)
+    levels = [(30, 1.0, 0.0), (15, 0.2, 0.25), (55, 1.05, 0.25)]
+    steps = [(0.01, v, a) for n, v, a in levels for _ in range(n)]
+    signal = Signal(Piecewise((1.0, 0.2, 1.05), (0.3, 0.45)), Piecewise((0.0, 0.25), (0.3,)))
+    reference = simulate(x0, signal, np.arange(len(steps) + 1) * 0.01)[1:]
+    slave = Slave(unzipped, **parameters)
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    return got, reference
+
+
+def test_the_exact_swing_step_keeps_omega_on_the_rk45_solution_through_a_deep_fault(unzipped):
+    corrected, reference = deep_fault_run(unzipped)
+    uncorrected, _ = deep_fault_run(unzipped, swing_weight=0.0)
+    error, error_without = np.abs(corrected - reference).max(0), np.abs(uncorrected - reference).max(0)
+    assert error[1] < 0.5 * error_without[1] and error[1] < 0.005  # omega [rad/s]
+
+
+def test_swing_weight_zero_leaves_the_operators_omega(unzipped):
+    steps = [(0.01, 1.0, 0.0)] * 10 + [(0.01, 0.5, 0.2)] * 30
+    slave = Slave(unzipped, swing_weight=0.0)
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    x0 = steady_state(1.0, 0.0)
+    np.testing.assert_allclose(got, operator_reference(x0, steps, swing_weight=0.0), rtol=0, atol=2e-5)
+    assert np.abs(got[:, 1] - operator_reference(x0, steps)[:, 1]).max() > 1e-4
 
 
 def test_rollover_horizon_defaults_to_the_operators_own(unzipped):
@@ -240,8 +287,9 @@ def test_restart_jump_zero_keeps_windows_at_the_rollover_horizon(unzipped):
 
 
 def test_a_step_crossing_the_window_boundary_equals_one_split_at_it(unzipped):
-    # without the slow-mode correction, whose trapezoid integral depends on how steps are cut
-    a, b = Slave(unzipped, "a", slow_weight=0.0), Slave(unzipped, "b", slow_weight=0.0)
+    # without the slow-mode correction and the exact swing step, whose integrals depend on how steps are cut
+    off = {"slow_weight": 0.0, "swing_weight": 0.0}
+    a, b = Slave(unzipped, "a", **off), Slave(unzipped, "b", **off)
     for h in (0.3, 0.3, 0.3):
         a.step(h, 0.95, 0.1)
         b.step(h, 0.95, 0.1)

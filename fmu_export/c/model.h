@@ -25,6 +25,7 @@ typedef struct {
     double restart_jump;          /* parameter [pu, rad]: an input change larger than this starts a window */
     double rest_radius;           /* parameter: scale of the rest correction's reach (0: no correction) */
     double slow_weight;           /* parameter in [0, 1]: weight of the slow-mode correction (0: none) */
+    double swing_weight;          /* parameter in [0, 1]: weight of the exact swing step for omega (0: none) */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
     double window_start;          /* start time of the current operator window [s] */
