@@ -13,8 +13,9 @@ For each run (both FMUs under fmpy, as `opfmu compare`), the operator is also ev
 * restarted, known future: the same windows with every sensor slot at the input that really comes
   (hindsight): the operator's own error on that input.
 
-The FMU's rest and slow-mode corrections (surrogate_model.c) act in the first only: pass --param
-rest_radius=0 --param slow_weight=0 to split the operator alone. So FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
+The FMU's rest and slow-mode corrections and its exact swing step (surrogate_model.c) act in the first
+only: pass --param rest_radius=0 --param slow_weight=0 --param swing_weight=0 to split the operator
+alone. So FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
 knowing the future input, and known is the operator's accuracy on these inputs. Also reported: the
 first window alone (the start from rest), and how many window-start states or inputs left the
 training envelope.

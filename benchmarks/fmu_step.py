@@ -5,7 +5,8 @@ ctypes loop over the FMI functions, at several step sizes, in one run.
 
 Without an FMU argument, builds one from the shipped operator. Also prints the cost of one
 operator (kernel) evaluation, the floor a step cannot go below, and the DoStep cost with the rest
-and slow-mode corrections turned off (rest_radius = slow_weight = 0): what the corrections cost.
+and slow-mode corrections and the exact swing step turned off (rest_radius = slow_weight = swing_weight
+= 0): what the corrections cost.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ from fmu_export.builder import build_surrogate_fmu
 from surrogate.operator import DEFAULT_OPERATOR
 
 
-CORRECTIONS_OFF = {"rest_radius": 0.0, "slow_weight": 0.0}
+CORRECTIONS_OFF = {"rest_radius": 0.0, "slow_weight": 0.0, "swing_weight": 0.0}
 
 
 def started(directory, md, parameters=None) -> FMU2Slave:

@@ -437,6 +437,21 @@ def test_residual_is_small_at_rest_and_large_on_an_inconsistent_state(unzipped):
     assert small < 0.5 < large
 
 
+def test_the_residual_is_the_operators_own_whatever_the_swing_step_does_to_omega(unzipped):
+    # within one window (no restart at the jumps), without the slow-mode correction (which reads the
+    # state the swing step left)
+    runs = {w: Slave(unzipped, f"w{w}", swing_weight=w, slow_weight=0.0, restart_jump=0.0) for w in (0.0, 1.0)}
+    residuals, omegas = {0.0: [], 1.0: []}, {0.0: [], 1.0: []}
+    for Vs, theta in [(1.0, 0.0)] * 10 + [(0.3, 0.2)] * 15 + [(1.0, 0.2)] * 20:
+        for w, slave in runs.items():
+            omegas[w].append(slave.step(0.01, Vs, theta)[1])
+            residuals[w].append(slave.fmu.getReal([VR["residual"]])[0])
+    for slave in runs.values():
+        slave.close()
+    assert np.abs(np.subtract(omegas[1.0], omegas[0.0])).max() > 1e-3
+    np.testing.assert_allclose(residuals[1.0], residuals[0.0], rtol=1e-9, atol=1e-12)
+
+
 def warnings_logged(slave):
     return [m for status, m in slave.messages if status == 1 and "residual" in m]
 

@@ -28,6 +28,7 @@ typedef struct {
     double swing_weight;          /* parameter in [0, 1]: weight of the exact swing step for omega (0: none) */
     double time;                  /* current communication point [s] */
     double x[4];                  /* state at `time` */
+    double omega_operator;        /* the operator's omega at `time`, before the exact swing step (residual) */
     double window_start;          /* start time of the current operator window [s] */
     double x_window[4];           /* state at the window start */
     int in_envelope;              /* false once an input or a window start left the envelope */

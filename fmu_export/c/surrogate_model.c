@@ -83,6 +83,7 @@ void model_defaults(ModelState *m)
     m->slow_weight = OPFMU_SLOW_WEIGHT;
     m->swing_weight = OPFMU_SWING_WEIGHT;
     memcpy(m->x, m->x_start, sizeof m->x);
+    m->omega_operator = m->x[1];
     m->in_envelope = 1;
 }
 
@@ -147,11 +148,14 @@ static void operator_rate(const ModelState *m, double tau, double rate[4])
 
 static double dot4(const double a[4], const double b[4]) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]; }
 
+/* The operator's physics residual: its rate against f at its own state (omega before the exact swing
+   step, which would hide the operator's omega error: the residual_limit was set on the operator alone) */
 static double residual(const ModelState *m)
 {
-    double rate[4], f[4], u[2] = {m->Vs, m->theta_vs}, sum = 0.0;
+    double rate[4], f[4], u[2] = {m->Vs, m->theta_vs}, x[4] = {m->x[0], m->omega_operator, m->x[2], m->x[3]};
+    double sum = 0.0;
     operator_rate(m, m->time - m->window_start, rate);
-    sm4_derivatives(m->x, u, f);
+    sm4_derivatives(x, u, f);
     if (m->slow_on) { /* the slow coordinate moves at l . f (slow_weight of it) */
         double shift = m->slow_weight * (dot4(m->slow_left, f) - dot4(m->slow_left, rate));
         for (int i = 0; i < 4; ++i) rate[i] += shift * m->slow_right[i];
@@ -288,6 +292,7 @@ static void start_window(ModelState *m)
 {
     m->window_start = m->time;
     memcpy(m->x_window, m->x, sizeof m->x);
+    m->omega_operator = m->x[1]; /* an anchored operator starts from the window's state */
     for (int k = 0; k < OPFMU_N_SENSORS; ++k) {
         m->sensors[2 * k] = m->Vs;
         m->sensors[2 * k + 1] = m->theta_vs;
@@ -564,6 +569,7 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 {
     m->time = start_time;
     memcpy(m->x, m->x_start, sizeof m->x);
+    m->omega_operator = m->x[1];
     m->in_envelope = 1;
     start_window(m);
     return check_envelope(m, message, size);
@@ -595,6 +601,7 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         }
         evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
         if (m->slow_on) slow_correct(m, end - m->time, rate_start);
+        m->omega_operator = m->x[1];
         if (m->swing_weight > 0.0) {
             double exact = swing_omega(omega_start, drive_start, swing_drive(m->x, u, &k), k, end - m->time);
             m->x[1] += m->swing_weight * (exact - m->x[1]);
