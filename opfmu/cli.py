@@ -253,7 +253,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("runs", nargs="+", help="run directory (from `opfmu train`); several: their mean (an ensemble "
                                             "of anchored Unstacked DeepONets of one shape) as one operator")
     ex.add_argument("-o", "--output", required=True, help="the .onnx file to write")
-    ex.add_argument("--data", default=None, help="dataset for envelope and test metrics (default: the run's)")
+    ex.add_argument("--data", default=None, help="dataset for envelope and test metrics (default: the first run's)")
     ex.set_defaults(func=cmd_export)
 
     fmu = sub.add_parser("build-fmu", help="build the native FMI 2.0 co-simulation FMU of an operator",
