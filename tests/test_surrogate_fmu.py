@@ -186,17 +186,23 @@ def test_a_negative_rest_radius_is_refused_with_a_reason(unzipped):
     slave.fmu.freeInstance()
 
 
+def fmu_and_rk45(unzipped, x0, signal, steps, **parameters):
+    """(FMU states, RK45 states) [n, 4] after each (h, Vs, theta) step from x0; the RK45 reference
+    solves under `signal`, the same inputs as functions of time."""
+    reference = simulate(x0, signal, np.cumsum([0.0] + [h for h, _, _ in steps]))[1:]
+    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)},
+                  **parameters)
+    got = np.array([slave.step(*step) for step in steps])
+    slave.close()
+    return got, reference
+
+
 def undervoltage_run(unzipped, seconds=15.0, Vs=0.84, **parameters):
     """(FMU states, RK45 states) [n, 4] every 10 ms of a machine held at Vs below the lowest voltage with
     an equilibrium, from the equilibrium at that voltage: it slowly slips (delta rises by 0.14 rad)."""
-    x0 = steady_state(min_voltage_with_equilibrium(), 0.0)
-    n = int(round(seconds / 0.01))
-    reference = simulate(x0, Signal(Piecewise((Vs,), ()), Piecewise((0.0,), ())), np.arange(n + 1) * 0.01)[1:]
-    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)},
-                  **parameters)
-    got = np.array([slave.step(0.01, Vs, 0.0) for _ in range(n)])
-    slave.close()
-    return got, reference
+    steps = [(0.01, Vs, 0.0)] * int(round(seconds / 0.01))
+    signal = Signal(Piecewise((Vs,), ()), Piecewise((0.0,), ()))
+    return fmu_and_rk45(unzipped, steady_state(min_voltage_with_equilibrium(), 0.0), signal, steps, **parameters)
 
 
 def test_the_slow_mode_correction_keeps_a_slow_drift_on_the_rk45_solution(unzipped):
@@ -230,15 +236,10 @@ def test_a_weight_outside_zero_to_one_is_refused_with_a_reason(unzipped, name, v
 def deep_fault_run(unzipped, **parameters):
     """(FMU states, RK45 states) [n, 4] every 10 ms from the equilibrium at Vs = 1: 0.3 s at rest, a
     fault to Vs = 0.2 pu with an angle jump of 0.25 rad for 150 ms, then 0.55 s at Vs = 1.05 pu."""
-    x0 = steady_state(1.0, 0.0)
     levels = [(30, 1.0, 0.0), (15, 0.2, 0.25), (55, 1.05, 0.25)]
     steps = [(0.01, v, a) for n, v, a in levels for _ in range(n)]
     signal = Signal(Piecewise((1.0, 0.2, 1.05), (0.3, 0.45)), Piecewise((0.0, 0.25), (0.3,)))
-    reference = simulate(x0, signal, np.arange(len(steps) + 1) * 0.01)[1:]
-    slave = Slave(unzipped, **parameters)
-    got = np.array([slave.step(*step) for step in steps])
-    slave.close()
-    return got, reference
+    return fmu_and_rk45(unzipped, steady_state(1.0, 0.0), signal, steps, **parameters)
 
 
 def test_the_exact_swing_step_keeps_omega_on_the_rk45_solution_through_a_deep_fault(unzipped):

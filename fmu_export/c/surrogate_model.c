@@ -569,7 +569,6 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 {
     m->time = start_time;
     memcpy(m->x, m->x_start, sizeof m->x);
-    m->omega_operator = m->x[1];
     m->in_envelope = 1;
     start_window(m);
     return check_envelope(m, message, size);
