@@ -58,11 +58,11 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
     data_dir = Path(data_dir or run_configs[0]["data"]["dir"])
     data_meta = load_metadata(data_dir)
     envelope = data_meta["envelope"]
+    member_data = [data_meta] if len(models) == 1 else [_training_dataset(c) for c in run_configs]
     if len(models) > 1:
-        envelope = _intersection([envelope] + [_training_envelope(c) for c in run_configs])
+        envelope = _intersection([envelope] + [meta["envelope"] for meta in member_data])
     t_grid = np.linspace(0.0, data_meta["horizon_s"], data_meta["n_points"])
-    summaries = [_training_summary(r, c, load_metadata(Path(c["data"]["dir"])) if len(models) > 1 else data_meta)
-                 for r, c in zip(run_dirs, run_configs)]
+    summaries = [_training_summary(r, c, meta) for r, c, meta in zip(run_dirs, run_configs, member_data)]
     causal = all(c["train"].get("causal") for c in run_configs)
     metadata = {
         "component": "sm4",
@@ -90,12 +90,12 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
     return metadata
 
 
-def _training_envelope(run_config: dict) -> dict:
-    """The envelope of the dataset a run trained on."""
+def _training_dataset(run_config: dict) -> dict:
+    """The metadata of the dataset a run trained on (an ensemble member's envelope and summary)."""
     data_dir = Path(run_config["data"]["dir"])
     if not (data_dir / "metadata.json").exists():
         raise ExportError(f"the dataset a member trained on is gone ({data_dir}): its envelope is needed")
-    return load_metadata(data_dir)["envelope"]
+    return load_metadata(data_dir)
 
 
 def _intersection(envelopes: list) -> dict:
