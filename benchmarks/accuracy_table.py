@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opfmu.files import write_json
+from reference_models.files import write_json
 from surrogate.data import load_split
 from surrogate.evaluation import aggregate, evaluate, plot_error_over_time, predict
 from surrogate.training import load_model

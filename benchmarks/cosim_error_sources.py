@@ -31,7 +31,7 @@ import numpy as np
 
 from opfmu.compare import compare, scenario_inputs
 from fmu_pair import extracted_pair, surrogate_parameters
-from opfmu.files import write_json
+from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import STATE_NAMES
 from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator

@@ -20,7 +20,7 @@ import numpy as np
 from opfmu.compare import compare, scenario_inputs, summary
 from opfmu.demo import GOAL_MAXAE
 from fmu_pair import extracted_pair, surrogate_parameters
-from opfmu.files import write_json
+from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import OUTPUT_NAMES, STATE_NAMES
 

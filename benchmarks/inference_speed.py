@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from opfmu.files import write_json
+from reference_models.files import write_json
 from reference_models.signals import Signal
 from reference_models.simulate import SolverConfig, simulate
 from surrogate.data import load_split

@@ -19,7 +19,7 @@ from fmpy import read_model_description
 
 from opfmu.compare import Inputs, communication_points, compare, scenario_inputs
 from fmu_pair import extracted_pair
-from opfmu.files import write_json
+from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS, rest_state
 
 

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from opfmu.files import atomic_path
+from reference_models.files import atomic_path
 from reference_models.sm4 import INPUT_NAMES, STATE_NAMES, steady_state
-from surrogate.onnx_export import TOLERANCE, random_inputs
+from surrogate.contract import TOLERANCE, random_inputs
 
 from .c_equations import sm4_c_source
 from .model_description import model_description, sm4_variables

@@ -146,7 +146,7 @@ def cmd_compare(args) -> None:
     from fmpy import extract
 
     from opfmu.compare import CompareError, compare, csv_inputs, format_table, plot_comparison, scenario_inputs, summary
-    from opfmu.files import write_json
+    from reference_models.files import write_json
 
     for path in (args.surrogate, args.reference):
         if not zipfile.is_zipfile(path):
@@ -307,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _version() -> str:
-    from opfmu import __version__
+    from reference_models.version import __version__
 
     return f"opfmu {__version__}"
 

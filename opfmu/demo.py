@@ -12,7 +12,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from opfmu.files import atomic_path, write_json
+from reference_models.files import atomic_path, write_json
 from reference_models.scenarios import SCENARIOS
 
 # the goal for a comparison over 10 s at h = 10 ms: MaxAE per state

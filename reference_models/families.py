@@ -1,4 +1,4 @@
-"""Input-signal families: named, seeded samplers of bus-voltage signals.
+"""Input-signal families of SM4: named, seeded samplers of bus-voltage signals (Vs, theta_vs).
 
 Each family maps points of the unit hypercube (from Latin hypercube sampling) to signals, one
 parameter per dimension, each uniform in its range. The paper's `slow` and `fast` families are
@@ -15,11 +15,13 @@ from typing import Callable
 import numpy as np
 
 from .signals import Dip, FirstOrder, Piecewise, Ramp, SecondOrder, Signal, held
+from .sm4 import SM4
 
 Ranges = dict  # parameter name -> (low, high)
 
-VS_RANGE = (0.7, 1.2)  # pu, bus voltage levels a window may start from
-THETA_RANGE = (-0.5, 0.5)  # rad
+COMPONENT = SM4  # the component whose inputs these families drive
+VS_RANGE = SM4.inputs[0].operating_range  # pu, bus voltage levels a window may start from
+THETA_RANGE = SM4.inputs[1].operating_range  # rad
 
 
 @dataclass(frozen=True)
@@ -29,6 +31,7 @@ class Family:
     name: str
     ranges: Ranges
     build: Callable[[dict, float], Signal]
+    component: object = COMPONENT
 
     @property
     def dim(self) -> int:
@@ -45,15 +48,20 @@ class Family:
         return [self.build(dict(zip(self.ranges, map(float, row))), horizon) for row in values]
 
 
+def bus(Vs, theta_vs, hold: float = 0.0) -> Signal:
+    """A signal of SM4's inputs from its bus-voltage magnitude and angle channels."""
+    return Signal({"Vs": Vs, "theta_vs": theta_vs}, hold)
+
+
 def _slow(p, horizon):
-    return Signal(
+    return bus(
         FirstOrder(p["Vs0"], p["k_v"], p["A_v"], p["w_v"], 1.0),
         FirstOrder(p["theta0"], p["k_th"], p["A_th"], p["w_th"], 0.0),
     )
 
 
 def _fast(p, horizon):
-    return Signal(
+    return bus(
         SecondOrder(p["Vs0"], p["dVs0"], p["zeta_v"], p["wn_v"], 1.0),
         SecondOrder(p["theta0"], p["dtheta0"], p["zeta_th"], p["wn_th"], 0.0),
     )
@@ -61,7 +69,7 @@ def _fast(p, horizon):
 
 def _step(p, horizon):
     t_v, t_th = p["t_v"] * horizon, p["t_th"] * horizon
-    return Signal(
+    return bus(
         Piecewise((p["Vs0"], p["Vs1"]), (t_v,)),
         Piecewise((p["theta0"], p["theta0"] + p["jump"]), (t_th,)),
     )
@@ -70,7 +78,7 @@ def _step(p, horizon):
 def _dip(p, horizon):
     t_fault = p["t_fault"] * horizon
     t_clear = t_fault + p["duration"]
-    return Signal(
+    return bus(
         Dip(p["Vs0"], p["Vs_fault"], t_fault, p["duration"], p["Vs0"] + p["post_shift"], p["tau"]),
         Piecewise(
             (p["theta0"], p["theta0"] + p["jump"], p["theta0"] + p["jump_post"]), (t_fault, t_clear)
@@ -81,7 +89,7 @@ def _dip(p, horizon):
 def _ramp(p, horizon):
     t_v = p["t_v"] * horizon
     t_th = p["t_th"] * horizon
-    return Signal(
+    return bus(
         Ramp(p["Vs0"], p["Vs1"], t_v, t_v + p["len_v"] * horizon),
         Ramp(p["theta0"], p["theta1"], t_th, t_th + p["len_th"] * horizon),
     )
@@ -143,7 +151,7 @@ def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fa
         t += float(rng.uniform(*dwell))
     if change_at_start:  # the level before t = 0 is never seen: drop it and the breakpoint at 0
         times, vs, theta = times[1:], vs[1:], theta[1:]
-    return Signal(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)))
+    return bus(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)))
 
 
 def _mix(p, horizon):

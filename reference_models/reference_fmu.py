@@ -19,7 +19,7 @@ import zipfile
 from pathlib import Path
 
 from fmu_export.model_description import Variable, model_description, sm4_variables
-from opfmu.files import atomic_path
+from reference_models.files import atomic_path
 
 from . import sm4
 

@@ -1,6 +1,6 @@
-"""Time-varying bus-voltage inputs u(t) = (Vs [pu], theta_vs [rad]).
+"""Time-varying inputs u(t) of a component, one closed-form channel per input.
 
-A signal is built from one channel per input. Every channel is a closed-form function of time, so
+Every channel is a closed-form function of time, so
 the solver and the sensors see exactly the same signal, and lists its breakpoints (times where the
 value or its slope jumps) so the solver can integrate piece by piece without stepping over them.
 Channels take a float (the solver's hot path, plain `math`) or an array of times.
@@ -128,21 +128,25 @@ CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ra
 
 @dataclass(frozen=True)
 class Signal:
-    """u(t) = (Vs(t), theta_vs(t)); optionally held piecewise constant every `hold` seconds (ZOH)."""
+    """u(t): one channel per input, by input name in the component's order (SM4: Vs, theta_vs);
+    optionally held piecewise constant every `hold` seconds (ZOH)."""
 
-    Vs: object
-    theta_vs: object
+    channels: dict
     hold: float = 0.0
 
+    @property
+    def names(self) -> tuple:
+        return tuple(self.channels)
+
     def __call__(self, t):
-        """u at times t [...] -> [..., 2] (t scalar -> [2])."""
+        """u at times t [...] -> [..., C] (t scalar -> [C])."""
         t = self.sample_time(np.asarray(t, dtype=float))
-        return np.stack([self.Vs(t), self.theta_vs(t)], axis=-1)
+        return np.stack([c(t) for c in self.channels.values()], axis=-1)
 
     def at(self, t: float) -> tuple:
-        """(Vs, theta_vs) at one time t [s] as floats: the solver's fast path."""
+        """The C input values at one time t [s] as floats: the solver's fast path."""
         t = float(self.sample_time(t))
-        return self.Vs(t), self.theta_vs(t)
+        return tuple(c(t) for c in self.channels.values())
 
     def sample_time(self, t):
         """The time whose value is seen at t: t itself, or under ZOH the last sample instant k*hold
@@ -156,14 +160,15 @@ class Signal:
         if self.hold > 0:
             points = np.arange(1, int(math.ceil(horizon / self.hold)) + 1) * self.hold
         else:
-            points = np.array(self.Vs.breakpoints() + self.theta_vs.breakpoints(), dtype=float)
+            points = np.array([b for c in self.channels.values() for b in c.breakpoints()], dtype=float)
         return np.unique(points[(points > 0) & (points < horizon)])
 
     def to_dict(self) -> dict:
+        """{input name: {"kind": channel class, its fields...}, ..., "hold": seconds}."""
         def channel(c):
             return {"kind": type(c).__name__, **{f.name: getattr(c, f.name) for f in fields(c)}}
 
-        return {"Vs": channel(self.Vs), "theta_vs": channel(self.theta_vs), "hold": self.hold}
+        return {**{name: channel(c) for name, c in self.channels.items()}, "hold": self.hold}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Signal":
@@ -172,11 +177,10 @@ class Signal:
             kind = CHANNELS[d.pop("kind")]
             return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
-        return cls(channel(data["Vs"]), channel(data["theta_vs"]), float(data.get("hold", 0.0)))
+        return cls({name: channel(d) for name, d in data.items() if name != "hold"}, float(data.get("hold", 0.0)))
 
 
 def held(signal: Signal, hold: float) -> Signal:
     """The same signal sampled and held every `hold` seconds (zero-order hold, as a co-simulation
     master with communication step `hold` delivers it)."""
-    return Signal(signal.Vs, signal.theta_vs, hold)
-
+    return Signal(signal.channels, hold)

@@ -1,4 +1,4 @@
-"""RK45 reference simulation of SM4 under a time-varying input signal (scipy `solve_ivp`)."""
+"""RK45 reference simulation of a component under a time-varying input signal (scipy `solve_ivp`)."""
 from __future__ import annotations
 
 import math
@@ -8,7 +8,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from .signals import Signal
-from .sm4 import SM4Params, derivatives
+from .component import Component
+from .sm4 import SM4
 
 
 @dataclass(frozen=True)
@@ -23,10 +24,11 @@ class SolverConfig:
         return asdict(self)
 
 
-def _scalar_rhs(u_of_t, p: SM4Params):
+def _scalar_rhs(u_of_t, component: Component, p):
+    derivatives = component.derivatives
+
     def f(t, x):
-        Vs, theta = u_of_t(t)
-        return derivatives(x[0], x[1], x[2], x[3], Vs, theta, p, math.sin, math.cos)
+        return derivatives(x, u_of_t(t), p, math)
 
     return f
 
@@ -35,10 +37,12 @@ def simulate(
     x0,
     signal: Signal,
     t_eval,
-    p: SM4Params = SM4Params(),
+    p=None,
     solver: SolverConfig = SolverConfig(),
+    component: Component = SM4,
 ) -> np.ndarray:
-    """States x [S, 4] at times t_eval [S] (ascending, from 0) for initial state x0 [4].
+    """States x [S, n_x] at times t_eval [S] (ascending, from 0) for initial state x0 [n_x], with
+    parameters p of `component` (default: its defaults).
 
     The solve restarts at every breakpoint of the signal, so jumps and kinks are never stepped over;
     a state at a jump time is the (continuous) state there.
@@ -46,12 +50,13 @@ def simulate(
     t_eval = np.asarray(t_eval, dtype=float)
     horizon = float(t_eval[-1])
     edges = np.concatenate([[0.0], signal.breakpoints(horizon), [horizon]])
-    x = np.empty((t_eval.size, 4))
+    p = component.params_type() if p is None else p
+    x = np.empty((t_eval.size, component.n_states))
     state = np.asarray(x0, dtype=float)
     for start, stop in zip(edges[:-1], edges[1:]):
         inside = (t_eval >= start) & (t_eval <= stop)
         # the signal on [start, stop): evaluated just inside the segment so a jump at `stop` is not seen
-        f = _scalar_rhs(_segment_input(signal, start, math.nextafter(stop, start)), p)
+        f = _scalar_rhs(_segment_input(signal, start, math.nextafter(stop, start)), component, p)
         # `stop` is always evaluated too: it is the next segment's initial state
         times = np.union1d(t_eval[inside], [stop])
         sol = solve_ivp(f, (start, stop), state, method=solver.method, t_eval=times,
@@ -77,6 +82,6 @@ def _segment_input(signal: Signal, start: float, last: float):
     return u_of_t
 
 
-def simulate_many(x0s, signals, t_eval, p: SM4Params = SM4Params(), solver: SolverConfig = SolverConfig()):
-    """States [N, S, 4] for initial states x0s [N, 4] and N signals (serial; see surrogate.data for dask)."""
-    return np.stack([simulate(x0, s, t_eval, p, solver) for x0, s in zip(x0s, signals)])
+def simulate_many(x0s, signals, t_eval, p=None, solver: SolverConfig = SolverConfig(), component: Component = SM4):
+    """States [N, S, n_x] for initial states x0s [N, n_x] and N signals (serial; see surrogate.data for dask)."""
+    return np.stack([simulate(x0, s, t_eval, p, solver, component) for x0, s in zip(x0s, signals)])

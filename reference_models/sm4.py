@@ -1,29 +1,25 @@
-"""The 4th-order synchronous machine (Sauer-Pai two-axis model) on a bus of varying voltage.
-
-One definition of the equations, written against a small math namespace, serves numpy arrays
-(scipy), torch tensors (physics losses, autograd) and symbolic code generation.
+"""The 4th-order synchronous machine (Sauer-Pai two-axis model) on a bus of varying voltage: `SM4`.
 
 States  x = (delta [rad], omega [rad/s, deviation from synchronous], Ed_p [pu], Eq_p [pu])
-Inputs  u = (Vs [pu], theta_vs [rad])
+Inputs  u = (Vs [pu], theta_vs [rad]); Pm and Efd are parameters (the machine's operating point).
+Outputs y = (Id, Iq, I_re, I_im, P, Q) [pu]: stator currents, bus current in the network frame,
+        power into the bus.
 Arrays carry the state or input on their last axis: x [..., 4], u [..., 2].
 """
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
-STATE_NAMES = ("delta", "omega", "Ed_p", "Eq_p")
-STATE_UNITS = ("rad", "rad/s", "pu", "pu")
-INPUT_NAMES = ("Vs", "theta_vs")
-INPUT_UNITS = ("pu", "rad")
-OUTPUT_NAMES = ("Id", "Iq", "I_re", "I_im", "P", "Q")
+from .component import Component, Parameters, Quantity
 
 
 @dataclass(frozen=True)
-class SM4Params:
-    """Machine, network and operating-point parameters (paper Table I); reactances in pu, times in s."""
+class SM4Params(Parameters):
+    """Machine, network and operating-point parameters (paper Table I); reactances in pu on the
+    machine base, times in s, Wb in rad/s, Pm and Efd in pu."""
 
     D: float = 2.0
     H: float = 5.06
@@ -40,17 +36,22 @@ class SM4Params:
     Pm: float = 0.7048
     Efd: float = 1.08
 
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        for name in ("H", "Td0_p", "Tq0_p", "Xd", "Xd_p", "Xq", "Xq_p", "Wb"):
+            self.require(name, getattr(self, name) > 0, "be > 0")
+        for name in ("D", "Rs", "Re", "Xep"):
+            self.require(name, getattr(self, name) >= 0, "be >= 0")
+        self.require("Xd_p", self.Xd_p <= self.Xd, f"not exceed Xd = {self.Xd!r}")
+        self.require("Xq_p", self.Xq_p <= self.Xq, f"not exceed Xq = {self.Xq!r}")
 
 
-def stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, sin, cos):
+def stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, m):
     """Id, Iq [pu] from the algebraic stator-network equations, solved in closed form (2x2)."""
     ra = p.Rs + p.Re
     xq = p.Xq_p + p.Xep
     xd = p.Xd_p + p.Xep
-    a = Ed_p - Vs * sin(delta - theta_vs)
-    b = Eq_p - Vs * cos(delta - theta_vs)
+    a = Ed_p - Vs * m.sin(delta - theta_vs)
+    b = Eq_p - Vs * m.cos(delta - theta_vs)
     det = ra * ra + xq * xd
     Id = (ra * a + xq * b) / det
     Iq = (ra * b - xd * a) / det
@@ -62,9 +63,11 @@ def electrical_power(Ed_p, Eq_p, Id, Iq, p: SM4Params):
     return Ed_p * Id + Eq_p * Iq + (p.Xq_p - p.Xd_p) * Id * Iq
 
 
-def derivatives(delta, omega, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, sin, cos):
-    """Time derivatives (d delta, d omega, d Ed_p, d Eq_p) per second; works on any numeric type."""
-    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, sin, cos)
+def derivatives(x, u, p: SM4Params, m):
+    """(d delta, d omega, d Ed_p, d Eq_p)/dt for x = (delta, omega, Ed_p, Eq_p), u = (Vs, theta_vs)."""
+    delta, omega, Ed_p, Eq_p = x
+    Vs, theta_vs = u
+    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, m)
     Pe = electrical_power(Ed_p, Eq_p, Id, Iq, p)
     d_delta = omega
     d_omega = p.Wb / (2.0 * p.H) * (p.Pm - Pe - p.D * omega)
@@ -73,42 +76,22 @@ def derivatives(delta, omega, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, sin, cos):
     return d_delta, d_omega, d_Ed_p, d_Eq_p
 
 
-def _namespace(x):
-    """(sin, cos, stack) for numpy arrays or torch tensors."""
-    if type(x).__module__.startswith("torch"):
-        import torch
-
-        return torch.sin, torch.cos, lambda parts: torch.stack(parts, dim=-1)
-    return np.sin, np.cos, lambda parts: np.stack(parts, axis=-1)
-
-
-def rhs(x, u, p: SM4Params = SM4Params()):
-    """dx/dt for states x [..., 4] and inputs u [..., 2] (numpy or torch, broadcast); returns [..., 4]."""
-    sin, cos, stack = _namespace(x)
-    parts = derivatives(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u[..., 0], u[..., 1], p, sin, cos)
-    return stack(list(parts))
-
-
-def derived(delta, Ed_p, Eq_p, Vs, theta_vs, p: SM4Params, sin, cos):
-    """(Id, Iq, I_re, I_im, P, Q) in pu; works on any numeric type.
+def derived(x, u, p: SM4Params, m):
+    """(Id, Iq, I_re, I_im, P, Q) in pu.
 
     Bus current in the network frame: I = (Id + j Iq) exp(j (delta - pi/2));
     power into the bus: P + jQ = Vs exp(j theta_vs) conj(I).
     """
-    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, sin, cos)
+    delta, _, Ed_p, Eq_p = x
+    Vs, theta_vs = u
+    Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, m)
     # exp(j(delta - pi/2)) = sin(delta) - j cos(delta)
-    I_re = Id * sin(delta) + Iq * cos(delta)
-    I_im = Iq * sin(delta) - Id * cos(delta)
-    V_re, V_im = Vs * cos(theta_vs), Vs * sin(theta_vs)
+    I_re = Id * m.sin(delta) + Iq * m.cos(delta)
+    I_im = Iq * m.sin(delta) - Id * m.cos(delta)
+    V_re, V_im = Vs * m.cos(theta_vs), Vs * m.sin(theta_vs)
     P = V_re * I_re + V_im * I_im
     Q = V_im * I_re - V_re * I_im
     return Id, Iq, I_re, I_im, P, Q
-
-
-def outputs(x, u, p: SM4Params = SM4Params()):
-    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 2] (see `derived`)."""
-    sin, cos, stack = _namespace(x)
-    return stack(list(derived(x[..., 0], x[..., 2], x[..., 3], u[..., 0], u[..., 1], p, sin, cos)))
 
 
 def _steady_fluxes(angle, Vs, p: SM4Params):
@@ -123,23 +106,27 @@ def _steady_fluxes(angle, Vs, p: SM4Params):
     return np.linalg.solve(A, rhs_)
 
 
-def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = SM4Params()) -> np.ndarray:
-    """The stable equilibrium x* [4] for constant inputs: omega = 0, Pe = Pm on the rising side of the
-    steady-state power-angle curve.
+def equilibrium(u, p: SM4Params) -> np.ndarray:
+    """The stable equilibrium x* [4] for constant inputs u = (Vs, theta_vs): omega = 0, Pe = Pm on
+    the rising side of the steady-state power-angle curve.
 
     Raises ValueError when the machine cannot transfer Pm at this voltage (no equilibrium).
     """
     from scipy.optimize import brentq
 
+    Vs, theta_vs = (float(v) for v in u)
+
     def excess_power(angle):
         Ed_p, Eq_p = _steady_fluxes(angle, Vs, p)
-        Id, Iq = stator_currents(angle, Ed_p, Eq_p, Vs, 0.0, p, np.sin, np.cos)
+        Id, Iq = stator_currents(angle, Ed_p, Eq_p, Vs, 0.0, p, np)
         return electrical_power(Ed_p, Eq_p, Id, Iq, p) - p.Pm
 
+    if not (math.isfinite(Vs) and math.isfinite(theta_vs) and Vs > 0):
+        raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad")
     grid = np.linspace(-math.pi / 2, math.pi, 301)
     values = np.array([excess_power(a) for a in grid])
     rising = np.nonzero((values[:-1] < 0) & (values[1:] >= 0))[0]
-    if not np.isfinite(Vs) or not np.isfinite(theta_vs) or Vs <= 0 or rising.size == 0:
+    if rising.size == 0:
         raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad")
     i = rising[0]
     angle = brentq(excess_power, grid[i], grid[i + 1], xtol=1e-15, rtol=1e-15)
@@ -147,7 +134,54 @@ def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = SM4Param
     return np.array([theta_vs + angle, 0.0, Ed_p, Eq_p])
 
 
-def min_voltage_with_equilibrium(p: SM4Params = SM4Params(), tol: float = 1e-9) -> float:
+SM4 = Component(
+    name="sm4",
+    description="SM4 synchronous machine: Sauer-Pai two-axis model on a bus of varying voltage",
+    states=(Quantity("delta", "rad", "rotor angle"),
+            Quantity("omega", "rad/s", "rotor speed deviation"),
+            Quantity("Ed_p", "pu", "d-axis transient voltage"),
+            Quantity("Eq_p", "pu", "q-axis transient voltage")),
+    inputs=(Quantity("Vs", "pu", "bus voltage magnitude", start=1.0, operating_range=(0.7, 1.2)),
+            Quantity("theta_vs", "rad", "bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
+    outputs=(Quantity("Id", "pu", "d-axis stator current"),
+             Quantity("Iq", "pu", "q-axis stator current"),
+             Quantity("I_re", "pu", "bus current, real part (network frame)"),
+             Quantity("I_im", "pu", "bus current, imaginary part (network frame)"),
+             Quantity("P", "pu", "active power into the bus"),
+             Quantity("Q", "pu", "reactive power into the bus")),
+    params_type=SM4Params,
+    derivatives=derivatives,
+    output_equations=derived,
+    equilibrium=equilibrium,
+    state_scales=(0.5, 0.25, 0.1, 0.1),
+    # d omega/dt = Wb/(2H) (Pm - Pe(delta, Ed_p, Eq_p, u)) - Wb D/(2H) omega
+    affine_states=(1,),
+)
+
+STATE_NAMES = SM4.state_names
+STATE_UNITS = tuple(q.unit for q in SM4.states)
+INPUT_NAMES = SM4.input_names
+INPUT_UNITS = tuple(q.unit for q in SM4.inputs)
+OUTPUT_NAMES = SM4.output_names
+DEFAULT_PARAMS = SM4Params()
+
+
+def rhs(x, u, p: SM4Params = DEFAULT_PARAMS):
+    """dx/dt [..., 4] for states x [..., 4] and inputs u [..., 2] (numpy or torch, broadcast)."""
+    return SM4.rhs(x, u, p)
+
+
+def outputs(x, u, p: SM4Params = DEFAULT_PARAMS):
+    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 2]."""
+    return SM4.output_values(x, u, p)
+
+
+def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = DEFAULT_PARAMS) -> np.ndarray:
+    """The stable equilibrium x* [4] at constant (Vs, theta_vs); ValueError where there is none."""
+    return SM4.steady_state((Vs, theta_vs), p)
+
+
+def min_voltage_with_equilibrium(p: SM4Params = DEFAULT_PARAMS, tol: float = 1e-9) -> float:
     """The lowest bus voltage Vs [pu] at which an equilibrium exists (bisection on steady_state).
 
     With fixed Efd and Pm there is none below it: the machine cannot deliver Pm there and, held

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from opfmu import __version__
-from opfmu.files import atomic_path
+from reference_models.version import __version__
+from reference_models.files import atomic_path
 from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
+from .contract import TOLERANCE, random_inputs
 from .data import load_metadata, load_split
 from .ensemble import Ensemble, EnsembleError, architecture
 from .evaluation import evaluate
@@ -27,7 +28,6 @@ from .losses import residual_scale
 from .training import load_model
 
 OPSET = 17
-TOLERANCE = 1e-5  # max abs difference allowed between onnxruntime and torch
 # A causally trained operator learns window time t with weight 1 - t/T (a uniform cut), so its last
 # part is its least trained: rolled over before it, at this share of the horizon, the shipped one's
 # omega error under slowly moving inputs fell from 0.013 to 0.005 rad/s (README, long co-simulations).
@@ -130,22 +130,6 @@ def _attach_metadata(path: Path, metadata: dict) -> None:
     proto.doc_string = "opfmu operator: x(t) of SM4 from x0 and u at the sensor times"
     onnx.checker.check_model(proto)
     onnx.save(proto, str(path))
-
-
-def random_inputs(envelope: dict, t_grid: np.ndarray, n: int, rng: np.random.Generator):
-    """In-envelope test inputs: x0 [n, 4] uniform in the box; u [n, S, 2] ramps between two random
-    levels per channel plus a random-amplitude sine, clipped to the box; t [M]: the grid and random times."""
-    lo_x = np.array([envelope["x0"][s][0] for s in STATE_NAMES])
-    hi_x = np.array([envelope["x0"][s][1] for s in STATE_NAMES])
-    lo_u = np.array([envelope["u"][s][0] for s in INPUT_NAMES])
-    hi_u = np.array([envelope["u"][s][1] for s in INPUT_NAMES])
-    x0 = rng.uniform(lo_x, hi_x, (n, 4))
-    frac = t_grid / t_grid[-1]
-    a, b = rng.uniform(lo_u, hi_u, (n, 2)), rng.uniform(lo_u, hi_u, (n, 2))
-    wiggle = 0.1 * (hi_u - lo_u) * rng.uniform(0, 1, (n, 1, 2)) * np.sin(2 * np.pi * rng.uniform(1, 8, (n, 1, 2)) * frac[None, :, None])
-    u = np.clip(a[:, None] + (b - a)[:, None] * frac[None, :, None] + wiggle, lo_u, hi_u)
-    t = np.sort(np.concatenate([t_grid, rng.uniform(0, t_grid[-1], 37)]))
-    return x0.astype(np.float32), u.astype(np.float32), t.astype(np.float32)
 
 
 def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0) -> float:

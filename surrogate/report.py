@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from opfmu.files import write_json
+from reference_models.files import write_json
 from reference_models.sm4 import STATE_NAMES
 
 from .data import load_split

@@ -29,7 +29,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from opfmu.files import atomic_path, write_json
+from reference_models.files import atomic_path, write_json
 from reference_models.sm4 import rhs
 
 from .data import load_metadata, load_split

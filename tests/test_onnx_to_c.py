@@ -11,7 +11,8 @@ from onnx import TensorProto, helper
 
 from fmu_export.onnx_to_c import UnsupportedGraph, generate_kernel
 from surrogate.models import OperatorConfig
-from surrogate.onnx_export import export_onnx, random_inputs
+from surrogate.contract import random_inputs
+from surrogate.onnx_export import export_onnx
 from surrogate.training import TrainConfig, train
 
 DOUBLE_P = ctypes.POINTER(ctypes.c_double)

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
-from opfmu import __version__
-from opfmu.files import write_json, write_npz
+from reference_models.version import __version__
+from reference_models.files import write_json, write_npz
 from reference_models.sm4 import INPUT_NAMES, STATE_NAMES, SM4Params
 
 from .envelope import probe_plan, reachable_box, reachable_summary

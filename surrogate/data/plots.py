@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from opfmu.files import atomic_path
+from reference_models.files import atomic_path
 from reference_models.sm4 import INPUT_NAMES, INPUT_UNITS, STATE_NAMES, STATE_UNITS
 
 

@@ -1,0 +1,180 @@
+"""What a component is: its variables, parameters, equations and steady state, declared once.
+
+Every layer derives from a `Component`: dataset generation (channels, sizes), the networks (input
+and output sizes), the physics losses (the right-hand side), the ONNX metadata, the generated C, the
+model descriptions and value references, and the reference FMUs. The equations are plain Python
+functions of sequences of scalars written against a math namespace `m` (anything with `sin`, `cos`,
+`exp`, `sqrt`: the `math` module, numpy, torch, or the C tracer of fmu_export), so one definition
+serves scipy, autograd and code generation.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+
+MAX_PARAMETER_FILE_BYTES = 64 * 1024
+
+
+class ParameterError(ValueError):
+    """A parameter set that a component refuses: unknown key, not a number, out of range."""
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One state, input or output: name, unit, what it is, and for an input its start value and the
+    operating range [low, high] the built-in input families draw levels from."""
+
+    name: str
+    unit: str
+    description: str
+    start: float | None = None
+    operating_range: tuple | None = None
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """Base of a component's parameter dataclass: every field a finite real number; subclasses add
+    their own checks in `check` (raise ParameterError naming the field)."""
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParameterError(f"parameter {f.name} = {value!r} must be a finite number")
+            object.__setattr__(self, f.name, float(value))
+        self.check()
+
+    def check(self) -> None:
+        """Range checks of a subclass (none here)."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def require(self, name: str, condition: bool, rule: str) -> None:
+        """Raise ParameterError "parameter NAME = VALUE must RULE" unless condition."""
+        if not condition:
+            raise ParameterError(f"parameter {name} = {getattr(self, name)!r} must {rule}")
+
+
+@dataclass(frozen=True)
+class Component:
+    """A dynamic component x' = f(x, u; p) with derived outputs y = g(x, u; p).
+
+    derivatives(x, u, p, m) and output_equations(x, u, p, m) take sequences of scalars (or arrays
+    broadcast together) and return tuples of len(states) and len(outputs). equilibrium(u [n_u], p)
+    returns the stable steady state [n_x] under constant inputs u, or raises ValueError.
+    state_scales: a typical excursion of each state in its units (how far "near rest" reaches).
+    affine_states: indices of states whose own derivative is affine in that state alone,
+        dx_i/dt = g(other states, u) - k x_i with k >= 0 constant (integrated exactly over a step).
+    """
+
+    name: str
+    description: str
+    states: tuple
+    inputs: tuple
+    outputs: tuple
+    params_type: type
+    derivatives: Callable
+    output_equations: Callable
+    equilibrium: Callable
+    state_scales: tuple
+    affine_states: tuple = ()
+
+    @property
+    def state_names(self) -> tuple:
+        return tuple(q.name for q in self.states)
+
+    @property
+    def input_names(self) -> tuple:
+        return tuple(q.name for q in self.inputs)
+
+    @property
+    def output_names(self) -> tuple:
+        return tuple(q.name for q in self.outputs)
+
+    @property
+    def n_states(self) -> int:
+        return len(self.states)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.inputs)
+
+    @property
+    def start_inputs(self) -> np.ndarray:
+        """The inputs' start values [n_u]: where the default initial state is the equilibrium."""
+        return np.array([q.start for q in self.inputs], dtype=float)
+
+    def rhs(self, x, u, p):
+        """dx/dt [..., n_x] for states x [..., n_x] and inputs u [..., n_u] (numpy or torch, broadcast)."""
+        m, stack = _namespace(x)
+        return stack(self.derivatives(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+
+    def output_values(self, x, u, p):
+        """Derived outputs [..., n_y] for x [..., n_x], u [..., n_u] (numpy or torch)."""
+        m, stack = _namespace(x)
+        return stack(self.output_equations(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+
+    def steady_state(self, u=None, p=None) -> np.ndarray:
+        """The stable equilibrium [n_x] at constant inputs u [n_u] (default: the start inputs)."""
+        u = self.start_inputs if u is None else np.asarray(u, dtype=float)
+        return np.asarray(self.equilibrium(u, p if p is not None else self.params_type()), dtype=float)
+
+    def params(self, values: Mapping | None = None):
+        """The component's parameters from a mapping of some of them (the rest default), checked:
+        unknown names, non-numbers and out-of-range values raise ParameterError naming the field."""
+        values = {} if values is None else values
+        if not isinstance(values, Mapping):
+            raise ParameterError(f"{self.name} parameters must be a JSON object of name: number, "
+                                 f"got {type(values).__name__}")
+        known = [f.name for f in fields(self.params_type)]
+        unknown = [str(k) for k in values if k not in known]
+        if unknown:
+            raise ParameterError(f"unknown {self.name} parameter(s) {', '.join(repr(k)[:40] for k in unknown[:5])} "
+                                 f"(known: {', '.join(known)})")
+        return self.params_type(**values)
+
+    def load_params(self, path) -> object:
+        """Parameters from a JSON file of name: number (any subset; the rest default)."""
+        path = Path(path)
+        try:
+            if path.stat().st_size > MAX_PARAMETER_FILE_BYTES:
+                raise ParameterError(f"machine file {path} is larger than {MAX_PARAMETER_FILE_BYTES} bytes")
+            values = json.loads(path.read_text(encoding="utf-8"), parse_constant=_refuse_constant)
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            if isinstance(exc, ParameterError):
+                raise
+            raise ParameterError(f"cannot read machine file {path}: {_one_line(exc)}") from None
+        try:
+            return self.params(values)
+        except ParameterError as exc:
+            raise ParameterError(f"{path}: {exc}") from None
+
+
+def _refuse_constant(name: str):
+    raise ValueError(f"{name} is not a number this file may hold")
+
+
+def _one_line(exc: Exception) -> str:
+    return " ".join(str(exc).split())[:200]
+
+
+def _columns(a, n: int) -> list:
+    """The n entries of a's last axis as a list."""
+    if a.shape[-1] != n:
+        raise ValueError(f"expected {n} values on the last axis, got shape {tuple(a.shape)}")
+    return [a[..., i] for i in range(n)]
+
+
+def _namespace(x):
+    """(math namespace, stack on a new last axis) for numpy arrays or torch tensors."""
+    if type(x).__module__.startswith("torch"):
+        import torch
+
+        return torch, lambda parts: torch.stack(list(parts), dim=-1)
+    return np, lambda parts: np.stack(list(parts), axis=-1)

@@ -1,0 +1,16 @@
+"""The components opfmu knows, by the name operator files and datasets record."""
+from __future__ import annotations
+
+from .component import Component
+from .sm4 import SM4
+
+COMPONENTS = {c.name: c for c in (SM4,)}
+
+
+def component(name) -> Component:
+    """The component called `name`; ValueError naming the known ones otherwise."""
+    try:
+        return COMPONENTS[name]
+    except (KeyError, TypeError):
+        known = ", ".join(COMPONENTS)
+        raise ValueError(f"unknown component {str(name)[:40]!r} (known: {known})") from None
