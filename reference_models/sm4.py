@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -181,11 +182,12 @@ def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = DEFAULT_
     return SM4.steady_state((Vs, theta_vs), p)
 
 
+@lru_cache(maxsize=64)
 def min_voltage_with_equilibrium(p: SM4Params = DEFAULT_PARAMS, tol: float = 1e-9) -> float:
     """The lowest bus voltage Vs [pu] at which an equilibrium exists (bisection on steady_state).
 
     With fixed Efd and Pm there is none below it: the machine cannot deliver Pm there and, held
-    long enough (Td0_p), loses synchronism.
+    long enough (Td0_p), loses synchronism. Cached per machine (the parameters are frozen).
     """
     low, high = 0.05, 10.0
     while high - low > tol:

@@ -13,13 +13,12 @@ import numpy as np
 import torch
 from matplotlib.figure import Figure
 
-from reference_models.sm4 import INPUT_NAMES, INPUT_UNITS, STATE_NAMES, STATE_UNITS
 
 from .models import OperatorModel
 
 
 def predict(model: OperatorModel, x0, u, t, batch: int = 256) -> np.ndarray:
-    """States [N, M, 4] (float64, physical units) for x0 [N, 4], u [N, S, 2], t [M], in batches of trajectories."""
+    """States [N, M, n_x] (float64, physical units) for x0 [N, n_x], u [N, S, n_u], t [M], in batches of trajectories."""
     f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
     x0, u, t = f32(x0), f32(u), f32(t)
     model.eval()
@@ -28,13 +27,14 @@ def predict(model: OperatorModel, x0, u, t, batch: int = 256) -> np.ndarray:
     return torch.cat(parts).double().numpy()
 
 
-def error_metrics(x_hat: np.ndarray, x: np.ndarray, x_std) -> dict:
-    """Metrics of predictions x_hat against references x, both [N, S, 4]; x_std [4] for standardising.
+def error_metrics(x_hat: np.ndarray, x: np.ndarray, x_std, state_names) -> dict:
+    """Metrics of predictions x_hat against references x, both [N, S, n_x]; x_std [n_x] for
+    standardising; state_names [n_x] name the per-state entries.
 
     Returns {"n_trajectories", "n_times",
              "physical" / "standardised": {"mse", "mae", "maxae"} over all points and states,
              "per_state" / "per_state_standardised": {state name: {"mse", "mae", "maxae"}},
-             "per_time": {"mae", "ae_std", "mse", "maxae"}: arrays [S, 4] over trajectories (physical)}.
+             "per_time": {"mae", "ae_std", "mse", "maxae"}: arrays [S, n_x] over trajectories (physical)}.
     """
     err = np.asarray(x_hat, dtype=float) - np.asarray(x, dtype=float)
     ae, ae_std = np.abs(err), np.abs(err) / np.asarray(x_std, dtype=float)
@@ -43,8 +43,8 @@ def error_metrics(x_hat: np.ndarray, x: np.ndarray, x_std) -> dict:
         "n_times": int(err.shape[1]),
         "physical": _summary(ae),
         "standardised": _summary(ae_std),
-        "per_state": {name: _summary(ae[..., i]) for i, name in enumerate(STATE_NAMES)},
-        "per_state_standardised": {name: _summary(ae_std[..., i]) for i, name in enumerate(STATE_NAMES)},
+        "per_state": {name: _summary(ae[..., i]) for i, name in enumerate(state_names)},
+        "per_state_standardised": {name: _summary(ae_std[..., i]) for i, name in enumerate(state_names)},
         "per_time": {"mae": ae.mean(0), "ae_std": ae.std(0), "mse": (ae ** 2).mean(0), "maxae": ae.max(0)},
     }
 
@@ -54,9 +54,10 @@ def _summary(ae: np.ndarray) -> dict:
 
 
 def evaluate(model: OperatorModel, split: dict) -> dict:
-    """error_metrics of the model on a labeled split (dict with x0, u, t, x), standardised by the model's x_std."""
+    """error_metrics of the model on a labeled split (from load_split: x0, u, t, x and the component),
+    standardised by the model's x_std."""
     x_hat = predict(model, split["x0"], split["u"], split["t"])
-    return error_metrics(x_hat, split["x"], model.x_std.double().numpy())
+    return error_metrics(x_hat, split["x"], model.x_std.double().numpy(), split["component"].state_names)
 
 
 def aggregate(metrics: list) -> dict:
@@ -90,23 +91,24 @@ def to_jsonable(tree):
 
 
 def plot_trajectories(split: dict, predictions: dict, path, indices=(0, 1, 2)) -> None:
-    """Fig. 3: the four states of a few trajectories, reference against each model's prediction
-    (predictions: label -> x_hat [N, S, 4]), above the inputs Vs and theta_vs. Writes a PNG."""
-    t, x, u = split["t"], split["x"], split["u"]
-    fig = Figure(figsize=(7, 11))
-    axes = fig.subplots(6, 1, sharex=True)
+    """Fig. 3: the states of a few trajectories, reference against each model's prediction
+    (predictions: label -> x_hat [N, S, n_x]), above the inputs. Writes a PNG."""
+    t, x, u, component = split["t"], split["x"], split["u"], split["component"]
+    n_x, n_u = component.n_states, component.n_inputs
+    fig = Figure(figsize=(7, 1.8 * (n_x + n_u) + 0.2))
+    axes = fig.subplots(n_x + n_u, 1, sharex=True)
     colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     styles = ["--", "-.", ":", (0, (5, 1))]
     for j, n in enumerate(indices):
         c = colors[j % len(colors)]
-        for i in range(4):
+        for i in range(n_x):
             axes[i].plot(t, x[n, :, i], color=c, lw=1.5, label="reference" if j == 0 else None)
             for k, (label, x_hat) in enumerate(predictions.items()):
                 axes[i].plot(t, x_hat[n, :, i], color=c, lw=1.2, ls=styles[k % len(styles)],
                              label=label if j == 0 else None)
-        for i in range(2):
-            axes[4 + i].plot(t, u[n, :, i], color=c, lw=1.2)
-    labels = [f"{n} [{unit}]" for n, unit in zip(STATE_NAMES + INPUT_NAMES, STATE_UNITS + INPUT_UNITS)]
+        for i in range(n_u):
+            axes[n_x + i].plot(t, u[n, :, i], color=c, lw=1.2)
+    labels = [f"{q.name} [{q.unit}]" for q in component.states + component.inputs]
     for ax, label in zip(axes, labels):
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -118,10 +120,10 @@ def plot_trajectories(split: dict, predictions: dict, path, indices=(0, 1, 2)) -
 
 def plot_error_over_time(split: dict, predictions: dict, path) -> None:
     """Fig. 4: absolute error per state over time, mean over trajectories with a +-1 std band,
-    for each model (predictions: label -> x_hat [N, S, 4]). Writes a PNG."""
-    t = split["t"]
-    fig = Figure(figsize=(7, 9))
-    axes = fig.subplots(4, 1, sharex=True)
+    for each model (predictions: label -> x_hat [N, S, n_x]). Writes a PNG."""
+    t, states = split["t"], split["component"].states
+    fig = Figure(figsize=(7, 2.2 * len(states) + 0.2))
+    axes = fig.subplots(len(states), 1, sharex=True)
     for label, x_hat in predictions.items():
         ae = np.abs(np.asarray(x_hat) - split["x"])
         mean, std = ae.mean(0), ae.std(0)
@@ -129,8 +131,8 @@ def plot_error_over_time(split: dict, predictions: dict, path) -> None:
             line, = ax.plot(t, mean[:, i], lw=1.2, label=label)
             ax.fill_between(t, np.maximum(mean[:, i] - std[:, i], 0), mean[:, i] + std[:, i],
                             color=line.get_color(), alpha=0.25, lw=0)
-    for ax, name, unit in zip(axes, STATE_NAMES, STATE_UNITS):
-        ax.set_ylabel(f"AE {name} [{unit}]")
+    for ax, q in zip(axes, states):
+        ax.set_ylabel(f"AE {q.name} [{q.unit}]")
         ax.grid(alpha=0.3)
     axes[0].legend(loc="best", fontsize="small")
     axes[-1].set_xlabel("time [s]")

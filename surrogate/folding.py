@@ -1,7 +1,7 @@
 """The inference form of a trained operator: the same function with its normalisation folded away.
 
-`fold(model)` returns a module with the signature of the model, (x0 [N, 4], u [N, S, 2], t [M]) ->
-x [N, M, 4] in physical units, that computes without any elementwise normalisation pass:
+`fold(model)` returns a module with the signature of the model, (x0 [N, n_x], u [N, S, n_u], t [M]) ->
+x [N, M, n_x] in physical units, that computes without any elementwise normalisation pass:
 
 * the standardisation of x0 and of the sensors (and the sensor scale) is folded into the weights and
   bias of the first linear layer that reads them, so the raw [x0, u] go straight into one Gemm;
@@ -23,7 +23,7 @@ import torch
 from torch import nn
 
 from .ensemble import Ensemble
-from .models import N_STATES, PINN, DeepONet, OperatorModel, StackedNDeepONet, UnstackedDeepONet
+from .models import PINN, DeepONet, OperatorModel, StackedNDeepONet, UnstackedDeepONet
 
 
 def fold(model: OperatorModel | Ensemble) -> nn.Module:
@@ -50,12 +50,13 @@ def fold_output(linear: nn.Linear, gain: torch.Tensor, offset: torch.Tensor) -> 
 
 
 def with_constant_coefficient(linear: nn.Linear, latent: int, constants: torch.Tensor) -> nn.Linear:
-    """A layer whose output, seen as [4, latent + 1], is linear's [4, latent] plus one more column
-    holding constants [4] whatever the input (zero weights, bias = the constant)."""
-    w = linear.weight.double().reshape(N_STATES, latent, -1)
-    b = linear.bias.double().reshape(N_STATES, latent)
-    w = torch.cat([w, torch.zeros(N_STATES, 1, w.shape[-1], dtype=w.dtype)], 1).reshape(N_STATES * (latent + 1), -1)
-    b = torch.cat([b, constants.double().reshape(N_STATES, 1)], 1).reshape(-1)
+    """A layer whose output, seen as [n_x, latent + 1], is linear's [n_x, latent] plus one more
+    column holding constants [n_x] whatever the input (zero weights, bias = the constant)."""
+    n = constants.numel()
+    w = linear.weight.double().reshape(n, latent, -1)
+    b = linear.bias.double().reshape(n, latent)
+    w = torch.cat([w, torch.zeros(n, 1, w.shape[-1], dtype=w.dtype)], 1).reshape(n * (latent + 1), -1)
+    b = torch.cat([b, constants.double().reshape(n, 1)], 1).reshape(-1)
     return _linear(w, b)
 
 
@@ -100,6 +101,7 @@ class FoldedDeepONet(nn.Module):
         self.model = model  # its time features and trunk are used as they are
         self.latent = model.config.latent
         self.anchored = model.config.anchored
+        self.n_states = model.n_states
         if self.anchored:
             with torch.no_grad():
                 tau0 = model.trunk(torch.zeros(1))  # [1, p]
@@ -112,7 +114,7 @@ class FoldedDeepONet(nn.Module):
     def last_layer(self, linear: nn.Linear, model: DeepONet) -> nn.Linear:
         """The branch's last layer with the decoding folded in: [4 p] (anchored) or [4 (p + 1)] outputs."""
         p = self.latent
-        scaled = fold_output(linear, _per_coefficient(model.x_std, p), torch.zeros(N_STATES * p))
+        scaled = fold_output(linear, _per_coefficient(model.x_std, p), torch.zeros(model.n_states * p))
         return scaled if self.anchored else with_constant_coefficient(scaled, p, self.offsets(model))
 
     def trunk(self, t: torch.Tensor) -> torch.Tensor:
@@ -123,8 +125,8 @@ class FoldedDeepONet(nn.Module):
     def coefficients(self, x0, u) -> torch.Tensor:
         """B_aug [N, 4, p + 1]."""
         if not self.anchored:
-            return self.branch(x0, u).reshape(-1, N_STATES, self.latent + 1)
-        b = self.branch(x0, u).reshape(-1, N_STATES, self.latent)
+            return self.branch(x0, u).reshape(-1, self.n_states, self.latent + 1)
+        b = self.branch(x0, u).reshape(-1, self.n_states, self.latent)
         return torch.cat([b, x0.unsqueeze(-1) - torch.matmul(b, self.tau0)], dim=-1)
 
     def forward(self, x0, u, t):
@@ -149,7 +151,7 @@ class FoldedStackedN(FoldedDeepONet):
         self.state_net = _replace(state, -1, self.last_layer(state[-1], model))
         inputs = _replace(model.input_net, 0, fold_input(model.input_net[0], *_input_normalisation(model, False)))
         if not self.anchored:
-            inputs = _replace(inputs, -1, with_constant_coefficient(inputs[-1], p, torch.ones(N_STATES)))
+            inputs = _replace(inputs, -1, with_constant_coefficient(inputs[-1], p, torch.ones(model.n_states)))
         self.input_net = inputs
 
     def branch(self, x0, u):
@@ -170,7 +172,7 @@ class FoldedEnsemble(FoldedDeepONet):
     def __init__(self, ensemble: Ensemble):
         nn.Module.__init__(self)
         members = [FoldedUnstacked(m) for m in ensemble.members]
-        self.k, self.p = len(members), members[0].latent
+        self.k, self.p, self.n_states = len(members), members[0].latent, members[0].n_states
         self.latent, self.anchored = self.k * self.p, True
         self.members = nn.ModuleList(f.model for f in members)  # their time features and trunks
         self.register_buffer("tau0", torch.cat([f.tau0 for f in members]))  # [K p, 1]
@@ -194,7 +196,7 @@ class FoldedEnsemble(FoldedDeepONet):
         h = self.first_layer(torch.cat([x0, torch.flatten(u, 1)], dim=-1)).reshape(-1, self.k, 1, self.width)
         for j in range(self.n_later):
             h = torch.matmul(self.activation(h), getattr(self, f"weight{j}")) + getattr(self, f"bias{j}")
-        return h.reshape(-1, self.k, N_STATES, self.p).transpose(1, 2).reshape(-1, N_STATES * self.latent)
+        return h.reshape(-1, self.k, self.n_states, self.p).transpose(1, 2).reshape(-1, self.n_states * self.latent)
 
 
 class FoldedPINN(nn.Module):

@@ -6,7 +6,8 @@
 * physics loss on collocation trajectories (eq. 7): d x_hat/dt against f(x_hat, u) at the
   predicted state.
 
-f is reference_models.sm4.rhs; u at a grid time is the sensor sample at that time (sensor and
+f is the right-hand side of the dataset's component with its parameters, passed in as a function
+`rhs(x, u)` (the losses know no equations); u at a grid time is the sensor sample at that time (sensor and
 query grids coincide). Residuals are divided per state by `residual_scale` (the std of the
 reference dx/dt over the training split) before squaring: unscaled, omega's residual (its dx/dt
 reaches ~200 rad/s^2 in the first tens of ms) would be the whole loss. d x_hat/dt comes from
@@ -20,7 +21,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from reference_models.sm4 import SM4Params, rhs
 
 
 @dataclass(frozen=True)
@@ -36,25 +36,25 @@ class LossWeights:
 
 
 def residual_scale(x: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Per-state std [4] of dx/dt (units of state per s) of reference trajectories x [N, S, 4] on t [S]."""
+    """Per-state std [n_x] of dx/dt (units of state per s) of reference trajectories x [N, S, n_x] on t [S]."""
     dxdt = np.gradient(np.asarray(x, dtype=float), np.asarray(t, dtype=float), axis=1)
     std = dxdt.reshape(-1, dxdt.shape[-1]).std(0)
     return np.where(std > 1e-9, std, 1.0)  # a state that does not move gets 1, not round-off
 
 
 def value_and_time_derivative(model, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor):
-    """(x_hat, d x_hat/dt), both [N, M, 4] in physical units (per s), differentiable w.r.t. the parameters."""
+    """(x_hat, d x_hat/dt), both [N, M, n_x] in physical units (per s), differentiable w.r.t. the parameters."""
     y, dydt = model.standardised_with_rate(x0, u, t)
     return model.decode(y), model.x_std * dydt
 
 
 def standardise(x: torch.Tensor, model) -> torch.Tensor:
-    """Physical states [..., 4] -> (x - x_mean) / x_std with the model's normalisation."""
+    """Physical states [..., n_x] -> (x - x_mean) / x_std with the model's normalisation."""
     return (x - model.x_mean) / model.x_std
 
 
 def masked_mean(squares: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-    """Mean of squares [N, M, 4] over all entries, or over the (n, m) where mask [N, M] is true."""
+    """Mean of squares [N, M, n_x] over all entries, or over the (n, m) where mask [N, M] is true."""
     if mask is None:
         return squares.mean()
     weights = mask.to(squares.dtype).unsqueeze(-1)
@@ -63,8 +63,8 @@ def masked_mean(squares: torch.Tensor, mask: torch.Tensor | None) -> torch.Tenso
 
 def data_loss(y_hat: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = None,
               state_weights: torch.Tensor | None = None) -> torch.Tensor:
-    """Eq. 5 on standardised states y_hat, y [N, M, 4]: mean of (y_hat - y)^2 (where mask [N, M]),
-    each state's square times state_weights [4] / their mean if given."""
+    """Eq. 5 on standardised states y_hat, y [N, M, n_x]: mean of (y_hat - y)^2 (where mask [N, M]),
+    each state's square times state_weights [n_x] / their mean if given."""
     squares = (y_hat - y) ** 2
     if state_weights is not None:
         squares = squares * (state_weights / state_weights.mean())
@@ -74,11 +74,13 @@ def data_loss(y_hat: torch.Tensor, y: torch.Tensor, mask: torch.Tensor | None = 
 def physics_data_loss(dxdt_hat: torch.Tensor, f_ref: torch.Tensor, scale: torch.Tensor,
                       mask: torch.Tensor | None = None) -> torch.Tensor:
     """Eq. 6: mean of ((d x_hat/dt - f(x, u)) / scale)^2 (where mask [N, M]); f_ref = rhs at the
-    reference states [N, M, 4]."""
+    reference states [N, M, n_x]."""
     return masked_mean(((dxdt_hat - f_ref) / scale) ** 2, mask)
 
 
 def physics_collocation_loss(x_hat: torch.Tensor, dxdt_hat: torch.Tensor, u: torch.Tensor, scale: torch.Tensor,
-                             params: SM4Params = SM4Params()) -> torch.Tensor:
-    """Eq. 7: mean of ((d x_hat/dt - f(x_hat, u)) / scale)^2; u [N, M, 2] the inputs at the same times."""
-    return (((dxdt_hat - rhs(x_hat, u, params)) / scale) ** 2).mean()
+                             rhs) -> torch.Tensor:
+    """Eq. 7: mean of ((d x_hat/dt - rhs(x_hat, u)) / scale)^2; u [N, M, n_u] the inputs at the same
+    times, rhs the component's right-hand side with its parameters bound (e.g. a lambda over
+    Component.rhs)."""
+    return (((dxdt_hat - rhs(x_hat, u)) / scale) ** 2).mean()

@@ -1,22 +1,24 @@
-"""Operator networks for SM4: Unstacked and Stacked-N DeepONets and the dense PINN baseline.
+"""Operator networks: Unstacked and Stacked-N DeepONets and the dense PINN baseline.
 
-Every model maps physical inputs to physical outputs with one signature,
+Networks know no equations: their sizes come from the training split they are fitted to (n_x
+states, n_u input channels, S sensor times), and every model maps physical inputs to physical
+outputs with one signature,
 
-    model(x0 [N, 4], u [N, S, 2], t [M]) -> x [N, M, 4]
+    model(x0 [N, n_x], u [N, S, n_u], t [M]) -> x [N, M, n_x]
 
-(x0 in state units, u = (Vs [pu], theta_vs [rad]) at the S sensor times, t [s] in [0, T]); the
+(x0 in state units, u the component's inputs at the S sensor times, t [s] in [0, T]); the
 normalisation is part of the model as buffers, fitted from the training split (`NormStats`):
 
 * states (x0 on the way in, x on the way out) are standardised per state with the mean and std of
   the training trajectories x (not of x0, whose Ed_p is constant in the paper's box);
-* inputs are standardised per channel and then multiplied by `sensor_gain * sqrt(4 / S)`, so the
-  2 S sensor values together weigh about as much as the 4 initial-state values in the first layer
+* inputs are standardised per channel and then multiplied by `sensor_gain * sqrt(n_x / S)`, so the
+  n_u S sensor values together weigh about as much as the n_x initial-state values in the first layer
   (DESIGN section 7: 5x lower validation MSE than unscaled sensors);
 * time enters as features 2 t/T - 1 and exp(-t/tau) for the configured tau (10-100 ms: the omega
   transient at the start of every window is that fast).
 
-DeepONet output: the branch gives p coefficients per state, [N, 4, p]; the trunk gives p basis
-functions of time shared by the four states, [M, p]; x = x_mean + x_std * (B @ tau^T + b0), or
+DeepONet output: the branch gives p coefficients per state, [N, n_x, p]; the trunk gives p basis
+functions of time shared by the states, [M, p]; x = x_mean + x_std * (B @ tau^T + b0), or
 anchored x = x0 + x_std * B @ (tau - tau(0))^T (exactly x0 at t = 0). A shared basis is enough because the states share their time scales (d delta/dt = omega carries the omega
 transient into delta) and it keeps the trunk, and its time derivative, at p columns.
 
@@ -33,8 +35,6 @@ import numpy as np
 import torch
 from torch import nn
 
-N_STATES = 4
-N_INPUTS = 2
 ARCHITECTURES = ("unstacked", "stacked-n", "pinn")
 ACTIVATIONS = {"tanh": nn.Tanh, "gelu": nn.GELU, "silu": nn.SiLU}
 
@@ -85,8 +85,8 @@ class OperatorConfig:
 
 @dataclass(frozen=True)
 class NormStats:
-    """Normalisation fitted from a training split: per-state mean/std of x [4], per-input mean/std
-    of u [2] (physical units), the horizon T [s] and the number of sensor times S."""
+    """Normalisation fitted from a training split: per-state mean/std of x [n_x], per-input mean/std
+    of u [n_u] (physical units), the horizon T [s] and the number of sensor times S."""
 
     x_mean: tuple
     x_std: tuple
@@ -97,9 +97,10 @@ class NormStats:
 
     @classmethod
     def fit(cls, split: dict) -> "NormStats":
-        """Statistics of a labeled split (dict with x [N, S, 4], u [N, S, 2], t [S])."""
-        x = np.asarray(split["x"], dtype=float).reshape(-1, N_STATES)
-        u = np.asarray(split["u"], dtype=float).reshape(-1, N_INPUTS)
+        """Statistics of a labeled split (dict with x [N, S, n_x], u [N, S, n_u], t [S])."""
+        x = np.asarray(split["x"], dtype=float)
+        u = np.asarray(split["u"], dtype=float)
+        x, u = x.reshape(-1, x.shape[-1]), u.reshape(-1, u.shape[-1])
         t = np.asarray(split["t"], dtype=float)
         as_tuple = lambda a: tuple(float(v) for v in a)  # noqa: E731
         return cls(as_tuple(x.mean(0)), as_tuple(_safe_std(x)), as_tuple(u.mean(0)), as_tuple(_safe_std(u)),
@@ -107,6 +108,14 @@ class NormStats:
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+    @property
+    def n_states(self) -> int:
+        return len(self.x_mean)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.u_mean)
 
     @classmethod
     def from_dict(cls, data: dict) -> "NormStats":
@@ -142,13 +151,14 @@ class OperatorModel(nn.Module, ABC):
         super().__init__()
         self.config = config
         self.n_sensors = stats.n_sensors
+        self.n_states, self.n_inputs = stats.n_states, stats.n_inputs
         f32 = dict(dtype=torch.float32)
         self.register_buffer("x_mean", torch.tensor(stats.x_mean, **f32))
         self.register_buffer("x_std", torch.tensor(stats.x_std, **f32))
         self.register_buffer("u_mean", torch.tensor(stats.u_mean, **f32))
         self.register_buffer("u_std", torch.tensor(stats.u_std, **f32))
         self.register_buffer("horizon", torch.tensor(stats.horizon, **f32))
-        sensor_scale = config.sensor_gain * math.sqrt(N_STATES / stats.n_sensors)
+        sensor_scale = config.sensor_gain * math.sqrt(stats.n_states / stats.n_sensors)
         self.register_buffer("sensor_scale", torch.tensor(sensor_scale, **f32))
         self.register_buffer("time_taus", torch.tensor(config.time_taus, **f32))
 
@@ -163,11 +173,11 @@ class OperatorModel(nn.Module, ABC):
                          float(self.horizon), self.n_sensors)
 
     def encode_state(self, x0: torch.Tensor) -> torch.Tensor:
-        """Standardised initial state [N, 4]."""
+        """Standardised initial state [N, n_x]."""
         return (x0 - self.x_mean) / self.x_std
 
     def encode_sensors(self, u: torch.Tensor) -> torch.Tensor:
-        """Scaled, standardised sensor values, flattened time-major: [N, S, 2] -> [N, 2 S]."""
+        """Scaled, standardised sensor values, flattened time-major: [N, S, n_u] -> [N, n_u S]."""
         return torch.flatten((u - self.u_mean) / self.u_std * self.sensor_scale, 1)
 
     def time_features(self, t: torch.Tensor) -> torch.Tensor:
@@ -176,26 +186,26 @@ class OperatorModel(nn.Module, ABC):
         return torch.cat([2.0 * t / self.horizon - 1.0, torch.exp(-t / self.time_taus)], dim=-1)
 
     def decode(self, y: torch.Tensor) -> torch.Tensor:
-        """Standardised states [..., 4] -> physical units."""
+        """Standardised states [..., n_x] -> physical units."""
         return self.x_mean + self.x_std * y
 
     @abstractmethod
     def standardised(self, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """Standardised states [N, M, 4] (x - x_mean) / x_std: what the data loss compares."""
+        """Standardised states [N, M, n_x] (x - x_mean) / x_std: what the data loss compares."""
 
     def forward(self, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-        """States [N, M, 4] (physical units)."""
+        """States [N, M, n_x] (physical units)."""
         return self.decode(self.standardised(x0, u, t))
 
     def standardised_with_rate(self, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor):
-        """(y, dy/dt): standardised states [N, M, 4] and their time derivative [1/s], by forward-mode
+        """(y, dy/dt): standardised states [N, M, n_x] and their time derivative [1/s], by forward-mode
         autodiff w.r.t. t (y[n, m] depends on t[m] alone, so a unit tangent on every time gives all
         N x M derivatives in one pass). Differentiable w.r.t. the parameters. Not for export."""
         return torch.func.jvp(lambda times: self.standardised(x0, u, times), (t,), (torch.ones_like(t),))
 
 
 class DeepONet(OperatorModel):
-    """Branch coefficients [N, 4, p] times a shared trunk basis [M, p], plus a bias per state; or,
+    """Branch coefficients [N, n_x, p] times a shared trunk basis [M, p], plus a bias per state; or,
     anchored, the standardised x0 plus the coefficients times the basis' change since t = 0."""
 
     def __init__(self, config: OperatorConfig, stats: NormStats):
@@ -203,18 +213,18 @@ class DeepONet(OperatorModel):
         c = config
         self.trunk_net = mlp(self.n_time_features, c.width, c.depth, c.latent, c.activation, out_activation=True)
         if not c.anchored:
-            self.bias = nn.Parameter(torch.zeros(N_STATES))
+            self.bias = nn.Parameter(torch.zeros(self.n_states))
 
     @abstractmethod
     def branch(self, x0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-        """Coefficients [N, 4, p] for x0 [N, 4] and u [N, S, 2] (physical units)."""
+        """Coefficients [N, n_x, p] for x0 [N, n_x] and u [N, S, n_u] (physical units)."""
 
     def trunk(self, t: torch.Tensor) -> torch.Tensor:
         """Basis functions [M, p] at times t [M] (s)."""
         return self.trunk_net(self.time_features(t))
 
     def offset(self, x0: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-        """What is added to B tau^T [N, 4, M]: the bias [4, 1], or anchored y0 - B tau(0) [N, 4, 1]."""
+        """What is added to B tau^T [N, n_x, M]: the bias [n_x, 1], or anchored y0 - B tau(0) [N, n_x, 1]."""
         if not self.config.anchored:
             return self.bias.unsqueeze(-1)
         tau0 = self.trunk(torch.zeros(1, dtype=x0.dtype, device=x0.device))  # [1, p]
@@ -222,7 +232,7 @@ class DeepONet(OperatorModel):
 
     def standardised(self, x0, u, t):
         b = self.branch(x0, u)
-        y = torch.matmul(b, self.trunk(t).transpose(0, 1)) + self.offset(x0, b)  # [N, 4, M]
+        y = torch.matmul(b, self.trunk(t).transpose(0, 1)) + self.offset(x0, b)  # [N, n_x, M]
         return y.transpose(1, 2)
 
     def standardised_with_rate(self, x0, u, t):
@@ -234,17 +244,17 @@ class DeepONet(OperatorModel):
 
 
 class UnstackedDeepONet(DeepONet):
-    """One branch net over the concatenation [x0 (4), sensors (2 S)]."""
+    """One branch net over the concatenation [x0 (n_x), sensors (n_u S)]."""
 
     def __init__(self, config: OperatorConfig, stats: NormStats):
         super().__init__(config, stats)
         c = config
-        n_in = N_STATES + N_INPUTS * stats.n_sensors
-        self.branch_net = mlp(n_in, c.width, c.depth, N_STATES * c.latent, c.activation)
+        n_in = self.n_states + self.n_inputs * stats.n_sensors
+        self.branch_net = mlp(n_in, c.width, c.depth, self.n_states * c.latent, c.activation)
 
     def branch(self, x0, u):
         z = torch.cat([self.encode_state(x0), self.encode_sensors(u)], dim=-1)
-        return self.branch_net(z).reshape(-1, N_STATES, self.config.latent)
+        return self.branch_net(z).reshape(-1, self.n_states, self.config.latent)
 
 
 class StackedNDeepONet(DeepONet):
@@ -258,28 +268,28 @@ class StackedNDeepONet(DeepONet):
     def __init__(self, config: OperatorConfig, stats: NormStats):
         super().__init__(config, stats)
         c = config
-        self.state_net = mlp(N_STATES, c.width, c.depth, N_STATES * c.latent, c.activation)
-        self.input_net = mlp(N_INPUTS * stats.n_sensors, c.width, c.depth, N_STATES * c.latent, c.activation)
+        self.state_net = mlp(self.n_states, c.width, c.depth, self.n_states * c.latent, c.activation)
+        self.input_net = mlp(self.n_inputs * stats.n_sensors, c.width, c.depth, self.n_states * c.latent, c.activation)
 
     def branch(self, x0, u):
         b = self.state_net(self.encode_state(x0)) * self.input_net(self.encode_sensors(u))
-        return b.reshape(-1, N_STATES, self.config.latent)
+        return b.reshape(-1, self.n_states, self.config.latent)
 
 
 class PINN(OperatorModel):
-    """One dense net over [x0, sensors, time features] -> 4 states, evaluated at every (n, m).
+    """One dense net over [x0, sensors, time features] -> n_x states, evaluated at every (n, m).
 
     The first layer is split into a part for [x0, sensors] and a part for the time features whose
     outputs are added ([N, 1, w] + [1, M, w]): the same net as one layer over the concatenated
-    input, without building the [N, M, 4 + 2 S] input. With the same width and depth it has about
+    input, without building the [N, M, n_x + n_u S] input. With the same width and depth it has about
     as many parameters as the Unstacked DeepONet (the first layer dominates both).
     """
 
     def __init__(self, config: OperatorConfig, stats: NormStats):
         super().__init__(config, stats)
         c = config
-        n_z = N_STATES + N_INPUTS * stats.n_sensors
-        net = mlp(n_z + self.n_time_features, c.width, c.depth, N_STATES, c.activation)
+        n_z = self.n_states + self.n_inputs * stats.n_sensors
+        net = mlp(n_z + self.n_time_features, c.width, c.depth, self.n_states, c.activation)
         first = net[0]
         self.input_layer = nn.Linear(n_z, c.width)
         self.time_layer = nn.Linear(self.n_time_features, c.width, bias=False)

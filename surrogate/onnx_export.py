@@ -1,8 +1,9 @@
 """Export a trained operator to one ONNX file (DESIGN section 4), checked against torch.
 
-Graph: inputs x0 [N, 4], u [N, S, 2], t [M] (physical units, float32); output x [N, M, 4];
+Graph: inputs x0 [N, n_x], u [N, S, n_u], t [M] (physical units, float32); output x [N, M, n_x];
 normalisation inside, folded into the first and last linear layers (folding.py); opset 17; N and M
-dynamic. metadata_props carry what an importer needs to use the file safely: component, names, horizon, sensor times, the training envelope, architecture,
+dynamic. metadata_props carry what an importer needs to use the file safely: the component and the parameters
+of the machine it was trained for (from the dataset), names, horizon, sensor times, the training envelope, architecture,
 training summary, test metrics, the per-state residual scale, the residual level to warn above, the
 window length to roll over at in co-simulation (`rollover_horizon_s`) and the opfmu version.
 """
@@ -17,10 +18,9 @@ import torch
 
 from reference_models.version import __version__
 from reference_models.files import atomic_path
-from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
 
 from .contract import TOLERANCE, random_inputs
-from .data import load_metadata, load_split
+from .data import load_metadata, load_split, machine_of
 from .ensemble import Ensemble, EnsembleError, architecture
 from .evaluation import evaluate
 from .folding import fold
@@ -57,17 +57,20 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
     run_configs = [json.loads((r / "config.json").read_text()) for r in run_dirs]
     data_dir = Path(data_dir or run_configs[0]["data"]["dir"])
     data_meta = load_metadata(data_dir)
+    component, params = machine_of(data_meta)
     envelope = data_meta["envelope"]
     member_data = [data_meta] if len(models) == 1 else [_training_dataset(c) for c in run_configs]
     if len(models) > 1:
+        _same_machine(data_meta, member_data)
         envelope = _intersection([envelope] + [meta["envelope"] for meta in member_data])
     t_grid = np.linspace(0.0, data_meta["horizon_s"], data_meta["n_points"])
     summaries = [_training_summary(r, c, meta) for r, c, meta in zip(run_dirs, run_configs, member_data)]
     causal = all(c["train"].get("causal") for c in run_configs)
     metadata = {
-        "component": "sm4",
-        "state_names": json.dumps(list(STATE_NAMES)),
-        "input_names": json.dumps(list(INPUT_NAMES)),
+        "component": component.name,
+        "params": json.dumps(params.to_dict()),
+        "state_names": json.dumps(list(component.state_names)),
+        "input_names": json.dumps(list(component.input_names)),
         "horizon_s": repr(float(data_meta["horizon_s"])),
         "n_sensors": str(len(t_grid)),
         "sensor_times_s": json.dumps(t_grid.tolist()),
@@ -77,13 +80,13 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
         "training": json.dumps(summaries[0] if len(models) == 1 else {"ensemble": summaries}),
         "metrics": json.dumps(_test_metrics(model, data_dir)),
         "residual_scale": json.dumps(_residual_scale(data_dir)),
-        "residual_limit": json.dumps(residual_limit(model, data_dir)),
+        "residual_limit": json.dumps(residual_limit(model, data_dir, component, params)),
         "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if causal else 1.0)),
         "opfmu_version": __version__,
     }
     with atomic_path(out) as tmp:
-        _torch_export(fold(model), len(t_grid), tmp)
-        _attach_metadata(tmp, metadata)
+        _torch_export(fold(model), len(t_grid), component.n_states, component.n_inputs, tmp)
+        _attach_metadata(tmp, metadata, component)
         worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed)
         if not worst <= TOLERANCE:
             raise ExportError(f"onnxruntime differs from torch by {worst:.2e} (> {TOLERANCE:g}); not written")
@@ -98,6 +101,14 @@ def _training_dataset(run_config: dict) -> dict:
     return load_metadata(data_dir)
 
 
+def _same_machine(data_meta: dict, member_data: list) -> None:
+    """An ensemble's members must model one machine: the same component and parameters."""
+    machines = {json.dumps([m.get("component"), m.get("params")], sort_keys=True) for m in [data_meta, *member_data]}
+    if len(machines) > 1:
+        raise ExportError("the members were trained for different machines (component or parameters differ): "
+                          "their mean models none of them")
+
+
 def _intersection(envelopes: list) -> dict:
     """The box every envelope contains: per group and name, [max of the lows, min of the highs]."""
     box = {group: {name: [max(e[group][name][0] for e in envelopes), min(e[group][name][1] for e in envelopes)]
@@ -109,8 +120,8 @@ def _intersection(envelopes: list) -> dict:
     return box
 
 
-def _torch_export(model, n_sensors: int, path: Path) -> None:
-    x0, u, t = torch.zeros(2, 4), torch.ones(2, n_sensors, 2), torch.linspace(0, 1, 5)
+def _torch_export(model, n_sensors: int, n_states: int, n_inputs: int, path: Path) -> None:
+    x0, u, t = torch.zeros(2, n_states), torch.ones(2, n_sensors, n_inputs), torch.linspace(0, 1, 5)
     dynamic = {"x0": {0: "N"}, "u": {0: "N"}, "t": {0: "M"}, "x": {0: "N", 1: "M"}}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the TorchScript exporter's deprecation notice
@@ -118,16 +129,16 @@ def _torch_export(model, n_sensors: int, path: Path) -> None:
                           dynamic_axes=dynamic, opset_version=OPSET, dynamo=False)
 
 
-def _attach_metadata(path: Path, metadata: dict) -> None:
+def _attach_metadata(path: Path, metadata: dict, component) -> None:
     import onnx
 
     proto = onnx.load(str(path))
-    output = proto.graph.output[0]  # the exporter leaves the state axis symbolic: declare [N, M, 4]
-    output.CopyFrom(onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, ["N", "M", 4]))
+    output = proto.graph.output[0]  # the exporter leaves the state axis symbolic: declare [N, M, n_x]
+    output.CopyFrom(onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, ["N", "M", component.n_states]))
     del proto.metadata_props[:]
     for key, value in metadata.items():
         proto.metadata_props.add(key=key, value=value)
-    proto.doc_string = "opfmu operator: x(t) of SM4 from x0 and u at the sensor times"
+    proto.doc_string = f"opfmu operator: x(t) of {component.name} from x0 and u at the sensor times"
     onnx.checker.check_model(proto)
     onnx.save(proto, str(path))
 
@@ -159,12 +170,12 @@ def _training_summary(run_dir: Path, run_config: dict, data_meta: dict) -> dict:
             "wall_s": result.get("wall_s"), "losses": losses, "optimizer": train["optimizer"],
             "lr": train["lr"], "lr_schedule": train.get("lr_schedule"), "time_points": train.get("time_points"),
             "weights": train["weights"], "causal": train.get("causal", False),
-            "state_weights": train.get("state_weights", [1.0] * 4), "dataset": {"preset": data_meta["preset"]["name"],
+            "state_weights": train.get("state_weights"), "dataset": {"preset": data_meta["preset"]["name"],
                                                      "seed": data_meta["seed"], "fingerprint": data_meta["fingerprint"]}}
 
 
 def _residual_scale(data_dir: Path) -> list:
-    """Per-state scale [4] of physics residuals (std of the reference dx/dt over the train split):
+    """Per-state scale [n_x] of physics residuals (std of the reference dx/dt over the train split):
     what the FMU divides its residual by, as the physics losses do."""
     train = load_split(data_dir, "train")
     return residual_scale(train["x"], train["t"]).tolist()
@@ -178,11 +189,10 @@ def _residual_scale(data_dir: Path) -> list:
 RESIDUAL_LIMIT_QUANTILE = 0.95
 
 
-def residual_limit(model, data_dir: Path) -> float:
+def residual_limit(model, data_dir: Path, component, params) -> float:
     """The RESIDUAL_LIMIT_QUANTILE quantile over the test split's (trajectory, time) points of the
-    residual the FMU reports: RMS over states of (d x_hat/dt - f(x_hat, u)) / residual_scale."""
-    from reference_models.sm4 import rhs
-
+    residual the FMU reports: RMS over states of (d x_hat/dt - f(x_hat, u)) / residual_scale, with f
+    the right-hand side of the machine (component, params) the dataset was solved for."""
     test = load_split(data_dir, "test")
     scale = torch.as_tensor(_residual_scale(data_dir), dtype=torch.float32)
     f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
@@ -190,7 +200,7 @@ def residual_limit(model, data_dir: Path) -> float:
     with torch.no_grad():
         y, dydt = model.standardised_with_rate(x0, u, t)
         x_hat, dxdt = model.decode(y), model.x_std * dydt
-        r = torch.sqrt((((dxdt - rhs(x_hat, u)) / scale) ** 2).mean(-1))
+        r = torch.sqrt((((dxdt - component.rhs(x_hat, u, params)) / scale) ** 2).mean(-1))
     return float(np.quantile(r.numpy(), RESIDUAL_LIMIT_QUANTILE))
 
 

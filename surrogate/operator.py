@@ -18,8 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_models.sm4 import INPUT_NAMES, STATE_NAMES
-
 
 DEFAULT_OPERATOR = Path(__file__).parent / "default" / "sm4_cosim.onnx"
 
@@ -33,7 +31,9 @@ class EnvelopeWarning(UserWarning):
 
 
 class Operator:
-    """An exported SM4 operator. predict(x0 [N, 4], u [N, S, 2], t [M]) -> x [N, M, 4] (float32)."""
+    """An exported operator of a component. predict(x0 [N, n_x], u [N, S, n_u], t [M]) -> x [N, M, n_x]
+    (float32). `state_names`, `input_names`, `component` and `params` (the machine it was trained
+    for, a dict) come from the file's metadata."""
 
     CACHE_SIZE = 8  # time grids whose trunk basis is kept
     # smaller batches run the branch on one thread: there the hand-off between threads costs more than
@@ -50,18 +50,24 @@ class Operator:
         proto = onnx.load(str(path))
         self.path = path
         self.metadata = {p.key: p.value for p in proto.metadata_props}
-        missing = {"horizon_s", "n_sensors", "envelope"} - set(self.metadata)
+        missing = {"horizon_s", "n_sensors", "envelope", "state_names", "input_names"} - set(self.metadata)
         if missing:
             raise OperatorInputError(f"{path} is not an opfmu operator (metadata lacks {', '.join(sorted(missing))})")
         self.horizon = float(self.metadata["horizon_s"])
         self.n_sensors = int(self.metadata["n_sensors"])
         self.envelope = json.loads(self.metadata["envelope"])
-        bounds = [self.envelope["x0"][n] for n in STATE_NAMES] + [self.envelope["u"][n] for n in INPUT_NAMES]
+        self.state_names = tuple(json.loads(self.metadata["state_names"]))
+        self.input_names = tuple(json.loads(self.metadata["input_names"]))
+        self.component = self.metadata.get("component")
+        self.params = json.loads(self.metadata.get("params", "null"))
+        n_x = len(self.state_names)
+        bounds = ([self.envelope["x0"][n] for n in self.state_names] +
+                  [self.envelope["u"][n] for n in self.input_names])
         self._env_min, self._env_max = np.array(bounds).T
-        # per-value bounds, widened by 1e-6, for the quick test: x0's four, then (Vs, theta_vs) per sensor
-        self._x_low, self._x_high = self._env_min[:4] - 1e-6, self._env_max[:4] + 1e-6
-        self._u_low = np.tile(self._env_min[4:] - 1e-6, self.n_sensors)
-        self._u_high = np.tile(self._env_max[4:] + 1e-6, self.n_sensors)
+        # per-value bounds, widened by 1e-6, for the quick test: x0's, then the inputs per sensor
+        self._x_low, self._x_high = self._env_min[:n_x] - 1e-6, self._env_max[:n_x] + 1e-6
+        self._u_low = np.tile(self._env_min[n_x:] - 1e-6, self.n_sensors)
+        self._u_high = np.tile(self._env_max[n_x:] + 1e-6, self.n_sensors)
         available = ort.get_available_providers()
         providers = providers or [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in available]
 
@@ -99,17 +105,17 @@ class Operator:
         return self._branch is not None
 
     def predict(self, x0, u, t, strict: bool = False) -> np.ndarray:
-        """States x [N, M, 4] at times t [M] (s, within [0, horizon]) from x0 [N, 4] and inputs u [N, S, 2]
+        """States x [N, M, n_x] at times t [M] (s, within [0, horizon]) from x0 [N, n_x] and inputs u [N, S, n_u]
         at the operator's sensor times. Outside the training envelope: EnvelopeWarning, or
         OperatorInputError when strict."""
         x0, u, t = self._checked(x0, u, t, strict)
         if self._branch is None:
             return self._full.run(["x"], {"x0": x0, "u": u, "t": t})[0]
         branch = self._branch_small if len(x0) < self.SMALL_BATCH else self._branch
-        b = branch.run(None, {"x0": x0, "u": u})[0]  # [N, 4, q]
+        b = branch.run(None, {"x0": x0, "u": u})[0]  # [N, n_x, q]
         basis = self._trunk(t)  # tau^T [q, M]
         if self._head is None:
-            return (b.reshape(-1, b.shape[-1]) @ basis).reshape(len(x0), 4, len(t)).transpose(0, 2, 1)
+            return (b.reshape(-1, b.shape[-1]) @ basis).reshape(len(x0), b.shape[1], len(t)).transpose(0, 2, 1)
         names = [i.name for i in self._head.get_inputs()]
         return self._head.run(["x"], {names[0]: b, names[1]: basis})[0]
 
@@ -126,11 +132,12 @@ class Operator:
 
     def _checked(self, x0, u, t, strict: bool):
         x0, u, t = (np.ascontiguousarray(a, dtype=np.float32) for a in (x0, u, t))
-        if x0.ndim != 2 or x0.shape[1] != 4:
-            raise OperatorInputError(f"x0 must be [N, 4] ({', '.join(STATE_NAMES)}), got shape {x0.shape}")
-        if u.shape != (x0.shape[0], self.n_sensors, 2):
-            raise OperatorInputError(f"u must be [N, S, 2] = [{x0.shape[0]}, {self.n_sensors}, 2] "
-                                     f"({', '.join(INPUT_NAMES)} at the sensor times), got shape {u.shape}")
+        n_x, n_u = len(self.state_names), len(self.input_names)
+        if x0.ndim != 2 or x0.shape[1] != n_x:
+            raise OperatorInputError(f"x0 must be [N, {n_x}] ({', '.join(self.state_names)}), got shape {x0.shape}")
+        if u.shape != (x0.shape[0], self.n_sensors, n_u):
+            raise OperatorInputError(f"u must be [N, S, {n_u}] = [{x0.shape[0]}, {self.n_sensors}, {n_u}] "
+                                     f"({', '.join(self.input_names)} at the sensor times), got shape {u.shape}")
         if t.ndim != 1 or t.size == 0:
             raise OperatorInputError(f"t must be a non-empty 1-D array of times, got shape {t.shape}")
         t_low, t_high = t.min(), t.max()
@@ -159,19 +166,20 @@ class Operator:
 
     @staticmethod
     def _ranges(x0: np.ndarray, u: np.ndarray):
-        """(min, max) [6] of the four states in x0 and the two inputs in u: a reduction over the
-        trajectories first (contiguous rows), then over the 2 S interleaved sensor values."""
+        """(min, max) [n_x + n_u] of the states in x0 and the inputs in u: a reduction over the
+        trajectories first (contiguous rows), then over the n_u S interleaved sensor values."""
+        n_u = u.shape[-1]
         flat = u.reshape(len(u), -1)
         low, high = flat.min(0), flat.max(0)
-        return (np.array([*x0.min(0), low[0::2].min(), low[1::2].min()]),
-                np.array([*x0.max(0), high[0::2].max(), high[1::2].max()]))
+        return (np.array([*x0.min(0), *(low[c::n_u].min() for c in range(n_u))]),
+                np.array([*x0.max(0), *(high[c::n_u].max() for c in range(n_u))]))
 
     def _outside(self, low: np.ndarray, high: np.ndarray) -> list[str]:
         outside = (low < self._env_min - 1e-6) | (high > self._env_max + 1e-6)
         if not outside.any():
             return []
         return [f"{name} in [{low[i]:.4g}, {high[i]:.4g}], trained [{self._env_min[i]:.4g}, {self._env_max[i]:.4g}]"
-                for i, name in enumerate(STATE_NAMES + INPUT_NAMES) if outside[i]]
+                for i, name in enumerate(self.state_names + self.input_names) if outside[i]]
 
 
 def split_branch_trunk(proto):

@@ -4,7 +4,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from reference_models.files import write_json
-from reference_models.sm4 import STATE_NAMES
 
 from .data import load_split
 from .evaluation import aggregate, evaluate, plot_error_over_time, plot_trajectories, predict, to_jsonable
@@ -51,7 +50,9 @@ def check_operator(operator, data_dir, out, split: str = "test") -> str:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EnvelopeWarning)
         x_hat = operator.predict(data["x0"], data["u"], data["t"]).astype(np.float64)
-    metrics = error_metrics(x_hat, data["x"], data["x"].reshape(-1, 4).std(0))  # standardised by this split
+    n_x = data["x"].shape[-1]
+    metrics = error_metrics(x_hat, data["x"], data["x"].reshape(-1, n_x).std(0),  # standardised by this split
+                            data["component"].state_names)
     out = Path(out)
     write_json(out / "metrics.json", {"operator": str(operator.path), "data": str(data_dir), "split": split,
                                       "outside_envelope": outside, "metrics": to_jsonable(metrics)})
@@ -79,6 +80,6 @@ def format_table(summary: dict, title: str) -> str:
 
     row("all (physical units)", mean["physical"], std["physical"])
     row("all (standardised)", mean["standardised"], std["standardised"])
-    for name in STATE_NAMES:
+    for name in mean["per_state"]:
         row(f"  {name}", mean["per_state"][name], std["per_state"][name])
     return "\n".join(lines)

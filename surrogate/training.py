@@ -27,12 +27,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from reference_models.files import atomic_path, write_json
-from reference_models.sm4 import rhs
+from reference_models.progress import progress_bar
 
-from .data import load_metadata, load_split
+from .data import load_metadata, load_split, machine_of
 from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, residual_scale,
                      standardise)
 from .models import NormStats, OperatorConfig, OperatorModel, build_model
@@ -97,8 +96,8 @@ class TrainConfig:
             raise ValueError("epochs must be >= 0, patience and checkpoint_every >= 1")
         if self.time_points is not None and self.time_points < 1:
             raise ValueError("time_points must be >= 1 (or None for the whole grid)")
-        if len(self.state_weights) != 4 or min(self.state_weights) < 0 or max(self.state_weights) <= 0:
-            raise ValueError(f"state_weights must be 4 weights >= 0, not all 0; got {self.state_weights}")
+        if len(self.state_weights) < 1 or min(self.state_weights) < 0 or max(self.state_weights) <= 0:
+            raise ValueError(f"state_weights must be one weight >= 0 per state, not all 0; got {self.state_weights}")
         object.__setattr__(self, "state_weights", tuple(float(w) for w in self.state_weights))
 
     def to_dict(self) -> dict:
@@ -137,14 +136,15 @@ class _Tensors:
     t: torch.Tensor
     x0: torch.Tensor
     u: torch.Tensor
-    y: torch.Tensor              # standardised reference states, [N, S, 4]
-    f_ref: torch.Tensor          # rhs at the reference states, [N, S, 4]
+    y: torch.Tensor              # standardised reference states, [N, S, n_x]
+    f_ref: torch.Tensor          # rhs at the reference states, [N, S, n_x]
     val_x0: torch.Tensor
     val_u: torch.Tensor
     val_y: torch.Tensor
     col_x0: torch.Tensor | None
     col_u: torch.Tensor | None
-    scale: torch.Tensor          # per-state residual scale [4]
+    scale: torch.Tensor          # per-state residual scale [n_x]
+    rhs: object                  # (x, u) -> dx/dt of the dataset's component and parameters (torch)
 
 
 @dataclass
@@ -169,6 +169,10 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
     """
     data_dir, run_dir = Path(data_dir), Path(run_dir)
     meta = load_metadata(data_dir)
+    machine = machine_of(meta)
+    if len(config.state_weights) != machine[0].n_states:
+        raise TrainError(f"state_weights gives {len(config.state_weights)} weights for the {machine[0].n_states} "
+                         f"states of {machine[0].name} ({', '.join(machine[0].state_names)})")
     data_info = {"dir": str(data_dir.resolve()), "fingerprint": meta.get("fingerprint")}
     checkpoint_path = run_dir / "checkpoint.pt"
     resuming = checkpoint_path.exists()
@@ -181,7 +185,7 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
         model = build_model(config.model, NormStats.fit(splits["train"]))
-    tensors = _to_tensors(splits, model)
+    tensors = _to_tensors(splits, model, machine)
     with _eager_heavyball():
         optimizer = _make_optimizer(model, config)
         generator = torch.Generator().manual_seed(config.seed)
@@ -200,7 +204,7 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
 def _loop(model, optimizer, generator, state: _State, tensors: _Tensors, config: TrainConfig, run_dir: Path,
           progress: bool) -> None:
     """Epochs until `config.epochs` or early stopping; checkpoints periodically and at the end."""
-    bar = tqdm(total=config.epochs, initial=state.epoch, desc="training", unit="epoch", disable=not progress)
+    bar = progress_bar(total=config.epochs, initial=state.epoch, desc="training", unit="epoch", enabled=progress)
     with open(run_dir / "metrics.jsonl", "a") as log, warnings.catch_warnings():
         # heavyball notes every rate change of the schedule as "experimental"; it is supported here
         warnings.filterwarnings("ignore", message="Learning rate changed between steps")
@@ -263,7 +267,7 @@ def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -
     if use_pc:
         yc_hat, dyc_hat = model.standardised_with_rate(tensors.col_x0, col_u, t)
         terms["physics_collocation"] = physics_collocation_loss(
-            model.decode(yc_hat), model.x_std * dyc_hat, pick(col_u), tensors.scale)
+            model.decode(yc_hat), model.x_std * dyc_hat, pick(col_u), tensors.scale, tensors.rhs)
         total = total + w.physics_collocation * terms["physics_collocation"]
     optimizer.zero_grad(set_to_none=True)
     total.backward()
@@ -272,7 +276,7 @@ def _step(model, optimizer, generator, tensors: _Tensors, config: TrainConfig) -
 
 
 def held_after(u: torch.Tensor, cut: torch.Tensor) -> torch.Tensor:
-    """u [N, S, 2] with every sensor after index cut[n] set to the value at cut[n] (held)."""
+    """u [N, S, n_u] with every sensor after index cut[n] set to the value at cut[n] (held)."""
     index = torch.minimum(torch.arange(u.shape[1])[None, :], cut[:, None])
     return torch.gather(u, 1, index.unsqueeze(-1).expand(-1, -1, u.shape[2]))
 
@@ -306,21 +310,24 @@ def _load_splits(data_dir: Path, config: TrainConfig) -> dict:
     return splits
 
 
-def _to_tensors(splits: dict, model: OperatorModel) -> _Tensors:
-    """The splits as float32 tensors; reference states standardised with the model's normalisation."""
+def _to_tensors(splits: dict, model: OperatorModel, machine) -> _Tensors:
+    """The splits as float32 tensors; reference states standardised with the model's normalisation;
+    the right-hand side is that of the dataset's machine (component, parameters)."""
     train_split, val_split, col = splits["train"], splits["val"], splits.get("collocation")
     f32 = lambda a: torch.as_tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
     t = f32(train_split["t"])
     with torch.no_grad():
         probe = model.standardised(f32(train_split["x0"][:1]), f32(train_split["u"][:1]), t)
     target = lambda x: _laid_out_like(standardise(f32(x), model), probe)  # noqa: E731
-    f_ref = rhs(torch.as_tensor(train_split["x"]), torch.as_tensor(train_split["u"]))
+    component, params = machine
+    f_ref = component.rhs(torch.as_tensor(train_split["x"]), torch.as_tensor(train_split["u"]), params)
     return _Tensors(
         t=t, x0=f32(train_split["x0"]), u=f32(train_split["u"]), y=target(train_split["x"]),
         f_ref=_laid_out_like(f_ref.float(), probe),
         val_x0=f32(val_split["x0"]), val_u=f32(val_split["u"]), val_y=target(val_split["x"]),
         col_x0=None if col is None else f32(col["x0"]), col_u=None if col is None else f32(col["u"]),
         scale=f32(residual_scale(train_split["x"], train_split["t"])),
+        rhs=lambda x, u: component.rhs(x, u, params),
     )
 
 

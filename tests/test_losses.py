@@ -60,7 +60,7 @@ def test_physics_residual_of_a_reference_trajectory_is_near_zero_and_of_a_pertur
 
     def residual(states):
         dxdt = np.gradient(states, t, axis=1, edge_order=2)  # derivative of the given trajectory
-        return physics_collocation_loss(torch.tensor(states), torch.tensor(dxdt), torch.tensor(u), scale).item()
+        return physics_collocation_loss(torch.tensor(states), torch.tensor(dxdt), torch.tensor(u), scale, rhs).item()
 
     assert residual(x) < 1e-4 * residual(perturbed)
     assert residual(perturbed) > 1e-4

@@ -9,6 +9,7 @@ import onnx
 import pytest
 import torch
 
+from reference_models.sm4 import SM4
 from surrogate.data import generate, load_metadata, load_split
 from surrogate.models import OperatorConfig
 from surrogate.onnx_export import ExportError, _attach_metadata, _torch_export, export_onnx
@@ -106,8 +107,8 @@ def test_a_graph_with_the_decoding_after_the_product_runs_its_head_as_a_session(
     if model.config.arch == "pinn":
         pytest.skip("the PINN has no head")
     unfolded = tmp_path / "unfolded.onnx"
-    _torch_export(model, model.n_sensors, unfolded)
-    _attach_metadata(unfolded, {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props})
+    _torch_export(model, model.n_sensors, SM4.n_states, SM4.n_inputs, unfolded)
+    _attach_metadata(unfolded, {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}, SM4)
     op, reference = Operator.load(unfolded), Operator.load(exported[1])
     x0, u = in_envelope_inputs(load_metadata(paper_tiny[1]))
     t = np.linspace(0, 1, 9)

@@ -17,7 +17,7 @@ def sample(fam, n=6, seed=0):
 
 def test_slow_family_signal_solves_its_first_order_ode():
     for s in sample(SLOW):
-        for ch in (s.Vs, s.theta_vs):
+        for ch in (s.channels["Vs"], s.channels["theta_vs"]):
             ode = lambda t, y: [-ch.k * (y[0] - ch.y_ref) + ch.A * np.sin(ch.w * t)]
             sol = solve_ivp(ode, (0, 1), [ch.y0], method="DOP853", t_eval=T, rtol=1e-12, atol=1e-13)
             np.testing.assert_allclose(ch(T), sol.y[0], rtol=0, atol=1e-9)
@@ -25,7 +25,7 @@ def test_slow_family_signal_solves_its_first_order_ode():
 
 def test_fast_family_signal_solves_its_second_order_ode():
     for s in sample(FAST):
-        for ch in (s.Vs, s.theta_vs):
+        for ch in (s.channels["Vs"], s.channels["theta_vs"]):
             ode = lambda t, y: [y[1], -2 * ch.zeta * ch.wn * y[1] - ch.wn**2 * (y[0] - ch.y_ref)]
             sol = solve_ivp(ode, (0, 1), [ch.y0, ch.dy0], method="DOP853", t_eval=T, rtol=1e-12, atol=1e-13)
             np.testing.assert_allclose(ch(T), sol.y[0], rtol=0, atol=1e-9)
@@ -33,13 +33,13 @@ def test_fast_family_signal_solves_its_second_order_ode():
 
 def test_paper_family_parameters_lie_in_the_paper_ranges():
     for s in sample(SLOW, 50):
-        assert 1 <= s.Vs.k <= 2 and 0 <= s.Vs.A <= 0.03 and 0.5 <= s.Vs.w <= 1.5 and 0.7 <= s.Vs.y0 <= 1.2
-        assert 1 <= s.theta_vs.k <= 3 and 0 <= s.theta_vs.A <= 0.05 and 0.1 <= s.theta_vs.w <= 0.5
-        assert s.Vs.y_ref == 1.0 and s.theta_vs.y_ref == 0.0
+        assert 1 <= s.channels["Vs"].k <= 2 and 0 <= s.channels["Vs"].A <= 0.03 and 0.5 <= s.channels["Vs"].w <= 1.5 and 0.7 <= s.channels["Vs"].y0 <= 1.2
+        assert 1 <= s.channels["theta_vs"].k <= 3 and 0 <= s.channels["theta_vs"].A <= 0.05 and 0.1 <= s.channels["theta_vs"].w <= 0.5
+        assert s.channels["Vs"].y_ref == 1.0 and s.channels["theta_vs"].y_ref == 0.0
     for s in sample(FAST, 50):
-        assert 0.6 <= s.Vs.zeta <= 0.8 and 8 <= s.Vs.wn <= 12 and -0.2 <= s.Vs.dy0 <= 0.2
-        assert 0.2 <= s.theta_vs.zeta <= 0.4 and 10 <= s.theta_vs.wn <= 18 and -0.8 <= s.theta_vs.dy0 <= 0.8
-        assert -0.5 <= s.theta_vs.y0 <= 0.5
+        assert 0.6 <= s.channels["Vs"].zeta <= 0.8 and 8 <= s.channels["Vs"].wn <= 12 and -0.2 <= s.channels["Vs"].dy0 <= 0.2
+        assert 0.2 <= s.channels["theta_vs"].zeta <= 0.4 and 10 <= s.channels["theta_vs"].wn <= 18 and -0.8 <= s.channels["theta_vs"].dy0 <= 0.8
+        assert -0.5 <= s.channels["theta_vs"].y0 <= 0.5
 
 
 def test_zero_order_hold_keeps_the_value_of_the_last_sample_instant():
@@ -89,7 +89,7 @@ def test_unknown_family_is_refused_with_the_known_names():
 
 def test_mix_family_holds_levels_and_faults_within_one_window():
     signals = family("mix").sample(np.linspace(0.05, 0.95, 20)[:, None], 1.0)
-    changes = [len(s.Vs.times) for s in signals]
+    changes = [len(s.channels["Vs"].times) for s in signals]
     assert min(changes) >= 1 and max(changes) >= 3
     t = np.linspace(0, 1, 1001)
     values = np.array([s(t) for s in signals])
@@ -99,7 +99,7 @@ def test_mix_family_holds_levels_and_faults_within_one_window():
 
 def test_jump_family_starts_each_window_with_a_change_a_fault_two_times_in_five():
     signals = family("jump").sample(np.linspace(0.01, 0.99, 60)[:, None], 1.0)
-    assert all(s.Vs.times[0] > 0.0 for s in signals)  # the change is at t = 0: no breakpoint there
+    assert all(s.channels["Vs"].times[0] > 0.0 for s in signals)  # the change is at t = 0: no breakpoint there
     first = np.array([s.at(0.0)[0] for s in signals])
     assert first.min() >= 0.2 and first.max() <= 1.15
     assert 0.2 <= np.mean(first < 0.85) <= 0.6  # faults (0.2-0.9 pu) start about two windows in five

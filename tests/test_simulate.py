@@ -2,8 +2,8 @@
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from reference_models.families import family
-from reference_models.signals import Piecewise, Signal
+from reference_models.families import bus, family
+from reference_models.signals import Piecewise
 from reference_models.simulate import SolverConfig, simulate
 from reference_models.sm4 import rhs, steady_state
 
@@ -21,12 +21,12 @@ def test_rk45_at_default_tolerances_matches_dop853_at_1e_12():
 
 def test_machine_at_equilibrium_under_constant_voltage_stays_there():
     x0 = steady_state(1.1, 0.3)
-    s = Signal(Piecewise((1.1,), ()), Piecewise((0.3,), ()))
+    s = bus(Piecewise((1.1,), ()), Piecewise((0.3,), ()))
     np.testing.assert_allclose(simulate(x0, s, T), np.tile(x0, (T.size, 1)), rtol=0, atol=1e-9)
 
 
 def test_step_input_is_integrated_piecewise_like_two_separate_solves():
-    s = Signal(Piecewise((1.0, 0.8), (0.3037,)), Piecewise((0.0, 0.2), (0.6511,)))
+    s = bus(Piecewise((1.0, 0.8), (0.3037,)), Piecewise((0.0, 0.2), (0.6511,)))
     x0 = steady_state(1.0, 0.0)
     f = lambda u: (lambda t, x: rhs(x, np.array(u)))
     tight = dict(method="DOP853", rtol=1e-12, atol=1e-12)
@@ -39,7 +39,7 @@ def test_step_input_is_integrated_piecewise_like_two_separate_solves():
 def test_breakpoints_closer_than_the_output_grid_are_integrated_through():
     from reference_models.signals import Ramp
 
-    s = Signal(Ramp(1.0, 0.8, 0.5001, 0.5004), Piecewise((0.0, 0.1), (0.50015,)))
+    s = bus(Ramp(1.0, 0.8, 0.5001, 0.5004), Piecewise((0.0, 0.1), (0.50015,)))
     x0 = steady_state(1.0, 0.0)
     tight = simulate(x0, s, T, solver=SolverConfig("DOP853", 1e-12, 1e-12))
     np.testing.assert_allclose(simulate(x0, s, T), tight, rtol=0, atol=1e-6)

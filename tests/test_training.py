@@ -6,6 +6,7 @@ import pytest
 import torch
 
 import surrogate.training as training
+from reference_models.sm4 import STATE_NAMES
 from surrogate.data import generate, load_split
 from surrogate.evaluation import (aggregate, error_metrics, evaluate, plot_error_over_time, plot_trajectories,
                                   predict)
@@ -131,7 +132,7 @@ def test_error_metrics_in_physical_and_standardised_units_per_state_and_per_time
     x = np.zeros((2, 5, 4))
     x_hat = x.copy()
     x_hat[0, :, 1] = 0.3  # omega off by 0.3 rad/s in one of two trajectories
-    m = error_metrics(x_hat, x, x_std=[1.0, 0.6, 1.0, 1.0])
+    m = error_metrics(x_hat, x, x_std=[1.0, 0.6, 1.0, 1.0], state_names=STATE_NAMES)
     assert m["physical"] == pytest.approx({"mse": 0.09 / 8, "mae": 0.3 / 8, "maxae": 0.3})
     assert m["standardised"] == pytest.approx({"mse": 0.25 / 8, "mae": 0.5 / 8, "maxae": 0.5})
     assert m["per_state"]["omega"] == pytest.approx({"mse": 0.045, "mae": 0.15, "maxae": 0.3})
@@ -143,7 +144,7 @@ def test_error_metrics_in_physical_and_standardised_units_per_state_and_per_time
 
 def test_aggregate_gives_mean_and_std_over_seeds_of_every_metric():
     x = np.zeros((1, 3, 4))
-    runs = [error_metrics(x + e, x, [1.0] * 4) for e in (0.1, 0.3)]
+    runs = [error_metrics(x + e, x, [1.0] * 4, STATE_NAMES) for e in (0.1, 0.3)]
     summary = aggregate(runs)
     assert summary["n"] == 2
     assert summary["mean"]["physical"]["mae"] == pytest.approx(0.2)

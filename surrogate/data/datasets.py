@@ -1,12 +1,13 @@
 """Dataset generation, storage and loading.
 
 A dataset directory holds one `.npz` per split with
-    x0 [N, 4]   initial states (physical units)
-    u  [N, S, 2] inputs (Vs, theta_vs) at the S sensor times
-    t  [S]      sensor = query times [s], uniform from 0 to the horizon
-    x  [N, S, 4] reference states at t (labeled splits only)
+    x0 [N, n_x]    initial states (physical units)
+    u  [N, S, n_u] the component's inputs at the S sensor times (SM4: Vs, theta_vs)
+    t  [S]         sensor = query times [s], uniform from 0 to the horizon
+    x  [N, S, n_x] reference states at t (labeled splits only)
     family [N]  input family of each trajectory;  signal [N]  its exact signal as JSON
-and `metadata.json` (written last: its presence marks a complete dataset). Solves run in chunks
+and `metadata.json` (written last: its presence marks a complete dataset), which records the
+component and its parameters (`component`, `params`): the machine every solve, loss and export uses. Solves run in chunks
 cached under `.partial/`; a rerun with the same preset and seed skips finished chunks, so an
 interrupted generation resumes and gives the same files. Everything is deterministic for a seed.
 """
@@ -20,28 +21,29 @@ import time
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
 from reference_models.version import __version__
+from reference_models.component import Component
+from reference_models.components import component
 from reference_models.files import write_json, write_npz
-from reference_models.sm4 import INPUT_NAMES, STATE_NAMES, SM4Params
+from reference_models.progress import progress_bar
 
 from .envelope import probe_plan, reachable_box, reachable_summary
 from .presets import LABELED, SPLITS, Preset
 from .runner import SolveRunner
 from .sampling import sample_split
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 
 def time_grid(preset: Preset) -> np.ndarray:
     return np.linspace(0.0, preset.horizon, preset.n_points)
 
 
-def fingerprint(preset: Preset, seed: int) -> str:
+def fingerprint(preset: Preset, seed: int, params) -> str:
     # the version too: finished chunks of another opfmu version are not mixed into a resumed run
-    text = json.dumps({"preset": preset.to_dict(), "seed": seed, "format": FORMAT_VERSION, "opfmu": __version__},
-                      sort_keys=True)
+    text = json.dumps({"preset": preset.to_dict(), "seed": seed, "params": params.to_dict(),
+                       "format": FORMAT_VERSION, "opfmu": __version__}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -50,11 +52,19 @@ class DatasetError(ValueError):
 
 
 def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner | None = None,
-             progress: bool = True) -> dict:
-    """Generate (or resume, or find complete) the dataset of `preset` in `out`; returns its metadata."""
+             progress: bool = True, params=None) -> dict:
+    """Generate (or resume, or find complete) the dataset of `preset` in `out` for the component's
+    parameters `params` (default: its defaults, e.g. Table I's machine); returns its metadata."""
     out = Path(out)
     partial = out / ".partial"
-    key = fingerprint(preset, seed)
+    try:
+        model = component(preset.component)
+    except ValueError as exc:
+        raise DatasetError(f"preset {preset.name!r}: {exc}") from None
+    params = model.params() if params is None else params
+    if not isinstance(params, model.params_type):
+        raise DatasetError(f"parameters of {type(params).__name__} given for a {model.name} dataset")
+    key = fingerprint(preset, seed, params)
     meta_path = out / "metadata.json"
     if meta_path.exists():
         meta = json.loads(meta_path.read_text())
@@ -72,30 +82,34 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
     t = time_grid(preset)
     rngs = dict(zip(("probe", *SPLITS), (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(5))))
     meta = {"format": FORMAT_VERSION, "fingerprint": key, "preset": preset.to_dict(), "seed": seed,
-            "state_names": list(STATE_NAMES), "input_names": list(INPUT_NAMES),
-            "params": SM4Params().to_dict(), "horizon_s": preset.horizon, "n_points": preset.n_points}
+            "component": model.name, "params": params.to_dict(),
+            "state_names": list(model.state_names), "input_names": list(model.input_names),
+            "horizon_s": preset.horizon, "n_points": preset.n_points}
+    machine = (model, params)
     with runner:
-        ic_box, pool = preset.ic_box, None
+        ic_box, pool = _ordered_box(preset.ic_box, model), None
         if preset.ic == "reachable":
-            x0s, signals, names = probe_plan(preset.families, preset.probes_per_family, preset.horizon, rngs["probe"])
-            x = _solve(runner, "probe", x0s, signals, t, preset, partial, progress)
-            meta["reachable"] = reachable_summary(x, names)
-            ic_box, pool = reachable_box(meta["reachable"]), x.reshape(-1, 4)
+            x0s, signals, names = probe_plan(preset.families, preset.probes_per_family, preset.horizon, rngs["probe"],
+                                             params)
+            x = _solve(runner, "probe", x0s, signals, t, preset, partial, progress, machine)
+            meta["reachable"] = reachable_summary(x, names, params)
+            ic_box, pool = reachable_box(meta["reachable"]), x.reshape(-1, model.n_states)
         meta["ic_box"] = {s: list(r) for s, r in ic_box.items()}
         trained_on = []  # (x0, u) of the splits a model trains on: its envelope
         for split in SPLITS:
             x0, signals, names = sample_split(preset.counts[split], preset.families, ic_box, preset.horizon,
                                               rngs[split], pool, preset.reachable_fraction)
+            _check_channels(signals, model)
             arrays = {"x0": x0, "u": np.stack([s(t) for s in signals]), "t": t,
                       "family": np.array(names), "signal": np.array([json.dumps(s.to_dict()) for s in signals])}
             if LABELED[split]:
-                arrays["x"] = _solve(runner, split, x0, signals, t, preset, partial, progress)
+                arrays["x"] = _solve(runner, split, x0, signals, t, preset, partial, progress, machine)
             write_npz(out / f"{split}.npz", **arrays)
             if split in ("train", "collocation"):
                 trained_on.append((arrays["x0"], arrays["u"]))
     meta["counts"] = {s: preset.counts[s] for s in SPLITS}
     meta["envelope"] = envelope_of(np.concatenate([x for x, _ in trained_on]),
-                                   np.concatenate([u for _, u in trained_on]))
+                                   np.concatenate([u for _, u in trained_on]), model)
     meta["versions"] = _versions()
     meta["wall_time_s"] = round(time.perf_counter() - started, 2)
     write_json(meta_path, meta)
@@ -103,8 +117,25 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
     return meta
 
 
-def _solve(runner, name, x0s, signals, t, preset, partial: Path, progress: bool) -> np.ndarray:
-    """Reference states [N, S, 4], reusing chunks cached in `partial` and caching new ones."""
+def _ordered_box(box: dict, model: Component) -> dict:
+    """The initial-condition box in the component's state order; DatasetError if a state is missing."""
+    missing = [s for s in model.state_names if s not in box]
+    if missing:
+        raise DatasetError(f"the preset's ic_box gives no range for {', '.join(missing)}")
+    return {s: tuple(box[s]) for s in model.state_names}
+
+
+def _check_channels(signals, model: Component) -> None:
+    """Every signal drives exactly the component's inputs, in its order."""
+    for s in signals[:1]:
+        if s.names != model.input_names:
+            raise DatasetError(f"input family channels {', '.join(s.names)} are not the inputs of {model.name} "
+                               f"({', '.join(model.input_names)})")
+
+
+def _solve(runner, name, x0s, signals, t, preset, partial: Path, progress: bool, machine) -> np.ndarray:
+    """Reference states [N, S, n_x] of machine (component, params), reusing chunks cached in
+    `partial` and caching new ones."""
     size = preset.chunk_size
     results, todo = {}, {}
     for k, start in enumerate(range(0, len(x0s), size)):
@@ -114,24 +145,25 @@ def _solve(runner, name, x0s, signals, t, preset, partial: Path, progress: bool)
             results[key] = np.load(path)["x"]
         else:
             todo[key] = (x0s[start:start + size], [s.to_dict() for s in signals[start:start + size]])
-    bar = tqdm(total=len(x0s), initial=sum(len(r) for r in results.values()), desc=f"solving {name}",
-               unit="traj", disable=not progress)
+    bar = progress_bar(total=len(x0s), initial=sum(len(r) for r in results.values()), desc=f"solving {name}",
+                       unit="traj", enabled=progress)
 
     def done(key, x):
         write_npz(partial / f"{key}.npz", x=x)
         results[key] = x
         bar.update(len(x))
 
-    runner.run(todo, t, preset.solver, done)
+    runner.run(todo, t, preset.solver, done, *machine)
     bar.close()
     return np.concatenate([results[k] for k in sorted(results)])
 
 
-def envelope_of(x0: np.ndarray, u: np.ndarray) -> dict:
-    """Min/max of every initial state (x0 [N, 4]) and input (u [N, S, 2]): what a model trained on them has seen."""
+def envelope_of(x0: np.ndarray, u: np.ndarray, model: Component) -> dict:
+    """Min/max of every initial state (x0 [N, n_x]) and input (u [N, S, n_u]): what a model trained
+    on them has seen, by the component's names."""
     return {
-        "x0": {n: [float(x0[:, i].min()), float(x0[:, i].max())] for i, n in enumerate(STATE_NAMES)},
-        "u": {n: [float(u[..., i].min()), float(u[..., i].max())] for i, n in enumerate(INPUT_NAMES)},
+        "x0": {n: [float(x0[:, i].min()), float(x0[:, i].max())] for i, n in enumerate(model.state_names)},
+        "u": {n: [float(u[..., i].min()), float(u[..., i].max())] for i, n in enumerate(model.input_names)},
     }
 
 
@@ -143,12 +175,14 @@ def _versions() -> dict:
 
 
 def load_split(directory: str | Path, split: str) -> dict:
-    """Arrays of one split as a dict (see module docstring for names and shapes)."""
+    """Arrays of one split as a dict (see module docstring for names and shapes), and under
+    `component` the component the dataset was solved for."""
     path = Path(directory) / f"{split}.npz"
     if not path.exists():
         raise DatasetError(f"no {split} split at {path}; run `opfmu data` first")
+    model, _ = machine_of(load_metadata(directory))
     with np.load(path) as data:
-        return {k: data[k] for k in data.files}
+        return {**{k: data[k] for k in data.files}, "component": model}
 
 
 def load_metadata(directory: str | Path) -> dict:
@@ -156,3 +190,14 @@ def load_metadata(directory: str | Path) -> dict:
     if not path.exists():
         raise DatasetError(f"{directory} is not a complete dataset (no metadata.json)")
     return json.loads(path.read_text())
+
+
+def machine_of(meta: dict):
+    """(component, parameters) a dataset (its metadata) was solved for."""
+    if "component" not in meta or "params" not in meta:
+        raise DatasetError("the dataset records no component and parameters (made by an older opfmu): regenerate it")
+    try:
+        model = component(meta["component"])
+        return model, model.params(meta["params"])
+    except ValueError as exc:
+        raise DatasetError(f"the dataset's machine is not usable: {exc}") from None

@@ -6,7 +6,6 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.files import atomic_path
-from reference_models.sm4 import INPUT_NAMES, INPUT_UNITS, STATE_NAMES, STATE_UNITS
 
 
 def plot_preview(directory: str | Path, split: str = "train", per_family: int = 2) -> Path:
@@ -22,9 +21,10 @@ def plot_preview(directory: str | Path, split: str = "train", per_family: int = 
     data = load_split(directory, split)
     families = list(dict.fromkeys(data["family"].tolist()))
     picks = [i for f in families for i in np.nonzero(data["family"] == f)[0][:per_family]]
-    fig, axes = plt.subplots(2, 3, figsize=(13, 6.5), sharex=True)
-    panels = [(data["u"], i, n, un) for i, (n, un) in enumerate(zip(INPUT_NAMES, INPUT_UNITS))]
-    panels += [(data["x"], i, n, un) for i, (n, un) in enumerate(zip(STATE_NAMES, STATE_UNITS))]
+    component = data["component"]
+    panels = [(data["u"], i, q.name, q.unit) for i, q in enumerate(component.inputs)]
+    panels += [(data["x"], i, q.name, q.unit) for i, q in enumerate(component.states)]
+    fig, axes = plt.subplots(2, (len(panels) + 1) // 2, figsize=(13, 6.5), sharex=True, squeeze=False)
     colors = {f: plt.cm.tab10(k % 10) for k, f in enumerate(families)}
     for ax, (arr, i, name, unit) in zip(axes.flat, panels):
         for j in picks:
@@ -34,6 +34,8 @@ def plot_preview(directory: str | Path, split: str = "train", per_family: int = 
         ax.grid(alpha=0.3)
     for ax in axes[1]:
         ax.set_xlabel("t [s]")
+    for ax in axes.flat[len(panels):]:
+        ax.set_visible(False)
     handles = [plt.Line2D([], [], color=c, label=f) for f, c in colors.items()]
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False)
     fig.suptitle(f"{directory.name}: {split} split, {per_family} trajectories per family")

@@ -24,6 +24,7 @@ class Preset:
         started at steady states (see surrogate.data.envelope) and the rest by LHS in their bounding box.
     probes_per_family: reference windows per family for the reachable-set measurement.
     chunk_size: trajectories per solve task (the unit of parallel work and of resume).
+    component: the component whose trajectories are solved (reference_models.components).
     """
 
     name: str
@@ -37,6 +38,7 @@ class Preset:
     probes_per_family: int = 0
     solver: SolverConfig = SolverConfig()
     chunk_size: int = 50
+    component: str = "sm4"
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -5,17 +5,22 @@ import logging
 
 import numpy as np
 
+from reference_models.components import component
 from reference_models.signals import Signal
 from reference_models.simulate import SolverConfig, simulate
 
 
-def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict) -> np.ndarray:
-    """States [n, S, 4] for one chunk; takes plain data so it travels to any dask worker."""
+def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict, component_name: str,
+                params: dict) -> np.ndarray:
+    """States [n, S, n_x] for one chunk of the component `component_name` with parameters `params`;
+    takes plain data so it travels to any dask worker."""
     config = SolverConfig(**solver)
+    model = component(component_name)
+    p = model.params(params)
     states = []
     for x0, s in zip(x0s, signal_dicts):
         try:
-            states.append(simulate(x0, Signal.from_dict(s), t, solver=config))
+            states.append(simulate(x0, Signal.from_dict(s), t, p, config, model))
         except RuntimeError as exc:
             raise RuntimeError(f"{exc} (x0 = {np.array2string(x0, precision=6)}, signal = {s})") from None
     return np.stack(states)
@@ -58,17 +63,18 @@ class SolveRunner:
         if self._cluster is not None:
             self._cluster.close()
 
-    def run(self, chunks: dict, t: np.ndarray, solver: SolverConfig, on_done) -> None:
-        """Solve chunks {key: (x0s [n, 4], signal dicts [n])}; on_done(key, x [n, S, 4]) per chunk."""
-        solver_dict = solver.to_dict()
+    def run(self, chunks: dict, t: np.ndarray, solver: SolverConfig, on_done, model, params) -> None:
+        """Solve chunks {key: (x0s [n, n_x], signal dicts [n])} of component `model` with `params`;
+        on_done(key, x [n, S, n_x]) per chunk."""
+        solver_dict, machine = solver.to_dict(), (model.name, params.to_dict())
         if self._client is None:
             for key, (x0s, signal_dicts) in chunks.items():
-                on_done(key, solve_chunk(x0s, signal_dicts, t, solver_dict))
+                on_done(key, solve_chunk(x0s, signal_dicts, t, solver_dict, *machine))
             return
         from dask.distributed import as_completed
 
         futures = {
-            self._client.submit(solve_chunk, x0s, sigs, t, solver_dict, pure=False, key=f"solve-{key}"): key
+            self._client.submit(solve_chunk, x0s, sigs, t, solver_dict, *machine, pure=False, key=f"solve-{key}"): key
             for key, (x0s, sigs) in chunks.items()
         }
         try:

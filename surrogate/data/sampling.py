@@ -5,7 +5,6 @@ import numpy as np
 from scipy.stats import qmc
 
 from reference_models.families import family
-from reference_models.sm4 import STATE_NAMES
 
 
 def split_counts(n: int, weights) -> list[int]:
@@ -20,14 +19,14 @@ def split_counts(n: int, weights) -> list[int]:
 
 def sample_split(n: int, families, ic_box: dict, horizon: float, rng: np.random.Generator,
                  pool: np.ndarray | None = None, pool_fraction: float = 0.0):
-    """Initial states x0 [n, 4], signals [n] and family names [n] for one split.
+    """Initial states x0 [n, n_x], signals [n] and family names [n] for one split; ic_box maps every
+    state name, in the component's order, to its (low, high).
 
     Per family, one scrambled Latin hypercube spans the varying initial-state dimensions of ic_box
-    and the family's parameters. With a pool of reachable states [P, 4], a `pool_fraction` of the
+    and the family's parameters. With a pool of reachable states [P, n_x], a `pool_fraction` of the
     initial states is drawn from it instead. Rows are shuffled so families interleave.
     """
-    lows = np.array([ic_box[s][0] for s in STATE_NAMES], dtype=float)
-    highs = np.array([ic_box[s][1] for s in STATE_NAMES], dtype=float)
+    lows, highs = np.array(list(ic_box.values()), dtype=float).T
     varying = np.nonzero(highs > lows)[0]
     x0_parts, signals, names = [], [], []
     for (name, _), count in zip(families, split_counts(n, [w for _, w in families])):
