@@ -31,13 +31,22 @@ def cmd_data(args) -> None:
         raise UserError("--workers must be >= 0")
     try:
         recipe = load_preset(args.preset)
+        params = _machine(args.machine, recipe.component)
     except ValueError as exc:
         raise UserError(str(exc)) from None
     meta = generate(recipe, args.out, seed=args.seed, runner=SolveRunner(args.workers, args.scheduler),
-                    progress=not args.quiet)
+                    progress=not args.quiet, params=params)
     preview = plot_preview(args.out)
     print(summary_table(meta))
     print(f"dataset written to {args.out} ({meta['wall_time_s']} s); preview: {preview}")
+
+
+def _machine(path, component_name: str = "sm4"):
+    """The parameters in a machine file (None: the component's defaults); ValueError in one line."""
+    from reference_models.components import component
+
+    model = component(component_name)
+    return model.params() if path is None else model.load_params(path)
 
 
 def summary_table(meta: dict) -> str:
@@ -71,6 +80,8 @@ def cmd_train(args) -> None:
             raise UserError(f"cannot read training config {args.config}: {exc}") from None
     flags = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs), ("optimizer", args.optimizer),
                                 ("lr", args.lr), ("time_points", args.time_points)) if v is not None}
+    if flags.get("time_points") == 0:
+        flags["time_points"] = None
     try:
         config = TrainConfig.from_dict({**base, **flags, "physics": args.physics or base.get("physics", False)})
         config = _with_arch(config, args.arch, OperatorConfig)
@@ -129,10 +140,12 @@ def cmd_build_fmu(args) -> None:
 
 
 def cmd_build_reference_fmu(args) -> None:
-    from reference_models.reference_fmu import ReferenceBuildError, build_reference_fmu
+    from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu
+    from opfmu.compare import operator_machine
 
     try:
-        info = build_reference_fmu(args.output, model_name=args.name)
+        params = operator_machine(args.operator) if args.operator else _machine(args.machine)
+        info = build_reference_fmu(args.output, model_name=args.name, params=params)
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
     print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, model {args.name}, guid {info['guid']}); "
@@ -145,7 +158,8 @@ def cmd_compare(args) -> None:
 
     from fmpy import extract
 
-    from opfmu.compare import CompareError, compare, csv_inputs, format_table, plot_comparison, scenario_inputs, summary
+    from opfmu.compare import (CompareError, compare, csv_inputs, fmu_machine, format_table, plot_comparison,
+                               same_machine, scenario_inputs, summary)
     from reference_models.files import write_json
 
     for path in (args.surrogate, args.reference):
@@ -153,16 +167,18 @@ def cmd_compare(args) -> None:
             raise UserError(f"{path} is not an FMU (no such file, or not a zip archive)")
     parameters = _parameters(args.param)
     try:
-        if args.scenario:
-            inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step)
-            stop_time = inputs.times[-1]
-        else:
-            inputs = csv_inputs(args.inputs)
-            stop_time = args.stop_time or float(inputs.times[-1])
         with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
-            result = compare(extract(args.surrogate, unzipdir=f"{tmp}/surrogate"),
-                             extract(args.reference, unzipdir=f"{tmp}/reference"), inputs, stop_time, args.step,
-                             parameters)
+            surrogate_dir = extract(args.surrogate, unzipdir=f"{tmp}/surrogate")
+            reference_dir = extract(args.reference, unzipdir=f"{tmp}/reference")
+            machine = fmu_machine(surrogate_dir)
+            same_machine(surrogate_dir, reference_dir)
+            if args.scenario:
+                inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step, machine)
+                stop_time = inputs.times[-1]
+            else:
+                inputs = csv_inputs(args.inputs, machine)
+                stop_time = args.stop_time or float(inputs.times[-1])
+            result = compare(surrogate_dir, reference_dir, inputs, stop_time, args.step, parameters)
     except (CompareError, ValueError) as exc:
         raise UserError(str(exc)) from None
     out = Path(args.out)
@@ -215,6 +231,9 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--preset", default="paper",
                       help="paper | cosim | quick, or a JSON file of Preset fields (default: paper)")
     data.add_argument("--out", required=True, help="dataset directory")
+    data.add_argument("--machine", default=None, metavar="FILE",
+                      help="JSON file of machine parameters (any subset of D, H, Rs, Td0_p, Tq0_p, Xd, Xd_p, Xq, "
+                           "Xq_p, Xep, Re, Wb, Pm, Efd; the rest: paper Table I)")
     data.add_argument("--seed", type=int, default=0, help="base seed; same seed, same files (default 0)")
     data.add_argument("--workers", type=int, default=_cores(),
                       help="local dask worker processes; 0 solves in this process (default: all cores)")
@@ -229,11 +248,11 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--physics", action="store_true", help="add the physics losses (PI-DeepONet)")
     tr.add_argument("--out", required=True, help="run directory (resumed if it holds a checkpoint)")
     tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
-    tr.add_argument("--epochs", type=int, default=None, help="maximum epochs (default 10000)")
+    tr.add_argument("--epochs", type=int, default=None, help="maximum epochs (default 2000)")
     tr.add_argument("--optimizer", default=None, help="soap | adam (default soap)")
     tr.add_argument("--lr", type=float, default=None, help="learning rate (default 3e-3)")
     tr.add_argument("--time-points", type=int, default=None,
-                    help="grid times drawn per epoch (default: the whole grid)")
+                    help="grid times drawn per epoch (default 200; 0: the whole grid)")
     tr.add_argument("--config", default=None, help="JSON file of TrainConfig fields (flags override it)")
     tr.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -266,7 +285,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     ref = sub.add_parser("build-reference-fmu", help="build the reference RK45 FMU (pythonfmu)",
                          description="An FMI 2.0 co-simulation FMU of SM4 that integrates the ODE over each "
-                                     "step with scipy's RK45; same variables as the surrogate FMU.")
+                                     "step with scipy's RK45; same variables as the surrogate FMU. The machine: "
+                                     "--machine FILE, or that of an operator file (--operator), or paper Table I.")
+    machine = ref.add_mutually_exclusive_group()
+    machine.add_argument("--machine", default=None, metavar="FILE", help="JSON file of machine parameters")
+    machine.add_argument("--operator", default=None, metavar="ONNX",
+                         help="take the machine an exported operator was trained for")
     ref.add_argument("-o", "--output", default="SM4Reference.fmu", help="FMU file (default SM4Reference.fmu)")
     ref.add_argument("--name", default="SM4Reference", help="model name and identifier (default SM4Reference)")
     ref.set_defaults(func=cmd_build_reference_fmu)

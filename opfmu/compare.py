@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.scenarios import rest_state, scenario
-from reference_models.sm4 import INPUT_NAMES, OUTPUT_NAMES, STATE_NAMES, STATE_UNITS
+from reference_models.sm4 import DEFAULT_PARAMS, INPUT_NAMES, OUTPUT_NAMES, SM4, STATE_NAMES, STATE_UNITS, SM4Params
 
 OUTPUTS = STATE_NAMES + OUTPUT_NAMES
 UNITS = dict(zip(STATE_NAMES, STATE_UNITS)) | {name: "pu" for name in OUTPUT_NAMES}
@@ -48,9 +48,9 @@ class Inputs:
         return rows
 
 
-def scenario_inputs(name: str, seed: int, stop_time: float, step: float) -> Inputs:
-    """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h."""
-    s = scenario(name, seed, stop_time)
+def scenario_inputs(name: str, seed: int, stop_time: float, step: float, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
+    """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h, for machine params."""
+    s = scenario(name, seed, stop_time, params)
     times = communication_points(stop_time, step)
     return Inputs(f"{name} (seed {seed})", times, s.inputs(times), s.initial_state())
 
@@ -64,9 +64,10 @@ def communication_points(stop_time: float, step: float) -> np.ndarray:
     return np.arange(n + 1) * step
 
 
-def csv_inputs(path) -> Inputs:
+def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
     """Inputs from a CSV file with the columns time, Vs, theta_vs (seconds, pu, rad; a header row;
-    times non-decreasing from 0; a repeated time is a jump, as fmpy reads it)."""
+    times non-decreasing from 0; a repeated time is a jump, as fmpy reads it); the machine params
+    starts at rest under the first row."""
     path = Path(path)
     try:
         with path.open(newline="") as f:
@@ -85,7 +86,46 @@ def csv_inputs(path) -> Inputs:
     times = data[:, 0]
     if times[0] != 0 or np.any(np.diff(times) < 0):
         raise CompareError(f"inputs {path}: times must start at 0 and never decrease")
-    return Inputs(path.name, times, data[:, 1:], rest_state(*data[0, 1:]))
+    return Inputs(path.name, times, data[:, 1:], rest_state(*data[0, 1:], params))
+
+
+def fmu_machine(fmu_dir) -> SM4Params:
+    """The machine an extracted surrogate FMU models: that of its operator (resources/model.onnx)."""
+    return operator_machine(Path(fmu_dir) / "resources" / "model.onnx")
+
+
+def operator_machine(path) -> SM4Params:
+    """The machine an operator file was trained for: the parameters in its metadata; CompareError
+    when it has none or they are invalid."""
+    import json
+
+    import onnx
+
+    try:
+        meta = {p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props}
+        if meta.get("component") != SM4.name:
+            raise CompareError(f"the operator in {path} is not of {SM4.name} (component {meta.get('component')!r})")
+        return SM4.params(json.loads(meta["params"]))
+    except CompareError:
+        raise
+    except Exception as exc:  # unreadable file, no or malformed params: one line
+        raise CompareError(f"cannot tell the surrogate FMU's machine from {path}: {' '.join(str(exc).split())[:200]}") \
+            from None
+
+
+def same_machine(surrogate_dir, reference_dir) -> None:
+    """CompareError unless both FMUs start from the same default state (their machine's equilibrium
+    at the start inputs): two FMUs of different machines are no comparison."""
+    from fmpy import read_model_description
+
+    starts = []
+    for directory in (surrogate_dir, reference_dir):
+        md = read_model_description(str(directory))
+        values = {v.name: v.start for v in md.modelVariables}
+        starts.append(np.array([float(values.get(f"{s}0") or "nan") for s in STATE_NAMES]))
+    if not np.allclose(starts[0], starts[1], rtol=0, atol=1e-9):
+        raise CompareError("the surrogate and reference FMUs model different machines (their default initial states "
+                           f"differ: {np.round(starts[0], 6).tolist()} against {np.round(starts[1], 6).tolist()})")
 
 
 @dataclass

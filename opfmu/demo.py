@@ -39,7 +39,8 @@ class DemoConfig:
 def run_demo(config: DemoConfig, say=print) -> Path:
     """Runs the demo; returns the report's path. `say` gets one line per stage."""
     from fmu_export.builder import build_surrogate_fmu
-    from reference_models.reference_fmu import build_reference_fmu
+    from fmu_export.reference_fmu import build_reference_fmu
+    from opfmu.compare import operator_machine
     from surrogate.operator import DEFAULT_OPERATOR
 
     out = Path(config.out)
@@ -49,7 +50,7 @@ def run_demo(config: DemoConfig, say=print) -> Path:
     info = build_surrogate_fmu(operator, surrogate_fmu)
     say(f"built {surrogate_fmu} ({info['size_bytes'] / 1e6:.2f} MB; kernel matches onnxruntime to "
         f"{info['max_abs_diff']:.1e})")
-    build_reference_fmu(reference_fmu)
+    build_reference_fmu(reference_fmu, params=operator_machine(operator))
     say(f"built {reference_fmu}")
     results = compare_scenarios(surrogate_fmu, reference_fmu, config, say)
     report = write_report(out, operator, config, results)
@@ -83,14 +84,15 @@ def compare_scenarios(surrogate_fmu: Path, reference_fmu: Path, config: DemoConf
 
     from fmpy import extract
 
-    from opfmu.compare import compare, format_table, plot_comparison, scenario_inputs, summary
+    from opfmu.compare import compare, fmu_machine, format_table, plot_comparison, scenario_inputs, summary
 
     results = {}
     with tempfile.TemporaryDirectory(prefix="opfmu_demo_") as tmp:
         surrogate_dir = extract(str(surrogate_fmu), unzipdir=str(Path(tmp) / "surrogate"))
         reference_dir = extract(str(reference_fmu), unzipdir=str(Path(tmp) / "reference"))
+        machine = fmu_machine(surrogate_dir)
         for name in config.scenarios:
-            inputs = scenario_inputs(name, config.seed, config.stop_time, config.step)
+            inputs = scenario_inputs(name, config.seed, config.stop_time, config.step, machine)
             result = compare(surrogate_dir, reference_dir, inputs, config.stop_time, config.step)
             directory = Path(config.out) / name
             result["plots"] = [str(p.relative_to(config.out)) for p in plot_comparison(result, directory, name)]

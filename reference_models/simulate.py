@@ -20,6 +20,12 @@ class SolverConfig:
     rtol: float = 1e-8
     atol: float = 1e-10
 
+    def __post_init__(self):
+        if self.method not in ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA"):
+            raise ValueError(f"unknown solve_ivp method {str(self.method)[:40]!r}")
+        if not all(isinstance(v, (int, float)) and 0 < v < 1 for v in (self.rtol, self.atol)):
+            raise ValueError(f"rtol and atol must be numbers in (0, 1), got {self.rtol!r}, {self.atol!r}")
+
     def to_dict(self) -> dict:
         return asdict(self)
 

@@ -179,10 +179,15 @@ def test_state_weights_scale_each_states_share_of_the_data_loss():
     assert data_loss(y_hat, y, state_weights=torch.tensor([1.0, 4.0, 1.0, 1.0])).item() == pytest.approx(4 / 7)
 
 
-@pytest.mark.parametrize("weights", [(1.0, 1.0, 1.0), (1.0, -1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.0)])
-def test_state_weights_must_be_four_non_negative_numbers_not_all_zero(weights):
+@pytest.mark.parametrize("weights", [(), (1.0, -1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.0)])
+def test_state_weights_must_be_non_negative_numbers_not_all_zero(weights):
     with pytest.raises(ValueError, match="state_weights"):
         TrainConfig(state_weights=weights)
+
+
+def test_training_refuses_state_weights_that_do_not_give_one_weight_per_state_of_the_component(paper_tiny, tmp_path):
+    with pytest.raises(TrainError, match="3 weights for the 4 states of sm4"):
+        train(paper_tiny[1], config(epochs=1, state_weights=(1.0, 1.0, 1.0)), tmp_path, progress=False)
 
 
 def test_masked_data_loss_counts_only_the_times_before_the_cut():

@@ -40,6 +40,31 @@ class Preset:
     chunk_size: int = 50
     component: str = "sm4"
 
+    def __post_init__(self):
+        from reference_models.families import family
+
+        def whole(value, low, high):
+            return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
+
+        if not isinstance(self.counts, dict) or not all(whole(self.counts.get(s, -1), 0, 10**6) for s in SPLITS):
+            raise ValueError(f"preset {self.name!r}: counts must give every split ({', '.join(SPLITS)}) "
+                             "a whole number in [0, 1000000]")
+        if not self.families or not all(isinstance(f, (tuple, list)) and len(f) == 2 for f in self.families):
+            raise ValueError(f"preset {self.name!r}: families must be (name, weight) pairs")
+        for name, weight in self.families:
+            family(str(name))  # ValueError naming the known families
+            if not (isinstance(weight, (int, float)) and weight >= 0):
+                raise ValueError(f"preset {self.name!r}: family {name!r} needs a weight >= 0")
+        if not (isinstance(self.horizon, (int, float)) and 0 < self.horizon <= 1000):
+            raise ValueError(f"preset {self.name!r}: horizon must lie in (0, 1000] s")
+        if not whole(self.n_points, 2, 100_000) or not whole(self.chunk_size, 1, 10**6):
+            raise ValueError(f"preset {self.name!r}: n_points must lie in [2, 100000] and chunk_size be >= 1")
+        if self.ic not in ("box", "reachable") or not (0 <= self.reachable_fraction <= 1):
+            raise ValueError(f"preset {self.name!r}: ic must be box or reachable, reachable_fraction in [0, 1]")
+        if not whole(self.probes_per_family, 1 if self.ic == "reachable" else 0, 10**5):
+            raise ValueError(f"preset {self.name!r}: probes_per_family must be a whole number (>= 1 when "
+                             "ic is reachable)")
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -92,10 +117,6 @@ def load_preset(name_or_path: str) -> Preset:
         fields_ = json.loads(path.read_text())
         solver = SolverConfig(**fields_.pop("solver", {}))
         fields_["families"] = tuple(tuple(f) for f in fields_["families"])
-        loaded = Preset(solver=solver, **fields_)
-    except (json.JSONDecodeError, TypeError, KeyError) as exc:
-        raise ValueError(f"preset file {path} is not a valid preset: {exc}") from None
-    missing = set(SPLITS) - set(loaded.counts)
-    if missing:
-        raise ValueError(f"preset file {path} gives no count for split(s) {', '.join(sorted(missing))}")
-    return loaded
+        return Preset(solver=solver, **fields_)
+    except (ValueError, TypeError, KeyError, AttributeError, RecursionError, OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"preset file {path} is not a valid preset: {' '.join(str(exc).split())[:300]}") from None
