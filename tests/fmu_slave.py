@@ -1,17 +1,28 @@
-"""An fmpy FMU2Slave of an SM4 FMU, driven step by step, recording what the FMU logs."""
+"""An fmpy FMU2Slave of a component's FMU, driven step by step, recording what the FMU logs.
+
+Value references come from the FMU's model description, by name; the component says which
+variables are its inputs and states (default SM4).
+"""
 import numpy as np
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
-STATES = [2, 3, 4, 5]  # value references of delta, omega, Ed_p, Eq_p in both SM4 FMUs
+from reference_models.sm4 import SM4
 
 
 class Slave:
-    """An initialized FMU instance that records log messages."""
+    """An FMU instance (initialized unless init=False) that records log messages.
 
-    def __init__(self, unzipped, name="a", init=True, logging_on=False, **start):
+    start: values set in initialization mode, by variable name (parameters such as delta0 or
+    rest_radius). vr: value reference by name; inputs/states: the component's names.
+    """
+
+    def __init__(self, unzipped, name="a", init=True, logging_on=False, component=SM4, **start):
         directory, md = unzipped
+        self.md = md
         self.messages = []
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.starts = {v.name: float(v.start) for v in md.modelVariables if v.type == "Real" and v.start is not None}
+        self.inputs, self.states = component.input_names, component.state_names
         self.callbacks = fmi2CallbackFunctions()
         self.callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
         self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier=md.coSimulation.modelIdentifier,
@@ -21,18 +32,43 @@ class Slave:
         if init:
             self.fmu.setupExperiment(startTime=0.0)
             self.fmu.enterInitializationMode()
-            for name_, value in start.items():
-                self.fmu.setReal([self.vr[name_]], [value])
+            self.set(**start)
             self.fmu.exitInitializationMode()
 
     def _log(self, env, instance, status, category, message):
         self.messages.append((status, message.decode()))
 
-    def step(self, h, Vs=1.0, theta=0.0):
-        self.fmu.setReal([0, 1], [Vs, theta])
+    def set(self, **values) -> None:
+        """fmi2SetReal of the named variables."""
+        if values:
+            self.fmu.setReal([self.vr[n] for n in values], [float(v) for v in values.values()])
+
+    def get(self, *names) -> np.ndarray:
+        """fmi2GetReal of the named variables."""
+        return np.array(self.fmu.getReal([self.vr[n] for n in names]))
+
+    def get_boolean(self, name) -> bool:
+        return bool(self.fmu.getBoolean([self.vr[name]])[0])
+
+    def state(self) -> np.ndarray:
+        """The states [n_x] now."""
+        return self.get(*self.states)
+
+    def step(self, h, *values, **named):
+        """Sets the inputs, positional in the component's order or by name (an input not given is set
+        to its start value), steps by h and returns the states [n_x] at the end of the step."""
+        if len(values) > len(self.inputs):
+            raise TypeError(f"at most {len(self.inputs)} input values ({', '.join(self.inputs)})")
+        inputs = {n: self.starts[n] for n in self.inputs}
+        inputs.update(zip(self.inputs, values))
+        unknown = set(named) - set(self.inputs)
+        if unknown:
+            raise TypeError(f"not an input: {', '.join(sorted(unknown))}")
+        inputs.update(named)
+        self.set(**inputs)
         self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
         self.t += h
-        return np.array(self.fmu.getReal(STATES))
+        return self.state()
 
     def close(self):
         self.fmu.terminate()

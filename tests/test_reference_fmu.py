@@ -1,4 +1,5 @@
-"""The reference RK45 FMU (pythonfmu) under fmpy: the same ODE, the same variables, FMI behaviour."""
+"""The reference RK45 FMU (pythonfmu) under fmpy: any machine's ODE, the one variable table, FMI behaviour."""
+import json
 import subprocess
 import sys
 import zipfile
@@ -10,10 +11,17 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
-from fmu_slave import STATES, Slave
-from reference_models.sm4 import outputs, rhs, steady_state
+from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu, reference_variables
+from fmu_export.variables import REFERENCE_EXTRAS, fmu_variables
+from fmu_slave import Slave
+from reference_models.component import ParameterError
+from reference_models.sm4 import SM4
 
 STEPS = [(0.01, 1.0, 0.0)] * 5 + [(0.02, 0.6, 0.1)] * 10 + [(0.005, 0.95, 0.25)] * 40 + [(0.05, 1.05, 0.2)] * 6
+# a machine other than the default (DESIGN section 2): no damping, no external reactance
+MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
+           "Tq0_p": 0.6, "Xep": 0, "Re": 0}
+DEFAULT, OTHER = SM4.params(), SM4.params(MACHINE)
 
 
 @pytest.fixture(scope="session")
@@ -21,60 +29,125 @@ def unzipped(reference_path):
     return extract(str(reference_path)), read_model_description(str(reference_path))
 
 
-def held_input_solution(x0, steps):
-    """States after each (h, Vs, theta) step by solve_ivp with the inputs held over the step."""
+@pytest.fixture(scope="module")
+def machine_path(tmp_path_factory):
+    """The reference FMU of MACHINE, model name Machine2."""
+    path = tmp_path_factory.mktemp("machine") / "Machine2.fmu"
+    build_reference_fmu(path, model_name="Machine2", params=MACHINE)
+    return path
+
+
+@pytest.fixture(scope="module")
+def machine(machine_path):
+    return extract(str(machine_path)), read_model_description(str(machine_path))
+
+
+def held_input_solution(x0, steps, p=DEFAULT):
+    """States after each (h, Vs, theta) step by solve_ivp (DOP853, tight) with the inputs held over the step."""
     x, out = np.array(x0, dtype=float), []
-    for h, Vs, theta in steps:
-        u = np.array([Vs, theta])
-        x = solve_ivp(lambda _t, y: rhs(y, u), (0.0, h), x, method="DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
+    for h, *u in steps:
+        u = np.array(u)
+        x = solve_ivp(lambda _t, y: SM4.rhs(y, u, p), (0.0, h), x, method="DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
         out.append(x)
     return np.array(out)
 
 
-def test_fmpy_validation_reports_no_problem(reference_path):
-    assert validate_fmu(str(reference_path)) == []
+def package_files(fmu_path) -> dict:
+    """{file name: bytes} of the model package in the FMU's resources (resources/sm4_reference_*/)."""
+    with zipfile.ZipFile(fmu_path) as z:
+        names = [n for n in z.namelist() if n.startswith("resources/sm4_reference_")]
+        return {n.rsplit("/", 1)[1]: z.read(n) for n in names}
 
 
-def test_variables_and_value_references_match_the_surrogate_less_its_diagnostics(unzipped):
+@pytest.mark.parametrize("fixture", ["reference_path", "machine_path"])
+def test_fmpy_validation_reports_no_problem(request, fixture):
+    assert validate_fmu(str(request.getfixturevalue(fixture))) == []
+
+
+def test_variables_and_value_references_are_the_tables(unzipped):
     md = unzipped[1]
-    names = {v.name: v.valueReference for v in md.modelVariables}
-    assert names == {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "Iq": 7,
-                     "I_re": 8, "I_im": 9, "P": 10, "Q": 11, "delta0": 12, "omega0": 13, "Ed_p0": 14,
-                     "Eq_p0": 15, "rtol": 16, "atol": 17}
-    deps = {md.modelVariables[o.variable.valueReference].name: [d.name for d in o.dependencies] for o in md.outputs}
-    assert deps["delta"] == [] and deps["P"] == ["Vs", "theta_vs"]
+    got = {v.name: (v.valueReference, v.causality) for v in md.modelVariables}
+    assert got == {v.name: (v.vr, v.causality) for v in reference_variables(SM4, DEFAULT)}
+    # the component's own variables have the value references every FMU of it has (the surrogate's too)
+    core = fmu_variables(SM4, DEFAULT, SM4.steady_state(None, DEFAULT))
+    assert all(got[v.name][0] == v.vr for v in core)
+    assert [n for n in got if n not in {v.name for v in core}] == [e.name for e in REFERENCE_EXTRAS]
+    by_vr = {v.valueReference: v.name for v in md.modelVariables}
+    deps = {by_vr[o.variable.valueReference]: [d.name for d in o.dependencies] for o in md.outputs}
+    assert all(deps[s] == [] for s in SM4.state_names) and deps["P"] == ["Vs", "theta_vs"]
 
 
-def test_fmu_carries_the_model_code_it_runs(reference_path):
-    names = zipfile.ZipFile(reference_path).namelist()
-    assert {"resources/sm4_reference/sm4.py", "resources/sm4_reference/slave.py",
-            "binaries/linux64/SM4Reference.so"} <= set(names)
+def test_fmu_carries_the_model_code_and_the_machine_it_runs(reference_path, machine_path):
+    files = package_files(reference_path)
+    assert {"sm4.py", "component.py", "slave.py", "machine.json", "fmu.json", "__init__.py"} <= set(files)
+    assert "binaries/linux64/SM4Reference.so" in zipfile.ZipFile(reference_path).namelist()
+    assert json.loads(files["machine.json"]) == DEFAULT.to_dict()
+    assert json.loads(package_files(machine_path)["machine.json"]) == OTHER.to_dict()
+    layout = json.loads(files["fmu.json"])
+    assert [v["name"] for v in layout["variables"]] == [v.name for v in reference_variables()]
+
+
+def test_default_initial_state_is_that_machines_equilibrium(unzipped, machine):
+    for fmu, p in ((unzipped, DEFAULT), (machine, OTHER)):
+        rest = SM4.steady_state(None, p)
+        starts = {v.name: float(v.start) for v in fmu[1].modelVariables if v.start is not None}
+        np.testing.assert_allclose([starts[f"{s}0"] for s in SM4.state_names], rest, rtol=0, atol=1e-12)
+        slave = Slave(fmu)
+        np.testing.assert_allclose(slave.state(), rest, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.abs(SM4.rhs(slave.state(), SM4.start_inputs, p)), 0, atol=1e-9)
+        np.testing.assert_allclose(slave.step(0.05), rest, rtol=0, atol=1e-9)  # at rest, it stays there
+        slave.close()
+    assert np.abs(SM4.steady_state(None, OTHER) - SM4.steady_state(None, DEFAULT)).max() > 0.01
 
 
 def test_states_equal_a_direct_solve_with_the_inputs_held_over_each_step(unzipped):
     slave = Slave(unzipped)
     got = np.array([slave.step(*step) for step in STEPS])
     slave.close()
-    np.testing.assert_allclose(got, held_input_solution(steady_state(1.0, 0.0), STEPS), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(got, held_input_solution(SM4.steady_state(None, DEFAULT), STEPS), rtol=0, atol=1e-6)
 
 
-def test_derived_outputs_follow_the_inputs_set_after_a_step(unzipped):
-    slave = Slave(unzipped)
-    x = slave.step(0.01, 0.9, 0.1)
-    slave.fmu.setReal([0, 1], [0.8, -0.2])
-    got = slave.fmu.getReal([6, 7, 8, 9, 10, 11])
+def test_another_machine_runs_its_own_equations(machine):
+    x0 = SM4.steady_state(None, OTHER)
+    slave = Slave(machine)
+    got = np.array([slave.step(*step) for step in STEPS])
     slave.close()
-    np.testing.assert_allclose(got, outputs(x, np.array([0.8, -0.2])), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got, held_input_solution(x0, STEPS, OTHER), rtol=0, atol=1e-6)
+    assert np.abs(got - held_input_solution(x0, STEPS, DEFAULT)).max() > 1e-2  # the machine matters
+
+
+@pytest.mark.parametrize("which", ["default", "other"])
+def test_derived_outputs_follow_the_inputs_set_after_a_step(unzipped, machine, which):
+    fmu, p = (unzipped, DEFAULT) if which == "default" else (machine, OTHER)
+    slave = Slave(fmu)
+    x = slave.step(0.01, 0.9, 0.1)
+    slave.set(Vs=0.8, theta_vs=-0.2)
+    got = slave.get(*SM4.output_names)
+    slave.close()
+    np.testing.assert_allclose(got, SM4.output_values(x, np.array([0.8, -0.2]), p), rtol=1e-12, atol=1e-12)
+    other = DEFAULT if p is OTHER else OTHER
+    assert np.abs(got - SM4.output_values(x, np.array([0.8, -0.2]), other)).max() > 1e-3
 
 
 def test_initial_state_parameters_start_the_run(unzipped):
-    x0 = steady_state(0.95, 0.1)
-    slave = Slave(unzipped, delta0=x0[0], omega0=0.05, Ed_p0=x0[2], Eq_p0=x0[3])
-    np.testing.assert_allclose(slave.fmu.getReal(STATES), [x0[0], 0.05, x0[2], x0[3]])
+    x0 = SM4.steady_state((0.95, 0.1), DEFAULT)
+    start = dict(zip(SM4.state_names, x0), omega=0.05)
+    slave = Slave(unzipped, **{f"{n}0": v for n, v in start.items()})
+    np.testing.assert_allclose(slave.state(), list(start.values()))
     got = slave.step(0.01, 0.95, 0.1)
     slave.close()
-    np.testing.assert_allclose(got, held_input_solution([x0[0], 0.05, x0[2], x0[3]], [(0.01, 0.95, 0.1)])[0],
+    np.testing.assert_allclose(got, held_input_solution(list(start.values()), [(0.01, 0.95, 0.1)])[0],
                                rtol=0, atol=1e-6)
+
+
+def test_fmus_of_two_machines_live_side_by_side_in_one_process(unzipped, machine):
+    a, b = Slave(unzipped, "default"), Slave(machine, "other")
+    xa, xb = a.step(0.02, 0.9, 0.1), b.step(0.02, 0.9, 0.1)
+    a.close(), b.close()
+    np.testing.assert_allclose(xa, held_input_solution(SM4.steady_state(None, DEFAULT), [(0.02, 0.9, 0.1)])[0],
+                               atol=1e-6)
+    np.testing.assert_allclose(xb, held_input_solution(SM4.steady_state(None, OTHER), [(0.02, 0.9, 0.1)], OTHER)[0],
+                               atol=1e-6)
 
 
 @pytest.mark.parametrize("value", [float("nan"), float("inf")])
@@ -94,18 +167,63 @@ def test_non_positive_step_is_refused_with_a_reason_logged_when_logging_is_on(un
     slave.close()
 
 
-def test_load_free_load_cycles_in_one_process_do_not_crash(reference_path, tmp_path):
+def with_machine_resource(fmu_path, out, content):
+    """A copy of the FMU whose machine.json holds `content` (bytes), or lacks it (None)."""
+    with zipfile.ZipFile(fmu_path) as source, zipfile.ZipFile(out, "w") as target:
+        for info in source.infolist():
+            if info.filename.endswith("/machine.json"):
+                if content is None:
+                    continue
+                target.writestr(info, content)
+            else:
+                target.writestr(info, source.read(info))
+    return out
+
+
+@pytest.mark.parametrize("content, reason", [
+    (None, "cannot read machine file"),
+    (b"{not json", "cannot read machine file"),
+    (b'{"H": -1}', "parameter H = -1.0 must be > 0"),
+    (b'{"inertia": 5}', "unknown sm4 parameter(s) 'inertia'"),
+])
+def test_a_missing_or_corrupt_machine_resource_is_refused_with_a_reason(machine_path, tmp_path, content, reason):
+    broken = with_machine_resource(machine_path, tmp_path / "Machine2.fmu", content)
+    slave = Slave((extract(str(broken)), read_model_description(str(broken))), logging_on=True)
+    with pytest.raises(FMICallException):
+        slave.step(0.01)
+    errors = [m for status, m in slave.messages if status == 3]  # fmi2Error
+    assert errors and all("cannot start the reference FMU" in m for m in errors)
+    assert any(reason in m for m in errors)
+    assert np.isnan(slave.state()).all()  # no machine, no made-up state
+    slave.close()
+
+
+def test_the_builder_refuses_an_unknown_parameter_and_a_machine_without_equilibrium(tmp_path):
+    with pytest.raises(ParameterError, match="unknown sm4 parameter"):
+        build_reference_fmu(tmp_path / "x.fmu", params={"inertia": 5.0})
+    with pytest.raises(ReferenceBuildError, match="no equilibrium at the start inputs"):
+        build_reference_fmu(tmp_path / "x.fmu", params={"Pm": 5.0})
+    with pytest.raises(ValueError, match="Python identifier"):
+        build_reference_fmu(tmp_path / "x.fmu", model_name="not-a-name")
+    assert not (tmp_path / "x.fmu").exists()
+
+
+def test_load_free_load_cycles_in_one_process_do_not_crash(reference_path, machine_path, tmp_path):
     script = f"""
 import sys
-sys.modules["reference_models"] = None  # the FMU must not need the repository's model code
+for name in ("reference_models", "fmu_export", "surrogate", "opfmu"):
+    sys.modules[name] = None  # the FMU must not need the repository's code
 from fmpy import simulate_fmu
 for k in range(3):
     result = simulate_fmu({str(reference_path)!r}, stop_time=0.05, output_interval=0.01)
-print(result["delta"][-1])
+    other = simulate_fmu({str(machine_path)!r}, stop_time=0.05, output_interval=0.01)
+print(result["delta"][-1], other["delta"][-1])
 """
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert abs(float(done.stdout.split()[-1]) - steady_state(1.0, 0.0)[0]) < 1e-9
+    got = [float(v) for v in done.stdout.split()[-2:]]
+    np.testing.assert_allclose(got, [SM4.steady_state(None, DEFAULT)[0], SM4.steady_state(None, OTHER)[0]],
+                               rtol=0, atol=1e-9)
 
 
 def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped, tmp_path):
