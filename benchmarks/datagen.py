@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from reference_models.sm4 import STATE_NAMES
+from reference_models.sm4 import SM4
 from surrogate.data.datasets import time_grid
 from surrogate.data.envelope import equilibria
 from surrogate.data.presets import preset
@@ -27,7 +27,7 @@ def timed_run(workers: int, chunks: dict, t, solver) -> tuple[float, float, np.n
     start = time.perf_counter()
     with SolveRunner(workers) as runner:
         ready = time.perf_counter()
-        runner.run(chunks, t, solver, lambda key, x: results.__setitem__(key, x))
+        runner.run(chunks, t, solver, lambda key, x: results.__setitem__(key, x), SM4, SM4.params())
         solved = time.perf_counter()
     return solved - ready, solved - start, np.concatenate([results[k] for k in sorted(results)])
 
@@ -44,8 +44,8 @@ def main() -> None:
     if recipe.ic == "box":
         box = recipe.ic_box
     else:  # initial states among the equilibria: enough to time the solves without a probe run
-        rest = equilibria()
-        box = {name: (rest[:, i].min(), rest[:, i].max()) for i, name in enumerate(STATE_NAMES)}
+        rest = equilibria(SM4, SM4.params())
+        box = {name: (rest[:, i].min(), rest[:, i].max()) for i, name in enumerate(SM4.state_names)}
     x0, signals, _ = sample_split(args.n, recipe.families, box, recipe.horizon, np.random.default_rng(0))
     t = time_grid(recipe)
     chunks = {f"c{k:05d}": (x0[i:i + args.chunk], [s.to_dict() for s in signals[i:i + args.chunk]])

@@ -68,6 +68,8 @@ class Component:
     derivatives(x, u, p, m) and output_equations(x, u, p, m) take sequences of scalars (or arrays
     broadcast together) and return tuples of len(states) and len(outputs). equilibrium(u [n_u], p)
     returns the stable steady state [n_x] under constant inputs u, or raises ValueError.
+    rest(u, p): the state at rest nearest to constant inputs u where equilibrium has none (SM4: the
+        equilibrium at the lowest voltage that has one); None: equilibrium's answer or its error.
     state_scales: a typical excursion of each state in its units (how far "near rest" reaches).
     affine_states: indices of states whose own derivative is affine in that state alone,
         dx_i/dt = g(other states, u) - k x_i with k >= 0 constant (integrated exactly over a step).
@@ -84,6 +86,7 @@ class Component:
     equilibrium: Callable
     state_scales: tuple
     affine_states: tuple = ()
+    rest: Callable | None = None
 
     @property
     def state_names(self) -> tuple:
@@ -124,6 +127,14 @@ class Component:
         """The stable equilibrium [n_x] at constant inputs u [n_u] (default: the start inputs)."""
         u = self.start_inputs if u is None else np.asarray(u, dtype=float)
         return np.asarray(self.equilibrium(u, p if p is not None else self.params_type()), dtype=float)
+
+    def rest_state(self, u, p=None) -> np.ndarray:
+        """The state [n_x] at rest under constant inputs u [n_u]: the equilibrium, or where there is
+        none the nearest state at rest the component declares (`rest`)."""
+        p = p if p is not None else self.params_type()
+        if self.rest is None:
+            return self.steady_state(u, p)
+        return np.asarray(self.rest(np.asarray(u, dtype=float), p), dtype=float)
 
     def params(self, values: Mapping | None = None):
         """The component's parameters from a mapping of some of them (the rest default), checked:

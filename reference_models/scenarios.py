@@ -21,7 +21,7 @@ import numpy as np
 from .families import family, held_levels
 from .signals import Signal
 from .simulate import simulate
-from .sm4 import DEFAULT_PARAMS, SM4Params, min_voltage_with_equilibrium, steady_state
+from .sm4 import DEFAULT_PARAMS, SM4, SM4Params
 
 SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
 # a scenario is redrawn (from the same seed's stream) until its bus voltage ends at or above this [pu]:
@@ -50,7 +50,7 @@ class Scenario:
 
 def rest_state(Vs: float, theta_vs: float, p: SM4Params = DEFAULT_PARAMS) -> np.ndarray:
     """Equilibrium [4] of machine p at (Vs, theta_vs), Vs raised to the lowest voltage that has one."""
-    return steady_state(max(float(Vs), min_voltage_with_equilibrium(p)), float(theta_vs), p)
+    return SM4.rest_state((Vs, theta_vs), p)
 
 
 def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Params = DEFAULT_PARAMS) -> Scenario:

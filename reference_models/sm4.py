@@ -135,6 +135,11 @@ def equilibrium(u, p: SM4Params) -> np.ndarray:
     return np.array([theta_vs + angle, 0.0, Ed_p, Eq_p])
 
 
+def rest(u, p: SM4Params) -> np.ndarray:
+    """The equilibrium [4] at u = (Vs, theta_vs), Vs raised to the lowest voltage that has one."""
+    return equilibrium((max(float(u[0]), min_voltage_with_equilibrium(p)), float(u[1])), p)
+
+
 SM4 = Component(
     name="sm4",
     description="SM4 synchronous machine: Sauer-Pai two-axis model on a bus of varying voltage",
@@ -157,6 +162,7 @@ SM4 = Component(
     state_scales=(0.5, 0.25, 0.1, 0.1),
     # d omega/dt = Wb/(2H) (Pm - Pe(delta, Ed_p, Eq_p, u)) - Wb D/(2H) omega
     affine_states=(1,),
+    rest=rest,
 )
 
 STATE_NAMES = SM4.state_names

@@ -90,9 +90,9 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
         ic_box, pool = _ordered_box(preset.ic_box, model), None
         if preset.ic == "reachable":
             x0s, signals, names = probe_plan(preset.families, preset.probes_per_family, preset.horizon, rngs["probe"],
-                                             params)
+                                             model, params)
             x = _solve(runner, "probe", x0s, signals, t, preset, partial, progress, machine)
-            meta["reachable"] = reachable_summary(x, names, params)
+            meta["reachable"] = reachable_summary(x, names, model, params)
             ic_box, pool = reachable_box(meta["reachable"]), x.reshape(-1, model.n_states)
         meta["ic_box"] = {s: list(r) for s, r in ic_box.items()}
         trained_on = []  # (x0, u) of the splits a model trains on: its envelope

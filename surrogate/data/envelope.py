@@ -1,9 +1,9 @@
-"""The reachable-state envelope of SM4 a co-simulation operator must cover, measured rather than guessed.
+"""The reachable-state envelope a co-simulation operator must cover, measured rather than guessed.
 
-The envelope holds every equilibrium for Vs in [lowest voltage with one, 1.2] pu and theta_vs in
-[-0.5, 0.5] rad (below that lowest voltage there is none), and every probe state. A probe is one
-reference window started at the equilibrium of the signal's first input value, under a
-signal of one family: the states a machine at rest reaches within one window when the bus voltage
+The envelope holds the component's state at rest on a grid over its inputs' operating ranges (SM4:
+Vs in [0.7, 1.2] pu, theta_vs in [-0.5, 0.5] rad; below the lowest voltage with an equilibrium, the
+one there), and every probe state. A probe is one reference window started at rest under the
+signal's first input value, under a signal of one family: the states a machine at rest reaches within one window when the bus voltage
 moves the way that family moves it. The envelope is the bounding box of every probe state; the
 probe states themselves are the pool that reachable initial conditions are drawn from.
 """
@@ -12,53 +12,46 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import qmc
 
-from reference_models.families import THETA_RANGE, VS_RANGE, family
-from reference_models.scenarios import rest_state
-from reference_models.sm4 import DEFAULT_PARAMS, STATE_NAMES, SM4Params, min_voltage_with_equilibrium, steady_state
+from reference_models.component import Component
+from reference_models.families import family
 
 
-def probe_plan(families, per_family: int, horizon: float, rng: np.random.Generator,
-               params: SM4Params = DEFAULT_PARAMS):
-    """Initial states x0 [n, 4], signals [n] and family names [n] of the probe windows of machine params.
-
-    x0 is the equilibrium at the signal's u(0); where Vs(0) is below the lowest voltage with an
-    equilibrium, the equilibrium at that lowest voltage (the closest state at rest).
-    """
+def probe_plan(families, per_family: int, horizon: float, rng: np.random.Generator, model: Component, params):
+    """Initial states x0 [n, n_x], signals [n] and family names [n] of the probe windows of the
+    component `model` with parameters `params`: x0 is the state at rest under the signal's u(0)
+    (Component.rest_state)."""
     x0s, signals, names = [], [], []
     for name, _ in families:
         fam = family(name)
         for signal in fam.sample(qmc.LatinHypercube(d=fam.dim, rng=rng).random(per_family), horizon):
-            x0s.append(rest_state(*signal.at(0.0), params))
+            x0s.append(model.rest_state(signal.at(0.0), params))
             signals.append(signal)
             names.append(name)
     return np.array(x0s), signals, names
 
 
-def equilibria(n: int = 11, params: SM4Params = DEFAULT_PARAMS) -> np.ndarray:
-    """Equilibrium states [n*n, 4] of machine params on a grid of Vs in [lowest with one, 1.2] pu x
-    theta_vs in [-0.5, 0.5] rad."""
-    grid = [(v, th) for v in np.linspace(min_voltage_with_equilibrium(params), max(VS_RANGE[1],
-                                         min_voltage_with_equilibrium(params)), n)
-            for th in np.linspace(*THETA_RANGE, n)]
-    return np.array([steady_state(v, th, params) for v, th in grid])
+def equilibria(model: Component, params, n: int = 11) -> np.ndarray:
+    """States at rest [n^n_u, n_x] on a grid of n points over each input's operating range."""
+    axes = [np.linspace(*q.operating_range, n) for q in model.inputs]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, model.n_inputs)
+    return np.array([model.rest_state(u, params) for u in grid])
 
 
-def reachable_summary(x: np.ndarray, names, params: SM4Params = DEFAULT_PARAMS) -> dict:
-    """Ranges [state -> (min, max)] of machine params' equilibria and the probe trajectories
-    x [n, S, 4], overall and per family."""
+def reachable_summary(x: np.ndarray, names, model: Component, params) -> dict:
+    """Ranges [state -> (min, max)] of the states at rest and the probe trajectories x [n, S, n_x],
+    overall and per family."""
 
     def ranges(block):
-        flat = block.reshape(-1, 4)
-        return {s: [float(flat[:, i].min()), float(flat[:, i].max())] for i, s in enumerate(STATE_NAMES)}
+        flat = block.reshape(-1, model.n_states)
+        return {s: [float(flat[:, i].min()), float(flat[:, i].max())] for i, s in enumerate(model.state_names)}
 
     names = np.asarray(names)
-    rest = equilibria(params=params)
+    rest = equilibria(model, params)
     return {
-        "all": ranges(np.concatenate([rest, x.reshape(-1, 4)])),
+        "all": ranges(np.concatenate([rest, x.reshape(-1, model.n_states)])),
         "equilibria": ranges(rest),
         "per_family": {f: ranges(x[names == f]) for f in dict.fromkeys(names.tolist())},
         "probes": int(len(x)),
-        "min_voltage_with_equilibrium_pu": min_voltage_with_equilibrium(params),
     }
 
 
