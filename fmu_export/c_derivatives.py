@@ -1,0 +1,161 @@
+"""C source of a component's exact partial derivatives, generated from its one Python definition.
+
+The component's equations run on `Dual` values: each carries its C expression and the C
+expressions of its partial derivatives with respect to the states and inputs it depends on
+(forward-mode differentiation, one statement per operation). No derivative is written by hand, and
+a derivative that is structurally zero is never computed.
+
+Generated functions (n_x states, n_u inputs, columns ordered x then u):
+    model_derivatives_jacobian(x, u, J)   J[i * (n_x + n_u) + j] = d f_i / d (x, u)_j
+    model_outputs_jacobian(x, u, J)       J[i * (n_x + n_u) + j] = d g_i / d (x, u)_j
+"""
+from __future__ import annotations
+
+import re
+
+from reference_models.component import Component
+
+_NAME = re.compile(r"\bd\d+\b")
+
+
+class _Recorder:
+    """Collects `const double dN = ...;` statements."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def emit(self, expression: str) -> str:
+        name = f"d{len(self.lines)}"
+        self.lines.append(f"    const double {name} = {expression};")
+        return name
+
+
+def _literal(value: float) -> str:
+    text = repr(float(value))
+    return f"({text})" if text.startswith("-") else text
+
+
+class Dual:
+    """A double-valued C expression `code` with its partial derivatives `grads` {column: C expression}."""
+
+    def __init__(self, code: str, grads: dict, recorder: _Recorder):
+        self.code, self.grads, self.recorder = code, grads, recorder
+
+    def _new(self, code: str, grads: dict) -> "Dual":
+        return Dual(self.recorder.emit(code), {j: self.recorder.emit(g) for j, g in grads.items()}, self.recorder)
+
+    def _lift(self, other) -> "Dual":
+        return other if isinstance(other, Dual) else Dual(_literal(other), {}, self.recorder)
+
+    def __add__(self, other):
+        o = self._lift(other)
+        keys = sorted(self.grads.keys() | o.grads.keys())
+        return self._new(f"{self.code} + {o.code}",
+                         {j: " + ".join(g[j] for g in (self.grads, o.grads) if j in g) for j in keys})
+
+    __radd__ = __add__
+
+    def __sub__(self, other):
+        return self + (-self._lift(other))
+
+    def __rsub__(self, other):
+        return self._lift(other) + (-self)
+
+    def __mul__(self, other):
+        o = self._lift(other)
+        keys = sorted(self.grads.keys() | o.grads.keys())
+        grads = {}
+        for j in keys:
+            terms = ([f"{self.grads[j]} * {o.code}"] if j in self.grads else []) + (
+                [f"{self.code} * {o.grads[j]}"] if j in o.grads else [])
+            grads[j] = " + ".join(terms)
+        return self._new(f"{self.code} * {o.code}", grads)
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, other):
+        o = self._lift(other)
+        value = self._new(f"{self.code} / {o.code}", {})
+        keys = sorted(self.grads.keys() | o.grads.keys())
+        grads = {}
+        for j in keys:
+            top = self.grads.get(j, "0.0") + (f" - {value.code} * {o.grads[j]}" if j in o.grads else "")
+            grads[j] = self.recorder.emit(f"({top}) / {o.code}")
+        return Dual(value.code, grads, self.recorder)
+
+    def __rtruediv__(self, other):
+        return self._lift(other) / self
+
+    def __neg__(self):
+        return self._new(f"-{self.code}", {j: f"-{g}" for j, g in self.grads.items()})
+
+
+class DualMath:
+    """The math namespace of Dual values: libm calls and their derivatives."""
+
+    @staticmethod
+    def sin(a: Dual) -> Dual:
+        c = a.recorder.emit(f"cos({a.code})")
+        return a._new(f"sin({a.code})", {j: f"{c} * {g}" for j, g in a.grads.items()})
+
+    @staticmethod
+    def cos(a: Dual) -> Dual:
+        s = a.recorder.emit(f"sin({a.code})")
+        return a._new(f"cos({a.code})", {j: f"-{s} * {g}" for j, g in a.grads.items()})
+
+    @staticmethod
+    def exp(a: Dual) -> Dual:
+        value = a._new(f"exp({a.code})", {})
+        return Dual(value.code, {j: a.recorder.emit(f"{value.code} * {g}") for j, g in a.grads.items()}, a.recorder)
+
+    @staticmethod
+    def sqrt(a: Dual) -> Dual:
+        value = a._new(f"sqrt({a.code})", {})
+        return Dual(value.code, {j: a.recorder.emit(f"{g} / (2.0 * {value.code})") for j, g in a.grads.items()},
+                    a.recorder)
+
+
+def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int, doc: str) -> str:
+    """`static void name(const double x[], const double u[], double J[])`: the row-major Jacobian
+    [n_rows, n_x + n_u] of fn(x, u, params, m) with respect to (x, u)."""
+    recorder = _Recorder()
+    n_x, n_u = component.n_states, component.n_inputs
+    x = [Dual(f"x[{i}]", {i: "1.0"}, recorder) for i in range(n_x)]
+    u = [Dual(f"u[{i}]", {n_x + i: "1.0"}, recorder) for i in range(n_u)]
+    results = fn(x, u, params, DualMath)
+    if len(results) != n_rows:
+        raise ValueError(f"{name}: expected {n_rows} results, got {len(results)}")
+    cols = n_x + n_u
+    stores = []
+    for i, r in enumerate(results):
+        grads = r.grads if isinstance(r, Dual) else {}
+        stores += [f"    J[{i * cols + j}] = {grads.get(j, '0.0')};" for j in range(cols)]
+    body = _live(recorder.lines, stores) + stores
+    return (f"/* {doc}: J[i * {cols} + j] = d out_i / d (x, u)_j */\n"
+            f"static void {name}(const double x[{n_x}], const double u[{n_u}], double J[{n_rows * cols}])\n{{\n"
+            f"    (void)x;\n    (void)u;\n" + "\n".join(body) + "\n}\n")
+
+
+def _live(lines: list[str], stores: list[str]) -> list[str]:
+    """The statements the stores need, in order (the values whose only use was their own
+    derivative are dropped)."""
+    needed = set(_NAME.findall(" ".join(stores)))
+    kept = []
+    for line in reversed(lines):
+        name, _, expression = line.partition(" = ")
+        if name.split()[-1] in needed:
+            kept.append(line)
+            needed.update(_NAME.findall(expression))
+    return kept[::-1]
+
+
+def jacobians_c_source(component: Component, params) -> str:
+    """C source with model_derivatives_jacobian and model_outputs_jacobian of `component` for `params`."""
+    header = (f"/* Generated by opfmu from the {component.name} component definition (forward-mode "
+              f"derivatives); do not edit. Columns: ({', '.join(component.state_names + component.input_names)}) */\n"
+              "#include <math.h>\n\n")
+    rhs = c_jacobian_function("model_derivatives_jacobian", component.derivatives, component, params,
+                              component.n_states, f"{component.name} d(dx/dt)/d(x, u)")
+    outs = c_jacobian_function("model_outputs_jacobian", component.output_equations, component, params,
+                               len(component.outputs), f"{component.name} d(outputs)/d(x, u)")
+    return header + rhs + "\n" + outs
