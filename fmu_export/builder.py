@@ -1,16 +1,22 @@
-"""Builds the native SM4Surrogate FMU from an exported operator (.onnx).
+"""Builds the native surrogate FMU of an exported operator (.onnx), for the machine its metadata names.
 
-Generated at build time: config.h (sizes, envelope, defaults, GUID), sm4_equations.h (from the
-Python equations) and operator_kernel.c (from the ONNX graph). With fmi2_cs.c and
-surrogate_model.c they compile (gcc) into binaries/linux64/<model>.so, which needs libc and libm
-only. The compiled kernel is checked against onnxruntime before the FMU is written; the .onnx goes
-into resources/ and the C sources into sources/.
+The operator file's metadata (validated by surrogate.contract.operator_metadata before anything is
+generated) names the component and its parameters; from those and the graph, generated at build time:
+config.h (sizes, envelope, defaults, component tables, GUID), variables.h (the value references of
+the model description, fmu_export.variables), equations.c (the component's right-hand side and
+outputs, fmu_export.c_equations), operator_kernel.c (from the ONNX graph) and sensor_sums.c. With the
+static sources in c/ (fmi2_cs.c: FMI plumbing; window.c: the window-and-sensor engine;
+corrections.c; variables.c: the variable table; linalg.c) they compile (gcc) into
+binaries/linux64/<model>.so, which needs libc and libm only. The compiled kernel is checked against
+onnxruntime before the FMU is written; the .onnx goes into resources/ and the C sources into
+sources/. Only numbers, generated identifiers and escaped component names reach the C sources.
 """
 from __future__ import annotations
 
 import ctypes
 import hashlib
-import json
+import math
+import re
 import shutil
 import subprocess
 import tempfile
@@ -20,27 +26,38 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.files import atomic_path
-from reference_models.sm4 import INPUT_NAMES, STATE_NAMES, steady_state
-from surrogate.contract import TOLERANCE, random_inputs
+from surrogate.contract import TOLERANCE, ContractError, operator_metadata, random_inputs
 
-from .c_equations import sm4_c_source
-from .model_description import model_description, sm4_variables
+from .c_equations import equations_c_source
+from .model_description import model_description
 from .onnx_to_c import generate_kernel
+from .variables import SURROGATE_EXTRAS, fmu_variables, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 # residual above which the FMU warns, for an operator whose metadata names none (the shipped
 # operator's own level is 1.37: see README, "When to distrust the surrogate")
 DEFAULT_RESIDUAL_LIMIT = 1.0
-# input change (pu for Vs, rad for theta_vs) that starts a new operator window at once
+# input change (in the input's unit) that starts a new operator window at once
 DEFAULT_RESTART_JUMP = 0.02
-DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (surrogate_model.c: the rest correction)
-DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (surrogate_model.c: the slow-mode correction)
-DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (surrogate_model.c: the exact swing step)
-STATIC_SOURCES = ("fmi2_cs.c", "surrogate_model.c", "model.h")
+DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (corrections.c: the rest correction)
+DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (corrections.c: the slow-mode correction)
+DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (corrections.c: the exact affine step)
+STATIC_SOURCES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "linalg.c", "model.h", "engine.h",
+                  "linalg.h")
+C_FILES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "linalg.c", "equations.c", "operator_kernel.c",
+           "sensor_sums.c")
+MODEL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
+C_KEYWORDS = frozenset("auto break case char const continue default do double else enum extern float for goto if "
+                       "inline int long register restrict return short signed sizeof static struct switch typedef "
+                       "union unsigned void volatile while".split())
 
 
 class BuildError(ValueError):
-    """The FMU cannot be built as asked (bad operator file, compiler failure, kernel mismatch)."""
+    """The FMU cannot be built as asked (bad operator file, compiler failure, kernel mismatch); the
+    message is one line."""
+
+    def __init__(self, message: str):
+        super().__init__(" ".join(str(message).split()))
 
 
 def fmi_headers() -> Path:
@@ -53,35 +70,88 @@ def fmi_headers() -> Path:
     return path
 
 
+def _c_double(value) -> str:
+    """A C double literal: shortest round-trip repr of a finite value, or -INFINITY."""
+    value = float(value)
+    if value == -math.inf:
+        return "(-INFINITY)"
+    if not math.isfinite(value):
+        raise BuildError(f"internal: non-finite value {value!r} for the C sources")
+    return repr(value)
+
+
 def _c_array(values) -> str:
-    return "{" + ", ".join(repr(float(v)) for v in values) + "}"
+    return "{" + ", ".join(_c_double(v) for v in values) + "}"
 
 
-def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_layer: int, kernel) -> str:
-    envelope = json.loads(meta["envelope"])
-    x_default = steady_state(1.0, 0.0)
+def _c_string(text: str) -> str:
+    """A C string literal of text; every character outside a small safe set as an octal escape."""
+    safe = set("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_ /.,:=-+()[]{}")  # no ?, \\, ", %
+    return '"' + "".join(c if c in safe else "".join(f"\\{b:03o}" for b in c.encode()) for c in text) + '"'
+
+
+def _c_strings(texts) -> str:
+    return "{" + ", ".join(_c_string(t) for t in texts) + "}"
+
+
+def input_minima(component) -> list[float]:
+    """The lowest value each input accepts (the FMU refuses a value below it): the Quantity's
+    `minimum` where it declares one, 0 for a magnitude in pu, else -inf."""
+    out = []
+    for q in component.inputs:
+        minimum = getattr(q, "minimum", None)
+        if minimum is None:
+            minimum = 0.0 if q.unit == "pu" and "magnitude" in q.description else -math.inf
+        out.append(float(minimum))
+    return out
+
+
+def mode_start(n: int) -> list[float]:
+    """The start vector of the inverse iteration for the slowest mode: from 1 down to 0.1."""
+    return [1.0] if n == 1 else [round(1.0 - 0.9 * i / (n - 1), 12) for i in range(n)]
+
+
+def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer: int, kernel) -> str:
+    """config.h: the FMU's sizes, defaults, envelope and component tables, all numbers or escaped names."""
+    component = meta["component"]
+    envelope = meta["envelope"]
+    n_x, n_u = component.n_states, component.n_inputs
+    affine = [int(i) for i in component.affine_states]
+    residual_scale = meta["residual_scale"] or [1.0] * n_x
     lines = [
         "/* Generated by opfmu: the configuration of one surrogate FMU. */",
-        "#ifndef OPFMU_CONFIG_H", "#define OPFMU_CONFIG_H",
-        f'#define OPFMU_MODEL_IDENTIFIER "{model_name}"',
-        f'#define OPFMU_GUID "{guid}"',
+        "#ifndef OPFMU_CONFIG_H", "#define OPFMU_CONFIG_H", "#include <math.h>",
+        f"#define OPFMU_MODEL_IDENTIFIER {_c_string(model_name)}",
+        f"#define OPFMU_GUID {_c_string(guid)}",
+        f"#define OPFMU_N_STATES {n_x}",
+        f"#define OPFMU_N_INPUTS {n_u}",
+        f"#define OPFMU_N_OUTPUTS {len(component.outputs)}",
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
-        f"#define OPFMU_HORIZON {float(meta['horizon_s'])!r}",
-        f"#define OPFMU_ROLLOVER_HORIZON {rollover_horizon(meta)!r} /* default of the parameter rollover_horizon */",
+        f"#define OPFMU_HORIZON {_c_double(meta['horizon_s'])}",
+        f"#define OPFMU_ROLLOVER_HORIZON {_c_double(meta['rollover_horizon_s'])} /* default of the parameter rollover_horizon */",
         f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
         f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
-        f"#define OPFMU_RESIDUAL_LIMIT {residual_limit(meta)!r} /* default of the parameter residual_limit */",
-        f"#define OPFMU_RESTART_JUMP {DEFAULT_RESTART_JUMP!r} /* default of the parameter restart_jump */",
-        f"#define OPFMU_REST_RADIUS {DEFAULT_REST_RADIUS!r} /* default of the parameter rest_radius */",
-        f"#define OPFMU_SLOW_WEIGHT {DEFAULT_SLOW_WEIGHT!r} /* default of the parameter slow_weight */",
-        f"#define OPFMU_SWING_WEIGHT {DEFAULT_SWING_WEIGHT!r} /* default of the parameter swing_weight */",
-        f"static const double OPFMU_DEFAULT_X0[4] = {_c_array(x_default)}; /* equilibrium at Vs = 1, theta_vs = 0 */",
-        f"static const double OPFMU_ENV_X0_MIN[4] = {_c_array(envelope['x0'][s][0] for s in STATE_NAMES)};",
-        f"static const double OPFMU_ENV_X0_MAX[4] = {_c_array(envelope['x0'][s][1] for s in STATE_NAMES)};",
-        f"static const double OPFMU_ENV_U_MIN[2] = {_c_array(envelope['u'][s][0] for s in INPUT_NAMES)};",
-        f"static const double OPFMU_ENV_U_MAX[2] = {_c_array(envelope['u'][s][1] for s in INPUT_NAMES)};",
-        f"static const double OPFMU_RESIDUAL_SCALE[4] = {_c_array(residual_scale)};",
+        f"#define OPFMU_RESIDUAL_LIMIT {_c_double(residual_limit(meta))} /* default of the parameter residual_limit */",
+        f"#define OPFMU_RESTART_JUMP {_c_double(DEFAULT_RESTART_JUMP)} /* default of the parameter restart_jump */",
+        f"#define OPFMU_REST_RADIUS {_c_double(DEFAULT_REST_RADIUS)} /* default of the parameter rest_radius */",
+        f"#define OPFMU_SLOW_WEIGHT {_c_double(DEFAULT_SLOW_WEIGHT)} /* default of the parameter slow_weight */",
+        f"#define OPFMU_SWING_WEIGHT {_c_double(DEFAULT_SWING_WEIGHT)} /* default of the parameter swing_weight */",
+        f"#define OPFMU_N_AFFINE {len(affine)} /* states whose rate is affine in themselves (exact step) */",
+        f"static const int OPFMU_AFFINE_STATES[{max(len(affine), 1)}] = {{{', '.join(map(str, affine or [0]))}}};",
+        f"static const double OPFMU_DEFAULT_X0[{n_x}] = {_c_array(x_default)}; /* equilibrium at the start inputs */",
+        f"static const double OPFMU_START_U[{n_u}] = {_c_array(component.start_inputs)};",
+        f"static const double OPFMU_INPUT_MIN[{n_u}] = {_c_array(input_minima(component))};",
+        f"static const char *const OPFMU_INPUT_NAMES[{n_u}] = {_c_strings(component.input_names)};",
+        f"static const char *const OPFMU_INPUT_UNITS[{n_u}] = {_c_strings(q.unit for q in component.inputs)};",
+        f"static const double OPFMU_STATE_SCALE[{n_x}] = {_c_array(component.state_scales)}; /* reach of the rest "
+        "correction at rest_radius = 1 */",
+        f"static const double OPFMU_MODE_START[{n_x}] = {_c_array(mode_start(n_x))};",
+        f"static const double OPFMU_ENV_X0_MIN[{n_x}] = {_c_array(envelope['x0'][s][0] for s in component.state_names)};",
+        f"static const double OPFMU_ENV_X0_MAX[{n_x}] = {_c_array(envelope['x0'][s][1] for s in component.state_names)};",
+        f"static const double OPFMU_ENV_U_MIN[{n_u}] = {_c_array(envelope['u'][s][0] for s in component.input_names)};",
+        f"static const double OPFMU_ENV_U_MAX[{n_u}] = {_c_array(envelope['u'][s][1] for s in component.input_names)};",
+        f"static const double OPFMU_RESIDUAL_SCALE[{n_x}] = {_c_array(residual_scale)};",
         "#endif", "",
     ]
     return "\n".join(lines)
@@ -90,142 +160,199 @@ def config_header(model_name: str, guid: str, meta: dict, residual_scale, first_
 def residual_limit(meta: dict) -> float:
     """The default residual_limit: the operator's own (metadata `residual_limit`, set by the export
     from its test split), else DEFAULT_RESIDUAL_LIMIT."""
-    return float(json.loads(meta.get("residual_limit", "null")) or DEFAULT_RESIDUAL_LIMIT)
+    limit = meta.get("residual_limit")
+    return DEFAULT_RESIDUAL_LIMIT if limit is None else float(limit)
 
 
 def rollover_horizon(meta: dict) -> float:
     """The default rollover_horizon [s]: the operator's own (metadata `rollover_horizon_s`, set by the
     export: shorter than the horizon for a causally trained operator), else its whole horizon."""
-    return float(meta.get("rollover_horizon_s", meta["horizon_s"]))
+    return float(meta["rollover_horizon_s"])
+
+
+def surrogate_starts(meta: dict) -> dict:
+    """Start values of the surrogate FMU's own parameters (SURROGATE_EXTRAS)."""
+    return {"rollover_horizon": rollover_horizon(meta), "residual_limit": residual_limit(meta),
+            "restart_jump": DEFAULT_RESTART_JUMP, "rest_radius": DEFAULT_REST_RADIUS,
+            "slow_weight": DEFAULT_SLOW_WEIGHT, "swing_weight": DEFAULT_SWING_WEIGHT}
+
+
+def check_model_name(model_name) -> str:
+    """model_name if it can be the FMU's modelIdentifier (a C identifier of at most 64 ASCII
+    characters, no C keyword); BuildError otherwise."""
+    if not isinstance(model_name, str) or not MODEL_NAME.fullmatch(model_name) or model_name in C_KEYWORDS:
+        raise BuildError(f"model name {str(model_name)[:80]!r} must be a C identifier (letters, digits, _; "
+                         "at most 64, not starting with a digit)")
+    return model_name
+
+
+def load_operator(onnx_path: Path):
+    """(ModelProto, validated metadata) of an operator file; BuildError for anything unusable."""
+    import onnx
+
+    try:
+        proto = onnx.load(str(onnx_path))
+    except Exception as exc:  # onnx raises several types for unreadable files
+        raise BuildError(f"{onnx_path} is not a readable ONNX file ({str(exc)[:200]})") from None
+    try:
+        meta = operator_metadata(proto)
+    except ContractError as exc:
+        raise BuildError(f"{onnx_path}: {exc}") from None
+    return proto, meta
+
+
+def default_state(meta: dict) -> np.ndarray:
+    """The default initial state: the machine's equilibrium at its inputs' start values."""
+    component, params = meta["component"], meta["params"]
+    try:
+        x = component.steady_state(component.start_inputs, params)
+    except (ValueError, ArithmeticError) as exc:
+        raise BuildError(f"the {component.name} machine of the operator has no stable equilibrium at its start "
+                         f"inputs {list(component.start_inputs)} ({str(exc)[:120]})") from None
+    if x.shape != (component.n_states,) or not np.all(np.isfinite(x)):
+        raise BuildError(f"the {component.name} machine of the operator has no finite equilibrium at its start inputs")
+    if not all(math.isfinite(s) and s > 0 for s in component.state_scales):
+        raise BuildError(f"the {component.name} component's state_scales must be finite and positive")
+    return x
 
 
 def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_check: int = 32) -> dict:
     """Write the FMU to `out`; returns {"guid", "max_abs_diff", "size_bytes"}."""
-    import onnx
-
     onnx_path, out = Path(onnx_path), Path(out)
-    if not model_name.isidentifier():
-        raise BuildError(f"model name {model_name!r} must be a C identifier")
+    check_model_name(model_name)
+    proto, meta = load_operator(onnx_path)
+    component, params = meta["component"], meta["params"]
+    x_default = default_state(meta)
+    n_sensors = meta["n_sensors"]
     try:
-        proto = onnx.load(str(onnx_path))
-    except Exception as exc:  # onnx raises several types for unreadable files
-        raise BuildError(f"{onnx_path} is not a readable ONNX file ({exc})") from None
-    meta = {p.key: p.value for p in proto.metadata_props}
-    if meta.get("component") != "sm4" or not {"envelope", "n_sensors", "horizon_s"} <= set(meta):
-        raise BuildError(f"{onnx_path} is not an opfmu SM4 operator (metadata component/envelope missing)")
-    residual_scale = json.loads(meta.get("residual_scale", "[1, 1, 1, 1]"))
-    n_sensors = int(meta["n_sensors"])
+        kernel = generate_kernel(proto, n_sensors)
+    except Exception as exc:  # an unsupported or malformed graph, found by the generator or shape inference
+        raise BuildError(f"{onnx_path}: cannot generate C for the operator graph ({type(exc).__name__}: "
+                         f"{str(exc)[:200]})") from None
+    if (kernel.n_states, kernel.n_inputs) != (component.n_states, component.n_inputs):
+        raise BuildError(f"{onnx_path}: the graph takes x0 [N, {kernel.n_states}] and u [N, S, {kernel.n_inputs}], "
+                         f"but the {component.name} component has {component.n_states} states and "
+                         f"{component.n_inputs} inputs")
+    variables = fmu_variables(component, params, x_default, SURROGATE_EXTRAS, surrogate_starts(meta))
+    equations = '#include "engine.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
 
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
         for name in STATIC_SOURCES:
             shutil.copy(C_DIR / name, src / name)
-        kernel = generate_kernel(proto, n_sensors)
-        guid = _guid(onnx_path, model_name, kernel.source)
+        guid = _guid(onnx_path, model_name, kernel.source + equations)
         (src / "operator_kernel.c").write_text(kernel.source)
-        (src / "sm4_equations.h").write_text(sm4_c_source())
+        (src / "equations.c").write_text(equations)
+        (src / "variables.h").write_text(vr_header(variables, component))
         first_layer = kernel.first_layer
+        suffix = None
         if first_layer:
             probe = _compile(Path(tmp) / "probe.so", [src / "operator_kernel.c"], src)
-            suffix = sensor_suffix_sums(probe, n_sensors, first_layer)
+            suffix = sensor_suffix_sums(probe, n_sensors, first_layer, component.n_states, component.n_inputs)
             first_layer = first_layer if suffix is not None else 0
-        (src / "sensor_sums.c").write_text(sensor_sums_source(suffix if first_layer else None, n_sensors, first_layer))
-        (src / "config.h").write_text(config_header(model_name, guid, meta, residual_scale, first_layer, kernel))
+        (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer))
+        (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel))
         binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
         worst = check_kernel(binary, onnx_path, meta, n_check)
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
-        xml = model_description(model_name, guid, sm4_variables(steady_state(1.0, 0.0), rollover_horizon(meta), True,
-                                                residual_limit=residual_limit(meta), restart_jump=DEFAULT_RESTART_JUMP,
-                                                rest_radius=DEFAULT_REST_RADIUS, slow_weight=DEFAULT_SLOW_WEIGHT,
-                                                swing_weight=DEFAULT_SWING_WEIGHT),
-                                "SM4 synchronous machine: PI-DeepONet surrogate evaluated from buffered input sensors")
-        with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
-            fmu.writestr("modelDescription.xml", xml)
-            fmu.write(binary, f"binaries/linux64/{model_name}.so")
-            fmu.write(onnx_path, "resources/model.onnx")
-            for path in sorted(src.iterdir()):
-                fmu.write(path, f"sources/{path.name}")
+        xml = model_description(model_name, guid, variables,
+                                f"{component.description}; PI-DeepONet surrogate evaluated from buffered input sensors")
+        try:
+            with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
+                fmu.writestr("modelDescription.xml", xml)
+                fmu.write(binary, f"binaries/linux64/{model_name}.so")
+                fmu.write(onnx_path, "resources/model.onnx")
+                for path in sorted(src.iterdir()):
+                    fmu.write(path, f"sources/{path.name}")
+        except OSError as exc:
+            raise BuildError(f"cannot write {out}: {exc.strerror or exc}") from None
     return {"guid": guid, "max_abs_diff": worst, "size_bytes": out.stat().st_size}
 
 
-def _guid(onnx_path: Path, model_name: str, kernel_source: str) -> str:
+def _guid(onnx_path: Path, model_name: str, generated: str) -> str:
     """A GUID that changes with everything compiled into the binary: operator, name and C sources."""
-    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode() + kernel_source.encode())
+    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode() + generated.encode())
     for name in STATIC_SOURCES:
         digest.update((C_DIR / name).read_bytes())
     h = digest.hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
 
 
-C_FILES = ("fmi2_cs.c", "surrogate_model.c", "operator_kernel.c", "sensor_sums.c")
-
-
 def _compile(binary: Path, sources, include: Path) -> Path:
     command = ["gcc", "-O3", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
                *map(str, sources), "-o", str(binary), "-lm"]
-    result = subprocess.run(command, capture_output=True, text=True)
+    try:
+        result = subprocess.run(command, capture_output=True, text=True)
+    except OSError as exc:
+        raise BuildError(f"cannot run gcc ({exc.strerror or exc}): a C compiler is needed to build the FMU") from None
     if result.returncode != 0:
         raise BuildError(f"gcc failed: {result.stderr.strip().splitlines()[-1] if result.stderr else result.returncode}")
     return binary
 
 
-def sensor_suffix_sums(library: Path, n_sensors: int, width: int):
-    """Suffix sums [S + 1, 2, H] over sensor slots of d z / d u, the sensor layer's response to each
+def sensor_suffix_sums(library: Path, n_sensors: int, width: int, n_states: int, n_inputs: int):
+    """Suffix sums [S + 1, n_u, H] over sensor slots of d z / d u, the sensor layer's response to each
     slot, so that z(x0, u) = z(x0, 0) + sum_k (suffix[k] - suffix[k + 1]) . u_k; None when z is not
     affine in u with a slope independent of x0 (then the FMU evaluates the whole kernel each step)."""
     lib = ctypes.CDLL(str(library))
     p = ctypes.POINTER(ctypes.c_double)
-    u = np.zeros(2 * n_sensors)
+    u = np.zeros(n_inputs * n_sensors)
     z = np.zeros(width)
 
     def first_layer(x0, u_):
         lib.opfmu_first_layer(x0.ctypes.data_as(p), u_.ctypes.data_as(p), z.ctypes.data_as(p))
         return z.copy()
 
-    x0 = np.zeros(4)
+    x0 = np.zeros(n_states)
     base = first_layer(x0, u)
-    slope = np.empty((2 * n_sensors, width))
-    for i in range(2 * n_sensors):
+    slope = np.empty((n_inputs * n_sensors, width))
+    for i in range(n_inputs * n_sensors):
         u[i] = 1.0
         slope[i] = first_layer(x0, u) - base
         u[i] = 0.0
     rng = np.random.default_rng(0)
     for _ in range(3):  # affine, with a slope that does not depend on x0
-        x_r, u_r = rng.uniform(-1, 2, 4), rng.uniform(-1, 2, 2 * n_sensors)
+        x_r, u_r = rng.uniform(-1, 2, n_states), rng.uniform(-1, 2, n_inputs * n_sensors)
         predicted = first_layer(x_r, np.zeros_like(u_r)) + u_r @ slope
         if not np.allclose(first_layer(x_r, u_r), predicted, rtol=1e-9, atol=1e-9):
             return None
-    per_slot = slope.reshape(n_sensors, 2, width)
-    suffix = np.zeros((n_sensors + 1, 2, width))
+    per_slot = slope.reshape(n_sensors, n_inputs, width)
+    suffix = np.zeros((n_sensors + 1, n_inputs, width))
     suffix[:-1] = np.cumsum(per_slot[::-1], axis=0)[::-1]
     return suffix
 
 
 def sensor_sums_source(suffix, n_sensors: int, width: int) -> str:
-    """C definition of OPFMU_SENSOR_SUFFIX [(S + 1) * 2 * H] (one zero when there is no split)."""
-    values = suffix.ravel() if suffix is not None else np.zeros(1)
+    """C definition of OPFMU_SENSOR_SUFFIX [(S + 1) * n_u * H] (one zero when there is no split)."""
+    values = suffix.ravel() if suffix is not None and width else np.zeros(1)
+    if not np.all(np.isfinite(values)):
+        raise BuildError("the operator's sensor layer has non-finite weights")
     body = ",\n".join(",".join(repr(float(v)) for v in values[i:i + 8]) for i in range(0, values.size, 8))
     return ("/* Generated by opfmu: suffix sums over sensor slots of the sensor layer's slope. */\n"
-            f"const double OPFMU_SENSOR_SUFFIX[{values.size}] = {{\n{body}}};\n")
+            '#include "model.h"\n'
+            f"OPFMU_INTERNAL const double OPFMU_SENSOR_SUFFIX[{values.size}] = {{\n{body}}};\n")
 
 
 def check_kernel(binary: Path, onnx_path: Path, meta: dict, n: int, seed: int = 0) -> float:
     """Max abs difference of the compiled kernel (inside the FMU binary) against onnxruntime."""
     import onnxruntime as ort
 
-    n_sensors, horizon = int(meta["n_sensors"]), float(meta["horizon_s"])
+    n_sensors, horizon = meta["n_sensors"], meta["horizon_s"]
     t_grid = np.linspace(0.0, horizon, n_sensors)
-    x0, u, t = random_inputs(json.loads(meta["envelope"]), t_grid, n, np.random.default_rng(seed))
+    x0, u, t = random_inputs(meta["envelope"], t_grid, n, np.random.default_rng(seed))
     t = t[:: max(1, len(t) // 9)]
-    expected = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).run(
-        ["x"], {"x0": x0, "u": u, "t": t})[0]
+    try:
+        expected = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).run(
+            ["x"], {"x0": x0, "u": u, "t": t})[0]
+    except Exception as exc:  # onnxruntime's own errors for graphs it cannot load or run
+        raise BuildError(f"{onnx_path}: onnxruntime cannot run the operator ({str(exc)[:200]})") from None
     library = ctypes.CDLL(str(binary))
     fn = library.opfmu_operator
     double_p = ctypes.POINTER(ctypes.c_double)
     fn.argtypes = [double_p, double_p, ctypes.c_double, double_p]
-    worst, out = 0.0, np.zeros(4)
+    worst, out = 0.0, np.zeros(x0.shape[1])
     for i in range(n):
         xi, ui = np.ascontiguousarray(x0[i], np.float64), np.ascontiguousarray(u[i], np.float64)
         for j, tj in enumerate(t):

@@ -1,12 +1,12 @@
 """C code for an exported operator, generated from its ONNX graph (no runtime needed).
 
-The graph is specialised to one trajectory and one query time (x0 [1, 4], u [1, S, 2], t [1]);
-shape inference then fixes every tensor's shape, and each node becomes a loop over fixed sizes.
-Only an explicit, checked subset of ONNX operators is supported; any other is refused by name.
-Weights stay float32 (as exported); arithmetic is in double.
+The graph is specialised to one trajectory and one query time (x0 [1, n_x], u [1, S, n_u], t [1],
+with n_x and n_u read from the graph's inputs); shape inference then fixes every tensor's shape, and
+each node becomes a loop over fixed sizes. Only an explicit, checked subset of ONNX operators is
+supported; any other is refused by name. Weights stay float32 (as exported); arithmetic is in double.
 
 Generated entry point:
-    void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4]);
+    void opfmu_operator(const double x0[n_x], const double u[n_u * OPFMU_N_SENSORS], double t, double x[n_x]);
 """
 from __future__ import annotations
 
@@ -50,12 +50,33 @@ def check_supported(proto) -> None:
                                f"(supported: {', '.join(sorted(SUPPORTED))})")
 
 
-def _specialised(proto, n_sensors: int):
+def graph_interface(proto) -> tuple:
+    """(n_x, n_u, S) of an operator graph: inputs exactly x0 [N, n_x], u [N, S, n_u], t [M] and one
+    output x; S is None where the graph leaves it symbolic. UnsupportedGraph otherwise."""
+    inputs = {v.name: v for v in proto.graph.input}
+    if sorted(inputs) != ["t", "u", "x0"] or [o.name for o in proto.graph.output] != ["x"]:
+        raise UnsupportedGraph(f"the graph must take inputs x0, u, t and give output x (it takes "
+                               f"{', '.join(sorted(inputs))[:80]} and gives {', '.join(o.name for o in proto.graph.output)[:80]})")
+
+    def dims(name, rank):
+        shape = inputs[name].type.tensor_type.shape.dim
+        if len(shape) != rank:
+            raise UnsupportedGraph(f"graph input {name} must have {rank} dimensions, has {len(shape)}")
+        return [d.dim_value if d.HasField("dim_value") else None for d in shape]
+
+    x0, u = dims("x0", 2), dims("u", 3)
+    dims("t", 1)
+    if not (x0[1] and u[2]):
+        raise UnsupportedGraph("graph inputs x0 and u must fix their last dimension (states, input channels)")
+    return x0[1], u[2], u[1]
+
+
+def _specialised(proto, n_sensors: int, n_states: int, n_inputs: int):
     """A copy with concrete input shapes (N = 1, M = 1) and every intermediate shape inferred."""
     import onnx
 
     proto = onnx.ModelProto.FromString(proto.SerializeToString())
-    shapes = {"x0": [1, 4], "u": [1, n_sensors, 2], "t": [1]}
+    shapes = {"x0": [1, n_states], "u": [1, n_sensors, n_inputs], "t": [1]}
     for value in proto.graph.input:
         dims = value.type.tensor_type.shape.dim
         for dim, size in zip(dims, shapes[value.name]):
@@ -101,11 +122,12 @@ def _float_array(name: str, values: np.ndarray) -> str:
 @dataclass(frozen=True)
 class Kernel:
     """Generated C source; first_layer is the width H of the split point (0 if none); trunk_size and
-    coef_size the lengths T and C of the trunk values and coefficients (0 if none; see _trunk_functions).
+    coef_size the lengths T and C of the trunk values and coefficients (0 if none; see _trunk_functions);
+    n_states and n_inputs the graph's n_x and n_u.
 
     With a split point, the source also defines
-        void opfmu_first_layer(const double x0[4], const double u[2 * S], double z[H]);
-        void opfmu_from_first_layer(const double x0[4], const double z[H], double t, double x[4]);
+        void opfmu_first_layer(const double x0[n_x], const double u[n_u * S], double z[H]);
+        void opfmu_from_first_layer(const double x0[n_x], const double z[H], double t, double x[n_x]);
     where z is the output of the first Gemm fed by the sensors, and the second function finishes the
     evaluation from it (everything but the sensor path), so a caller that tracks z incrementally
     never re-runs the sensor layer.
@@ -113,16 +135,22 @@ class Kernel:
 
     source: str
     first_layer: int
-    trunk_size: int = 0
-    coef_size: int = 0
+    trunk_size: int
+    coef_size: int
+    n_states: int
+    n_inputs: int
 
 
 def generate_kernel(proto, n_sensors: int) -> Kernel:
-    """C source of the operator `proto` (an onnx.ModelProto) for S = n_sensors sensor times."""
+    """C source of the operator `proto` (an onnx.ModelProto) for S = n_sensors sensor times; the
+    numbers of states and input channels come from the graph (graph_interface)."""
     from onnx import numpy_helper
 
     check_supported(proto)
-    model = _specialised(proto, n_sensors)
+    n_x, n_u, graph_sensors = graph_interface(proto)
+    if graph_sensors is not None and graph_sensors != n_sensors:
+        raise UnsupportedGraph(f"the graph's input u has {graph_sensors} sensor times, not {n_sensors}")
+    model = _specialised(proto, n_sensors, n_x, n_u)
     graph = model.graph
     shapes = {v.name: _shape(v) for v in list(graph.input) + list(graph.value_info) + list(graph.output)}
     names, constants, nodes = {}, [], []  # nodes: (node, declaration, code)
@@ -186,13 +214,17 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
         nodes.append((node, f"    double {dst}[{max(size, 1)}];", code))
 
     result = c_name(graph.output[0].name)
+    if int(np.prod(shapes[graph.output[0].name])) != n_x:
+        raise UnsupportedGraph(f"the graph's output x has shape {shapes[graph.output[0].name]} for one trajectory "
+                               f"and one time, not [1, 1, {n_x}]")
+    x0_arg, u_arg = f"const double x0[{n_x}]", f"const double u[{n_u} * OPFMU_N_SENSORS]"
+    copy_x = f"    for (int i = 0; i < {n_x}; ++i) x[i] = {result}[i];"
     lines = ["/* Generated by opfmu from an ONNX operator graph; do not edit. */", "#include <math.h>",
              f"#define OPFMU_N_SENSORS {n_sensors}", VECTOR, TANH, *constants, ""]
-    lines += _function("void opfmu_operator(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double t, double x[4])",
-                       nodes, f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
+    lines += _function(f"void opfmu_operator({x0_arg}, {u_arg}, double t, double x[{n_x}])", nodes, copy_x)
     split = _sensor_layer(graph, [n for n, _, _ in nodes])
     if split is None:
-        return Kernel("\n".join(lines), 0)
+        return Kernel("\n".join(lines), 0, 0, 0, n_x, n_u)
     first, _ = split
     width = int(np.prod(shapes[first.output[0]]))
     z = c_name(first.output[0])
@@ -200,20 +232,19 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
     head = [entry for entry in nodes if entry[0].output[0] in needed]
     after = _ancestors({n.output[0]: n for n, _, _ in nodes}, graph.output[0].name, cut=first.output[0])
     rest = [entry for entry in nodes if entry[0].output[0] in after and entry[0] is not first]
-    lines += _function(f"void opfmu_first_layer(const double x0[4], const double u[2 * OPFMU_N_SENSORS], double z[{width}])",
+    lines += _function(f"void opfmu_first_layer({x0_arg}, {u_arg}, double z[{width}])",
                        head, f"    for (int i = 0; i < {width}; ++i) z[i] = {z}[i];")
-    lines += _function(f"void opfmu_from_first_layer(const double x0[4], const double z[{width}], double t, double x[4])",
-                       [(None, f"    const double *{z} = z;", "")] + rest,
-                       f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
-    trunk_size, coef_size, trunk_lines = _trunk_functions(rest, shapes, c_name, z, width, result)
-    return Kernel("\n".join(lines + trunk_lines), width, trunk_size, coef_size)
+    lines += _function(f"void opfmu_from_first_layer({x0_arg}, const double z[{width}], double t, double x[{n_x}])",
+                       [(None, f"    const double *{z} = z;", "")] + rest, copy_x)
+    trunk_size, coef_size, trunk_lines = _trunk_functions(rest, shapes, c_name, z, width, n_x, copy_x)
+    return Kernel("\n".join(lines + trunk_lines), width, trunk_size, coef_size, n_x, n_u)
 
 
-def _trunk_functions(rest, shapes, c_name, z: str, width: int, result: str):
+def _trunk_functions(rest, shapes, c_name, z: str, width: int, n_x: int, copy_x: str):
     """(T, C, source lines): the evaluation after the sensor layer split into three parts,
         void opfmu_trunk(double t, double tau[T]);            what depends on t alone
-        void opfmu_coefficients(const double x0[4], const double z[H], double c[C]);   on x0, z alone
-        void opfmu_head(const double c[C], const double tau[T], double x[4]);          the rest
+        void opfmu_coefficients(const double x0[n_x], const double z[H], double c[C]);   on x0, z alone
+        void opfmu_head(const double c[C], const double tau[T], double x[n_x]);          the rest
     (for a DeepONet: the basis, the coefficients B and their product), so a caller can keep tau per
     query time and evaluate the state at other times from the same coefficients for the price of the
     head. (0, 0, []) when the graph does not split so."""
@@ -250,10 +281,10 @@ def _trunk_functions(rest, shapes, c_name, z: str, width: int, result: str):
     n_tau, tau_out, tau_views = packed(boundary, "tau")
     n_coef, coef_copy, coef_views = packed(handed, "c")
     lines = _function(f"void opfmu_trunk(double t, double tau[{n_tau}])", trunk, tau_out)
-    lines += _function(f"void opfmu_coefficients(const double x0[4], const double z[{width}], double c[{n_coef}])",
+    lines += _function(f"void opfmu_coefficients(const double x0[{n_x}], const double z[{width}], double c[{n_coef}])",
                        [(None, f"    const double *{z} = z;", "")] + coefficients, coef_copy)
-    lines += _function(f"void opfmu_head(const double c[{n_coef}], const double tau[{n_tau}], double x[4])",
-                       coef_views + tau_views + head, f"    for (int i = 0; i < 4; ++i) x[i] = {result}[i];")
+    lines += _function(f"void opfmu_head(const double c[{n_coef}], const double tau[{n_tau}], double x[{n_x}])",
+                       coef_views + tau_views + head, copy_x)
     return n_tau, n_coef, lines
 
 
@@ -304,6 +335,8 @@ def _gemm(node, attrs, src, dst, shapes) -> str:
     outputs (no reduction chain), so it vectorises and pipelines; the sum over p keeps its order."""
     alpha = attrs["alpha"].f if "alpha" in attrs else 1.0
     beta = attrs["beta"].f if "beta" in attrs else 1.0
+    if not (math.isfinite(alpha) and math.isfinite(beta)):
+        raise UnsupportedGraph(f"Gemm {node.name[:40]!r} has a non-finite alpha or beta")
     trans_a = attrs["transA"].i if "transA" in attrs else 0
     trans_b = attrs["transB"].i if "transB" in attrs else 0
     a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]

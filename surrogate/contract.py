@@ -1,9 +1,13 @@
-"""The ONNX operator contract that needs no torch: the export tolerance and in-envelope test inputs.
+"""The ONNX operator contract that needs no torch: the export tolerance, in-envelope test inputs and
+the validated metadata of an operator file (`operator_metadata`).
 
-Used by the export (against torch) and by the FMU builder (the compiled kernel against onnxruntime),
-which must not import torch.
+Used by the export (against torch), by inference and by the FMU builder (the compiled kernel against
+onnxruntime), which must not import torch.
 """
 from __future__ import annotations
+
+import json
+import math
 
 import numpy as np
 
@@ -25,3 +29,204 @@ def random_inputs(envelope: dict, t_grid: np.ndarray, n: int, rng: np.random.Gen
     u = np.clip(a[:, None] + (b - a)[:, None] * frac[None, :, None] + wiggle, lo_u, hi_u)
     t = np.sort(np.concatenate([t_grid, rng.uniform(0, t_grid[-1], 37)]))
     return x0.astype(np.float32), u.astype(np.float32), t.astype(np.float32)
+
+
+# ---------------------------------------------------------------------------------------------------
+# The metadata of an operator file, validated: every value a consumer (the FMU builder, inference)
+# uses is parsed here, typed, range-checked and bounded before anything is generated from it.
+
+MAX_METADATA_CHARS = 8_000_000  # per value (sensor_times_s of the largest S is about 2.5 MB)
+MAX_NAMES = 256
+N_SENSORS_RANGE = (2, 100_000)
+MAX_HORIZON_S = 1000.0
+REQUIRED_KEYS = ("component", "params", "state_names", "input_names", "horizon_s", "n_sensors", "envelope")
+
+
+class ContractError(ValueError):
+    """Operator metadata that breaks the contract (DESIGN section 4); the message is one line."""
+
+
+def operator_metadata(source) -> dict:
+    """The validated metadata of an operator: `source` is an onnx.ModelProto (its metadata_props)
+    or a mapping of key to string value. Returns
+
+        component           the Component (reference_models.components) named by `component`
+        params              its parameters from `params` (a JSON object; the rest default)
+        state_names, input_names   tuples, equal to the component's
+        horizon_s           float in (0, MAX_HORIZON_S]
+        n_sensors           int in N_SENSORS_RANGE
+        sensor_times_s      tuple of n_sensors uniform times from 0 to horizon_s, or None if absent
+        envelope            {"x0": {state: (lo, hi)}, "u": {input: (lo, hi)}} in the component's order
+        residual_scale      tuple of n_x finite positive numbers, or None if absent
+        residual_limit      finite number >= 0, or None if absent or null
+        rollover_horizon_s  float in (0, horizon_s] (default horizon_s)
+        raw                 the metadata strings as read
+
+    Raises ContractError naming the key and what is wrong with it."""
+    from reference_models.component import ParameterError
+    from reference_models.components import component as lookup
+
+    raw = _raw_metadata(source)
+    missing = [k for k in REQUIRED_KEYS if k not in raw]
+    if missing:
+        raise ContractError(f"not an opfmu operator: its metadata lacks {', '.join(missing)}")
+    try:
+        comp = lookup(raw["component"])
+    except ValueError as exc:
+        raise ContractError(f"metadata component: {exc}") from None
+    try:
+        params = comp.params(_json(raw, "params"))
+    except (ParameterError, OverflowError) as exc:  # OverflowError: an integer too large for a float
+        raise ContractError(f"metadata params: {_one_line(exc)}") from None
+    for key, expected in (("state_names", comp.state_names), ("input_names", comp.input_names)):
+        names = _json(raw, key)
+        if not (isinstance(names, list) and tuple(names) == expected):
+            raise ContractError(f"metadata {key} {_show(names)} differ from the {comp.name} component's "
+                                f"{list(expected)}")
+    horizon = _number(raw, "horizon_s", _json(raw, "horizon_s"))
+    if not 0.0 < horizon <= MAX_HORIZON_S:
+        raise ContractError(f"metadata horizon_s = {horizon!r} must lie in (0, {MAX_HORIZON_S:g}] s")
+    n_sensors = _json(raw, "n_sensors")
+    low, high = N_SENSORS_RANGE
+    if isinstance(n_sensors, float) and n_sensors.is_integer() and abs(n_sensors) < 2 ** 53:
+        n_sensors = int(n_sensors)
+    if isinstance(n_sensors, bool) or not isinstance(n_sensors, int) or not low <= n_sensors <= high:
+        raise ContractError(f"metadata n_sensors = {_show(n_sensors)} must be an integer in [{low}, {high}]")
+    return {
+        "component": comp, "params": params, "state_names": comp.state_names, "input_names": comp.input_names,
+        "horizon_s": horizon, "n_sensors": n_sensors,
+        "sensor_times_s": _sensor_times(raw, n_sensors, horizon),
+        "envelope": _envelope(raw, comp),
+        "residual_scale": _residual_scale(raw, comp.n_states),
+        "residual_limit": _residual_limit(raw),
+        "rollover_horizon_s": _rollover(raw, horizon),
+        "raw": raw,
+    }
+
+
+def _raw_metadata(source) -> dict:
+    """{key: value} of string metadata; ContractError for duplicate keys, non-strings, oversize values."""
+    from collections.abc import Mapping
+
+    if isinstance(source, Mapping):
+        pairs = list(source.items())
+    elif hasattr(source, "metadata_props"):
+        pairs = [(p.key, p.value) for p in source.metadata_props]
+    else:
+        raise ContractError(f"operator metadata must be an ONNX model or a mapping, got {type(source).__name__}")
+    raw = {}
+    for key, value in pairs:
+        if not isinstance(key, str) or not isinstance(value, str):
+            raise ContractError(f"metadata entry {_show(key)} must map a string to a string")
+        if key in raw:
+            raise ContractError(f"metadata key {_show(key)} appears more than once")
+        if len(value) > MAX_METADATA_CHARS:
+            raise ContractError(f"metadata {_show(key)} is longer than {MAX_METADATA_CHARS} characters")
+        raw[key] = value
+    return raw
+
+
+def _refuse_constant(name: str):
+    raise ValueError(f"{name} is not a number the metadata may hold")
+
+
+def _json(raw: dict, key: str):
+    """The JSON value of metadata `key` (NaN and Infinity refused)."""
+    try:
+        return json.loads(raw[key], parse_constant=_refuse_constant)
+    except (ValueError, RecursionError) as exc:
+        raise ContractError(f"metadata {key} is not valid JSON ({_one_line(exc)[:80]}): {_show(raw[key])}") from None
+
+
+def _number(raw: dict, key: str, value, what: str = "") -> float:
+    """value as a finite float, or ContractError naming the key."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ContractError(f"metadata {key}{what} = {_show(value)} must be a number")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise ContractError(f"metadata {key}{what} = {_show(value)} must be a finite number")
+    return number
+
+
+def _sensor_times(raw: dict, n_sensors: int, horizon: float):
+    if "sensor_times_s" not in raw:
+        return None
+    times = _json(raw, "sensor_times_s")
+    if not isinstance(times, list) or len(times) != n_sensors:
+        raise ContractError(f"metadata sensor_times_s must be a list of n_sensors = {n_sensors} times")
+    times = tuple(_number(raw, "sensor_times_s", t, f"[{i}]") for i, t in enumerate(times))
+    uniform = np.linspace(0.0, horizon, n_sensors)
+    if np.max(np.abs(np.asarray(times) - uniform)) > 1e-6 * horizon:
+        raise ContractError(f"metadata sensor_times_s must be {n_sensors} uniformly spaced times from 0 to "
+                            f"horizon_s = {horizon!r} s")
+    return times
+
+
+def _bounds(raw: dict, where: str, value) -> tuple:
+    if not (isinstance(value, list) and len(value) == 2):
+        raise ContractError(f"metadata envelope {where} = {_show(value)} must be [low, high]")
+    low, high = (_number(raw, "envelope", v, f" {where}") for v in value)
+    if not low <= high:
+        raise ContractError(f"metadata envelope {where} = [{low!r}, {high!r}] has low > high")
+    return low, high
+
+
+def _envelope(raw: dict, comp) -> dict:
+    envelope = _json(raw, "envelope")
+    if not isinstance(envelope, dict):
+        raise ContractError(f"metadata envelope must be a JSON object with groups x0 and u, got {_show(envelope)}")
+    out = {}
+    for group, names in (("x0", comp.state_names), ("u", comp.input_names)):
+        box = envelope.get(group)
+        if not isinstance(box, dict) or sorted(box) != sorted(names):
+            shown = _show(sorted(box)) if isinstance(box, dict) else _show(box)
+            raise ContractError(f"metadata envelope {group} must give [low, high] for exactly {', '.join(names)} "
+                                f"(the {comp.name} component's), got {shown}")
+        out[group] = {name: _bounds(raw, f"{group}.{name}", box[name]) for name in names}
+    return out
+
+
+def _residual_scale(raw: dict, n_states: int):
+    if "residual_scale" not in raw:
+        return None
+    scale = _json(raw, "residual_scale")
+    if not isinstance(scale, list) or len(scale) != n_states:
+        raise ContractError(f"metadata residual_scale must be a list of {n_states} numbers, one per state")
+    scale = tuple(_number(raw, "residual_scale", s, f"[{i}]") for i, s in enumerate(scale))
+    if not all(s > 0.0 for s in scale):
+        raise ContractError(f"metadata residual_scale {list(scale)} must hold positive numbers")
+    return scale
+
+
+def _residual_limit(raw: dict):
+    if "residual_limit" not in raw:
+        return None
+    limit = _json(raw, "residual_limit")
+    if limit is None:
+        return None
+    limit = _number(raw, "residual_limit", limit)
+    if limit < 0.0:
+        raise ContractError(f"metadata residual_limit = {limit!r} must be >= 0")
+    return limit
+
+
+def _rollover(raw: dict, horizon: float) -> float:
+    if "rollover_horizon_s" not in raw:
+        return horizon
+    rollover = _number(raw, "rollover_horizon_s", _json(raw, "rollover_horizon_s"))
+    if not 0.0 < rollover <= horizon:
+        raise ContractError(f"metadata rollover_horizon_s = {rollover!r} must lie in (0, horizon_s = {horizon!r}]")
+    return rollover
+
+
+def _show(value) -> str:
+    """A short one-line rendering of a (possibly hostile) value for a message."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _one_line(exc) -> str:
+    return " ".join(str(exc).split())[:200]

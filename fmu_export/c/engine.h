@@ -1,0 +1,70 @@
+/* What the surrogate model's source files share: the generated operator kernel and component
+   equations, the sensor grid, and the functions window.c and corrections.c provide each other. */
+#ifndef OPFMU_ENGINE_H
+#define OPFMU_ENGINE_H
+
+#include "linalg.h"
+#include "model.h"
+
+#define N_X OPFMU_N_STATES
+#define N_U OPFMU_N_INPUTS
+
+static const double SENSOR_DT = OPFMU_HORIZON / (OPFMU_N_SENSORS - 1);
+static const double TIME_EPS = 1e-9;
+
+/* the operator kernel (operator_kernel.c, generated from the ONNX graph) */
+void opfmu_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X]);
+#if OPFMU_FIRST_LAYER > 0
+void opfmu_first_layer(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double z[OPFMU_FIRST_LAYER]);
+void opfmu_from_first_layer(const double x0[N_X], const double z[OPFMU_FIRST_LAYER], double t, double x[N_X]);
+/* suffix sums over sensor slots of the sensor layer's slope (sensor_sums.c, generated) */
+OPFMU_INTERNAL extern const double OPFMU_SENSOR_SUFFIX[(OPFMU_N_SENSORS + 1) * N_U * OPFMU_FIRST_LAYER];
+#define SUFFIX(k, c, h) OPFMU_SENSOR_SUFFIX[((k) * N_U + (c)) * OPFMU_FIRST_LAYER + (h)]
+#endif
+#if OPFMU_TRUNK_SIZE > 0
+void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
+void opfmu_coefficients(const double x0[N_X], const double z[OPFMU_FIRST_LAYER], double c[OPFMU_COEF_SIZE]);
+void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SIZE], double x[N_X]);
+#endif
+
+/* the component's right-hand side and derived outputs (equations.c, generated from its definition) */
+OPFMU_INTERNAL void model_derivatives(const double x[N_X], const double u[N_U], double dx[N_X]);
+OPFMU_INTERNAL void model_outputs(const double x[N_X], const double u[N_U], double y[OPFMU_N_OUTPUTS]);
+
+/* window.c */
+/* the operator's physics residual at the current time (RMS over the states, per state scaled) */
+OPFMU_INTERNAL double window_residual(const ModelState *m);
+#if OPFMU_TRUNK_SIZE > 0
+/* the sensor layer's output from x0 with every sensor slot at zero */
+OPFMU_INTERNAL void first_layer_base(const double x0[N_X], double base[OPFMU_FIRST_LAYER]);
+/* the operator's coefficients from x0 with every sensor slot holding u, given first_layer_base(x0) */
+OPFMU_INTERNAL void held_coefficients(const double x0[N_X], const double base[OPFMU_FIRST_LAYER],
+                                      const double u[N_U], double coef[OPFMU_COEF_SIZE]);
+#endif
+
+/* corrections.c */
+/* the rest and slow-mode corrections of a window just started, for the current input; unless
+   `always`, only if they were computed for another input */
+OPFMU_INTERNAL void start_corrections(ModelState *m, int always);
+#if OPFMU_TRUNK_SIZE > 0
+/* subtracts the rest correction at the trunk values `basis` from x */
+OPFMU_INTERNAL void rest_correct(const ModelState *m, const double *basis, double x[N_X]);
+/* subtracts the rest correction's rate, its difference between trunk values lo and hi over span, from rate */
+OPFMU_INTERNAL void rest_correct_rate(const ModelState *m, const double *lo, const double *hi, double span,
+                                      double rate[N_X]);
+#endif
+/* l . f(x, u): the rate of the slow coordinate under the held input */
+OPFMU_INTERNAL double slow_rate(const ModelState *m, const double x[N_X]);
+/* after a step of length h that started at slow rate rate_start: the slow-mode correction of m->x */
+OPFMU_INTERNAL void slow_correct(ModelState *m, double h, double rate_start);
+
+#define N_AFFINE_CAP (OPFMU_N_AFFINE > 0 ? OPFMU_N_AFFINE : 1)
+/* g and k of each affine state's rate g - k x_i at state x under input u */
+OPFMU_INTERNAL void affine_drive(const double x[N_X], const double u[N_U], double g[N_AFFINE_CAP],
+                                 double k[N_AFFINE_CAP]);
+/* after a step of length h from x_start (g_start, k_start there, from affine_drive): moves each
+   affine state of m->x swing_weight of the way to its exact solution */
+OPFMU_INTERNAL void affine_step(ModelState *m, const double x_start[N_X], const double g_start[N_AFFINE_CAP],
+                                const double k_start[N_AFFINE_CAP], double h);
+
+#endif
