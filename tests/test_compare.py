@@ -11,7 +11,7 @@ from fmpy import extract
 from opfmu.compare import CompareError, compare, csv_inputs, scenario_inputs
 from reference_models.scenarios import SCENARIOS, scenario
 from reference_models.simulate import simulate
-from reference_models.sm4 import SM4Params, derivatives, min_voltage_with_equilibrium
+from reference_models.sm4 import SM4, min_voltage_with_equilibrium
 
 from conftest import preset_file, tiny
 from test_cli import assert_one_line_error, opfmu
@@ -29,7 +29,7 @@ def extracted(fmu_path, reference_path, tmp_path_factory):
 def test_every_scenario_starts_the_machine_at_rest_and_is_reproducible_from_its_seed(name):
     s = scenario(name, seed=4, stop_time=10.0)
     x0, u0 = s.initial_state(), s.inputs(np.array([0.0]))[0]
-    rate = derivatives(*x0, max(u0[0], min_voltage_with_equilibrium()), u0[1], SM4Params(), np.sin, np.cos)
+    rate = SM4.rhs(x0, np.array([max(u0[0], min_voltage_with_equilibrium()), u0[1]]), SM4.params())
     assert np.max(np.abs(rate)) < 1e-8
     t = np.linspace(0, 10, 1001)
     np.testing.assert_array_equal(scenario(name, seed=4).inputs(t), s.inputs(t))

@@ -1,7 +1,7 @@
 """The native surrogate FMU under fmpy: FMI 2.0 behaviour and the step semantics of DESIGN section 5."""
+import json
 import subprocess
 import sys
-import warnings
 import zipfile
 
 import numpy as np
@@ -10,19 +10,12 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import DEFAULT_REST_RADIUS, DEFAULT_RESTART_JUMP, DEFAULT_SLOW_WEIGHT, DEFAULT_SWING_WEIGHT
+from fmu_export.step_mirror import StepMirror, affine_step, equilibrium, fmu_settings, jacobian, slow_mode
 from fmu_slave import Slave
 from reference_models.signals import Piecewise, Signal
 from reference_models.simulate import simulate
-from reference_models.sm4 import min_voltage_with_equilibrium, rhs, steady_state
-from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
-
-VR = {"Vs": 0, "theta_vs": 1, "delta": 2, "omega": 3, "Ed_p": 4, "Eq_p": 5, "Id": 6, "P": 10, "delta0": 12,
-      "residual": 16, "rollover_horizon": 17, "residual_limit": 18, "restart_jump": 19, "rest_radius": 20,
-      "slow_weight": 21, "swing_weight": 22}
-STATES = [2, 3, 4, 5]
-DT = 1e-3  # sensor spacing of the shipped operator
-REST_RADIUS = np.array([0.5, 0.25, 0.1, 0.1])  # reach of the rest correction at rest_radius = 1 (surrogate_model.c)
+from reference_models.sm4 import SM4, min_voltage_with_equilibrium, steady_state
+from surrogate.operator import DEFAULT_OPERATOR, Operator
 
 
 @pytest.fixture(scope="session")
@@ -30,97 +23,63 @@ def unzipped(fmu_path):
     return extract(str(fmu_path)), read_model_description(str(fmu_path))
 
 
-def rest_correction(op, x_window, u, tau, rest_radius):
-    """What the FMU subtracts at window time tau (see surrogate_model.c): the operator's error from the
-    equilibrium of the input u held over the window's first step, weighted by the window start's distance from it."""
-    try:
-        rest = steady_state(*u)
-    except ValueError:
-        return 0.0
-    distance = np.max(np.abs(x_window - rest) / (rest_radius * REST_RADIUS)) if rest_radius > 0 else np.inf
-    if distance >= 1.0:
-        return 0.0
-    held = np.tile(np.asarray(u, np.float32), (op.n_sensors, 1))
-    at_rest = op.predict(rest[None].astype(np.float32), held[None], np.array([tau]))[0, 0]
-    return (1.0 - distance) * (at_rest - rest)
+@pytest.fixture(scope="session")
+def settings(unzipped):
+    """The FMU's defaults of the settings the step mirror takes (rest_radius, slow_weight, ...)."""
+    return fmu_settings(unzipped[1])
 
 
-def f(x, u):
-    """The SM4 right-hand side [4] at state x [4] under input u [2]."""
-    return np.asarray(rhs(np.asarray(x, float)[None], np.asarray(u, float)[None]))[0]
+@pytest.fixture(scope="session")
+def mirror():
+    return StepMirror(DEFAULT_OPERATOR)
 
 
-def slow_mode(x, u):
-    """(l, r): left and right eigenvectors (l . r = 1) of the slowest mode of the Jacobian at (x, u), or
-    None when that mode is not real and clearly slower than the next (see surrogate_model.c)."""
-    J = np.column_stack([(f(x + d, u) - f(x - d, u)) / (2 * d.max()) for d in 1e-6 * np.eye(4) * np.maximum(1, np.abs(x))])
-    values, right = np.linalg.eig(J)
-    first, second = np.argsort(np.abs(values))[:2]
-    if abs(values[first].imag) > 0 or abs(values[first]) > 0.5 * abs(values[second]):
-        return None
-    left_values, left = np.linalg.eig(J.T)
-    r, l = right[:, first].real, left[:, np.argmin(np.abs(left_values - values[first]))].real
-    return l / (l @ r), r
+@pytest.fixture
+def operator_reference(mirror, settings):
+    """States after each (h, Vs, theta) step by the FMU's step semantics in Python (fmu_export.step_mirror,
+    onnxruntime), with the FMU's default settings changed by `changes` (its parameters of those names)."""
+    def run(x0, steps, **changes):
+        return mirror.run(x0, steps, **{**settings, **changes})
+    return run
 
 
-def swing_omega(x_start, x_end, u, h):
-    """omega at the end of a step of h: the exact solution of d omega/dt = g - k omega from x_start's
-    omega, with g linear in time between its values at x_start and x_end (see surrogate_model.c);
-    g is d omega/dt at omega = 0, k its drop from omega = 0 to 1."""
-    def g(x):
-        return f(np.array([x[0], 0.0, x[2], x[3]]), u)[1]
-    k = g(x_end) - f(np.array([x_end[0], 1.0, x_end[2], x_end[3]]), u)[1]
-    reach = -np.expm1(-k * h) / k
-    return np.exp(-k * h) * x_start[1] + g(x_start) * reach + (g(x_end) - g(x_start)) * (h - reach) / (k * h)
+def initial(x0) -> dict:
+    """The initial-state parameters {delta0: ..., ...} of a state x0 [4]."""
+    return {f"{name}0": float(value) for name, value in zip(SM4.state_names, x0)}
 
 
-def operator_reference(x0, steps, horizon=None, restart_jump=DEFAULT_RESTART_JUMP, rest_radius=DEFAULT_REST_RADIUS,
-                       slow_weight=DEFAULT_SLOW_WEIGHT, swing_weight=DEFAULT_SWING_WEIGHT):
-    """States after each (h, Vs, theta) step by the DESIGN semantics, evaluated with onnxruntime; an
-    input change above restart_jump starts a new window, each window gets the rest and slow-mode
-    corrections and each step the exact swing step (as the FMU's parameters of those names). horizon:
-    the rollover horizon (default: the operator's)."""
-    op = Operator.load(DEFAULT_OPERATOR)
-    horizon = horizon or float(op.metadata["rollover_horizon_s"])
-    n = op.n_sensors
-    t, t_window, x_window, x = 0.0, 0.0, np.array(x0, dtype=np.float32), np.array(x0)
-    u_window = None  # the input held over the window's first step
-    buffer = np.zeros((n, 2), np.float32)
-    buffer[:] = steps[0][1:]
-    out, last = [], steps[0][1:]
-    for h, Vs, th in steps:
-        if restart_jump > 0 and t > t_window + 1e-9 and max(abs(Vs - last[0]), abs(th - last[1])) > restart_jump:
-            t_window, x_window, u_window = t, np.asarray(x, dtype=np.float32), None
-            buffer[:] = (Vs, th)
-        last = (Vs, th)
-        stop = t + h
-        while t < stop - 1e-9:
-            end = min(stop, t_window + horizon)
-            first = int(np.ceil((t - t_window) / DT - 1e-6))
-            buffer[first:] = (Vs, th)
-            if u_window is None:
-                u_window = (Vs, th)
-                slow = slow_mode(x_window.astype(float), u_window) if slow_weight > 0 else None
-                slow_integral = 0.0
-            rate_start = slow[0] @ f(x, (Vs, th)) if slow else 0.0
-            x_start = np.array(x, dtype=float)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", EnvelopeWarning)
-                x = op.predict(x_window[None], buffer[None], np.array([end - t_window]))[0, 0].astype(float)
-                x = x - rest_correction(op, x_window.astype(float), u_window, end - t_window, rest_radius)
-            if slow:
-                l, r = slow
-                slow_integral += 0.5 * (end - t) * (rate_start + l @ f(x, (Vs, th)))
-                x = x + slow_weight * (l @ x_window + slow_integral - l @ x) * r
-            if swing_weight > 0:
-                exact = swing_omega(x_start, x, (Vs, th), end - t)
-                x[1] += swing_weight * (exact - x[1])
-            t = end
-            if t >= t_window + horizon - 1e-9:
-                t_window, x_window, u_window = t, x.astype(np.float32), None
-                buffer[:] = (Vs, th)
-        out.append(x)
-    return np.array(out)
+def test_the_mirrors_newton_finds_the_equilibrium_and_its_slow_mode_is_the_slowest_eigenvalue(mirror):
+    u = np.array([0.95, 0.1])
+    rest = SM4.steady_state(u)
+    np.testing.assert_allclose(equilibrium(mirror.f, rest + np.array([0.05, 0.01, 0.01, -0.01]), u), rest,
+                               rtol=0, atol=1e-9)
+    l, r = slow_mode(mirror.f, rest, u)
+    J = jacobian(mirror.f, rest, u)
+    values = np.linalg.eigvals(J)
+    slowest = values[np.argmin(np.abs(values))]
+    assert slowest.imag == 0 and slowest.real < 0
+    assert l @ r == pytest.approx(1.0)
+    np.testing.assert_allclose(J @ r, slowest.real * r, atol=1e-6 * np.abs(r).max())
+    np.testing.assert_allclose(l @ J, slowest.real * l, atol=1e-6 * np.abs(l).max())
+
+
+@pytest.mark.parametrize("k", [62.0, 0.0])
+def test_the_exact_affine_step_solves_its_linear_equation(k):
+    from scipy.integrate import solve_ivp
+
+    h, start, g0, g1 = 0.02, 0.3, 5.0, -7.0
+    exact = solve_ivp(lambda s, x: g0 + (g1 - g0) * s / h - k * x, (0, h), [start], rtol=1e-12, atol=1e-14).y[0, -1]
+    assert affine_step(start, g0, g1, k, h) == pytest.approx(exact, abs=1e-10)
+
+
+def test_the_mirror_takes_the_machine_from_the_operators_metadata(mirror):
+    def stub(**metadata):  # an operator with that metadata
+        meta = {k: v for k, v in {**mirror.operator.metadata, **metadata}.items() if v is not None}
+        return type("Stub", (), {"metadata": meta, "n_sensors": mirror.operator.n_sensors,
+                                 "horizon": mirror.operator.horizon, "separable": True})()
+
+    assert StepMirror(stub(params=json.dumps({"H": 3.01, "D": 0.0}))).params == SM4.params({"H": 3.01, "D": 0.0})
+    assert StepMirror(stub(params=None)).params == SM4.params()  # no params recorded: the defaults
 
 
 def test_fmpy_validation_reports_no_problem(fmu_path):
@@ -139,7 +98,7 @@ def test_fmu_carries_the_operator_and_its_sources(fmu_path):
     assert "resources/model.onnx" in names and "sources/operator_kernel.c" in names
 
 
-def test_outputs_equal_the_operator_on_the_same_sensor_buffer(unzipped):
+def test_outputs_equal_the_operator_on_the_same_sensor_buffer(unzipped, operator_reference):
     rng = np.random.default_rng(0)
     steps = [(0.01, 1.0 + 0.05 * np.sin(k / 7), 0.1 * np.cos(k / 11)) for k in range(60)]
     steps += [(float(h), float(v), float(a)) for h, v, a in
@@ -159,7 +118,7 @@ def test_machine_at_rest_under_its_held_input_stays_exactly_at_rest(unzipped):
     np.testing.assert_allclose(states, np.tile(steady_state(1.0, 0.0), (300, 1)), rtol=0, atol=1e-6)
 
 
-def test_without_the_rest_correction_the_machine_at_rest_moves_by_the_operators_error(unzipped):
+def test_without_the_rest_correction_the_machine_at_rest_moves_by_the_operators_error(unzipped, operator_reference):
     slave = Slave(unzipped, rest_radius=0.0)
     states = np.array([slave.step(0.01) for _ in range(300)])
     slave.close()
@@ -168,10 +127,10 @@ def test_without_the_rest_correction_the_machine_at_rest_moves_by_the_operators_
     assert np.abs(states - steady_state(1.0, 0.0)).max() > 1e-5
 
 
-def test_the_rest_correction_fades_with_the_distance_from_rest(unzipped):
+def test_the_rest_correction_fades_with_the_distance_from_rest(unzipped, operator_reference):
     x0 = steady_state(1.0, 0.0) + np.array([0.1, 0.0, 0.0, 0.02])  # weight 1 - 0.2 = 0.8 at the start
     steps = [(0.01, 1.0, 0.0)] * 120
-    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)})
+    slave = Slave(unzipped, **initial(x0))
     got = np.array([slave.step(*step) for step in steps])
     slave.close()
     np.testing.assert_allclose(got, operator_reference(x0, steps), rtol=0, atol=2e-5)
@@ -181,7 +140,7 @@ def test_the_rest_correction_fades_with_the_distance_from_rest(unzipped):
 def test_a_negative_rest_radius_is_refused_with_a_reason(unzipped):
     slave = Slave(unzipped, init=False)
     with pytest.raises(FMICallException):
-        slave.fmu.setReal([VR["rest_radius"]], [-1.0])
+        slave.set(rest_radius=-1.0)
     assert any("rest_radius" in m for _, m in slave.messages)
     slave.fmu.freeInstance()
 
@@ -190,8 +149,7 @@ def fmu_and_rk45(unzipped, x0, signal, steps, **parameters):
     """(FMU states, RK45 states) [n, 4] after each (h, Vs, theta) step from x0; the RK45 reference
     solves under `signal`, the same inputs as functions of time."""
     reference = simulate(x0, signal, np.cumsum([0.0] + [h for h, _, _ in steps]))[1:]
-    slave = Slave(unzipped, **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)},
-                  **parameters)
+    slave = Slave(unzipped, **initial(x0), **parameters)
     got = np.array([slave.step(*step) for step in steps])
     slave.close()
     return got, reference
@@ -201,7 +159,7 @@ def undervoltage_run(unzipped, seconds=15.0, Vs=0.84, **parameters):
     """(FMU states, RK45 states) [n, 4] every 10 ms of a machine held at Vs below the lowest voltage with
     an equilibrium, from the equilibrium at that voltage: it slowly slips (delta rises by 0.14 rad)."""
     steps = [(0.01, Vs, 0.0)] * int(round(seconds / 0.01))
-    signal = Signal(Piecewise((Vs,), ()), Piecewise((0.0,), ()))
+    signal = Signal({"Vs": Piecewise((Vs,), ()), "theta_vs": Piecewise((0.0,), ())})
     return fmu_and_rk45(unzipped, steady_state(min_voltage_with_equilibrium(), 0.0), signal, steps, **parameters)
 
 
@@ -212,11 +170,11 @@ def test_the_slow_mode_correction_keeps_a_slow_drift_on_the_rk45_solution(unzipp
     assert error[0] < 0.5 * error_without[0] and error[3] < 0.5 * error_without[3]  # delta, Eq_p
 
 
-def test_slow_weight_zero_is_the_operator_with_the_rest_correction_only(unzipped):
+def test_slow_weight_zero_is_the_operator_with_the_rest_correction_only(unzipped, operator_reference):
     x0 = steady_state(1.0, 0.0) + np.array([0.1, 0.0, 0.0, 0.02])
     steps = [(0.01, 0.95, 0.05)] * 120
     slave = Slave(unzipped, slow_weight=0.0,
-                  **{f"{name}0": value for name, value in zip(("delta", "omega", "Ed_p", "Eq_p"), x0)})
+                  **initial(x0))
     got = np.array([slave.step(*step) for step in steps])
     slave.close()
     np.testing.assert_allclose(got, operator_reference(x0, steps, slow_weight=0.0), rtol=0, atol=2e-5)
@@ -228,7 +186,7 @@ def test_slow_weight_zero_is_the_operator_with_the_rest_correction_only(unzipped
 def test_a_weight_outside_zero_to_one_is_refused_with_a_reason(unzipped, name, value):
     slave = Slave(unzipped, init=False)
     with pytest.raises(FMICallException):
-        slave.fmu.setReal([VR[name]], [value])
+        slave.set(**{name: value})
     assert any(f"{name} = {value:g} must lie in [0, 1]" in m for _, m in slave.messages)
     slave.fmu.freeInstance()
 
@@ -238,7 +196,7 @@ def deep_fault_run(unzipped, **parameters):
     fault to Vs = 0.2 pu with an angle jump of 0.25 rad for 150 ms, then 0.55 s at Vs = 1.05 pu."""
     levels = [(30, 1.0, 0.0), (15, 0.2, 0.25), (55, 1.05, 0.25)]
     steps = [(0.01, v, a) for n, v, a in levels for _ in range(n)]
-    signal = Signal(Piecewise((1.0, 0.2, 1.05), (0.3, 0.45)), Piecewise((0.0, 0.25), (0.3,)))
+    signal = Signal({"Vs": Piecewise((1.0, 0.2, 1.05), (0.3, 0.45)), "theta_vs": Piecewise((0.0, 0.25), (0.3,))})
     return fmu_and_rk45(unzipped, steady_state(1.0, 0.0), signal, steps, **parameters)
 
 
@@ -249,7 +207,7 @@ def test_the_exact_swing_step_keeps_omega_on_the_rk45_solution_through_a_deep_fa
     assert error[1] < 0.5 * error_without[1] and error[1] < 0.005  # omega [rad/s]
 
 
-def test_swing_weight_zero_leaves_the_operators_omega(unzipped):
+def test_swing_weight_zero_leaves_the_operators_omega(unzipped, operator_reference):
     steps = [(0.01, 1.0, 0.0)] * 10 + [(0.01, 0.5, 0.2)] * 30
     slave = Slave(unzipped, swing_weight=0.0)
     got = np.array([slave.step(*step) for step in steps])
@@ -261,12 +219,12 @@ def test_swing_weight_zero_leaves_the_operators_omega(unzipped):
 
 def test_rollover_horizon_defaults_to_the_operators_own(unzipped):
     slave = Slave(unzipped)
-    horizon = slave.fmu.getReal([VR["rollover_horizon"]])[0]
+    horizon = slave.get("rollover_horizon")[0]
     slave.close()
     assert horizon == float(Operator.load(DEFAULT_OPERATOR).metadata["rollover_horizon_s"]) == 0.8
 
 
-def test_an_input_jump_above_restart_jump_starts_a_new_window_from_the_state_reached(unzipped):
+def test_an_input_jump_above_restart_jump_starts_a_new_window_from_the_state_reached(unzipped, operator_reference):
     steps = [(0.01, 1.0, 0.0)] * 30 + [(0.01, 0.6, 0.1)] * 20 + [(0.01, 1.0, 0.1)] * 30
     slave = Slave(unzipped)
     got = np.array([slave.step(*step) for step in steps])
@@ -278,7 +236,7 @@ def test_an_input_jump_above_restart_jump_starts_a_new_window_from_the_state_rea
     assert np.abs(got[30:] - without[30:]).max() > 1e-4
 
 
-def test_restart_jump_zero_keeps_windows_at_the_rollover_horizon(unzipped):
+def test_restart_jump_zero_keeps_windows_at_the_rollover_horizon(unzipped, operator_reference):
     steps = [(0.01, 1.0, 0.0)] * 30 + [(0.01, 0.6, 0.1)] * 20
     slave = Slave(unzipped, restart_jump=0.0)
     got = np.array([slave.step(*step) for step in steps])
@@ -301,12 +259,12 @@ def test_a_step_crossing_the_window_boundary_equals_one_split_at_it(unzipped):
     np.testing.assert_allclose(crossing, split, rtol=0, atol=1e-12)
 
 
-def test_shorter_rollover_horizon_starts_windows_more_often(unzipped):
+def test_shorter_rollover_horizon_starts_windows_more_often(unzipped, operator_reference):
     slave = Slave(unzipped, rollover_horizon=0.25)
     states = [slave.step(0.05, 0.97, 0.05) for _ in range(20)]
-    horizon = slave.fmu.getReal([VR["rollover_horizon"]])[0]
+    horizon = slave.get("rollover_horizon")[0]
     slave.close()
-    expected = operator_reference(steady_state(1.0, 0.0), [(0.05, 0.97, 0.05)] * 20, horizon=0.25)
+    expected = operator_reference(steady_state(1.0, 0.0), [(0.05, 0.97, 0.05)] * 20, rollover_horizon=0.25)
     assert horizon == 0.25
     np.testing.assert_allclose(states, expected, rtol=0, atol=2e-5)
 
@@ -361,7 +319,7 @@ def test_corrupt_serialized_state_is_refused_with_a_reason(unzipped):
 def test_non_finite_input_is_an_error_with_a_logged_reason(unzipped, value):
     slave = Slave(unzipped)
     with pytest.raises(FMICallException):
-        slave.fmu.setReal([VR["Vs"]], [value])
+        slave.set(Vs=value)
     assert any("not a finite number" in m for _, m in slave.messages)
     assert slave.step(0.01)[0] == pytest.approx(steady_state(1.0, 0.0)[0], abs=1e-2)  # still usable
     slave.close()
@@ -395,7 +353,7 @@ def test_step_from_the_wrong_time_is_an_error(unzipped):
 def test_setting_a_parameter_after_initialization_is_an_error(unzipped):
     slave = Slave(unzipped)
     with pytest.raises(FMICallException):
-        slave.fmu.setReal([VR["delta0"]], [0.5])
+        slave.set(delta0=0.5)
     assert any("fixed after initialization" in m for _, m in slave.messages)
     slave.close()
 
@@ -403,12 +361,12 @@ def test_setting_a_parameter_after_initialization_is_an_error(unzipped):
 def test_input_outside_the_envelope_turns_in_envelope_false_and_warns(unzipped):
     slave = Slave(unzipped)
     slave.step(0.01)
-    assert slave.fmu.getBoolean([0]) == [True]
+    assert slave.get_boolean("in_envelope") is True
     slave.step(0.01, Vs=0.05)
-    assert slave.fmu.getBoolean([0]) == [False]
+    assert slave.get_boolean("in_envelope") is False
     assert any("left the trained envelope" in m for _, m in slave.messages)
     slave.step(0.01)
-    assert slave.fmu.getBoolean([0]) == [False]  # sticky
+    assert slave.get_boolean("in_envelope") is False  # sticky
     slave.close()
 
 
@@ -421,19 +379,19 @@ def test_reset_returns_to_the_start(unzipped):
     slave.fmu.enterInitializationMode()
     slave.fmu.exitInitializationMode()
     slave.t = 0.0
-    np.testing.assert_allclose(slave.fmu.getReal(STATES), steady_state(1.0, 0.0), atol=1e-12)
+    np.testing.assert_allclose(slave.state(), steady_state(1.0, 0.0), atol=1e-12)
     slave.close()
 
 
 def test_residual_is_small_at_rest_and_large_on_an_inconsistent_state(unzipped):
     rest = Slave(unzipped)
     rest.step(0.01)
-    small = rest.fmu.getReal([VR["residual"]])[0]
+    small = rest.get("residual")[0]
     rest.close()
     odd = Slave(unzipped, delta0=0.2)  # far from the equilibrium, with nominal voltage
     odd.step(0.001)
-    odd.fmu.setReal([0], [0.5])  # an input the state does not belong to
-    large = odd.fmu.getReal([VR["residual"]])[0]
+    odd.set(Vs=0.5)  # an input the state does not belong to
+    large = odd.get("residual")[0]
     odd.close()
     assert small < 0.5 < large
 
@@ -446,7 +404,7 @@ def test_the_residual_is_the_operators_own_whatever_the_swing_step_does_to_omega
     for Vs, theta in [(1.0, 0.0)] * 10 + [(0.3, 0.2)] * 15 + [(1.0, 0.2)] * 20:
         for w, slave in runs.items():
             omegas[w].append(slave.step(0.01, Vs, theta)[1])
-            residuals[w].append(slave.fmu.getReal([VR["residual"]])[0])
+            residuals[w].append(slave.get("residual")[0])
     for slave in runs.values():
         slave.close()
     assert np.abs(np.subtract(omegas[1.0], omegas[0.0])).max() > 1e-3
@@ -470,7 +428,7 @@ def test_the_default_residual_limit_stays_quiet_on_a_quiet_run_and_zero_turns_th
     quiet = Slave(unzipped)
     for k in range(200):
         quiet.step(0.01, 1.0 + 0.02 * np.sin(k / 20))
-    assert warnings_logged(quiet) == [] and quiet.fmu.getReal([VR["residual_limit"]])[0] > 0
+    assert warnings_logged(quiet) == [] and quiet.get("residual_limit")[0] > 0
     quiet.close()
     off = Slave(unzipped, residual_limit=0.0, delta0=0.2)
     off.step(0.01, 0.5)

@@ -1,0 +1,280 @@
+"""The surrogate FMU's step semantics in Python: what its C (fmu_export/c/: the window, the
+corrections) does per step, with the operator evaluated by onnxruntime (surrogate.operator.Operator).
+
+Tests compare the compiled FMU with this mirror step by step; benchmarks use it to evaluate the
+operator "as the FMU does" without the FMU. It follows the C where the C is generic: the sizes of the
+component (n_x states, n_u inputs), its affine states (`component.affine_states`: the exact swing step
+for SM4's omega) and its state scales (`component.state_scales`: the reach of the rest correction at
+rest_radius = 1). The machine's parameters are the operator's (metadata `params`), else the
+component's defaults, as the FMU's generated equations are.
+
+Per communication step (h, u) [s, u in the component's input units] (DESIGN section 5):
+
+* an input change above restart_jump (in any input's unit) starts a new window at once, from the
+  state reached, with every sensor slot at the new input;
+* the step is cut at the window's end (rollover_horizon); each piece writes u into the sensor slots
+  from the current time on (slot k at window time k * dt, dt = horizon / (n_sensors - 1); slots not
+  yet reached hold the latest input) and evaluates the operator at the piece's end;
+* rest correction (rest_radius > 0, operators whose FMU kernel splits branch and trunk): each window
+  subtracts w (G(x_rest, u held) - x_rest), x_rest the equilibrium (Newton from the window start) of
+  the input held over the window's first step, w = 1 - max_i |x_window_i - x_rest_i| /
+  (rest_radius * state_scale_i) when positive;
+* slow-mode correction (slow_weight > 0): the slowest real mode of the right-hand side's Jacobian at
+  the window start (inverse iteration, left and right eigenvectors l, r with l . r = 1); the slow
+  coordinate l . x follows the trapezoid integral of l . f(x, u) over the window, and the state moves
+  along r by slow_weight times its miss;
+* exact affine step (swing_weight > 0): each affine state x_i (dx_i/dt = g(x) - k x_i) is integrated
+  exactly over the piece from its value at the piece's start, g linear in time between its values at
+  the piece's start and end states, and x_i moves swing_weight of the way to that solution;
+* at the window's end a new window starts from the state there.
+
+The diagnostics (residual, in_envelope, warnings) are not mirrored.
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from reference_models.component import Component
+from reference_models.components import component as component_named
+
+TIME_EPS = 1e-9  # s: times closer than this are the same time (TIME_EPS in the C)
+SETTINGS = ("rollover_horizon", "restart_jump", "rest_radius", "slow_weight", "swing_weight")
+
+
+def fmu_settings(model_description) -> dict:
+    """{setting: default} of a surrogate FMU: the start values of its parameters named in SETTINGS,
+    from an fmpy ModelDescription (fmpy.read_model_description). Pass them on to StepMirror.run."""
+    starts = {v.name: v.start for v in model_description.modelVariables}
+    missing = [name for name in SETTINGS if starts.get(name) is None]
+    if missing:
+        raise ValueError(f"the model description has no parameter {', '.join(missing)} (not a surrogate FMU?)")
+    return {name: float(starts[name]) for name in SETTINGS}
+
+
+def jacobian(f, x, u) -> np.ndarray:
+    """d f / d x [n_x, n_x] at state x [n_x] under input u [n_u], by central differences with steps
+    1e-6 max(1, |x_j|) (as the C)."""
+    x = np.asarray(x, dtype=float)
+    J = np.empty((x.size, x.size))
+    for j in range(x.size):
+        d = 1e-6 * max(1.0, abs(x[j]))
+        hi, lo = x.copy(), x.copy()
+        hi[j] += d
+        lo[j] -= d
+        J[:, j] = (f(hi, u) - f(lo, u)) / (2.0 * d)
+    return J
+
+
+def lu_factor(A):
+    """(F, perm) LU factors of A [n, n] with partial pivoting (row i of F is row perm[i] of A), or None
+    when a pivot is below 1e-14 in magnitude (as the C)."""
+    F, n = np.array(A, dtype=float), len(A)
+    perm = np.arange(n)
+    for c in range(n):
+        pivot = c + int(np.argmax(np.abs(F[c:, c])))
+        if not abs(F[pivot, c]) >= 1e-14:
+            return None
+        if pivot != c:
+            F[[c, pivot]] = F[[pivot, c]]
+            perm[[c, pivot]] = perm[[pivot, c]]
+        F[c + 1:, c] /= F[c, c]
+        F[c + 1:, c + 1:] -= np.outer(F[c + 1:, c], F[c, c + 1:])
+    return F, perm
+
+
+def lu_solve(factors, b) -> np.ndarray:
+    """A^-1 b [n] from lu_factor's factors."""
+    F, perm = factors
+    x = np.asarray(b, dtype=float)[perm].copy()
+    for i in range(len(x)):
+        x[i] -= F[i, :i] @ x[:i]
+    for i in reversed(range(len(x))):
+        x[i] = (x[i] - F[i, i + 1:] @ x[i + 1:]) / F[i, i]
+    return x
+
+
+def equilibrium(f, x, u, iterations: int = 30):
+    """The equilibrium [n_x] under the held input u nearest x (Newton on f from x, finite-difference
+    Jacobian), or None when Newton does not reach sum |f| < 1e-12 within `iterations` (as the C)."""
+    rest = np.array(x, dtype=float)
+    for _ in range(iterations):
+        rate = f(rest, u)
+        norm = np.abs(rate).sum()
+        if not np.isfinite(norm):
+            return None
+        if norm < 1e-12:
+            return rest
+        factors = lu_factor(jacobian(f, rest, u))
+        if factors is None:
+            return None
+        rest = rest - lu_solve(factors, rate)
+    return None
+
+
+def slowest_mode(A, factors, iterations: int = 60):
+    """The eigenvector [n] of A's eigenvalue of least magnitude by inverse iteration with A's LU
+    factors (start from 1 down to 0.1, as the C's OPFMU_MODE_START; scaled by the largest entry,
+    signed), or None unless it converged:
+    |A v - lambda v| <= 1e-6 |lambda|, which needs that eigenvalue real and clearly the smallest."""
+    n = len(A)
+    v = np.array([1.0] if n == 1 else [round(1.0 - 0.9 * i / (n - 1), 12) for i in range(n)])
+    for _ in range(iterations):
+        w = lu_solve(factors, v)
+        big = int(np.argmax(np.abs(w)))
+        if not np.isfinite(w[big]) or w[big] == 0.0:
+            return None
+        v = w / w[big]
+    Av = A @ v
+    eigenvalue = (v @ Av) / (v @ v)
+    return v if np.max(np.abs(Av - eigenvalue * v)) <= 1e-6 * abs(eigenvalue) else None
+
+
+def slow_mode(f, x, u):
+    """(l, r): left and right eigenvectors [n_x] (l . r = 1) of the slowest mode of f's Jacobian at
+    (x, u), or None where the C finds none (no converged real slowest mode, or l . r ~ 0)."""
+    J = jacobian(f, x, u)
+    right_factors, left_factors = lu_factor(J), lu_factor(J.T)
+    if right_factors is None or left_factors is None:
+        return None
+    r, l = slowest_mode(J, right_factors), slowest_mode(J.T, left_factors)
+    if r is None or l is None:
+        return None
+    overlap = l @ r
+    if not abs(overlap) > 1e-9:
+        return None
+    return l / overlap, r
+
+
+def affine_drive(f, i: int, x, u) -> tuple[float, float]:
+    """(g, k) of an affine state i, dx_i/dt = g - k x_i, at state x [n_x] under input u: g the rate at
+    x_i = 0, k its drop from x_i = 0 to x_i = 1."""
+    at_zero, at_one = np.array(x, dtype=float), np.array(x, dtype=float)
+    at_zero[i], at_one[i] = 0.0, 1.0
+    g = f(at_zero, u)[i]
+    return g, g - f(at_one, u)[i]
+
+
+def affine_step(value_start: float, g_start: float, g_end: float, k: float, h: float) -> float:
+    """x_i after a step of h [s] from value_start, solving dx_i/dt = g - k x_i exactly for g linear in
+    time from g_start to g_end (the trapezoid rule, also exact, where |k h| <= 1e-8)."""
+    if not abs(k * h) > 1e-8:
+        return value_start + 0.5 * h * (g_start + g_end)
+    reach = -np.expm1(-k * h) / k  # integral of exp(-k (h - s)) over the step
+    return np.exp(-k * h) * value_start + g_start * reach + (g_end - g_start) * (h - reach) / (k * h)
+
+
+class StepMirror:
+    """The surrogate FMU's steps for one operator, in Python.
+
+    operator: a surrogate.operator.Operator or the path of an exported .onnx; component: default the
+    one its metadata names; params: default its metadata's `params`, else the component's defaults.
+    """
+
+    def __init__(self, operator, component: Component | None = None, params=None):
+        if isinstance(operator, (str, Path)):
+            from surrogate.operator import Operator
+
+            operator = Operator.load(operator)
+        self.operator = operator
+        meta = operator.metadata
+        self.component = component or component_named(meta.get("component", "sm4"))
+        if params is None:
+            params = self.component.params(json.loads(meta["params"]) if "params" in meta else None)
+        self.params = params
+        self.n_sensors, self.horizon = operator.n_sensors, float(operator.horizon)
+        self.sensor_dt = self.horizon / (self.n_sensors - 1)
+        self.default_rollover = float(meta.get("rollover_horizon_s", self.horizon))
+        self.rest_scale = np.asarray(self.component.state_scales, dtype=float)
+
+    def f(self, x, u) -> np.ndarray:
+        """The component's right-hand side dx/dt [n_x] at state x [n_x] under input u [n_u]."""
+        return np.asarray(self.component.rhs(np.asarray(x, float), np.asarray(u, float), self.params), dtype=float)
+
+    def predict(self, x_window, sensors, tau: float) -> np.ndarray:
+        """The operator's state [n_x] at window time tau [s] from x_window [n_x] and the sensor buffer
+        [n_sensors, n_u] (float32 evaluation, EnvelopeWarning silenced: the FMU flags it instead)."""
+        from surrogate.operator import EnvelopeWarning
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", EnvelopeWarning)
+            x = self.operator.predict(np.asarray(x_window, np.float32)[None], np.asarray(sensors, np.float32)[None],
+                                      np.array([tau], np.float32))
+        return x[0, 0].astype(float)
+
+    def rest_correction(self, x_window, u, rest_radius: float):
+        """(weight, x_rest) of a window starting at x_window [n_x] whose first step holds u [n_u]:
+        None where the correction does not apply (off, no equilibrium, too far from rest, or an
+        operator the FMU evaluates whole)."""
+        if not (rest_radius > 0 and self.operator.separable):
+            return None
+        rest = equilibrium(self.f, x_window, u)
+        if rest is None:
+            return None
+        distance = np.max(np.abs(np.asarray(x_window, float) - rest) / (rest_radius * self.rest_scale))
+        return (1.0 - distance, rest) if distance < 1.0 else None
+
+    def run(self, x0, steps, rollover_horizon: float | None = None, restart_jump: float = 0.0,
+            rest_radius: float = 0.0, slow_weight: float = 0.0, swing_weight: float = 0.0) -> np.ndarray:
+        """States [len(steps), n_x] at the end of each communication step (h, u_1, ..., u_n_u), from x0
+        [n_x] at t = 0, with the FMU's settings (names and meanings of its parameters; default: the
+        bare operator, windows of the operator's rollover horizon). fmu_settings(md) gives a surrogate
+        FMU's defaults."""
+        n_u = self.component.n_inputs
+        horizon = float(rollover_horizon or self.default_rollover)
+        steps = [(float(s[0]), np.asarray(s[1:], dtype=float)) for s in steps]
+        if any(u.shape != (n_u,) for _, u in steps):
+            raise ValueError(f"each step is (h, {', '.join(self.component.input_names)})")
+        t, x = 0.0, np.array(x0, dtype=float)
+        window = None  # (start time, start state, sensor buffer, corrections or None until the first step)
+        last_u = steps[0][1] if steps else None
+        out = []
+
+        def start_window(time, state, u):
+            return {"t": time, "x": state.copy(), "sensors": np.tile(u, (self.n_sensors, 1)), "corrections": None}
+
+        if steps:
+            window = start_window(0.0, x, steps[0][1])
+        for h, u in steps:
+            if restart_jump > 0 and t > window["t"] + TIME_EPS and np.max(np.abs(u - last_u)) > restart_jump:
+                window = start_window(t, x, u)
+            stop = t + h
+            while t < stop - TIME_EPS:
+                end = min(stop, window["t"] + horizon)
+                first = min(max(int(np.ceil((t - window["t"]) / self.sensor_dt - 1e-6)), 0), self.n_sensors)
+                if window["corrections"] is None:  # for the input held over the window's first step
+                    window["corrections"] = {
+                        "rest": self.rest_correction(window["x"], u, rest_radius),
+                        "rest_sensors": np.tile(u, (self.n_sensors, 1)),
+                        "slow": slow_mode(self.f, window["x"], u) if slow_weight > 0 else None,
+                        "slow_integral": 0.0}
+                c = window["corrections"]
+                slow = c["slow"]
+                rate_start = slow[0] @ self.f(x, u) if slow else 0.0
+                x_start = x.copy()
+                drives = {i: affine_drive(self.f, i, x, u) for i in self.component.affine_states} \
+                    if swing_weight > 0 else {}
+                window["sensors"][first:] = u
+                tau = min(end - window["t"], self.horizon)
+                x = self.predict(window["x"], window["sensors"], tau)
+                if c["rest"] is not None:
+                    weight, rest = c["rest"]
+                    x = x - weight * (self.predict(rest, c["rest_sensors"], tau) - rest)
+                if slow:
+                    l, r = slow
+                    c["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u))
+                    x = x + slow_weight * (l @ window["x"] + c["slow_integral"] - l @ x) * r
+                for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's
+                    g_end, _ = affine_drive(self.f, i, x, u)
+                    x[i] += swing_weight * (affine_step(x_start[i], g_start, g_end, k, end - t) - x[i])
+                last_u, t = u, end
+                if not np.all(np.isfinite(x)):
+                    raise FloatingPointError(f"t = {t:.6g} s: the operator returned a non-finite state")
+                if t >= window["t"] + horizon - TIME_EPS:
+                    window = start_window(t, x, u)
+            t = stop
+            out.append(x.copy())
+        return np.array(out).reshape(len(steps), self.component.n_states)
