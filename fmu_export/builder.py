@@ -201,16 +201,18 @@ def load_operator(onnx_path: Path):
     return proto, meta
 
 
-def default_state(meta: dict) -> np.ndarray:
+def default_state(meta: dict, onnx_path: Path) -> np.ndarray:
     """The default initial state: the machine's equilibrium at its inputs' start values."""
     component, params = meta["component"], meta["params"]
+    starts = ", ".join(f"{q.name} = {float(q.start)!r}" for q in component.inputs)
     try:
         x = component.steady_state(component.start_inputs, params)
     except (ValueError, ArithmeticError) as exc:
-        raise BuildError(f"the {component.name} machine of the operator has no stable equilibrium at its start "
-                         f"inputs {list(component.start_inputs)} ({str(exc)[:120]})") from None
+        raise BuildError(f"{onnx_path}: the {component.name} machine of the operator has no stable equilibrium at "
+                         f"its start inputs {starts} ({str(exc)[:120]})") from None
     if x.shape != (component.n_states,) or not np.all(np.isfinite(x)):
-        raise BuildError(f"the {component.name} machine of the operator has no finite equilibrium at its start inputs")
+        raise BuildError(f"{onnx_path}: the {component.name} machine of the operator has no finite equilibrium at "
+                         f"its start inputs {starts}")
     if not all(math.isfinite(s) and s > 0 for s in component.state_scales):
         raise BuildError(f"the {component.name} component's state_scales must be finite and positive")
     return x
@@ -222,7 +224,7 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
     check_model_name(model_name)
     proto, meta = load_operator(onnx_path)
     component, params = meta["component"], meta["params"]
-    x_default = default_state(meta)
+    x_default = default_state(meta, onnx_path)
     n_sensors = meta["n_sensors"]
     try:
         kernel = generate_kernel(proto, n_sensors)

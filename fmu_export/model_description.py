@@ -13,6 +13,16 @@ from reference_models.version import __version__
 from .variables import Variable
 
 
+# SI base-unit exponents of the units components use; a unit not listed is declared without them
+BASE_UNITS = {"rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "s": {"s": "1"}, "pu": {},
+              "Hz": {"s": "-1"}, "1/s": {"s": "-1"}}
+
+
+def unit_names(variables: list[Variable]) -> list[str]:
+    """The units the variables use, in order of first use (pu, dimensionless, declared all the same)."""
+    return list(dict.fromkeys(v.unit for v in variables if v.unit))
+
+
 def model_description(model_name: str, guid: str, variables: list[Variable], description: str,
                       stop_time: float = 10.0, step: float = 0.01) -> bytes:
     """The XML document (UTF-8 bytes)."""
@@ -25,8 +35,10 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
         "canNotUseMemoryManagementFunctions": "true"})
     units = ET.SubElement(root, "UnitDefinitions")
-    for name, base in (("rad", {"rad": "1"}), ("rad/s", {"rad": "1", "s": "-1"}), ("s", {"s": "1"}), ("pu", {})):
-        ET.SubElement(ET.SubElement(units, "Unit", {"name": name}), "BaseUnit", base)
+    for name in unit_names(variables):
+        unit = ET.SubElement(units, "Unit", {"name": name})
+        if name in BASE_UNITS:
+            ET.SubElement(unit, "BaseUnit", BASE_UNITS[name])
     categories = ET.SubElement(root, "LogCategories")
     for name, text in (("logStatusWarning", "warnings: inputs or states outside the trained envelope"),
                        ("logStatusError", "errors: invalid calls and values"), ("logAll", "everything")):

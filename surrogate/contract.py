@@ -76,8 +76,10 @@ def operator_metadata(source) -> dict:
         raise ContractError(f"metadata component: {exc}") from None
     try:
         params = comp.params(_json(raw, "params"))
-    except (ParameterError, OverflowError) as exc:  # OverflowError: an integer too large for a float
+    except ParameterError as exc:
         raise ContractError(f"metadata params: {_one_line(exc)}") from None
+    except OverflowError:  # an integer beyond the range of a float
+        raise ContractError("metadata params: a parameter is too large for a floating-point number") from None
     for key, expected in (("state_names", comp.state_names), ("input_names", comp.input_names)):
         names = _json(raw, key)
         if not (isinstance(names, list) and tuple(names) == expected):
@@ -135,7 +137,7 @@ def _json(raw: dict, key: str):
     try:
         return json.loads(raw[key], parse_constant=_refuse_constant)
     except (ValueError, RecursionError) as exc:
-        raise ContractError(f"metadata {key} is not valid JSON ({_one_line(exc)[:80]}): {_show(raw[key])}") from None
+        raise ContractError(f"metadata {key} is not valid JSON ({_one_line(exc)[:100]}): {_show(raw[key])}") from None
 
 
 def _number(raw: dict, key: str, value, what: str = "") -> float:

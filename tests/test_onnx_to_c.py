@@ -9,7 +9,7 @@ import onnxruntime as ort
 import pytest
 from onnx import TensorProto, helper
 
-from fmu_export.onnx_to_c import UnsupportedGraph, generate_kernel
+from fmu_export.onnx_to_c import UnsupportedGraph, generate_kernel, graph_interface
 from surrogate.models import OperatorConfig
 from surrogate.contract import random_inputs
 from surrogate.onnx_export import export_onnx
@@ -100,3 +100,66 @@ def test_graph_with_an_unsupported_op_is_refused_naming_it():
         [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 4])])
     with pytest.raises(UnsupportedGraph, match="does not support: Erf, Softmax"):
         generate_kernel(helper.make_model(graph), 1001)
+
+
+def small_operator(n_x: int, n_u: int, n_sensors: int):
+    """A hand-made operator graph of other sizes: x [N, M, n_x] = tanh(Gemm([x0, u])) * sin(Gemm(t))."""
+    rng = np.random.default_rng(0)
+    width = n_x + n_u * n_sensors
+    init = [helper.make_tensor("W", TensorProto.FLOAT, [width, n_x], rng.normal(size=width * n_x).tolist()),
+            helper.make_tensor("b", TensorProto.FLOAT, [n_x], rng.normal(size=n_x).tolist()),
+            helper.make_tensor("Wt", TensorProto.FLOAT, [1, n_x], rng.normal(size=n_x).tolist()),
+            helper.make_tensor("ax1", TensorProto.INT64, [1], [1]), helper.make_tensor("ax0", TensorProto.INT64, [1], [0])]
+    nodes = [helper.make_node("Flatten", ["u"], ["uf"], axis=1),
+             helper.make_node("Concat", ["x0", "uf"], ["xu"], axis=1),
+             helper.make_node("Gemm", ["xu", "W", "b"], ["g"]),
+             helper.make_node("Tanh", ["g"], ["branch"]),
+             helper.make_node("Unsqueeze", ["t", "ax1"], ["tc"]),
+             helper.make_node("Gemm", ["tc", "Wt"], ["tg"]),
+             helper.make_node("Sin", ["tg"], ["trunk"]),
+             helper.make_node("Unsqueeze", ["branch", "ax1"], ["b3"]),
+             helper.make_node("Unsqueeze", ["trunk", "ax0"], ["t3"]),
+             helper.make_node("Mul", ["b3", "t3"], ["x"])]
+    graph = helper.make_graph(nodes, "small", [
+        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
+        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
+        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
+    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+
+
+def test_kernel_takes_the_number_of_states_and_inputs_from_the_graph(tmp_path):
+    n_x, n_u, n_sensors = 3, 1, 11
+    proto = small_operator(n_x, n_u, n_sensors)
+    kernel = generate_kernel(proto, n_sensors)
+    assert (kernel.n_states, kernel.n_inputs) == (n_x, n_u)
+    assert "void opfmu_operator(const double x0[3], const double u[1 * OPFMU_N_SENSORS], double t, double x[3])" \
+        in kernel.source
+    source, library = tmp_path / "kernel.c", tmp_path / "libkernel.so"
+    source.write_text(kernel.source)
+    subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(source), "-o", str(library), "-lm"],
+                   check=True)
+    lib = ctypes.CDLL(str(library))
+    rng = np.random.default_rng(1)
+    x0 = rng.uniform(-1, 1, (5, n_x)).astype(np.float32)
+    u = rng.uniform(-1, 1, (5, n_sensors, n_u)).astype(np.float32)
+    t = np.array([0.0, 0.3, 1.0], np.float32)
+    expected = ort.InferenceSession(proto.SerializeToString(), providers=["CPUExecutionProvider"]).run(
+        ["x"], {"x0": x0, "u": u, "t": t})[0]
+    for n in range(len(x0)):
+        x0_n, u_n = np.ascontiguousarray(x0[n], np.float64), np.ascontiguousarray(u[n], np.float64)
+        for m, tm in enumerate(t):
+            out = np.zeros(n_x)
+            lib.opfmu_operator(x0_n.ctypes.data_as(DOUBLE_P), u_n.ctypes.data_as(DOUBLE_P), ctypes.c_double(tm),
+                               out.ctypes.data_as(DOUBLE_P))
+            np.testing.assert_allclose(out, expected[n, m], rtol=0, atol=1e-5)
+
+
+def test_graph_interface_is_read_from_the_inputs_and_refused_when_it_is_not_the_contract():
+    assert graph_interface(small_operator(3, 1, 11)) == (3, 1, 11)
+    renamed = small_operator(3, 1, 11)
+    renamed.graph.input[0].name = "state"
+    with pytest.raises(UnsupportedGraph, match="must take inputs x0, u, t"):
+        generate_kernel(renamed, 11)
+    with pytest.raises(UnsupportedGraph, match="has 11 sensor times, not 12"):
+        generate_kernel(small_operator(3, 1, 11), 12)
