@@ -4,18 +4,20 @@
         [--stop-time 10] [--step 0.01] [--scenarios ...] [--seeds 0] [--out error_sources.json]
 
 For each run (both FMUs under fmpy, as `opfmu compare`), the operator is also evaluated in Python
-(onnxruntime) window by window, each window restarted from the reference state at its start:
+(onnxruntime) window by window, windows of the FMU's rollover_horizon, each restarted from the
+reference state at its start:
 
 * FMU: the surrogate FMU as a user runs it (errors carried over from window to window);
-* restarted, held future: every communication point evaluated as the FMU does (sensor slots after the
-  current step hold its input), but from the reference window-start state: the error the FMU would
-  have without what earlier windows left behind;
+* restarted, held future: every communication point evaluated as the FMU does (the FMU's step
+  semantics, fmu_export.step_mirror, corrections off: sensor slots after the current step hold its
+  input), but from the reference window-start state: the error the FMU would have without what
+  earlier windows left behind;
 * restarted, known future: the same windows with every sensor slot at the input that really comes
   (hindsight): the operator's own error on that input.
 
-The FMU's rest and slow-mode corrections and its exact swing step (surrogate_model.c) act in the first
-only: pass --param rest_radius=0 --param slow_weight=0 --param swing_weight=0 to split the operator
-alone. So FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
+The FMU's rest and slow-mode corrections and its exact swing step act in the first only: pass
+--param rest_radius=0 --param slow_weight=0 --param swing_weight=0 to split the operator alone. So
+FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
 knowing the future input, and known is the operator's accuracy on these inputs. Also reported: the
 first window alone (the start from rest), and how many window-start states or inputs left the
 training envelope.
@@ -29,8 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fmu_export.step_mirror import StepMirror
 from opfmu.compare import compare, scenario_inputs
-from fmu_pair import extracted_pair, surrogate_parameters
+from fmu_pair import extracted_pair, surrogate_machine, surrogate_parameters, surrogate_setting
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import STATE_NAMES
@@ -38,30 +41,27 @@ from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
 
 
 def zoh(inputs_times: np.ndarray, inputs: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """The input held from each communication point to the next, at `times` [T] -> [T, 2]."""
+    """The input held from each communication point to the next, at `times` [T] -> [T, n_u]."""
     index = np.searchsorted(inputs_times, times + 1e-9, side="right") - 1
     return inputs[np.clip(index, 0, len(inputs) - 1)]
 
 
-def restarted(op: Operator, times: np.ndarray, inputs: np.ndarray, reference: np.ndarray, h: float):
-    """(held, known): states [T, 4] at the communication points, each window restarted from the
-    reference; held evaluates every point with later sensor slots at the current input, known with
-    the true input throughout."""
+def restarted(mirror: StepMirror, times: np.ndarray, inputs: np.ndarray, reference: np.ndarray, h: float,
+              horizon: float):
+    """(held, known): states [T, n_x] at the communication points times [T], windows of `horizon`
+    seconds each restarted from the reference [T, n_x] at its start; inputs [T, n_u] held over each
+    step of h. held: the FMU's step semantics without corrections; known: every sensor slot at the true
+    input."""
+    op = mirror.operator
     sensor_t = np.linspace(0.0, op.horizon, op.n_sensors)
-    per_window = int(round(op.horizon / h))
+    per_window = int(round(horizon / h))
     held, known = reference.copy(), reference.copy()
     for start in range(0, len(times) - 1, per_window):
         steps = np.arange(start, min(start + per_window, len(times) - 1))  # steps whose end is in this window
-        t0, x0 = times[start], reference[start][None].astype(np.float32)
+        t0, x0 = times[start], reference[start]
+        held[steps + 1] = mirror.run(x0, [(h, *inputs[i]) for i in steps], rollover_horizon=horizon)
         u_true = zoh(times, inputs, t0 + sensor_t)
-        ends = times[steps + 1] - t0
-        known[steps + 1] = op.predict(x0, u_true[None], ends)[0]
-        # held future: for the step from times[i], slots from times[i] on carry inputs[i]
-        u_held = np.repeat(u_true[None], len(steps), axis=0)
-        for row, i in enumerate(steps):
-            u_held[row, t0 + sensor_t >= times[i] - 1e-9] = inputs[i]
-        x = op.predict(np.repeat(x0, len(steps), axis=0), u_held, ends)
-        held[steps + 1] = x[np.arange(len(steps)), np.arange(len(steps))]
+        known[steps + 1] = op.predict(x0[None].astype(np.float32), u_true[None], times[steps + 1] - t0)[0]
     return held, known
 
 
@@ -88,19 +88,24 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="opfmu_sources_") as tmp:
         tmp = Path(tmp)
         dirs = extracted_pair(args.surrogate, args.reference, tmp, args.operator)
+        parameters = surrogate_parameters(args.param)
+        horizon = surrogate_setting(dirs[0], "rollover_horizon", parameters)
+        machine = surrogate_machine(dirs[0])
+        mirror = StepMirror(op, params=machine)
+        per_window = int(round(horizon / args.step))
         print(f"{args.stop_time:g} s at h = {args.step * 1e3:g} ms; MaxAE of delta [rad] / omega [rad/s] / Eq_p [pu]")
         print(f"{'scenario':<8}{'seed':>5}{'FMU':>26}{'restarted, held':>26}{'restarted, known':>26}"
               f"{'first window':>26}{'outside':>9}")
         rows = []
         for name in args.scenarios:
             for seed in args.seeds:
-                inputs = scenario_inputs(name, seed, args.stop_time, args.step)
-                result = compare(*dirs, inputs, args.stop_time, args.step, surrogate_parameters(args.param))
+                inputs = scenario_inputs(name, seed, args.stop_time, args.step, machine)
+                result = compare(*dirs, inputs, args.stop_time, args.step, parameters)
                 ref = np.stack([result["trajectories"]["reference"][s] for s in STATE_NAMES], axis=1)
                 fmu = np.stack([result["trajectories"]["surrogate"][s] for s in STATE_NAMES], axis=1)
-                held, known = restarted(op, inputs.times, inputs.values, ref, args.step)
-                first = int(round(op.horizon / args.step)) + 1
-                starts = ref[:: int(round(op.horizon / args.step))]
+                held, known = restarted(mirror, inputs.times, inputs.values, ref, args.step, horizon)
+                first = per_window + 1
+                starts = ref[::per_window]
                 outside = sum(bool(op.outside_envelope(x[None], inputs.values[None, :1])) for x in starts)
                 outside += bool(op.outside_envelope(ref[:1], inputs.values[None]))
                 parts = {"fmu": maxae(fmu, ref), "held": maxae(held, ref), "known": maxae(known, ref),
@@ -110,7 +115,7 @@ def main() -> None:
                 rows.append({"scenario": name, "seed": seed, "outside": outside,
                              **{k: dict(zip(STATE_NAMES, v.tolist())) for k, v in parts.items()}})
         write_json(args.out, {"stop_time_s": args.stop_time, "step_s": args.step, "operator": args.operator,
-                              "rows": rows})
+                              "rollover_horizon_s": horizon, "rows": rows})
 
 
 if __name__ == "__main__":

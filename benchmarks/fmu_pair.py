@@ -8,21 +8,45 @@ from fmpy import extract
 
 def extracted_pair(surrogate, reference, tmp: Path, operator=None) -> tuple[str, str]:
     """(surrogate dir, reference dir) under tmp; a missing surrogate FMU is built from `operator`
-    (default: the shipped one), a missing reference FMU is built too."""
+    (default: the shipped one), a missing reference FMU is built for the surrogate's machine (the
+    parameters its operator records; the default machine where it records none)."""
     if surrogate is None:
         from fmu_export.builder import build_surrogate_fmu
         from surrogate.operator import DEFAULT_OPERATOR
 
         surrogate = tmp / "SM4Surrogate.fmu"
         build_surrogate_fmu(operator or DEFAULT_OPERATOR, surrogate)
+    surrogate_dir = extract(str(surrogate), unzipdir=str(tmp / "s"))
     if reference is None:
-        from reference_models.reference_fmu import build_reference_fmu
+        from fmu_export.reference_fmu import build_reference_fmu
 
         reference = tmp / "SM4Reference.fmu"
-        build_reference_fmu(reference)
-    return extract(str(surrogate), unzipdir=str(tmp / "s")), extract(str(reference), unzipdir=str(tmp / "r"))
+        build_reference_fmu(reference, params=surrogate_machine(surrogate_dir))
+    return surrogate_dir, extract(str(reference), unzipdir=str(tmp / "r"))
+
+
+def surrogate_machine(surrogate_dir):
+    """The machine (SM4Params) of an extracted surrogate FMU: the one its operator records, else the
+    default machine (operators exported before operators recorded it)."""
+    from opfmu.compare import CompareError, fmu_machine
+
+    try:
+        return fmu_machine(surrogate_dir)
+    except CompareError:
+        from reference_models.sm4 import SM4
+
+        return SM4.params()
 
 
 def surrogate_parameters(specs) -> dict:
     """--param NAME=VALUE strings -> {name: float}."""
     return {name: float(value) for name, value in (spec.split("=", 1) for spec in specs)}
+
+
+def surrogate_setting(surrogate_dir, name: str, parameters: dict) -> float:
+    """A surrogate parameter as a run uses it: given in `parameters`, else the FMU's default."""
+    from fmpy import read_model_description
+
+    if name in parameters:
+        return float(parameters[name])
+    return float(next(v.start for v in read_model_description(str(surrogate_dir)).modelVariables if v.name == name))

@@ -42,16 +42,29 @@ def started(directory, md, parameters=None) -> FMU2Slave:
     return fmu
 
 
+def variables(md) -> tuple[list, list]:
+    """(inputs, states): the model description's Real inputs, and its outputs that have an
+    initial-state parameter <name>0 (the states), as fmpy ScalarVariables in their order."""
+    names = {v.name for v in md.modelVariables}
+    reals = [v for v in md.modelVariables if v.type == "Real"]
+    return ([v for v in reals if v.causality == "input"],
+            [v for v in reals if v.causality == "output" and f"{v.name}0" in names])
+
+
 def fmpy_loop(directory, md, h: float, steps: int) -> float:
+    """fmpy's setReal of the inputs (the first one varied around its start), doStep and getReal of the states."""
     fmu = started(directory, md)
-    start = time.perf_counter()
+    inputs, states = variables(md)
+    input_vrs, state_vrs = [v.valueReference for v in inputs], [v.valueReference for v in states]
+    start = [float(v.start) for v in inputs]
+    begin = time.perf_counter()
     t = 0.0
     for k in range(steps):
-        fmu.setReal([0, 1], [1.0 + 0.01 * np.sin(k * h), 0.0])
+        fmu.setReal(input_vrs, [start[0] + 0.01 * np.sin(k * h), *start[1:]])
         fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
-        fmu.getReal([2, 3, 4, 5])
+        fmu.getReal(state_vrs)
         t += h
-    elapsed = time.perf_counter() - start
+    elapsed = time.perf_counter() - begin
     fmu.terminate()
     fmu.freeInstance()
     return elapsed / steps * 1e6
@@ -72,18 +85,26 @@ def ctypes_loop(directory, md, h: float, steps: int, parameters=None) -> float:
     return elapsed / steps * 1e6
 
 
-def kernel_call(directory, n: int = 2000) -> float:
-    lib = ctypes.CDLL(str(Path(directory) / "binaries" / "linux64" / "SM4Surrogate.so"))
+def kernel_call(directory, md, n: int = 2000) -> float:
+    """Microseconds of one opfmu_operator call (the compiled operator) in the FMU's binary, from the
+    FMU's default initial state with every sensor at the inputs' start values, at window time T/2."""
+    from surrogate.operator import Operator
+
+    op = Operator.load(Path(directory) / "resources" / "model.onnx")
+    lib = ctypes.CDLL(str(Path(directory) / "binaries" / "linux64" / f"{md.coSimulation.modelIdentifier}.so"))
     p = ctypes.POINTER(ctypes.c_double)
-    x0, u, out = np.zeros(4), np.ones(2002), np.zeros(4)
-    x0[:] = (1.06, 0.0, 0.33, 0.63)
-    args = (x0.ctypes.data_as(p), u.ctypes.data_as(p))
+    starts = {v.name: float(v.start) for v in md.modelVariables if v.type == "Real" and v.start is not None}
+    inputs, states = variables(md)
+    x0 = np.array([starts[f"{v.name}0"] for v in states])
+    u = np.tile([float(v.start) for v in inputs], op.n_sensors)
+    out = np.zeros(len(x0))
+    args = (x0.ctypes.data_as(p), u.ctypes.data_as(p), ctypes.c_double(0.5 * op.horizon), out.ctypes.data_as(p))
     times = []
     for _ in range(5):
-        start = time.perf_counter()
+        begin = time.perf_counter()
         for _ in range(n):
-            lib.opfmu_operator(*args, ctypes.c_double(0.5), out.ctypes.data_as(p))
-        times.append((time.perf_counter() - start) / n * 1e6)
+            lib.opfmu_operator(*args)
+        times.append((time.perf_counter() - begin) / n * 1e6)
     return statistics.median(times)
 
 
@@ -99,7 +120,7 @@ def main() -> None:
             build_surrogate_fmu(DEFAULT_OPERATOR, path)
         directory, md = extract(path), read_model_description(path)
         print(f"{Path(path).name}: {Path(path).stat().st_size / 1e6:.2f} MB; one operator evaluation "
-              f"{kernel_call(directory):.1f} us")
+              f"{kernel_call(directory, md):.1f} us")
         print(f"{'h [s]':>8}{'fmpy loop [us/step]':>22}{'ctypes DoStep [us/step]':>26}{'corrections off':>18}")
         for h in args.sizes:
             print(f"{h:>8g}{statistics.median(fmpy_loop(directory, md, h, args.steps) for _ in range(3)):>22.1f}"

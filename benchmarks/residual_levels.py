@@ -18,13 +18,14 @@ import numpy as np
 from fmpy import read_model_description
 
 from opfmu.compare import Inputs, communication_points, compare, scenario_inputs
-from fmu_pair import extracted_pair
+from fmu_pair import extracted_pair, surrogate_machine
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS, rest_state
 
 
-def stress(name: str, stop_time: float, step: float) -> Inputs:
-    """A run from rest at Vs = 1, theta_vs = 0 with one event at t = 2 s that leaves the envelope."""
+def stress(name: str, stop_time: float, step: float, machine) -> Inputs:
+    """A run of `machine` (SM4Params) from rest at Vs = 1, theta_vs = 0 with one event at t = 2 s that
+    leaves the envelope."""
     t = communication_points(stop_time, step)
     vs, theta = np.ones_like(t), np.zeros_like(t)
     event = t >= 2.0 - 1e-9
@@ -34,7 +35,7 @@ def stress(name: str, stop_time: float, step: float) -> Inputs:
         vs[event] = 1.35
     else:  # angle jump
         theta[event] = 1.0
-    return Inputs(name, t, np.stack([vs, theta], axis=1), rest_state(1.0, 0.0))
+    return Inputs(name, t, np.stack([vs, theta], axis=1), rest_state(1.0, 0.0, machine))
 
 
 def main() -> None:
@@ -52,8 +53,9 @@ def main() -> None:
         dirs = extracted_pair(args.surrogate, args.reference, tmp)
         md = read_model_description(dirs[0])
         limit = next(float(v.start) for v in md.modelVariables if v.name == "residual_limit")
-        runs = [scenario_inputs(n, seed, args.stop_time, args.step) for n in SCENARIOS for seed in args.seeds]
-        runs += [stress(n, args.stop_time, args.step) for n in ("deep fault", "overvoltage", "angle jump")]
+        machine = surrogate_machine(dirs[0])
+        runs = [scenario_inputs(n, seed, args.stop_time, args.step, machine) for n in SCENARIOS for seed in args.seeds]
+        runs += [stress(n, args.stop_time, args.step, machine) for n in ("deep fault", "overvoltage", "angle jump")]
         print(f"residual_limit {limit:.3g}; {args.stop_time:g} s at h = {args.step * 1e3:g} ms")
         print(f"{'run':<16}{'max residual':>13}{'MaxAE delta':>13}{'MaxAE omega':>13}{'MaxAE Eq_p':>12}"
               f"{'warnings':>10}{'envelope':>10}")

@@ -4,16 +4,27 @@
 
 Both FMUs see the same bus voltage, sampled at the communication points and held over each step: a
 fault to 0.5 pu at t = 1 s, cleared after 150 ms, with a 0.1 rad jump of the voltage angle. Both
-start from their default state (the machine at rest at Vs = 1 pu, theta_vs = 0).
+start from their default state (the machine at rest at Vs = 1 pu, theta_vs = 0). Every output the two
+model descriptions share is compared; the states (the outputs with an initial-state parameter
+<name>0) are plotted.
 """
 import argparse
 import time
 
 import numpy as np
-from fmpy import simulate_fmu
+from fmpy import read_model_description, simulate_fmu
 
-STATES = ["delta", "omega", "Ed_p", "Eq_p"]
 STOP_TIME, STEP = 5.0, 0.01
+
+
+def shared_outputs(*fmus) -> tuple[list, list]:
+    """(outputs, states): the Real outputs every FMU has, in the first one's order, and those of them
+    that are states (an initial-state parameter <name>0 exists)."""
+    descriptions = [read_model_description(f).modelVariables for f in fmus]
+    names = [{v.name for v in d if v.causality == "output" and v.type == "Real"} for d in descriptions]
+    outputs = [v.name for v in descriptions[0] if all(v.name in n for n in names)]
+    parameters = {v.name for v in descriptions[0] if v.causality == "parameter"}
+    return outputs, [n for n in outputs if f"{n}0" in parameters]
 
 
 def fault() -> np.ndarray:
@@ -25,9 +36,9 @@ def fault() -> np.ndarray:
     return signal
 
 
-def run(fmu: str, signal: np.ndarray):
+def run(fmu: str, signal: np.ndarray, outputs: list):
     start = time.perf_counter()
-    result = simulate_fmu(fmu, stop_time=STOP_TIME, output_interval=STEP, input=signal, output=STATES + ["P", "Q"])
+    result = simulate_fmu(fmu, stop_time=STOP_TIME, output_interval=STEP, input=signal, output=outputs)
     return result, time.perf_counter() - start
 
 
@@ -39,10 +50,11 @@ def main() -> None:
     args = parser.parse_args()
 
     signal = fault()
-    surrogate, t_surrogate = run(args.surrogate, signal)
-    reference, t_reference = run(args.reference, signal)
+    outputs, states = shared_outputs(args.surrogate, args.reference)
+    surrogate, t_surrogate = run(args.surrogate, signal, outputs)
+    reference, t_reference = run(args.reference, signal, outputs)
     print(f"{'output':<8}{'max abs error':>15}")
-    for name in STATES + ["P", "Q"]:
+    for name in outputs:
         print(f"{name:<8}{np.max(np.abs(surrogate[name] - reference[name])):>15.3e}")
     print(f"wall time: surrogate {t_surrogate:.3f} s, reference {t_reference:.3f} s "
           f"({t_reference / t_surrogate:.1f}x)")
@@ -53,8 +65,9 @@ def main() -> None:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        fig, axes = plt.subplots(len(STATES), 1, figsize=(8, 8), sharex=True)
-        for ax, name in zip(axes, STATES):
+        fig, axes = plt.subplots(len(states), 1, figsize=(8, 2 * len(states)), sharex=True, squeeze=False)
+        axes = axes[:, 0]
+        for ax, name in zip(axes, states):
             ax.plot(reference["time"], reference[name], "k", label="reference")
             ax.plot(surrogate["time"], surrogate[name], "r--", label="surrogate")
             ax.set_ylabel(name)
