@@ -229,7 +229,7 @@ class StepMirror:
         if any(u.shape != (n_u,) for _, u in steps):
             raise ValueError(f"each step is (h, {', '.join(self.component.input_names)})")
         t, x = 0.0, np.array(x0, dtype=float)
-        window = None  # (start time, start state, sensor buffer, corrections or None until the first step)
+        window = None  # {t: start time, x: start state, sensors: [n_sensors, n_u], corrections: None until its first step}
         last_u = steps[0][1] if steps else None
         out = []
 
