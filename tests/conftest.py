@@ -51,7 +51,7 @@ def fmu_path(tmp_path_factory):
 @pytest.fixture(scope="session")
 def reference_path(tmp_path_factory):
     """The reference RK45 FMU, built once."""
-    from reference_models.reference_fmu import build_reference_fmu
+    from fmu_export.reference_fmu import build_reference_fmu
 
     path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"
     build_reference_fmu(path)
