@@ -34,8 +34,8 @@ from .onnx_to_c import generate_kernel
 from .variables import SURROGATE_EXTRAS, fmu_variables, vr_header
 
 C_DIR = Path(__file__).parent / "c"
-# residual above which the FMU warns, for an operator whose metadata names none (the shipped
-# operator's own level is 1.37: see README, "When to distrust the surrogate")
+# residual above which the FMU warns, for an operator whose metadata names none (the export writes
+# each operator's own level, from its test split, as `residual_limit`)
 DEFAULT_RESIDUAL_LIMIT = 1.0
 # input change (in the input's unit) that starts a new operator window at once
 DEFAULT_RESTART_JUMP = 0.02
