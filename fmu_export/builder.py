@@ -96,14 +96,8 @@ def _c_strings(texts) -> str:
 
 def input_minima(component) -> list[float]:
     """The lowest value each input accepts (the FMU refuses a value below it): the Quantity's
-    `minimum` where it declares one, 0 for a magnitude in pu, else -inf."""
-    out = []
-    for q in component.inputs:
-        minimum = getattr(q, "minimum", None)
-        if minimum is None:
-            minimum = 0.0 if q.unit == "pu" and "magnitude" in q.description else -math.inf
-        out.append(float(minimum))
-    return out
+    `minimum`, -inf where it declares none."""
+    return [-math.inf if q.minimum is None else float(q.minimum) for q in component.inputs]
 
 
 def mode_start(n: int) -> list[float]:

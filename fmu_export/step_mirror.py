@@ -32,14 +32,12 @@ The diagnostics (residual, in_envelope, warnings) are not mirrored.
 """
 from __future__ import annotations
 
-import json
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from reference_models.component import Component
-from reference_models.components import component as component_named
 
 TIME_EPS = 1e-9  # s: times closer than this are the same time (TIME_EPS in the C)
 SETTINGS = ("rollover_horizon", "restart_jump", "rest_radius", "slow_weight", "swing_weight")
@@ -170,8 +168,8 @@ def affine_step(value_start: float, g_start: float, g_end: float, k: float, h: f
 class StepMirror:
     """The surrogate FMU's steps for one operator, in Python.
 
-    operator: a surrogate.operator.Operator or the path of an exported .onnx; component: default the
-    one its metadata names; params: default its metadata's `params`, else the component's defaults.
+    operator: a surrogate.operator.Operator or the path of an exported .onnx; component and params:
+    default the machine its metadata names.
     """
 
     def __init__(self, operator, component: Component | None = None, params=None):
@@ -181,10 +179,8 @@ class StepMirror:
             operator = Operator.load(operator)
         self.operator = operator
         meta = operator.metadata
-        self.component = component or component_named(meta.get("component", "sm4"))
-        if params is None:
-            params = self.component.params(json.loads(meta["params"]) if "params" in meta else None)
-        self.params = params
+        self.component = component or operator.component
+        self.params = operator.params if params is None else params
         self.n_sensors, self.horizon = operator.n_sensors, float(operator.horizon)
         self.sensor_dt = self.horizon / (self.n_sensors - 1)
         self.default_rollover = float(meta.get("rollover_horizon_s", self.horizon))

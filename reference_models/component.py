@@ -26,14 +26,16 @@ class ParameterError(ValueError):
 
 @dataclass(frozen=True)
 class Quantity:
-    """One state, input or output: name, unit, what it is, and for an input its start value and the
-    operating range [low, high] the built-in input families draw levels from."""
+    """One state, input or output: name, unit, what it is, and for an input its start value, the
+    operating range [low, high] the built-in input families draw levels from and the lowest value it
+    may take (None: unbounded; an FMU refuses a value below it)."""
 
     name: str
     unit: str
     description: str
     start: float | None = None
     operating_range: tuple | None = None
+    minimum: float | None = None
 
 
 @dataclass(frozen=True)
@@ -44,8 +46,8 @@ class Parameters:
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-                raise ParameterError(f"parameter {f.name} = {value!r} must be a finite number")
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
+                raise ParameterError(f"parameter {f.name} = {str(value)[:40]} must be a finite number")
             object.__setattr__(self, f.name, float(value))
         self.check()
 
@@ -165,6 +167,14 @@ class Component:
             return self.params(values)
         except ParameterError as exc:
             raise ParameterError(f"{path}: {exc}") from None
+
+
+def _finite(value) -> bool:
+    """True for a number that is finite as a float (a huge int is not)."""
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def _refuse_constant(name: str):

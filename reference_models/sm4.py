@@ -147,7 +147,7 @@ SM4 = Component(
             Quantity("omega", "rad/s", "rotor speed deviation"),
             Quantity("Ed_p", "pu", "d-axis transient voltage"),
             Quantity("Eq_p", "pu", "q-axis transient voltage")),
-    inputs=(Quantity("Vs", "pu", "bus voltage magnitude", start=1.0, operating_range=(0.7, 1.2)),
+    inputs=(Quantity("Vs", "pu", "bus voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
             Quantity("theta_vs", "rad", "bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
     outputs=(Quantity("Id", "pu", "d-axis stator current"),
              Quantity("Iq", "pu", "q-axis stator current"),

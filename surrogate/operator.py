@@ -11,13 +11,13 @@ product (the PINN) run whole.
 """
 from __future__ import annotations
 
-import json
 import warnings
 from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
 
+from .contract import ContractError, operator_metadata
 
 DEFAULT_OPERATOR = Path(__file__).parent / "default" / "sm4_cosim.onnx"
 
@@ -32,8 +32,8 @@ class EnvelopeWarning(UserWarning):
 
 class Operator:
     """An exported operator of a component. predict(x0 [N, n_x], u [N, S, n_u], t [M]) -> x [N, M, n_x]
-    (float32). `state_names`, `input_names`, `component` and `params` (the machine it was trained
-    for, a dict) come from the file's metadata."""
+    (float32). `state_names`, `input_names`, the `component` and its `params` (the machine it was
+    trained for) come from the file's metadata, validated by surrogate.contract.operator_metadata."""
 
     CACHE_SIZE = 8  # time grids whose trunk basis is kept
     # smaller batches run the branch on one thread: there the hand-off between threads costs more than
@@ -50,16 +50,14 @@ class Operator:
         proto = onnx.load(str(path))
         self.path = path
         self.metadata = {p.key: p.value for p in proto.metadata_props}
-        missing = {"horizon_s", "n_sensors", "envelope", "state_names", "input_names"} - set(self.metadata)
-        if missing:
-            raise OperatorInputError(f"{path} is not an opfmu operator (metadata lacks {', '.join(sorted(missing))})")
-        self.horizon = float(self.metadata["horizon_s"])
-        self.n_sensors = int(self.metadata["n_sensors"])
-        self.envelope = json.loads(self.metadata["envelope"])
-        self.state_names = tuple(json.loads(self.metadata["state_names"]))
-        self.input_names = tuple(json.loads(self.metadata["input_names"]))
-        self.component = self.metadata.get("component")
-        self.params = json.loads(self.metadata.get("params", "null"))
+        try:
+            contract = operator_metadata(self.metadata)
+        except ContractError as exc:
+            raise OperatorInputError(f"{path}: {exc}") from None
+        self.horizon, self.n_sensors = contract["horizon_s"], contract["n_sensors"]
+        self.envelope = contract["envelope"]
+        self.state_names, self.input_names = contract["state_names"], contract["input_names"]
+        self.component, self.params = contract["component"], contract["params"]
         n_x = len(self.state_names)
         bounds = ([self.envelope["x0"][n] for n in self.state_names] +
                   [self.envelope["u"][n] for n in self.input_names])

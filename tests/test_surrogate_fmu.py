@@ -72,14 +72,16 @@ def test_the_exact_affine_step_solves_its_linear_equation(k):
     assert affine_step(start, g0, g1, k, h) == pytest.approx(exact, abs=1e-10)
 
 
-def test_the_mirror_takes_the_machine_from_the_operators_metadata(mirror):
-    def stub(**metadata):  # an operator with that metadata
-        meta = {k: v for k, v in {**mirror.operator.metadata, **metadata}.items() if v is not None}
-        return type("Stub", (), {"metadata": meta, "n_sensors": mirror.operator.n_sensors,
-                                 "horizon": mirror.operator.horizon, "separable": True})()
+def test_the_mirror_takes_the_machine_from_the_operators_metadata(tmp_path):
+    import onnx
 
-    assert StepMirror(stub(params=json.dumps({"H": 3.01, "D": 0.0}))).params == SM4.params({"H": 3.01, "D": 0.0})
-    assert StepMirror(stub(params=None)).params == SM4.params()  # no params recorded: the defaults
+    proto = onnx.load(str(DEFAULT_OPERATOR))
+    for entry in proto.metadata_props:
+        if entry.key == "params":
+            entry.value = json.dumps({"H": 3.01, "D": 0.0})
+    onnx.save(proto, str(tmp_path / "other.onnx"))
+    assert StepMirror(tmp_path / "other.onnx").params == SM4.params({"H": 3.01, "D": 0.0})
+    assert StepMirror(DEFAULT_OPERATOR).params == SM4.params()
 
 
 def test_fmpy_validation_reports_no_problem(fmu_path):

@@ -14,6 +14,7 @@ import pytest
 from fmpy import extract, read_model_description
 from scipy.integrate import solve_ivp
 
+from reference_models.scenarios import scenario
 from reference_models.sm4 import SM4
 from surrogate.data import load_metadata, load_split
 
@@ -103,8 +104,9 @@ def test_compare_runs_the_users_fmus_from_that_machines_rest(user_run):
     done = opfmu("compare", "--surrogate", root / "M.fmu", "--reference", root / "R.fmu", "--scenario", "step",
                  "--stop-time", 1, "--out", root / "cmp")
     assert done.returncode == 0, done.stderr
-    assert json.loads((root / "cmp" / "step.json").read_text())["x0"] == pytest.approx(
-        SM4.steady_state(None, SM4.params(MACHINE)).tolist(), abs=0.2)
+    start = scenario("step", 0, 1.0, SM4.params(MACHINE)).initial_state()
+    assert json.loads((root / "cmp" / "step.json").read_text())["x0"] == pytest.approx(start.tolist(), abs=1e-12)
+    assert np.abs(start - scenario("step", 0, 1.0).initial_state()).max() > 0.05
 
 
 def test_compare_refuses_fmus_of_two_different_machines(user_run, tmp_path):
@@ -123,6 +125,7 @@ def test_compare_refuses_fmus_of_two_different_machines(user_run, tmp_path):
     ('[1, 2]', "JSON object"),
     ('{"H": NaN}', "cannot read machine file"),
     ('{"H": 1e400}', "parameter H"),
+    ('{"H": 1' + '0' * 400 + '}', "parameter H"),
     ('{"Xd_p": 2.0}', "not exceed Xd"),
     ("not json", "cannot read machine file"),
 ])
