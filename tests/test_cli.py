@@ -52,3 +52,32 @@ def test_data_command_writes_the_splits_a_preview_and_a_summary(tmp_path):
     assert (tmp_path / "d" / "preview.png").stat().st_size > 10_000
     assert load_split(tmp_path / "d", "test")["x"].shape == (3, 1001, 4)
     assert np.isfinite(load_split(tmp_path / "d", "train")["x"]).all()
+
+
+def test_a_preset_file_with_an_unknown_family_or_bad_counts_is_a_one_line_error(tmp_path):
+    for name, changes in (("family", {"families": [["nope", 1.0]]}), ("counts", {"counts": {"train": -1}})):
+        spec = tmp_path / f"{name}.json"
+        spec.write_text(__import__("json").dumps({**tiny("paper").to_dict(), **changes}))
+        assert_one_line_error(opfmu("data", "--preset", str(spec), "--out", str(tmp_path / name)), "not a valid preset")
+
+
+def test_progress_off_a_terminal_is_plain_lines_not_bar_redraws(tmp_path):
+    spec = preset_file(tmp_path / "p.json", tiny("paper"))
+    result = opfmu("data", "--preset", str(spec), "--out", str(tmp_path / "d"), "--workers", "0")
+    assert result.returncode == 0, result.stderr
+    assert "\r" not in result.stderr
+    assert "solving train: 8/8 traj (100%" in result.stderr
+
+
+def test_line_progress_prints_at_most_one_line_per_interval_and_one_at_the_end():
+    import io
+
+    from reference_models.progress import LineProgress, progress_bar
+
+    stream = io.StringIO()
+    assert isinstance(progress_bar(1000, "work", "item", stream=stream), LineProgress)
+    bar = LineProgress(1000, "work", "item", stream=stream, every=3600.0)
+    for _ in range(1000):
+        bar.update(1)
+    bar.close()
+    assert stream.getvalue().count("\n") == 1 and "work: 1000/1000 item (100%" in stream.getvalue()
