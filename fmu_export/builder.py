@@ -4,9 +4,12 @@ The operator file's metadata (validated by surrogate.contract.operator_metadata 
 generated) names the component and its parameters; from those and the graph, generated at build time:
 config.h (sizes, envelope, defaults, component tables, GUID), variables.h (the value references of
 the model description, fmu_export.variables), equations.c (the component's right-hand side and
-outputs, fmu_export.c_equations), operator_kernel.c (from the ONNX graph) and sensor_sums.c. With the
-static sources in c/ (fmi2_cs.c: FMI plumbing; window.c: the window-and-sensor engine;
-corrections.c; variables.c: the variable table; linalg.c) they compile (gcc) into
+outputs, fmu_export.c_equations), derivatives.c (their exact partial derivatives,
+fmu_export.c_derivatives: the directional derivatives), operator_kernel.c (from the ONNX graph) and
+sensor_sums.c. With the static sources in c/ (fmi2_cs.c: FMI plumbing; model.h: its interface to a
+model; window.c: the window-and-sensor engine; corrections.c; variables.c: the component's variables;
+surrogate_variables.c and surrogate_state.h: the surrogate's own variables and state; linalg.c) they
+compile (gcc) into
 binaries/linux64/<model>.so, which needs libc and libm only. The compiled kernel is checked against
 onnxruntime before the FMU is written; the .onnx goes into resources/ and the C sources into
 sources/. Only numbers, generated identifiers and escaped component names reach the C sources.
@@ -28,6 +31,7 @@ import numpy as np
 from reference_models.files import atomic_path
 from surrogate.contract import TOLERANCE, ContractError, operator_metadata, random_inputs
 
+from .c_derivatives import jacobians_c_source
 from .c_equations import equations_c_source
 from .model_description import model_description
 from .onnx_to_c import generate_kernel
@@ -42,10 +46,10 @@ DEFAULT_RESTART_JUMP = 0.02
 DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (corrections.c: the rest correction)
 DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (corrections.c: the slow-mode correction)
 DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (corrections.c: the exact affine step)
-STATIC_SOURCES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "linalg.c", "model.h", "engine.h",
-                  "linalg.h")
-C_FILES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "linalg.c", "equations.c", "operator_kernel.c",
-           "sensor_sums.c")
+STATIC_SOURCES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c",
+                  "model.h", "surrogate_state.h", "engine.h", "linalg.h")
+C_FILES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c",
+           "equations.c", "derivatives.c", "operator_kernel.c", "sensor_sums.c")
 MODEL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 C_KEYWORDS = frozenset("auto break case char const continue default do double else enum extern float for goto if "
                        "inline int long register restrict return short signed sizeof static struct switch typedef "
@@ -120,6 +124,8 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"#define OPFMU_N_STATES {n_x}",
         f"#define OPFMU_N_INPUTS {n_u}",
         f"#define OPFMU_N_OUTPUTS {len(component.outputs)}",
+        '#define OPFMU_STATE_HEADER "surrogate_state.h" /* the model\'s ModelState */',
+        "#define OPFMU_CAN_INTERPOLATE_INPUTS 0 /* inputs held over a step; no input derivatives */",
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {_c_double(meta['horizon_s'])}",
         f"#define OPFMU_ROLLOVER_HORIZON {_c_double(meta['rollover_horizon_s'])} /* default of the parameter rollover_horizon */",
@@ -231,15 +237,17 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
                          f"{component.n_inputs} inputs")
     variables = fmu_variables(component, params, x_default, SURROGATE_EXTRAS, surrogate_starts(meta))
     equations = '#include "engine.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
+    derivatives = derivatives_source(component, params)
 
     with tempfile.TemporaryDirectory() as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
         for name in STATIC_SOURCES:
             shutil.copy(C_DIR / name, src / name)
-        guid = _guid(onnx_path, model_name, kernel.source + equations)
+        guid = _guid(onnx_path, model_name, kernel.source + equations + derivatives)
         (src / "operator_kernel.c").write_text(kernel.source)
         (src / "equations.c").write_text(equations)
+        (src / "derivatives.c").write_text(derivatives)
         (src / "variables.h").write_text(vr_header(variables, component))
         first_layer = kernel.first_layer
         suffix = None
@@ -254,7 +262,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
         xml = model_description(model_name, guid, variables,
-                                f"{component.description}; PI-DeepONet surrogate evaluated from buffered input sensors")
+                                f"{component.description}; PI-DeepONet surrogate evaluated from buffered input sensors",
+                                directional_derivatives=True)
         try:
             with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
                 fmu.writestr("modelDescription.xml", xml)
@@ -265,6 +274,19 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         except OSError as exc:
             raise BuildError(f"cannot write {out}: {exc.strerror or exc}") from None
     return {"guid": guid, "max_abs_diff": worst, "size_bytes": out.stat().st_size}
+
+
+def derivatives_source(component, params) -> str:
+    """derivatives.c of a native FMU: the component's exact partial derivatives (forward-mode tracing
+    of its one definition, fmu_export.c_derivatives) behind model.h's component_rhs_jacobian and
+    component_output_jacobian."""
+    n_x, n_u, n_y = component.n_states, component.n_inputs, len(component.outputs)
+    return ('#include "model.h"\n' + jacobians_c_source(component, params) + "\n"
+            f"void component_rhs_jacobian(const double x[{n_x}], const double u[{n_u}], double J[{n_x * (n_x + n_u)}])\n"
+            "{\n    model_derivatives_jacobian(x, u, J);\n}\n\n"
+            f"void component_output_jacobian(const double x[{n_x}], const double u[{n_u}], "
+            f"double J[{n_y * (n_x + n_u)}])\n"
+            "{\n    model_outputs_jacobian(x, u, J);\n}\n")
 
 
 def _guid(onnx_path: Path, model_name: str, generated: str) -> str:

@@ -24,16 +24,24 @@ def unit_names(variables: list[Variable]) -> list[str]:
 
 
 def model_description(model_name: str, guid: str, variables: list[Variable], description: str,
-                      stop_time: float = 10.0, step: float = 0.01) -> bytes:
-    """The XML document (UTF-8 bytes)."""
+                      stop_time: float = 10.0, step: float = 0.01, directional_derivatives: bool = False,
+                      interpolates_inputs: bool = False) -> bytes:
+    """The XML document (UTF-8 bytes). directional_derivatives: the FMU provides
+    fmi2GetDirectionalDerivative (providesDirectionalDerivative); interpolates_inputs: it takes
+    first input derivatives with fmi2SetRealInputDerivatives, the inputs linear over a step
+    (canInterpolateInputs)."""
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_name, "guid": guid, "description": description,
         "generationTool": f"opfmu {__version__}", "variableNamingConvention": "flat",
         "numberOfEventIndicators": "0"})
-    ET.SubElement(root, "CoSimulation", {
-        "modelIdentifier": model_name, "canHandleVariableCommunicationStepSize": "true",
-        "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true",
-        "canNotUseMemoryManagementFunctions": "true"})
+    capabilities = {"modelIdentifier": model_name, "canHandleVariableCommunicationStepSize": "true"}
+    if interpolates_inputs:
+        capabilities["canInterpolateInputs"] = "true"
+    capabilities.update(canGetAndSetFMUstate="true", canSerializeFMUstate="true",
+                        canNotUseMemoryManagementFunctions="true")
+    if directional_derivatives:
+        capabilities["providesDirectionalDerivative"] = "true"
+    ET.SubElement(root, "CoSimulation", capabilities)
     units = ET.SubElement(root, "UnitDefinitions")
     for name in unit_names(variables):
         unit = ET.SubElement(units, "Unit", {"name": name})

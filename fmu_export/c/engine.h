@@ -1,5 +1,6 @@
-/* What the surrogate model's source files share: the generated operator kernel and component
-   equations, the sensor grid, and the functions window.c and corrections.c provide each other. */
+/* What the surrogate model's source files share: the generated operator kernel, the sensor grid,
+   and the functions window.c and corrections.c provide each other (the component's equations are
+   declared in model.h). */
 #ifndef OPFMU_ENGINE_H
 #define OPFMU_ENGINE_H
 
@@ -26,10 +27,6 @@ void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
 void opfmu_coefficients(const double x0[N_X], const double z[OPFMU_FIRST_LAYER], double c[OPFMU_COEF_SIZE]);
 void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SIZE], double x[N_X]);
 #endif
-
-/* the component's right-hand side and derived outputs (equations.c, generated from its definition) */
-OPFMU_INTERNAL void model_derivatives(const double x[N_X], const double u[N_U], double dx[N_X]);
-OPFMU_INTERNAL void model_outputs(const double x[N_X], const double u[N_U], double y[OPFMU_N_OUTPUTS]);
 
 /* window.c */
 /* the operator's physics residual at the current time (RMS over the states, per state scaled) */

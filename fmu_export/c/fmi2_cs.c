@@ -1,6 +1,8 @@
-/* FMI 2.0 co-simulation plumbing: instances, the FMI state machine, logging, variable access and
-   FMU state (get/set/serialize). Model behaviour lives behind model.h. Every misuse returns
-   fmi2Error (or fmi2Discard) with a reason through the importer's logger; nothing aborts. */
+/* FMI 2.0 co-simulation plumbing of both native FMUs: instances, the FMI state machine, logging,
+   variable access, directional derivatives of the outputs with respect to the inputs, input
+   derivatives (where the model can interpolate its inputs) and FMU state (get/set/serialize). Model
+   behaviour lives behind model.h. Every misuse returns fmi2Error (or fmi2Discard) with a reason
+   through the importer's logger; nothing aborts. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -9,6 +11,7 @@
 
 #include "fmi2Functions.h"
 #include "model.h"
+#include "variables.h"
 
 typedef enum { ST_INSTANTIATED = 1, ST_INIT = 2, ST_STEP = 4, ST_TERMINATED = 8, ST_ERROR = 16 } MachineState;
 #define ST_ANY (ST_INSTANTIATED | ST_INIT | ST_STEP | ST_TERMINATED | ST_ERROR)
@@ -314,8 +317,30 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[])
 {
+#if OPFMU_CAN_INTERPOLATE_INPUTS
+    char message[512];
+    Instance *inst = (Instance *)c;
+    if (not_allowed(inst, "fmi2SetRealInputDerivatives", ST_INSTANTIATED | ST_INIT | ST_STEP)) return fmi2Error;
+    if (nvr > 0 && (!vr || !order || !value)) return fail(inst, fmi2Error, "%s", "fmi2SetRealInputDerivatives: NULL array");
+    for (size_t i = 0; i < nvr; ++i) {
+        if (model_real_kind(vr[i]) != VAR_INPUT || !IN_GROUP(vr[i], VR_FIRST_INPUT, OPFMU_N_INPUTS)) {
+            snprintf(message, sizeof message, "fmi2SetRealInputDerivatives: value reference %u is not an input", vr[i]);
+            return fail(inst, fmi2Error, "%s", message);
+        }
+        if (order[i] != 1) {
+            snprintf(message, sizeof message, "fmi2SetRealInputDerivatives: order %d of value reference %u: only "
+                     "first derivatives are supported (inputs linear over a step)", (int)order[i], vr[i]);
+            return fail(inst, fmi2Error, "%s", message);
+        }
+        if (model_set_input_derivative(&inst->model, vr[i] - VR_FIRST_INPUT, value[i], message, sizeof message) !=
+            MODEL_OK)
+            return fail(inst, fmi2Error, "fmi2SetRealInputDerivatives: %s", message);
+    }
+    return fmi2OK;
+#else
     (void)vr; (void)nvr; (void)order; (void)value;
     return fail((Instance *)c, fmi2Error, "%s", "fmi2SetRealInputDerivatives: not supported (inputs are held constant)");
+#endif
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
@@ -325,12 +350,61 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     return fail((Instance *)c, fmi2Error, "%s", "fmi2GetRealOutputDerivatives: not supported");
 }
 
+/* Outputs with respect to inputs at the current state and inputs: the states at the communication
+   point do not depend on the inputs directly (zero); the derived outputs have the component's exact
+   partial derivatives (generated from its definition). Knowns must be inputs, unknowns outputs; a
+   model's diagnostic output is refused with its reason. Nothing is written unless every reference is
+   valid. */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
 {
-    (void)vUnknown_ref; (void)nUnknown; (void)vKnown_ref; (void)nKnown; (void)dvKnown; (void)dvUnknown;
-    return fail((Instance *)c, fmi2Error, "%s", "fmi2GetDirectionalDerivative: not supported");
+    char message[512];
+    Instance *inst = (Instance *)c;
+    if (not_allowed(inst, "fmi2GetDirectionalDerivative", ST_INIT | ST_INITIALIZED)) return fmi2Error;
+    if ((nUnknown > 0 && (!vUnknown_ref || !dvUnknown)) || (nKnown > 0 && (!vKnown_ref || !dvKnown)))
+        return fail(inst, fmi2Error, "%s", "fmi2GetDirectionalDerivative: NULL array");
+    for (size_t k = 0; k < nKnown; ++k) {
+        if (model_real_kind(vKnown_ref[k]) != VAR_INPUT || !IN_GROUP(vKnown_ref[k], VR_FIRST_INPUT, OPFMU_N_INPUTS)) {
+            snprintf(message, sizeof message, "fmi2GetDirectionalDerivative: known value reference %u is not an "
+                     "input (derivatives are of outputs with respect to inputs)", vKnown_ref[k]);
+            return fail(inst, fmi2Error, "%s", message);
+        }
+        if (!isfinite(dvKnown[k])) {
+            snprintf(message, sizeof message, "fmi2GetDirectionalDerivative: seed %g of value reference %u is not a "
+                     "finite number", dvKnown[k], vKnown_ref[k]);
+            return fail(inst, fmi2Error, "%s", message);
+        }
+    }
+    int derived = 0;
+    for (size_t i = 0; i < nUnknown; ++i) {
+        const fmi2ValueReference vr = vUnknown_ref[i];
+        if (model_real_kind(vr) != VAR_OUTPUT) {
+            snprintf(message, sizeof message, "fmi2GetDirectionalDerivative: unknown value reference %u is not an "
+                     "output", vr);
+            return fail(inst, fmi2Error, "%s", message);
+        }
+        if (IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) {
+            derived = 1;
+        } else if (!IN_GROUP(vr, VR_FIRST_STATE, OPFMU_N_STATES)) {
+            const char *reason = model_no_derivative(vr);
+            snprintf(message, sizeof message, "fmi2GetDirectionalDerivative: output %u: %s", vr,
+                     reason ? reason : "has no directional derivative");
+            return fail(inst, fmi2Error, "%s", message);
+        }
+    }
+    double J[OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS : 1];
+    if (derived) model_output_jacobian(&inst->model, J);
+    for (size_t i = 0; i < nUnknown; ++i) {
+        const fmi2ValueReference vr = vUnknown_ref[i];
+        double sum = 0.0;
+        if (IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) {
+            const double *row = J + (vr - VR_FIRST_OUTPUT) * OPFMU_N_COLUMNS + OPFMU_N_STATES;
+            for (size_t k = 0; k < nKnown; ++k) sum += row[vKnown_ref[k] - VR_FIRST_INPUT] * dvKnown[k];
+        }
+        dvUnknown[i] = sum; /* a state: no direct dependence on the inputs */
+    }
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate)

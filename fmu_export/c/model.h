@@ -1,8 +1,19 @@
-/* The interface between the FMI 2.0 co-simulation plumbing (fmi2_cs.c) and one model (window.c,
-   corrections.c, variables.c, with the generated config.h, variables.h, equations.c and operator
-   kernel). A model's whole dynamic state is the plain struct ModelState, so the plumbing can copy
-   and serialise it byte for byte. Its sizes come from config.h: OPFMU_N_STATES states,
-   OPFMU_N_INPUTS inputs, OPFMU_N_SENSORS sensor times per window. */
+/* The interface between the FMI 2.0 co-simulation plumbing (fmi2_cs.c) and one model.
+
+   Both native FMUs (the surrogate and the reference) compile fmi2_cs.c and variables.c unchanged
+   against this interface; a model never touches an FMI call. Per FMU, generated at build time:
+   config.h (sizes, defaults, component tables, OPFMU_STATE_HEADER: the header that defines the
+   model's ModelState), variables.h (the value references of the model description, groups
+   VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT, VR_FIRST_START), equations.c (the component's
+   right-hand side and derived outputs) and derivatives.c (their exact partial derivatives).
+
+   A model's whole dynamic state is the plain struct ModelState, so the plumbing copies and
+   serialises it byte for byte. Every ModelState has at least the fields
+       double time;                  current communication point [s]
+       double u[OPFMU_N_INPUTS];     inputs (the component's, in its order)
+       double x[OPFMU_N_STATES];     state at `time`
+       double x_start[OPFMU_N_STATES]; initial-state parameters
+   which variables.c reads and writes for the component's own variables. */
 #ifndef OPFMU_MODEL_H
 #define OPFMU_MODEL_H
 
@@ -17,63 +28,55 @@
 #define OPFMU_INTERNAL
 #endif
 
-#define OPFMU_Z_SIZE (OPFMU_FIRST_LAYER > 0 ? OPFMU_FIRST_LAYER : 1)
-#define OPFMU_TRUNK_SLOTS (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS : 1)
-#define OPFMU_TRUNK_CACHE (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS * OPFMU_TRUNK_SIZE : 1)
-#define OPFMU_COEF_CAP (OPFMU_COEF_SIZE > 0 ? OPFMU_COEF_SIZE : 1)
-
 typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
 
 /* Variable kinds the plumbing checks writes against. */
 typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT } VarKind;
 
-typedef struct {
-    double u[OPFMU_N_INPUTS];     /* inputs, held over the next step */
-    double x_start[OPFMU_N_STATES]; /* parameters: initial state */
-    double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
-    double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
-    int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */
-    double restart_jump;          /* parameter [input units]: an input change larger than this starts a window */
-    double rest_radius;           /* parameter: scale of the rest correction's reach (0: no correction) */
-    double slow_weight;           /* parameter in [0, 1]: weight of the slow-mode correction (0: none) */
-    double swing_weight;          /* parameter in [0, 1]: weight of the exact step of the affine states (0: none) */
-    double time;                  /* current communication point [s] */
-    double x[OPFMU_N_STATES];     /* state at `time` */
-    double x_operator[OPFMU_N_STATES]; /* the operator's state at `time`, before the exact step (residual) */
-    double window_start;          /* start time of the current operator window [s] */
-    double x_window[OPFMU_N_STATES]; /* state at the window start */
-    int in_envelope;              /* false once an input or a window start left the envelope */
-    double sensors[OPFMU_N_INPUTS * OPFMU_N_SENSORS]; /* the inputs at the window's sensor times, slot-major */
-    /* the sensor layer's output z, tracked incrementally (OPFMU_FIRST_LAYER > 0): z = z_base (x0 part
-       and bias) + z_past (slots before `filled`, final) + the held input times the remaining slots */
-    double z_base[OPFMU_Z_SIZE], z_past[OPFMU_Z_SIZE];
-    int filled;                   /* slots before this index hold final values */
-    double last_u[OPFMU_N_INPUTS]; /* the input written from slot `filled` on */
-    /* the trunk values at each sensor time, computed when first needed (OPFMU_TRUNK_SIZE > 0): they
-       depend on the window time alone, so every window after the first reuses them */
-    unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];
-    double trunk[OPFMU_TRUNK_CACHE];
-    double coef[OPFMU_COEF_CAP];  /* the operator's coefficients at the last evaluation (residual) */
-    /* the rest correction of the current window (corrections.c): the equilibrium x_rest of the input
-       at the window start, the operator's coefficients from there under that input held, and the
-       weight the correction gets (0: none) */
-    double x_rest[OPFMU_N_STATES], rest_coef[OPFMU_COEF_CAP], rest_weight;
-    /* the slow-mode correction of the current window (corrections.c): the slowest mode's left and
-       right eigenvectors (left . right = 1), the slow coordinate left . x at the window start and the
-       integral of left . f since then; slow_on: the window has one */
-    double slow_left[OPFMU_N_STATES], slow_right[OPFMU_N_STATES], slow_start, slow_integral;
-    int slow_on;
-    double corrected_for[OPFMU_N_INPUTS]; /* the input both corrections of the current window were computed for */
-} ModelState;
+/* value reference vr lies in the group of n starting at first */
+#define IN_GROUP(vr, first, n) ((unsigned int)((vr) - (first)) < (unsigned int)(n))
 
-OPFMU_INTERNAL void model_defaults(ModelState *m);
+/* columns of the component's Jacobians: the states, then the inputs */
+#define OPFMU_N_COLUMNS (OPFMU_N_STATES + OPFMU_N_INPUTS)
+
+#include OPFMU_STATE_HEADER /* the model's ModelState */
+
+/* --- the component's equations (equations.c, derivatives.c: generated from its definition) --- */
+OPFMU_INTERNAL void model_derivatives(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+                                      double dx[OPFMU_N_STATES]);
+OPFMU_INTERNAL void model_outputs(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+                                  double y[OPFMU_N_OUTPUTS]);
+/* J[i * OPFMU_N_COLUMNS + j] = d (dx_i/dt) / d (x, u)_j, exact */
+OPFMU_INTERNAL void component_rhs_jacobian(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+                                           double J[OPFMU_N_STATES * OPFMU_N_COLUMNS]);
+/* J[i * OPFMU_N_COLUMNS + j] = d y_i / d (x, u)_j, exact */
+OPFMU_INTERNAL void component_output_jacobian(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+                                              double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+
+/* --- variables.c (both FMUs): the component's variables by value reference --- */
 /* kind of a real variable, or -1 if vr names none */
 OPFMU_INTERNAL int model_real_kind(unsigned int vr);
 OPFMU_INTERNAL ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value);
 OPFMU_INTERNAL ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size);
+/* the derived outputs' Jacobian at the current state and inputs, J[i * OPFMU_N_COLUMNS + j] */
+OPFMU_INTERNAL void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+
+/* --- each model provides --- */
+OPFMU_INTERNAL void model_defaults(ModelState *m);
+OPFMU_INTERNAL ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size);
+/* advances m from m->time to m->time + h (inputs held, or linear where their derivatives are set) */
+OPFMU_INTERNAL ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size);
+/* the model's own Real variables (those after the component's groups): MODEL_ERROR if vr names none */
+OPFMU_INTERNAL ModelStatus model_get_extra(const ModelState *m, unsigned int vr, double *value);
+OPFMU_INTERNAL ModelStatus model_set_extra(ModelState *m, unsigned int vr, double value, char *message, size_t size);
 OPFMU_INTERNAL int model_boolean_exists(unsigned int vr);
 OPFMU_INTERNAL int model_get_boolean(const ModelState *m, unsigned int vr);
-OPFMU_INTERNAL ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size);
-OPFMU_INTERNAL ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size);
+/* why the model's own output vr has no directional derivative (a diagnostic), or NULL */
+OPFMU_INTERNAL const char *model_no_derivative(unsigned int vr);
+#if OPFMU_CAN_INTERPOLATE_INPUTS
+/* sets the first time derivative of input c (0-based) for the next steps */
+OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
+                                                      size_t size);
+#endif
 
 #endif
