@@ -216,8 +216,14 @@ def cmd_demo(args) -> None:
             load_preset(args.preset)
     except (CompareError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    report = run_demo(DemoConfig(Path(args.out), train=args.train, preset=args.preset, epochs=args.epochs,
-                                 workers=args.workers, seed=args.seed, stop_time=args.stop_time, step=args.step))
+    from fmu_export.builder import BuildError
+    from fmu_export.reference_fmu import ReferenceBuildError
+
+    try:
+        report = run_demo(DemoConfig(Path(args.out), train=args.train, preset=args.preset, epochs=args.epochs,
+                                     workers=args.workers, seed=args.seed, stop_time=args.stop_time, step=args.step))
+    except (BuildError, ReferenceBuildError, CompareError) as exc:
+        raise UserError(f"demo: {exc}") from None
     print(f"report: {report}")
 
 

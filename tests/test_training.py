@@ -29,7 +29,8 @@ def learnable(tmp_path_factory):
 
 
 def config(**changes):
-    return TrainConfig(**{"model": SMALL, "epochs": 12, "checkpoint_every": 4, **changes})
+    """A small, short run over the whole time grid."""
+    return TrainConfig(**{"model": SMALL, "epochs": 12, "checkpoint_every": 4, "time_points": None, **changes})
 
 
 def metrics_lines(run_dir):
