@@ -1,0 +1,63 @@
+/* A generic explicit Runge-Kutta integrator: Dormand-Prince 5(4) with local extrapolation (the
+   5th-order solution is propagated, the embedded 4th-order one estimates the error), first same as
+   last (6 right-hand sides per step), a PI step-size controller and Hairer's initial step guess.
+   No dense output. libc and libm only; no global state (reentrant).
+
+       double x[2] = {1.0, 0.0}, h = 0.0;   (h: the step size guess, 0: none yet)
+       DopriStats stats;
+       int rc = dopri5(f, ctx, 2, 0.0, 1.0, x, 1e-8, 1e-10, &h, &stats);
+       if (rc != DOPRI5_OK) fprintf(stderr, "%s\n", dopri5_message(rc));
+
+   The error of a step is the RMS over the components of (error estimate) / (atol + rtol *
+   max(|x_i| before, |x_i| after)); a step is accepted when it is at most 1. */
+#ifndef OPFMU_DOPRI5_H
+#define OPFMU_DOPRI5_H
+
+/* not exported from a shared library unless compiled with -DDOPRI5_EXPORT (an FMU's binary exports
+   its FMI functions only; a program that links dopri5.c in needs nothing) */
+#ifndef DOPRI5_API
+#if defined(__GNUC__) && !defined(DOPRI5_EXPORT)
+#define DOPRI5_API __attribute__((visibility("hidden")))
+#else
+#define DOPRI5_API
+#endif
+#endif
+
+/* right-hand side: dx = f(t, x), n components; ctx is passed through */
+typedef void (*Dopri5Rhs)(void *ctx, double t, const double *x, double *dx);
+
+typedef struct {
+    long accepted;    /* steps accepted */
+    long rejected;    /* steps rejected (error above the tolerance, or a non-finite stage) */
+    long evaluations; /* right-hand side evaluations */
+    double h_last;    /* the last step size tried [time units] */
+} DopriStats;
+
+enum {
+    DOPRI5_OK = 0,
+    DOPRI5_BAD_ARGUMENT = -1,   /* n < 1, NULL x or f, t1 < t0 or not finite, a tolerance not usable */
+    DOPRI5_STEP_UNDERFLOW = -2, /* the step size fell below what the time's precision resolves */
+    DOPRI5_TOO_MANY_STEPS = -3, /* more than DOPRI5_MAX_STEPS steps (accepted and rejected) */
+    DOPRI5_NOT_FINITE = -4,     /* the state or its rate is not finite, and smaller steps do not help */
+    DOPRI5_NO_MEMORY = -5       /* workspace for n > DOPRI5_STACK_N could not be allocated */
+};
+
+#ifndef DOPRI5_MAX_STEPS
+#define DOPRI5_MAX_STEPS 100000L /* per call */
+#endif
+#ifndef DOPRI5_STACK_N
+#define DOPRI5_STACK_N 16 /* systems up to this size need no heap */
+#endif
+
+/* Integrates x' = f(t, x) from t0 to t1 (t1 >= t0), x [n] in place: on DOPRI5_OK it holds x(t1); on
+   failure it is unchanged. rtol >= 10 * DBL_EPSILON, atol > 0. *h_guess: the first step to try (<= 0
+   or NULL: Hairer's initial guess from f); on success the step size to try next (carry it to the next
+   call to continue where this one left off), on failure unchanged. stats may be NULL. Returns
+   DOPRI5_OK or an error code. */
+DOPRI5_API int dopri5(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
+           double *h_guess, DopriStats *stats);
+
+/* one line saying what an error code of dopri5 means */
+DOPRI5_API const char *dopri5_message(int code);
+
+#endif

@@ -1,0 +1,131 @@
+/* The native reference model: the component's ODE (the generated model_derivatives, traced from its
+   one definition) integrated over each communication step by Dormand-Prince 5(4) (dopri5.c) to the
+   parameters rtol and atol, with the inputs held over the step, or linear in time where the master
+   set their first derivatives (fmi2SetRealInputDerivatives). The solver's step size carries over
+   from step to step and is part of the FMU state. A step the solver cannot complete to the
+   tolerance (step size underflow, too many steps, a non-finite state) is refused with the reason and
+   leaves the state where it was. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "dopri5.h"
+#include "model.h"
+#include "variables.h"
+
+#define N_X OPFMU_N_STATES
+#define N_U OPFMU_N_INPUTS
+
+void model_defaults(ModelState *m)
+{
+    memset(m, 0, sizeof *m);
+    memcpy(m->u, OPFMU_START_U, sizeof m->u);
+    memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
+    memcpy(m->x, m->x_start, sizeof m->x);
+    m->rtol = OPFMU_RTOL;
+    m->atol = OPFMU_ATOL;
+}
+
+ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
+{
+    (void)message;
+    (void)size;
+    m->time = start_time;
+    memcpy(m->x, m->x_start, sizeof m->x);
+    m->h_guess = 0.0;
+    return MODEL_OK;
+}
+
+/* the inputs over a step: u(t) = u0 + du (t - t0) */
+typedef struct {
+    const double *u0, *du;
+    double t0;
+} StepInputs;
+
+static void rhs(void *ctx, double t, const double *x, double *dx)
+{
+    const StepInputs *in = (const StepInputs *)ctx;
+    double u[N_U];
+    for (int c = 0; c < N_U; ++c) u[c] = in->u0[c] + in->du[c] * (t - in->t0);
+    model_derivatives(x, u, dx);
+}
+
+ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
+{
+    const double stop = m->time + h;
+    double u_end[N_U], x[N_X], h_guess = m->h_guess;
+    for (int c = 0; c < N_U; ++c) {
+        u_end[c] = m->u[c] + m->du[c] * h;
+        if (!isfinite(u_end[c]) || u_end[c] < OPFMU_INPUT_MIN[c]) {
+            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
+                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
+                     m->du[c], OPFMU_INPUT_UNITS[c], u_end[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
+                     OPFMU_INPUT_UNITS[c]);
+            return MODEL_ERROR;
+        }
+    }
+    StepInputs inputs = {m->u, m->du, m->time};
+    DopriStats stats;
+    memcpy(x, m->x, sizeof x);
+    const int rc = dopri5(rhs, &inputs, N_X, m->time, stop, x, m->rtol, m->atol, &h_guess, &stats);
+    if (rc != DOPRI5_OK) {
+        snprintf(message, size, "t = %.9g s: Dormand-Prince 5(4) cannot complete the step to %.9g s within rtol = %g, "
+                 "atol = %g: %s (after %ld steps and %ld rejected, last step size %g s)", m->time, stop, m->rtol,
+                 m->atol, dopri5_message(rc), stats.accepted, stats.rejected, stats.h_last);
+        return MODEL_ERROR;
+    }
+    memcpy(m->x, x, sizeof x);
+    memcpy(m->u, u_end, sizeof u_end); /* the inputs at the new communication point */
+    m->time = stop;
+    m->h_guess = h_guess;
+    return MODEL_OK;
+}
+
+ModelStatus model_get_extra(const ModelState *m, unsigned int vr, double *value)
+{
+    switch (vr) {
+    case VR_RTOL: *value = m->rtol; return MODEL_OK;
+    case VR_ATOL: *value = m->atol; return MODEL_OK;
+    default: return MODEL_ERROR;
+    }
+}
+
+ModelStatus model_set_extra(ModelState *m, unsigned int vr, double value, char *message, size_t size)
+{
+    switch (vr) {
+    case VR_RTOL:
+        if (!(value >= OPFMU_RTOL_MIN && value < 1.0)) {
+            snprintf(message, size, "rtol = %g must lie in [%g, 1) (the relative tolerance of each solver step)",
+                     value, OPFMU_RTOL_MIN);
+            return MODEL_ERROR;
+        }
+        m->rtol = value;
+        return MODEL_OK;
+    case VR_ATOL:
+        if (!(value > 0.0)) {
+            snprintf(message, size, "atol = %g must be > 0 (the absolute tolerance of each solver step)", value);
+            return MODEL_ERROR;
+        }
+        m->atol = value;
+        return MODEL_OK;
+    default:
+        snprintf(message, size, "value reference %u is not a settable Real variable", vr);
+        return MODEL_ERROR;
+    }
+}
+
+int model_boolean_exists(unsigned int vr) { (void)vr; return 0; }
+
+int model_get_boolean(const ModelState *m, unsigned int vr) { (void)m; (void)vr; return 0; }
+
+const char *model_no_derivative(unsigned int vr) { (void)vr; return NULL; }
+
+ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
+{
+    if (!isfinite(value)) {
+        snprintf(message, size, "the derivative of %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], value);
+        return MODEL_ERROR;
+    }
+    m->du[c] = value;
+    return MODEL_OK;
+}

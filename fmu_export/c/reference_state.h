@@ -1,0 +1,16 @@
+/* The native reference model's state (model.h includes it as OPFMU_STATE_HEADER): the component's
+   ODE integrated by Dormand-Prince 5(4) over each communication step (reference_model.c). */
+#ifndef OPFMU_REFERENCE_STATE_H
+#define OPFMU_REFERENCE_STATE_H
+
+typedef struct {
+    double time;                    /* current communication point [s] */
+    double u[OPFMU_N_INPUTS];       /* inputs at `time` */
+    double du[OPFMU_N_INPUTS];      /* their first time derivatives over the next step (0: held) */
+    double x_start[OPFMU_N_STATES]; /* parameters: initial state */
+    double rtol, atol;              /* parameters: the solver's tolerances */
+    double x[OPFMU_N_STATES];       /* state at `time` */
+    double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */
+} ModelState;
+
+#endif

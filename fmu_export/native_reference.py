@@ -1,0 +1,182 @@
+"""Builds the native reference FMU of a component for any machine: its ODE in C, integrated over each
+communication step by Dormand-Prince 5(4).
+
+From the component and its parameters, generated at build time: config.h (sizes, defaults, the
+solver's default tolerances, GUID), variables.h (the value references of the model description,
+fmu_export.variables: the same table as the surrogate's, less its own variables, plus rtol and atol),
+equations.c (the component's right-hand side and derived outputs, fmu_export.c_equations: the same
+C the surrogate FMU runs) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
+With the static sources in c/ (fmi2_cs.c: the FMI plumbing both native FMUs share; variables.c: the
+component's variables; reference_model.c and reference_state.h: the step and the state; dopri5.c:
+the integrator) they compile (gcc) into binaries/linux64/<model>.so, which needs libc and libm only.
+The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;
+the binary has them compiled in).
+
+What the FMU does (DESIGN section 5): inputs set before fmi2DoStep(t, h) hold over [t, t + h], or
+are linear over it where the master set their first derivatives (canInterpolateInputs); the
+states after the call are the ODE's solution at t + h to the parameters rtol and atol (defaults
+1e-10, 1e-12: SOLVER_STARTS), and the derived outputs are computed from them and the inputs whenever they are read.
+The solver's step size carries over from step to step. A step the solver cannot complete within the
+tolerance is refused with fmi2Error and a logged reason. fmi2GetDirectionalDerivative gives the
+outputs' exact derivatives with respect to the inputs. The default initial state is the machine's
+equilibrium at the inputs' start values.
+
+The pythonfmu reference FMU (reference_fmu.py) has the same variables and value references.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from reference_models.component import Component, ParameterError
+from reference_models.files import atomic_path
+from reference_models.sm4 import SM4
+
+from .builder import BuildError, _c_array, _c_double, _c_string, _c_strings, _compile, check_model_name, \
+    derivatives_source, input_minima
+from .c_equations import equations_c_source
+from .model_description import model_description
+from .reference_fmu import machine_params
+from .variables import REFERENCE_EXTRAS, fmu_variables, vr_header
+
+C_DIR = Path(__file__).parent / "c"
+STATIC_SOURCES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h",
+                  "dopri5.h")
+C_FILES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
+RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
+# defaults of the parameters rtol, atol. Tighter than the pythonfmu reference's 1e-8, 1e-10: the
+# tolerance bounds each solver step's error, and over 60 s of 10 ms steps an undamped machine (D = 0)
+# accumulates them to 6e-8 rad/s in omega at 1e-8, 1e-10 (1e-9 at these), against DOP853 at 1e-11;
+# the default machine stays within 1e-9 at either. A 10 ms step costs about 1 us at these.
+SOLVER_STARTS = {"rtol": 1e-10, "atol": 1e-12}
+
+
+class NativeReferenceError(BuildError):
+    """The native reference FMU cannot be built as asked (refused parameters, no equilibrium to start
+    from, a bad model name, compiler failure, an FMU that does not validate); one-line message."""
+
+
+def native_reference_variables(component: Component = SM4, params=None):
+    """The native reference FMU's variables for that machine (the pythonfmu reference FMU's table)."""
+    params = machine_params(component, params)
+    return fmu_variables(component, params, _start_state(component, params), REFERENCE_EXTRAS, SOLVER_STARTS)
+
+
+def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
+                               params=None) -> dict:
+    """Write the native reference FMU of `component` with parameters `params` (None: its defaults; a
+    mapping of some of them; or a parameter object) to `out`, atomically.
+
+    Returns {"path", "size_bytes", "guid", "params"} (params: every parameter of the machine built
+    in). Raises NativeReferenceError (a ValueError, subclass of builder.BuildError) with a one-line
+    message for anything that stops the build."""
+    out = Path(out)
+    try:
+        check_model_name(model_name)
+        params = machine_params(component, params)
+    except (BuildError, ParameterError) as exc:
+        raise NativeReferenceError(str(exc)) from None
+    x_start = _start_state(component, params)
+    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS)
+    generated = {
+        "variables.h": vr_header(variables, component),
+        "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL"),
+        "derivatives.c": derivatives_source(component, params),
+    }
+    guid = _guid(model_name, component, params, generated)
+    generated["config.h"] = config_header(model_name, guid, component, x_start)
+    description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
+    xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
+                            interpolates_inputs=True)
+    with tempfile.TemporaryDirectory(prefix="opfmu_native_reference_") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for name in STATIC_SOURCES:
+            shutil.copy(C_DIR / name, src / name)
+        for name, text in generated.items():
+            (src / name).write_text(text)
+        try:
+            binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
+        except BuildError as exc:
+            raise NativeReferenceError(str(exc)) from None
+        fmu_tmp = Path(tmp) / "fmu.fmu"
+        with zipfile.ZipFile(fmu_tmp, "w", zipfile.ZIP_DEFLATED) as fmu:
+            fmu.writestr("modelDescription.xml", xml)
+            fmu.write(binary, f"binaries/linux64/{model_name}.so")
+            fmu.writestr("resources/machine.json", json.dumps(params.to_dict(), indent=2) + "\n")
+            for path in sorted(src.iterdir()):
+                fmu.write(path, f"sources/{path.name}")
+        problems = _validate(fmu_tmp)
+        if problems:
+            raise NativeReferenceError("the native reference FMU does not validate: " + "; ".join(problems)[:500])
+        try:
+            with atomic_path(out) as target:
+                shutil.copy2(fmu_tmp, target)
+        except OSError as exc:
+            raise NativeReferenceError(f"cannot write {out}: {exc.strerror or exc}") from None
+    return {"path": str(out), "size_bytes": out.stat().st_size, "guid": guid, "params": params.to_dict()}
+
+
+def config_header(model_name: str, guid: str, component: Component, x_start) -> str:
+    """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
+    escaped names."""
+    n_x, n_u = component.n_states, component.n_inputs
+    lines = [
+        "/* Generated by opfmu: the configuration of one native reference FMU. */",
+        "#ifndef OPFMU_CONFIG_H", "#define OPFMU_CONFIG_H", "#include <math.h>",
+        f"#define OPFMU_MODEL_IDENTIFIER {_c_string(model_name)}",
+        f"#define OPFMU_GUID {_c_string(guid)}",
+        f"#define OPFMU_N_STATES {n_x}",
+        f"#define OPFMU_N_INPUTS {n_u}",
+        f"#define OPFMU_N_OUTPUTS {len(component.outputs)}",
+        '#define OPFMU_STATE_HEADER "reference_state.h" /* the model\'s ModelState */',
+        "#define OPFMU_CAN_INTERPOLATE_INPUTS 1 /* inputs linear over a step where their derivatives are set */",
+        f"#define OPFMU_RTOL {_c_double(SOLVER_STARTS['rtol'])} /* default of the parameter rtol */",
+        f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
+        f"#define OPFMU_RTOL_MIN {_c_double(RTOL_MIN)} /* the smallest rtol accepted */",
+        f"static const double OPFMU_DEFAULT_X0[{n_x}] = {_c_array(x_start)}; /* equilibrium at the start inputs */",
+        f"static const double OPFMU_START_U[{n_u}] = {_c_array(component.start_inputs)};",
+        f"static const double OPFMU_INPUT_MIN[{n_u}] = {_c_array(input_minima(component))};",
+        f"static const char *const OPFMU_INPUT_NAMES[{n_u}] = {_c_strings(component.input_names)};",
+        f"static const char *const OPFMU_INPUT_UNITS[{n_u}] = {_c_strings(q.unit for q in component.inputs)};",
+        "#endif", "",
+    ]
+    return "\n".join(lines)
+
+
+def _start_state(component: Component, params) -> np.ndarray:
+    """The equilibrium at the inputs' start values [n_x]; NativeReferenceError where there is none."""
+    starts = ", ".join(f"{q.name} = {float(q.start)!r}" for q in component.inputs)
+    try:
+        x = np.asarray(component.steady_state(None, params), dtype=float)
+    except (ValueError, ArithmeticError) as exc:
+        raise NativeReferenceError(f"this {component.name} machine has no equilibrium at the start inputs ({starts}) "
+                                   f"to start from: {' '.join(str(exc).split())[:200]}") from None
+    if x.shape != (component.n_states,) or not np.all(np.isfinite(x)):
+        raise NativeReferenceError(f"this {component.name} machine has no finite equilibrium at the start inputs "
+                                   f"({starts})")
+    return x
+
+
+def _guid(model_name: str, component: Component, params, generated: dict) -> str:
+    """A GUID that changes with everything compiled into the binary: name, machine and C sources."""
+    digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
+                            + json.dumps(params.to_dict(), sort_keys=True).encode())
+    for name in sorted(generated):
+        digest.update(name.encode() + b"\0" + generated[name].encode())
+    for name in STATIC_SOURCES:
+        digest.update(name.encode() + b"\0" + (C_DIR / name).read_bytes())
+    h = digest.hexdigest()
+    return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
+
+
+def _validate(fmu: Path) -> list[str]:
+    from fmpy.validation import validate_fmu
+
+    return list(validate_fmu(str(fmu)))
