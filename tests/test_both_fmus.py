@@ -1,11 +1,17 @@
 """What the surrogate, the pythonfmu reference and the native reference FMU must all do as FMI 2.0
 co-simulation units."""
+import shutil
+import subprocess
+
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 
+from fmu_export.builder import fmi_headers
 from fmu_export.native_reference import build_native_reference_fmu
 from fmu_slave import Slave
+
+FUZZ_HARNESS = __file__.rsplit("/", 1)[0] + "/c/fuzz_harness.c"
 
 
 @pytest.fixture(scope="module")
@@ -39,3 +45,46 @@ def test_the_two_references_agree_on_held_inputs(reference_path, native_referenc
         runs.append([slave.step(h, *u) for h, *u in [(0.01, 0.9, 0.1)] * 20 + [(0.05, 1.05, -0.2)] * 10])
         slave.close()
     np.testing.assert_allclose(runs[0], runs[1], rtol=0, atol=1e-9)
+
+
+@pytest.fixture(scope="module", params=["fmu_path", "native_reference_path"])
+def native(request):
+    """A native FMU (the surrogate or the native reference), extracted."""
+    path = request.getfixturevalue(request.param)
+    return extract(str(path)), read_model_description(str(path))
+
+
+@pytest.fixture(scope="module")
+def fuzz_harness(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fuzz") / "fuzz_harness"
+    subprocess.run(["gcc", "-O1", "-g", "-I", str(fmi_headers()), FUZZ_HARNESS, "-o", str(out), "-ldl", "-lm"],
+                   check=True)
+    return out
+
+
+def fuzz_command(native, calls: int, seed: int) -> list:
+    directory, md = native
+    n_reals = sum(v.type == "Real" for v in md.modelVariables)
+    return [f"{directory}/binaries/linux64/{md.coSimulation.modelIdentifier}.so", md.guid, str(calls), str(seed),
+            str(n_reals)]
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_random_fmi_call_sequences_from_a_c_importer_never_crash(native, fuzz_harness, seed):
+    """A few thousand FMI calls in random order with random values (NaN, inf, h <= 0, wrong states,
+    NULL arrays, unknown value references, corrupt states): every one returns a valid status."""
+    result = subprocess.run([str(fuzz_harness), *fuzz_command(native, 5000, seed)], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr[-2000:]
+    counts = dict(zip(result.stdout.split()[0::2], map(int, result.stdout.split()[1::2])))
+    assert counts["steps"] > 1000 and counts["error"] > 500  # it stepped, and it was refused often
+
+
+@pytest.mark.skipif(not shutil.which("valgrind"), reason="valgrind is not installed")
+def test_random_fmi_call_sequences_under_valgrind_are_clean(native, fuzz_harness):
+    calls = 600 if any(v.name == "residual" for v in native[1].modelVariables) else 3000  # the surrogate is slower
+    result = subprocess.run(["valgrind", "--leak-check=full", "--errors-for-leak-kinds=definite,indirect,possible",
+                             "--error-exitcode=3", str(fuzz_harness), *fuzz_command(native, calls, 7)],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr[-3000:]
+    assert "ERROR SUMMARY: 0 errors" in result.stderr
