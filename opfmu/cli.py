@@ -140,15 +140,18 @@ def cmd_build_fmu(args) -> None:
 
 
 def cmd_build_reference_fmu(args) -> None:
+    from fmu_export.native_reference import build_native_reference_fmu
     from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu
     from opfmu.compare import operator_machine
 
+    build = build_reference_fmu if args.python else build_native_reference_fmu
     try:
         params = operator_machine(args.operator) if args.operator else _machine(args.machine)
-        info = build_reference_fmu(args.output, model_name=args.name, params=params)
+        info = build(args.output, model_name=args.name, params=params)
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
-    print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, model {args.name}, guid {info['guid']}); "
+    kind = "pythonfmu (scipy RK45)" if args.python else "native (Dormand-Prince 5(4) in C)"
+    print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, {kind}, model {args.name}, guid {info['guid']}); "
           "fmpy validates it")
 
 
@@ -289,10 +292,14 @@ def build_parser() -> argparse.ArgumentParser:
     fmu.add_argument("--name", default="SM4Surrogate", help="model name and identifier (default SM4Surrogate)")
     fmu.set_defaults(func=cmd_build_fmu)
 
-    ref = sub.add_parser("build-reference-fmu", help="build the reference RK45 FMU (pythonfmu)",
-                         description="An FMI 2.0 co-simulation FMU of SM4 that integrates the ODE over each "
-                                     "step with scipy's RK45; same variables as the surrogate FMU. The machine: "
-                                     "--machine FILE, or that of an operator file (--operator), or paper Table I.")
+    ref = sub.add_parser("build-reference-fmu", help="build the reference FMU (native Dormand-Prince 5(4))",
+                         description="An FMI 2.0 co-simulation FMU of SM4 that integrates the ODE over each step "
+                                     "with an adaptive Dormand-Prince 5(4) (RK45) compiled from the component's "
+                                     "equations (--python: scipy's RK45 under pythonfmu instead); same variables as "
+                                     "the surrogate FMU. The machine: --machine FILE, or that of an operator file "
+                                     "(--operator), or paper Table I.")
+    ref.add_argument("--python", action="store_true",
+                     help="the pythonfmu FMU (scipy RK45; needs Python, numpy and scipy where it runs)")
     machine = ref.add_mutually_exclusive_group()
     machine.add_argument("--machine", default=None, metavar="FILE", help="JSON file of machine parameters")
     machine.add_argument("--operator", default=None, metavar="ONNX",

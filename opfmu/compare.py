@@ -226,15 +226,21 @@ def format_table(result: dict) -> str:
         lines.append(f"{name:<10}{UNITS[name]:<7}{m['mae']:>11.3e}{m['rmse']:>11.3e}{m['maxae']:>11.3e}")
     wall = result["wall_s"]
     inside = result["do_step_s"]
-    lines.append(f"wall time under fmpy: surrogate {wall['surrogate']:.3f} s, reference {wall['reference']:.3f} s; "
-                 f"speedup {result['speedup']:.1f}x")
-    lines.append(f"time inside fmi2DoStep: surrogate {inside['surrogate']:.3f} s, reference {inside['reference']:.3f} s; "
-                 f"speedup {result['do_step_speedup']:.1f}x")
+    steps = round(result["stop_time_s"] / result["step_s"])
+    lines.append(f"wall time under fmpy: surrogate {wall['surrogate']:.3f} s, reference {wall['reference']:.3f} s "
+                 f"({_ratio(result['speedup'])})")
+    lines.append(f"time inside fmi2DoStep: surrogate {1e6 * inside['surrogate'] / steps:.2f} us per step, reference "
+                 f"{1e6 * inside['reference'] / steps:.2f} us per step ({_ratio(result['do_step_speedup'])})")
     said = result["messages"]["surrogate"]
     lines.append(f"surrogate diagnostics: max residual {result['max_residual']:.3g}, "
                  f"in envelope throughout: {'yes' if result['in_envelope'] else 'NO'}, warnings logged: {len(said)}")
     lines += [f"  {message}" for message in said[:5]]
     return "\n".join(lines)
+
+
+def _ratio(speedup: float) -> str:
+    """reference time / surrogate time as words."""
+    return f"surrogate {speedup:.1f}x faster" if speedup >= 1 else f"surrogate {1 / speedup:.1f}x slower"
 
 
 def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
