@@ -70,7 +70,7 @@ static double initial_step(Dopri5Rhs f, void *ctx, int n, double t0, double span
 
 /* the integration proper, in the workspace `work` [10 n] */
 static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x_out, double rtol, double atol,
-                     double *h_guess, DopriStats *st, double *work)
+                     double *h_guess, DopriStats *st, Dopri5Observer observer, void *observer_ctx, double *work)
 {
     double *k1 = work, *k2 = k1 + n, *k3 = k2 + n, *k4 = k3 + n, *k5 = k4 + n, *k6 = k5 + n, *k7 = k6 + n;
     double *y = k7 + n, *x_new = y + n, *x = x_new + n;
@@ -136,6 +136,7 @@ static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double
             if (rejected_last) h_new = fmin(h_new, h);
             log_err_old = log(fmax(err, ERR_FLOOR));
             st->accepted++;
+            if (observer) observer(observer_ctx, t, x, k1, t_new, x_new, k7);
             double *swap = k1;
             k1 = k7; /* first same as last */
             k7 = swap;
@@ -162,6 +163,12 @@ static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double
 int dopri5(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
            double *h_guess, DopriStats *stats)
 {
+    return dopri5_observed(f, ctx, n, t0, t1, x, rtol, atol, h_guess, stats, NULL, NULL);
+}
+
+int dopri5_observed(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
+                    double *h_guess, DopriStats *stats, Dopri5Observer observer, void *observer_ctx)
+{
     DopriStats local;
     DopriStats *st = stats ? stats : &local;
     memset(st, 0, sizeof *st);
@@ -174,7 +181,7 @@ int dopri5(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, doubl
         work = (double *)malloc(10 * (size_t)n * sizeof *work);
         if (!work) return DOPRI5_NO_MEMORY;
     }
-    const int rc = integrate(f, ctx, n, t0, t1, x, rtol, atol, h_guess, st, work);
+    const int rc = integrate(f, ctx, n, t0, t1, x, rtol, atol, h_guess, st, observer, observer_ctx, work);
     if (work != stack) free(work);
     return rc;
 }

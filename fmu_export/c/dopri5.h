@@ -57,6 +57,16 @@ enum {
 DOPRI5_API int dopri5(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
            double *h_guess, DopriStats *stats);
 
+/* called after each accepted step from t0 to t1 with the states and their rates at both ends (for dense
+   output between them, e.g. cubic Hermite interpolation); the arrays are valid during the call only */
+typedef void (*Dopri5Observer)(void *ctx, double t0, const double *x0, const double *f0, double t1,
+                               const double *x1, const double *f1);
+
+/* dopri5 with an observer of every accepted step (observer NULL: dopri5 itself) */
+DOPRI5_API int dopri5_observed(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol,
+                               double atol, double *h_guess, DopriStats *stats, Dopri5Observer observer,
+                               void *observer_ctx);
+
 /* one line saying what an error code of dopri5 means */
 DOPRI5_API const char *dopri5_message(int code);
 

@@ -54,6 +54,25 @@ static void not_a_number(void *ctx, double t, const double *x, double *dx)
     dx[0] = NAN;
 }
 
+/* the observer's record: steps seen, whether they tile the interval, the worst cubic Hermite error
+   of cos at the steps' midpoints */
+typedef struct {
+    long steps;
+    double end, worst;
+    int gaps;
+} Seen;
+
+static void observe(void *ctx, double t0, const double *x0, const double *f0, double t1, const double *x1,
+                    const double *f1)
+{
+    Seen *seen = (Seen *)ctx;
+    const double h = t1 - t0, mid = 0.5 * (x0[0] + x1[0]) + 0.125 * h * (f0[0] - f1[0]);
+    seen->gaps += t0 != seen->end;
+    seen->end = t1;
+    seen->steps++;
+    seen->worst = fmax(seen->worst, fabs(mid - cos(t0 + 0.5 * h)));
+}
+
 int main(void)
 {
     DopriStats st;
@@ -76,6 +95,15 @@ int main(void)
     CHECK(fabs(y[0] - cos(10.0)) < 1e-8 && fabs(y[1] + sin(10.0)) < 1e-8, "chunked error %g", fabs(y[0] - cos(10.0)));
     CHECK(steps <= 1100 && evaluations <= 7 * steps + 2, "carried guess: %ld steps, %ld evaluations", steps,
           evaluations);
+
+    /* every accepted step observed, end to end */
+    double o[2] = {1.0, 0.0}, ho = 0.0;
+    Seen seen = {0, 0.0, 0.0, 0};
+    rc = dopri5_observed(oscillator, NULL, 2, 0.0, 10.0, o, 1e-10, 1e-12, &ho, &st, observe, &seen);
+    CHECK(rc == DOPRI5_OK && seen.steps == st.accepted && !seen.gaps && seen.end == 10.0, "observed %ld of %ld, "
+          "gaps %d, end %g", seen.steps, st.accepted, seen.gaps, seen.end);
+    CHECK(o[0] == x[0] && o[1] == x[1], "observing changed the answer");
+    CHECK(seen.worst < 1e-6, "Hermite midpoint error %g", seen.worst);
 
     /* 40 components (beyond the stack workspace), time-dependent rate */
     double k40[40], x40[40], h40 = 0.0;
