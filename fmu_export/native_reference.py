@@ -43,18 +43,14 @@ from .builder import BuildError, _c_array, _c_double, _c_string, _c_strings, _co
 from .c_equations import equations_c_source
 from .model_description import model_description
 from .reference_fmu import machine_params
-from .variables import REFERENCE_EXTRAS, fmu_variables, vr_header
+from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 STATIC_SOURCES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h",
                   "dopri5.h")
 C_FILES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
 RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
-# defaults of the parameters rtol, atol. Tighter than the pythonfmu reference's 1e-8, 1e-10: the
-# tolerance bounds each solver step's error, and over 60 s of 10 ms steps an undamped machine (D = 0)
-# accumulates them to 6e-8 rad/s in omega at 1e-8, 1e-10 (1e-9 at these), against DOP853 at 1e-11;
-# the default machine stays within 1e-9 at either. A 10 ms step costs about 1 us at these.
-SOLVER_STARTS = {"rtol": 1e-10, "atol": 1e-12}
+SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
 
 
 class NativeReferenceError(BuildError):

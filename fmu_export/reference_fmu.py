@@ -42,10 +42,10 @@ from reference_models.sm4 import SM4
 from reference_models.version import __version__
 
 from .model_description import model_description
-from .variables import REFERENCE_EXTRAS, Variable, fmu_variables
+from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, Variable, fmu_variables
 
 SLAVE = Path(__file__).with_name("reference_slave.py")
-SOLVER_STARTS = {"rtol": 1e-8, "atol": 1e-10}  # defaults of the parameters rtol, atol
+SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
 MACHINE_FILE, LAYOUT_FILE = "machine.json", "fmu.json"  # names the slave reads (reference_slave.py)
 REPOSITORY_PACKAGES = ("reference_models", "surrogate", "fmu_export", "opfmu")
 

@@ -107,6 +107,7 @@ def write_report(out: Path, operator: Path, config: DemoConfig, results: dict) -
     """report.md in `out`: the operator, the overview table, the goal check, each scenario in full."""
     import onnx
 
+    from fmu_export.variables import REFERENCE_STARTS
     from surrogate.ensemble import describe
 
     meta = {p.key: p.value for p in onnx.load(str(operator)).metadata_props}
@@ -119,8 +120,8 @@ def write_report(out: Path, operator: Path, config: DemoConfig, results: dict) -
              f"Each scenario: {config.stop_time:g} s at a communication step of {config.step * 1e3:g} ms, seed "
              f"{config.seed}, the machine starting at the equilibrium of the first input; fmpy runs both FMUs on "
              "the same inputs. Errors are surrogate minus reference over every communication point.", "",
-             "The reference is native C too (the machine's equations, Dormand-Prince 5(4) at rtol/atol "
-             "1e-10/1e-12), so the cost columns compare the surrogate with a compiled solver of the same ODE, not "
+             "The reference is native C too (the machine's equations, Dormand-Prince 5(4) at rtol "
+             f"{REFERENCE_STARTS['rtol']:g}, atol {REFERENCE_STARTS['atol']:g}), so the cost columns compare the surrogate with a compiled solver of the same ODE, not "
              "with Python. Cost ratio: the surrogate's time over the reference's (above 1: the surrogate is slower).",
              "",
              "| scenario | MaxAE delta [rad] | MaxAE omega [rad/s] | MaxAE Ed_p [pu] | MaxAE Eq_p [pu] | MaxAE P [pu] "
