@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from fmu_export.step_mirror import StepMirror
-from opfmu.compare import compare, scenario_inputs
-from fmu_pair import extracted_pair, surrogate_machine, surrogate_parameters, surrogate_setting
+from opfmu.compare import compare, fmu_machine, scenario_inputs
+from fmu_pair import extracted_pair, surrogate_parameters, surrogate_setting
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import STATE_NAMES
@@ -90,7 +90,7 @@ def main() -> None:
         dirs = extracted_pair(args.surrogate, args.reference, tmp, args.operator)
         parameters = surrogate_parameters(args.param)
         horizon = surrogate_setting(dirs[0], "rollover_horizon", parameters)
-        machine = surrogate_machine(dirs[0])
+        machine = fmu_machine(dirs[0])
         mirror = StepMirror(op, params=machine)
         per_window = int(round(horizon / args.step))
         print(f"{args.stop_time:g} s at h = {args.step * 1e3:g} ms; MaxAE of delta [rad] / omega [rad/s] / Eq_p [pu]")

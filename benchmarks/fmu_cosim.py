@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from opfmu.compare import compare, scenario_inputs, summary
+from opfmu.compare import compare, fmu_machine, scenario_inputs, summary
 from opfmu.demo import GOAL_MAXAE
-from fmu_pair import extracted_pair, surrogate_machine, surrogate_parameters, surrogate_setting
+from fmu_pair import extracted_pair, surrogate_parameters, surrogate_setting
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import OUTPUT_NAMES, STATE_NAMES
@@ -54,7 +54,7 @@ def main() -> None:
         dirs = extracted_pair(args.surrogate, args.reference, tmp)
         parameters = surrogate_parameters(args.param)
         horizon = surrogate_setting(dirs[0], "rollover_horizon", parameters)
-        machine = surrogate_machine(dirs[0])
+        machine = fmu_machine(dirs[0])
         rows = []
         header = (f"{'scenario':<8}{'seed':>5}{'h [ms]':>7}" + "".join(f"{'MaxAE ' + n:>13}" for n in STATE_NAMES)
                   + f"{'derived':>10}{'rollover':>10}{'elsewhere':>10}{'fmpy x':>8}{'doStep x':>9}{'goal':>7}")

@@ -8,8 +8,8 @@ from fmpy import extract
 
 def extracted_pair(surrogate, reference, tmp: Path, operator=None) -> tuple[str, str]:
     """(surrogate dir, reference dir) under tmp; a missing surrogate FMU is built from `operator`
-    (default: the shipped one), a missing reference FMU is built for the surrogate's machine (the
-    parameters its operator records; the default machine where it records none)."""
+    (default: the shipped one), a missing reference FMU is the native one built for the surrogate's
+    machine (the parameters its operator records)."""
     if surrogate is None:
         from fmu_export.builder import build_surrogate_fmu
         from surrogate.operator import DEFAULT_OPERATOR
@@ -18,24 +18,12 @@ def extracted_pair(surrogate, reference, tmp: Path, operator=None) -> tuple[str,
         build_surrogate_fmu(operator or DEFAULT_OPERATOR, surrogate)
     surrogate_dir = extract(str(surrogate), unzipdir=str(tmp / "s"))
     if reference is None:
-        from fmu_export.reference_fmu import build_reference_fmu
+        from fmu_export.native_reference import build_native_reference_fmu
+        from opfmu.compare import fmu_machine
 
         reference = tmp / "SM4Reference.fmu"
-        build_reference_fmu(reference, params=surrogate_machine(surrogate_dir))
+        build_native_reference_fmu(reference, params=fmu_machine(surrogate_dir))
     return surrogate_dir, extract(str(reference), unzipdir=str(tmp / "r"))
-
-
-def surrogate_machine(surrogate_dir):
-    """The machine (SM4Params) of an extracted surrogate FMU: the one its operator records, else the
-    default machine (operators exported before operators recorded it)."""
-    from opfmu.compare import CompareError, fmu_machine
-
-    try:
-        return fmu_machine(surrogate_dir)
-    except CompareError:
-        from reference_models.sm4 import SM4
-
-        return SM4.params()
 
 
 def surrogate_parameters(specs) -> dict:

@@ -1,12 +1,14 @@
-"""Microseconds per communication step of the surrogate FMU: through fmpy and through a direct
-ctypes loop over the FMI functions, at several step sizes, in one run.
+"""Microseconds per communication step of the surrogate FMU beside the native reference FMU (the same
+machine's equations, Dormand-Prince 5(4) in C) and the pythonfmu reference, in one run: through
+fmpy and through a direct ctypes loop over fmi2DoStep, at several step sizes.
 
-    python benchmarks/fmu_step.py [FMU] [--steps 2000] [--sizes 0.001 0.01]
+    python benchmarks/fmu_step.py [SURROGATE_FMU] [--steps 2000] [--sizes 0.001 0.01 0.05]
 
-Without an FMU argument, builds one from the shipped operator. Also prints the cost of one
-operator (kernel) evaluation, the floor a step cannot go below, and the DoStep cost with the rest
-and slow-mode corrections and the exact swing step turned off (rest_radius = slow_weight = swing_weight
-= 0): what the corrections cost.
+Without an FMU argument, builds the surrogate FMU of the shipped operator; both references are built
+for its machine. Also prints the cost of one operator (kernel) evaluation, the floor a surrogate
+step cannot go below, and the surrogate's DoStep cost with the rest and slow-mode corrections and
+the exact swing step turned off (rest_radius = slow_weight = swing_weight = 0): what they cost.
+Every FMU gets the same inputs (the first input varied around its start value).
 """
 from __future__ import annotations
 
@@ -22,6 +24,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
 from fmu_export.builder import build_surrogate_fmu
+from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.reference_fmu import build_reference_fmu
+from opfmu.compare import fmu_machine
 from surrogate.operator import DEFAULT_OPERATOR
 
 
@@ -71,15 +76,22 @@ def fmpy_loop(directory, md, h: float, steps: int) -> float:
 
 
 def ctypes_loop(directory, md, h: float, steps: int, parameters=None) -> float:
-    """DoStep alone, called through ctypes on the loaded binary (no fmpy wrappers)."""
+    """DoStep alone, called through ctypes on the loaded binary (no fmpy wrappers), under the same
+    inputs as fmpy_loop set before each step (also through ctypes; outside the timing)."""
     fmu = started(directory, md, parameters)
-    do_step = fmu.dll.fmi2DoStep
+    do_step, set_real = fmu.dll.fmi2DoStep, fmu.dll.fmi2SetReal
     do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
-    component = fmu.component
-    start = time.perf_counter()
+    inputs, _ = variables(md)
+    vrs = (ctypes.c_uint * len(inputs))(*[v.valueReference for v in inputs])
+    start_values = [float(v.start) for v in inputs]
+    values = [(ctypes.c_double * len(inputs))(start_values[0] + 0.01 * np.sin(k * h), *start_values[1:])
+              for k in range(steps)]
+    component, elapsed = fmu.component, 0.0
     for k in range(steps):
+        set_real(component, vrs, len(inputs), values[k])
+        begin = time.perf_counter()
         do_step(component, k * h, h, 1)
-    elapsed = time.perf_counter() - start
+        elapsed += time.perf_counter() - begin
     fmu.terminate()
     fmu.freeInstance()
     return elapsed / steps * 1e6
@@ -110,22 +122,37 @@ def kernel_call(directory, md, n: int = 2000) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("fmu", nargs="?", default=None)
+    parser.add_argument("fmu", nargs="?", default=None, help="surrogate FMU (default: built from the shipped operator)")
     parser.add_argument("--steps", type=int, default=2000)
-    parser.add_argument("--sizes", type=float, nargs="+", default=[0.001, 0.01])
+    parser.add_argument("--sizes", type=float, nargs="+", default=[0.001, 0.01, 0.05])
     args = parser.parse_args()
+    median = lambda fn: statistics.median(fn() for _ in range(3))  # noqa: E731
     with tempfile.TemporaryDirectory() as tmp:
         path = args.fmu or str(Path(tmp) / "SM4Surrogate.fmu")
         if not args.fmu:
             build_surrogate_fmu(DEFAULT_OPERATOR, path)
-        directory, md = extract(path), read_model_description(path)
+        surrogate = extract(path, unzipdir=str(Path(tmp) / "s")), read_model_description(path)
+        machine = fmu_machine(surrogate[0])
+        references = {}
+        for label, build in (("native", build_native_reference_fmu), ("pythonfmu", build_reference_fmu)):
+            ref_path = Path(tmp) / f"{label}.fmu"
+            build(ref_path, params=machine)
+            references[label] = extract(str(ref_path), unzipdir=str(Path(tmp) / label)), read_model_description(str(ref_path))
         print(f"{Path(path).name}: {Path(path).stat().st_size / 1e6:.2f} MB; one operator evaluation "
-              f"{kernel_call(directory, md):.1f} us")
-        print(f"{'h [s]':>8}{'fmpy loop [us/step]':>22}{'ctypes DoStep [us/step]':>26}{'corrections off':>18}")
+              f"{kernel_call(*surrogate):.1f} us; medians of 3 runs of {args.steps} steps; us per step")
+        print(f"{'h [s]':>7} | {'surrogate: fmpy':>15}{'DoStep':>8}{'no corr.':>9} | {'native ref.: fmpy':>17}"
+              f"{'DoStep':>8} | {'pythonfmu: fmpy':>15}{'DoStep':>8} | {'DoStep surrogate / native':>26}")
         for h in args.sizes:
-            print(f"{h:>8g}{statistics.median(fmpy_loop(directory, md, h, args.steps) for _ in range(3)):>22.1f}"
-                  f"{statistics.median(ctypes_loop(directory, md, h, args.steps) for _ in range(3)):>26.1f}"
-                  f"{statistics.median(ctypes_loop(directory, md, h, args.steps, CORRECTIONS_OFF) for _ in range(3)):>18.1f}")
+            s_fmpy, s_step = median(lambda: fmpy_loop(*surrogate, h, args.steps)), \
+                median(lambda: ctypes_loop(*surrogate, h, args.steps))
+            s_off = median(lambda: ctypes_loop(*surrogate, h, args.steps, CORRECTIONS_OFF))
+            n_fmpy, n_step = median(lambda: fmpy_loop(*references["native"], h, args.steps)), \
+                median(lambda: ctypes_loop(*references["native"], h, args.steps))
+            few = max(50, args.steps // 20)  # scipy under pythonfmu: 100-1000 times slower
+            p_fmpy, p_step = median(lambda: fmpy_loop(*references["pythonfmu"], h, few)), \
+                median(lambda: ctypes_loop(*references["pythonfmu"], h, few))
+            print(f"{h:>7g} | {s_fmpy:>15.1f}{s_step:>8.1f}{s_off:>9.1f} | {n_fmpy:>17.1f}{n_step:>8.2f} | "
+                  f"{p_fmpy:>15.0f}{p_step:>8.0f} | {s_step / n_step:>25.1f}x")
 
 
 if __name__ == "__main__":

@@ -4,13 +4,16 @@
         --model unstacked=runs/table/unstacked-deeponet-seed0 --model stacked-n=... --model pinn=... \
         [--sizes 1 10 1000] [--repeats 7] [--out speed.json]
 
-Every row solves the same trajectories (the test split, repeated to size) in this one run: RK45 at
-high precision (rtol 1e-9, atol 1e-12) and at scipy's defaults, one trajectory after another on one
-core; each operator through torch, through a plain onnxruntime session of the whole graph, and
-through `Operator.predict` (trunk basis cached per grid). Times are medians over repeats (RK45 at
-1000 trajectories: one pass), each method timed after a pause so that the thread pools of the one
-before have stopped spinning; speedups are against high-precision RK45 of the same size. A CUDA
-column is added when torch sees a GPU.
+Every row solves the same trajectories (the test split, repeated to size) in this one run: scipy's
+RK45 at high precision (rtol 1e-9, atol 1e-12) and at its defaults, and the same two tolerances by
+the compiled Dormand-Prince 5(4) of the native reference FMU (benchmarks/compiled_solver.py: C, dense
+output on the grid), one trajectory after another on one core; each operator through torch, through
+a plain onnxruntime session of the whole graph, and through `Operator.predict` (trunk basis cached
+per grid). Times are medians over repeats (scipy at 1000 trajectories: one pass), each method timed
+after a pause so that the thread pools of the one before have stopped spinning; speedups are against
+scipy's high-precision RK45 and against the compiled solver at the same tolerance (the strongest
+peer). The error column is the max abs error over the test split's states against DOP853 at
+rtol = atol = 1e-12. A CUDA column is added when torch sees a GPU.
 """
 from __future__ import annotations
 
@@ -26,16 +29,20 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from compiled_solver import CompiledSolver
 from reference_models.files import write_json
 from reference_models.signals import Signal
 from reference_models.simulate import SolverConfig, simulate
-from surrogate.data import load_split
+from surrogate.data import load_metadata, load_split, machine_of
 from surrogate.onnx_export import export_onnx
 from surrogate.operator import EnvelopeWarning, Operator
 from surrogate.training import load_model
 
-SOLVERS = {"RK45 (rtol 1e-9, atol 1e-12)": SolverConfig("RK45", 1e-9, 1e-12),
-           "RK45 (scipy defaults: rtol 1e-3, atol 1e-6)": SolverConfig("RK45", 1e-3, 1e-6)}
+SOLVERS = {"scipy RK45 (rtol 1e-9, atol 1e-12)": SolverConfig("RK45", 1e-9, 1e-12),
+           "scipy RK45 (its defaults: rtol 1e-3, atol 1e-6)": SolverConfig("RK45", 1e-3, 1e-6)}
+COMPILED = {"compiled DOPRI5 (rtol 1e-9, atol 1e-12)": (1e-9, 1e-12),
+            "compiled DOPRI5 (rtol 1e-3, atol 1e-6)": (1e-3, 1e-6)}
+EXACT = SolverConfig("DOP853", 1e-12, 1e-12)
 
 
 def median_time(fn, repeats: int) -> float:
@@ -69,15 +76,31 @@ def main() -> None:
     warnings.simplefilter("ignore", EnvelopeWarning)
 
     data = load_split(args.data, "test")
+    component, params = machine_of(load_metadata(args.data))
+    signals = [Signal.from_dict(json.loads(s)) for s in data["signal"]]
+    exact = np.stack([simulate(x0, s, data["t"], params, EXACT, component) for x0, s in zip(data["x0"], signals)])
+    error = lambda x: float(np.max(np.abs(np.asarray(x, dtype=float)[:len(exact)] - exact)))  # noqa: E731
     repeats = lambda n: args.repeats if n >= 100 else args.small_repeats  # noqa: E731
-    rows, sizes = {}, args.sizes
+    rows, errors, sizes = {}, {}, args.sizes
     for label, solver in SOLVERS.items():
         rows[label] = {}
         for n in sizes:
             b = batch(data, n)
-            signals = [Signal.from_dict(json.loads(s)) for s in b["signal"]]
-            run = lambda: [simulate(x0, s, b["t"], solver=solver) for x0, s in zip(b["x0"], signals)]  # noqa: E731
-            rows[label][n] = median_time(run, 1 if n >= 100 else args.repeats)  # RK45: long enough as it is
+            chosen = [signals[i % len(signals)] for i in range(n)]
+            run = lambda: [simulate(x0, s, b["t"], params, solver, component) for x0, s in zip(b["x0"], chosen)]  # noqa: E731
+            rows[label][n] = median_time(run, 1 if n >= 100 else args.repeats)  # long enough as it is
+        errors[label] = error([simulate(x0, s, data["t"], params, solver, component)
+                               for x0, s in zip(data["x0"], signals)])
+    compiled = CompiledSolver(component, params)
+    evaluations = {}
+    for label, (rtol, atol) in COMPILED.items():
+        rows[label] = {}
+        for n in sizes:
+            b = batch(data, n)
+            channels = compiled.channels([signals[i % len(signals)] for i in range(n)])
+            rows[label][n] = median_time(lambda: compiled.solve(b["x0"], channels, b["t"], rtol, atol), repeats(n))
+        errors[label] = error(compiled.solve(data["x0"], compiled.channels(signals), data["t"], rtol, atol))
+        evaluations[label] = compiled.evaluations / len(signals)
     cuda = torch.cuda.is_available()
     with tempfile.TemporaryDirectory() as tmp:
         for spec in args.model:
@@ -100,25 +123,30 @@ def main() -> None:
                         if device == "cuda":
                             torch.cuda.synchronize()
                     rows[f"{name} torch ({device})"][n] = median_time(run, repeats(n))
-            rows[f"{name} onnxruntime, whole graph"] = {}
-            rows[f"{name} Operator.predict (cached basis)"] = {}
+            whole, cached = f"{name} onnxruntime, whole graph", f"{name} Operator.predict (cached basis)"
+            rows[whole], rows[cached] = {}, {}
             for n in sizes:
                 b = batch(data, n)
                 feed = {k: np.asarray(b[k], dtype=np.float32) for k in ("x0", "u", "t")}
-                rows[f"{name} onnxruntime, whole graph"][n] = median_time(lambda: op._full.run(["x"], feed), repeats(n))
-                rows[f"{name} Operator.predict (cached basis)"][n] = median_time(
-                    lambda: op.predict(feed["x0"], feed["u"], feed["t"]), repeats(n))
+                rows[whole][n] = median_time(lambda: op._full.run(["x"], feed), repeats(n))
+                rows[cached][n] = median_time(lambda: op.predict(feed["x0"], feed["u"], feed["t"]), repeats(n))
+            errors[whole] = errors[cached] = error(op.predict(data["x0"], data["u"], data["t"]))
 
-    reference = rows["RK45 (rtol 1e-9, atol 1e-12)"]
+    scipy_ref, compiled_ref = rows["scipy RK45 (rtol 1e-9, atol 1e-12)"], rows["compiled DOPRI5 (rtol 1e-9, atol 1e-12)"]
     print(f"{len(data['t'])} points per trajectory; {os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}"
           f"{', GPU: ' + torch.cuda.get_device_name() if cuda else ', no GPU'}; medians of {args.small_repeats} "
-          f"(fewer than 100 trajectories) or {args.repeats} calls; RK45 at 1000 trajectories: one pass")
-    header = "".join(f"{f'{n} traj [ms]':>15}{'speedup':>10}" for n in sizes)
-    print(f"{'method':<48}{header}")
+          f"(fewer than 100 trajectories) or {args.repeats} calls; scipy at 100 trajectories or more: one pass; "
+          f"speedups against scipy RK45 and against the compiled DOPRI5, both at rtol 1e-9, atol 1e-12")
+    print("compiled DOPRI5, right-hand side evaluations per trajectory: "
+          + ", ".join(f"{label.split('(')[1][:-1]}: {v:.0f}" for label, v in evaluations.items()))
+    header = "".join(f"{f'{n} traj [ms]':>14}{'vs scipy':>10}{'vs C':>8}" for n in sizes)
+    print(f"{'method':<48}{header}{'max error':>11}")
     for label, times in rows.items():
-        cells = "".join(f"{times[n] * 1e3:>15.3f}{reference[n] / times[n]:>9.0f}x" for n in sizes)
-        print(f"{label:<48}{cells}")
+        cells = "".join(f"{times[n] * 1e3:>14.3f}{scipy_ref[n] / times[n]:>9.0f}x{compiled_ref[n] / times[n]:>7.2f}x"
+                        for n in sizes)
+        print(f"{label:<48}{cells}{errors.get(label, float('nan')):>11.1e}")
     write_json(args.out, {"sizes": sizes, "seconds": {k: {str(n): v for n, v in t.items()} for k, t in rows.items()},
+                          "max_error": errors, "compiled_evaluations_per_trajectory": evaluations,
                           "cpus": os.cpu_count(), "gpu": torch.cuda.get_device_name() if cuda else None})
 
 

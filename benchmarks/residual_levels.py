@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 from fmpy import read_model_description
 
-from opfmu.compare import Inputs, communication_points, compare, scenario_inputs
-from fmu_pair import extracted_pair, surrogate_machine
+from opfmu.compare import Inputs, communication_points, compare, fmu_machine, scenario_inputs
+from fmu_pair import extracted_pair
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS, rest_state
 
@@ -53,7 +53,7 @@ def main() -> None:
         dirs = extracted_pair(args.surrogate, args.reference, tmp)
         md = read_model_description(dirs[0])
         limit = next(float(v.start) for v in md.modelVariables if v.name == "residual_limit")
-        machine = surrogate_machine(dirs[0])
+        machine = fmu_machine(dirs[0])
         runs = [scenario_inputs(n, seed, args.stop_time, args.step, machine) for n in SCENARIOS for seed in args.seeds]
         runs += [stress(n, args.stop_time, args.step, machine) for n in ("deep fault", "overvoltage", "angle jump")]
         print(f"residual_limit {limit:.3g}; {args.stop_time:g} s at h = {args.step * 1e3:g} ms")

@@ -1,6 +1,5 @@
 """Dataset generation: format, content, determinism, resume, parallel solves."""
 import json
-import os
 import signal
 import subprocess
 import sys
