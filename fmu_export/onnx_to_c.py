@@ -4,6 +4,8 @@ The graph is specialised to one trajectory and one query time (x0 [1, n_x], u [1
 with n_x and n_u read from the graph's inputs); shape inference then fixes every tensor's shape, and
 each node becomes a loop over fixed sizes. Only an explicit, checked subset of ONNX operators is
 supported; any other is refused by name. Weights stay float32 (as exported); arithmetic is in double.
+A Gemm's weights are stored in the order its product reads them, and the products and tanh, most of
+the cost, have AVX2/FMA versions that x86-64 CPUs with those instructions take (DISPATCH).
 
 Generated entry point:
     void opfmu_operator(const double x0[n_x], const double u[n_u * OPFMU_N_SENSORS], double t, double x[n_x]);
@@ -11,31 +13,186 @@ Generated entry point:
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 ELEMENTWISE = {"Add": "+", "Sub": "-", "Mul": "*", "Div": "/"}
-UNARY = {"Tanh": "opfmu_tanh({})", "Exp": "exp({})", "Neg": "(-{})", "Sqrt": "sqrt({})", "Sin": "sin({})",
+UNARY = {"Exp": "exp({})", "Neg": "(-{})", "Sqrt": "sqrt({})", "Sin": "sin({})",
          "Cos": "cos({})", "Relu": "({0} > 0.0 ? {0} : 0.0)", "Sigmoid": "(1.0 / (1.0 + exp(-{})))"}
 COPIES = {"Flatten", "Reshape", "Unsqueeze", "Squeeze", "Identity"}
-SUPPORTED = set(ELEMENTWISE) | set(UNARY) | COPIES | {"Gemm", "MatMul", "Transpose", "Concat", "Constant"}
+SUPPORTED = set(ELEMENTWISE) | set(UNARY) | COPIES | {"Tanh", "Gemm", "MatMul", "Transpose", "Concat", "Constant"}
+# output columns a Gemm accumulates at once from its weights stored in panels (_gemm, PRODUCT): 32
+# doubles are 8 AVX2 registers, as many independent sums as two FMA pipes of latency 4 keep busy (and
+# half of the 16 registers, so none is spilled)
+PANEL = 32
 
 
-# the kernel functions are compiled twice on x86-64 with gcc, for AVX2/FMA machines and for any other,
-# and the loader picks one at run time (the FMU stays portable; the AVX2 build is about 1.3x faster)
+# The kernel functions are compiled twice on x86-64 with gcc, for AVX2/FMA machines and for any other,
+# and the loader picks one at run time (the FMU stays portable).
 VECTOR = """#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define OPFMU_VECTOR __attribute__((target_clones("arch=x86-64-v3", "default")))
+#ifndef OPFMU_X86 /* -DOPFMU_X86=0 builds the portable loops alone */
+#define OPFMU_X86 1
+#endif
 #else
+#undef OPFMU_X86
 #define OPFMU_VECTOR
+#define OPFMU_X86 0
 #endif"""
 
-# tanh through one exp: within 3e-16 of libm's tanh and about twice as fast (most of a step's cost is tanh)
+# The two loops that are most of a step, the weight products of the Gemms and tanh, are in addition
+# written out in AVX2/FMA instructions, taken on x86-64 CPUs that have them (decided once, when the
+# binary loads): gcc's own vectorisation of the plain product converts float32 weights through extra
+# shuffles and spills a sum (about twice as slow), and it does not vectorise tanh's exp at all. Any other
+# CPU runs the plain loops, whose results differ from the vector ones in the last bits (the products
+# unfused, tanh through libm's exp).
+DISPATCH = """#if OPFMU_X86
+#include <immintrin.h>
+static int opfmu_avx2; /* the CPU has AVX2 and FMA */
+__attribute__((constructor)) static void opfmu_pick(void)
+{
+    __builtin_cpu_init();
+    opfmu_avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
+#endif"""
+
+# tanh through one exp (libm's): within 3e-16 of libm's tanh and about twice as fast. The AVX2 version
+# computes exp(-2 |x|) = 2^k exp(r) with k = round(-2 |x| / ln 2), |r| <= ln 2 / 2, and exp(r) by its
+# Taylor polynomial of degree 13 (truncation below 5e-18): within 4e-16 of libm's tanh, and it keeps
+# tanh(+-0) = +-0, tanh(+-inf) = +-1 and NaN.
 TANH = """static double opfmu_tanh(double x)
 {
     const double e = exp(-2.0 * fabs(x));
     return copysign((1.0 - e) / (1.0 + e), x);
+}
+
+#if OPFMU_X86
+__attribute__((target("avx2,fma"))) static inline __m256d opfmu_tanh4(__m256d x)
+{
+    const __m256d sign = _mm256_set1_pd(-0.0), one = _mm256_set1_pd(1.0);
+    /* y = -2 |x|, at least -40 (a NaN stays); below -40 exp(y) < 2^-54 and the quotient is 1 either way */
+    const __m256d y = _mm256_max_pd(_mm256_set1_pd(-40.0), _mm256_mul_pd(_mm256_set1_pd(-2.0),
+                                                                          _mm256_andnot_pd(sign, x)));
+    /* k = y / ln 2 rounded, also held in the low bits of `shifted`; r = y - k ln 2 in two parts */
+    const __m256d shifted = _mm256_fmadd_pd(y, _mm256_set1_pd(0x1.71547652b82fep0), _mm256_set1_pd(0x1.8p52));
+    const __m256d k = _mm256_sub_pd(shifted, _mm256_set1_pd(0x1.8p52));
+    const __m256d r = _mm256_fnmadd_pd(k, _mm256_set1_pd(0x1.abc9e3b39803fp-56),
+                                       _mm256_fnmadd_pd(k, _mm256_set1_pd(0x1.62e42fefa39efp-1), y));
+    /* exp(r): sum of r^i / i! for i <= 13, by Estrin's scheme */
+    const __m256d r2 = _mm256_mul_pd(r, r), r4 = _mm256_mul_pd(r2, r2), r8 = _mm256_mul_pd(r4, r4);
+    const __m256d q0 = _mm256_add_pd(r, one);
+    const __m256d q1 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 6), _mm256_set1_pd(1.0 / 2));
+    const __m256d q2 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 120), _mm256_set1_pd(1.0 / 24));
+    const __m256d q3 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 5040), _mm256_set1_pd(1.0 / 720));
+    const __m256d q4 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 362880), _mm256_set1_pd(1.0 / 40320));
+    const __m256d q5 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 39916800), _mm256_set1_pd(1.0 / 3628800));
+    const __m256d q6 = _mm256_fmadd_pd(r, _mm256_set1_pd(1.0 / 6227020800), _mm256_set1_pd(1.0 / 479001600));
+    const __m256d s0 = _mm256_fmadd_pd(r2, q1, q0), s1 = _mm256_fmadd_pd(r2, q3, q2), s2 = _mm256_fmadd_pd(r2, q5, q4);
+    const __m256d p = _mm256_fmadd_pd(r8, _mm256_fmadd_pd(r4, q6, s2), _mm256_fmadd_pd(r4, s1, s0));
+    /* 2^k from the bits of k + 1023 */
+    const __m256i bits = _mm256_add_epi64(_mm256_castpd_si256(shifted), _mm256_set1_epi64x(1023 - 0x4338000000000000LL));
+    const __m256d e = _mm256_mul_pd(p, _mm256_castsi256_pd(_mm256_slli_epi64(bits, 52)));
+    const __m256d q = _mm256_div_pd(_mm256_sub_pd(one, e), _mm256_add_pd(one, e));
+    return _mm256_or_pd(q, _mm256_and_pd(sign, x)); /* q >= 0: with x's sign */
+}
+
+__attribute__((target("avx2,fma"))) static void opfmu_tanh_avx2(int n, const double *x, double *y)
+{
+    int i = 0;
+    for (; i + 4 <= n; i += 4) _mm256_storeu_pd(y + i, opfmu_tanh4(_mm256_loadu_pd(x + i)));
+    if (i < n) { /* the last 1-3 values, by the same formula */
+        double in[4] = {0.0, 0.0, 0.0, 0.0}, out[4];
+        for (int j = 0; i + j < n; ++j) in[j] = x[i + j];
+        _mm256_storeu_pd(out, opfmu_tanh4(_mm256_loadu_pd(in)));
+        for (int j = 0; i + j < n; ++j) y[i + j] = out[j];
+    }
+}
+#endif
+
+/* y[i] = tanh(x[i]), i < n */
+static void opfmu_tanh_array(int n, const double *x, double *y)
+{
+#if OPFMU_X86
+    if (opfmu_avx2) {
+        opfmu_tanh_avx2(n, x, y);
+        return;
+    }
+#endif
+    for (int i = 0; i < n; ++i) y[i] = opfmu_tanh(x[i]);
 }"""
+
+# The weight product of a Gemm's row, y[c] += sum over p in order of x[p] W[p, c] for its n outputs,
+# with W [k, n] stored in panels of OPFMU_PANEL columns (each [k, width] row-major, _panels) and y
+# holding the bias: each panel's sums stay in registers over the whole of p while its weights stream
+# by contiguously. The AVX2 version converts 4 float32 weights and fuses their multiply-add at a time.
+# The sensor layer's product (opfmu_product_sparse) skips the inputs that are exactly zero, which adds
+# nothing but the sign of a zero sum: a window's start evaluates it with every sensor at zero, for the
+# part of its output that comes from the start state and the bias (4 of 2006 inputs for SM4).
+PANEL_PLAIN = """#define OPFMU_PANEL {panel}
+static inline void opfmu_panel(int k, int width, const float *restrict w, const double *restrict x,
+                               double *restrict y, int skip_zeros)
+{{
+    double acc[OPFMU_PANEL];
+    for (int j = 0; j < width; ++j) acc[j] = y[j];
+    for (int p = 0; p < k; ++p) {{
+        const double a = x[p];
+        if (skip_zeros && a == 0.0) continue;
+        for (int j = 0; j < width; ++j) acc[j] += a * (double)w[p * width + j];
+    }}
+    for (int j = 0; j < width; ++j) y[j] = acc[j];
+}}"""
+PRODUCT_AVX2 = """__attribute__((target("avx2,fma"))) static void opfmu_{name}_avx2(int k, int n, const float *restrict w,
+                                                                    const double *restrict x, double *restrict y)
+{{
+    int c = 0;{inputs}
+    for (; c + OPFMU_PANEL <= n; c += OPFMU_PANEL) {{
+        const float *panel = w + c * k;
+{load}
+        for ({loop}) {{{pick}
+            const __m256d a = _mm256_set1_pd(x[p]);
+            const float *v = panel + p * OPFMU_PANEL;
+{step}
+        }}
+{store}
+    }}
+    if (c < n) opfmu_panel(k, n - c, w + c * k, x, y + c, {skip_zeros}); /* the narrower last panel */
+}}"""
+PRODUCT = """static void opfmu_{name}(int k, int n, const float *w, const double *x, double *y)
+{{
+#if OPFMU_X86
+    if (opfmu_avx2) {{
+        opfmu_{name}_avx2(k, n, w, x, y);
+        return;
+    }}
+#endif
+    int c = 0;
+    for (; c + OPFMU_PANEL <= n; c += OPFMU_PANEL) opfmu_panel(k, OPFMU_PANEL, w + c * k, x, y + c, {skip_zeros});
+    if (c < n) opfmu_panel(k, n - c, w + c * k, x, y + c, {skip_zeros});
+}}"""
+
+
+def _product_source(names) -> str:
+    """PANEL_PLAIN and, for each of the names used ("product", "product_sparse"), its AVX2 version
+    (PANEL / 4 sums of 4 in named registers) and its dispatch."""
+    vectors = range(PANEL // 4)
+    load = "\n".join(f"        __m256d s{i} = _mm256_loadu_pd(y + c + {4 * i});" for i in vectors)
+    step = "\n".join(f"            s{i} = _mm256_fmadd_pd(a, _mm256_cvtps_pd(_mm_loadu_ps(v + {4 * i})), s{i});"
+                     for i in vectors)
+    store = "\n".join(f"        _mm256_storeu_pd(y + c + {4 * i}, s{i});" for i in vectors)
+    parts, x86 = [PANEL_PLAIN.format(panel=PANEL)], []
+    for name in sorted(names):
+        sparse = int(name == "product_sparse")
+        if sparse:  # the inputs that are not zero, listed once for all panels
+            inputs = "\n    int nonzero[k], m = 0;\n    for (int p = 0; p < k; ++p)\n        if (x[p] != 0.0) nonzero[m++] = p;"
+            loop, pick = "int i = 0; i < m; ++i", "\n            const int p = nonzero[i];"
+        else:
+            inputs, loop, pick = "", "int p = 0; p < k; ++p", ""
+        x86.append(PRODUCT_AVX2.format(name=name, load=load, step=step, store=store, inputs=inputs, loop=loop,
+                                       pick=pick, skip_zeros=sparse))
+        parts.append(PRODUCT.format(name=name, skip_zeros=sparse))
+    return "\n\n".join(parts[:1] + ["#if OPFMU_X86", *x86, "#endif"] + parts[1:])
 
 
 class UnsupportedGraph(ValueError):
@@ -158,22 +315,31 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
     def c_name(tensor: str) -> str:
         return names.setdefault(tensor, f"v{len(names)}")
 
-    # weights a Gemm reads transposed (transB = 1) are stored transposed, so its inner loop reads them
-    # contiguously; each such weight must feed that one Gemm only
+    # the weights B [k, n] of a Gemm (B' read transposed where transB = 1) are stored in panels of
+    # PANEL output columns, each panel [k, PANEL] contiguous in the order the Gemm reads it (see
+    # _gemm); each such weight must be a 2-D initializer that feeds that one Gemm only
     uses = {}
     for node in graph.node:
         for i in node.input:
             uses[i] = uses.get(i, 0) + 1
     initializers = {init.name for init in graph.initializer}
-    stored_transposed = {n.input[1] for n in graph.node if n.op_type == "Gemm" and n.input[1] in initializers
-                         and uses[n.input[1]] == 1 and any(a.name == "transB" and a.i for a in n.attribute)}
+    stored_panels = {n.input[1]: any(a.name == "transB" and a.i for a in n.attribute) for n in graph.node
+                     if n.op_type == "Gemm" and n.input[1] in initializers and uses[n.input[1]] == 1}
     for init in graph.initializer:
         array = numpy_helper.to_array(init)
-        if init.name in stored_transposed:
-            array = array.T
         shapes[init.name] = array.shape
+        if init.name in stored_panels:
+            if array.ndim != 2:
+                raise UnsupportedGraph(f"Gemm weight {init.name[:40]!r} is not a matrix")
+            array = _panels(array.T if stored_panels[init.name] else array)
         if array.dtype.kind == "f":
             constants.append(_float_array(c_name(init.name), array))
+    float_tensors = set(initializers)  # stored as float arrays (with the Constant nodes' values, below)
+    sensor_fed = {"u"}  # tensors computed from the sensors before any Gemm
+    for node in graph.node:
+        if node.op_type != "Gemm" and any(i in sensor_fed for i in node.input):
+            sensor_fed.add(node.output[0])
+    products = set()  # the product functions the Gemms call
     names.update({"x0": "x0", "u": "u", "t": "t_"})
 
     for node in graph.node:
@@ -184,10 +350,12 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
             shapes[out] = array.shape
             if array.dtype.kind == "f":
                 constants.append(_float_array(c_name(out), array))
+            float_tensors.add(out)
             continue
         if op == "Identity" and node.input[0] in initializers:  # the exporter's alias of a shared weight
             names[out] = c_name(node.input[0])
             initializers.add(out)
+            float_tensors.add(out)
             continue
         shape = shapes[out]
         size = int(np.prod(shape))
@@ -197,14 +365,20 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
             a, b = node.input
             code = (f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {src[0]}[{_offset('i', shape, shapes[a])}] "
                     f"{ELEMENTWISE[op]} {src[1]}[{_offset('i', shape, shapes[b])}];")
+        elif op == "Tanh":
+            code = f"    opfmu_tanh_array({size}, {src[0]}, {dst});"
         elif op in UNARY:
             code = f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {UNARY[op].format(src[0] + '[i]')};"
         elif op in COPIES:
+            if node.input[0] not in float_tensors:  # the same values in the same order: a view, no copy
+                nodes.append((node, f"    const double *{dst} = {src[0]};", ""))
+                continue
             code = f"    for (int i = 0; i < {size}; ++i) {dst}[i] = {src[0]}[i];"
         elif op == "Gemm":
-            if node.input[1] in stored_transposed:
-                attrs = {k: v for k, v in attrs.items() if k != "transB"}
-            code = _gemm(node, attrs, src, dst, shapes)
+            panels, sparse = node.input[1] in stored_panels, node.input[0] in sensor_fed
+            if panels:
+                products.add("product_sparse" if sparse else "product")
+            code = _gemm(node, attrs, src, dst, shapes, panels, node.input[0] in float_tensors, sparse)
         elif op == "MatMul":
             code = _matmul(node, src, dst, shapes)
         elif op == "Transpose":
@@ -219,8 +393,10 @@ def generate_kernel(proto, n_sensors: int) -> Kernel:
                                f"and one time, not [1, 1, {n_x}]")
     x0_arg, u_arg = f"const double x0[{n_x}]", f"const double u[{n_u} * OPFMU_N_SENSORS]"
     copy_x = f"    for (int i = 0; i < {n_x}; ++i) x[i] = {result}[i];"
+    uses_tanh = any(n.op_type == "Tanh" for n in graph.node)
     lines = ["/* Generated by opfmu from an ONNX operator graph; do not edit. */", "#include <math.h>",
-             f"#define OPFMU_N_SENSORS {n_sensors}", VECTOR, TANH, *constants, ""]
+             f"#define OPFMU_N_SENSORS {n_sensors}", VECTOR, *([DISPATCH] if uses_tanh or products else []),
+             *([TANH] if uses_tanh else []), *([_product_source(products)] if products else []), *constants, ""]
     lines += _function(f"void opfmu_operator({x0_arg}, {u_arg}, double t, double x[{n_x}])", nodes, copy_x)
     split = _sensor_layer(graph, [n for n, _, _ in nodes])
     if split is None:
@@ -290,7 +466,8 @@ def _trunk_functions(rest, shapes, c_name, z: str, width: int, n_x: int, copy_x:
 
 def _function(signature: str, nodes, tail: str) -> list[str]:
     body = [decl for _, decl, _ in nodes] + [code for _, _, code in nodes if code]
-    return ["OPFMU_VECTOR " + signature, "{", "    const double t_[1] = {t};" if "double t," in signature else "", *body, tail, "}", ""]
+    uses_t = "double t," in signature and any(re.search(r"\bt_\b", line) for line in body)
+    return ["OPFMU_VECTOR " + signature, "{", "    const double t_[1] = {t};" if uses_t else "", *body, tail, "}", ""]
 
 
 def _sensor_layer(graph, nodes):
@@ -329,10 +506,20 @@ def _ancestors(producer: dict, tensor: str, cut: str | None = None) -> set:
     return seen
 
 
-def _gemm(node, attrs, src, dst, shapes) -> str:
-    """Y = alpha A' B' + beta C as an outer-product accumulation: for each row, Y[r, :] starts at the
-    bias and gains alpha A'[r, p] B'[p, :] for p in order. The innermost loop runs over independent
-    outputs (no reduction chain), so it vectorises and pipelines; the sum over p keeps its order."""
+def _panels(weights: np.ndarray) -> np.ndarray:
+    """B [k, n] as its column panels B[:, j:j + PANEL] (the last one narrower where PANEL does not
+    divide n), each row-major, one after the other: the order _gemm reads them in."""
+    return np.concatenate([weights[:, j:j + PANEL].ravel() for j in range(0, weights.shape[1], PANEL)]
+                          or [weights.ravel()])
+
+
+def _gemm(node, attrs, src, dst, shapes, panels: bool = False, a_float: bool = False, sparse: bool = False) -> str:
+    """Y = alpha A' B' + beta C. Each output starts at its bias and gains alpha A'[r, p] B'[p, c] for
+    p in order (in both forms below). With B a weight stored in panels (_panels), each row is one call
+    of opfmu_product (PANEL_PLAIN, PRODUCT), which keeps the sums in registers while the weights stream by;
+    otherwise (B computed in the graph) Y[r, :] is accumulated in place, p by p. a_float: A is a float
+    array of the kernel (a constant) rather than a double one; sparse: the product skips zero inputs
+    (opfmu_product_sparse, for the sensor layer)."""
     alpha = attrs["alpha"].f if "alpha" in attrs else 1.0
     beta = attrs["beta"].f if "beta" in attrs else 1.0
     if not (math.isfinite(alpha) and math.isfinite(beta)):
@@ -343,21 +530,38 @@ def _gemm(node, attrs, src, dst, shapes) -> str:
     m, k = (a_shape[1], a_shape[0]) if trans_a else a_shape
     n = b_shape[0] if trans_b else b_shape[1]
     a_index = f"p * {m} + r" if trans_a else f"r * {k} + p"
-    b_index = f"c * {k} + p" if trans_b else f"p * {n} + c"
-    bias = "0.0"
-    if len(node.input) > 2 and node.input[2]:
-        bias = f"{beta!r} * {src[2]}[{_offset('(r * %d + c)' % n, (m, n), shapes[node.input[2]])}]"
+
+    def bias(column: str) -> str:
+        if len(node.input) > 2 and node.input[2]:
+            return f"{beta!r} * {src[2]}[{_offset(f'(r * {n} + {column})', (m, n), shapes[node.input[2]])}]"
+        return "0.0"
+
+    if not panels:
+        b_index = f"c * {k} + p" if trans_b else f"p * {n} + c"
+        return (f"    for (int r = 0; r < {m}; ++r) {{\n"
+                f"        double *y = {dst} + r * {n};\n"
+                f"        for (int c = 0; c < {n}; ++c) y[c] = {bias('c')};\n"
+                f"        for (int p = 0; p < {k}; ++p) {{\n"
+                f"            const double a = {alpha!r} * (double){src[0]}[{a_index}];\n"
+                f"            for (int c = 0; c < {n}; ++c) y[c] += a * (double){src[1]}[{b_index}];\n"
+                f"        }}\n    }}")
+    if alpha == 1.0 and not trans_a and not a_float:  # the row itself (1.0 * a == a)
+        row, scaled = f"{src[0]} + r * {k}", ""
+    else:
+        row = "a"
+        scaled = (f"        double a[{k}];\n"
+                  f"        for (int p = 0; p < {k}; ++p) a[p] = {alpha!r} * (double){src[0]}[{a_index}];\n")
     return (f"    for (int r = 0; r < {m}; ++r) {{\n"
             f"        double *y = {dst} + r * {n};\n"
-            f"        for (int c = 0; c < {n}; ++c) y[c] = {bias};\n"
-            f"        for (int p = 0; p < {k}; ++p) {{\n"
-            f"            const double a = {alpha!r} * (double){src[0]}[{a_index}];\n"
-            f"            for (int c = 0; c < {n}; ++c) y[c] += a * (double){src[1]}[{b_index}];\n"
-            f"        }}\n    }}")
+            f"        for (int c = 0; c < {n}; ++c) y[c] = {bias('c')};\n"
+            f"{scaled}"
+            f"        opfmu_product{'_sparse' if sparse else ''}({k}, {n}, {src[1]}, {row}, y);\n"
+            f"    }}")
 
 
 def _matmul(node, src, dst, shapes) -> str:
-    """Batched A @ B, accumulated row by row as in _gemm."""
+    """Batched A @ B, accumulated row by row as in _gemm (over independent outputs c), or, for B a
+    column (n = 1), over the independent rows r: each sum runs over p in order either way."""
     a_shape, b_shape = shapes[node.input[0]], shapes[node.input[1]]
     if len(a_shape) < 2 or len(b_shape) < 2:
         raise UnsupportedGraph("MatMul with a 1-D operand is not supported")
@@ -367,6 +571,14 @@ def _matmul(node, src, dst, shapes) -> str:
     n_batch = int(np.prod(batch)) if batch else 1
     a_off = _offset("q", batch, a_shape[:-2]) if batch else "0"
     b_off = _offset("q", batch, b_shape[:-2]) if batch else "0"
+    if n == 1:  # a matrix times a vector (a DeepONet's head): the rows' sums interleaved, each in order
+        return (f"    for (int q = 0; q < {n_batch}; ++q) {{\n"
+                f"        double *y = {dst} + q * {m};\n"
+                f"        for (int r = 0; r < {m}; ++r) y[r] = 0.0;\n"
+                f"        for (int p = 0; p < {k}; ++p) {{\n"
+                f"            const double b = (double){src[1]}[({b_off}) * {k} + p];\n"
+                f"            for (int r = 0; r < {m}; ++r) y[r] += (double){src[0]}[({a_off}) * {m * k} + r * {k} + p] * b;\n"
+                f"        }}\n    }}")
     return (f"    for (int q = 0; q < {n_batch}; ++q) for (int r = 0; r < {m}; ++r) {{\n"
             f"        double *y = {dst} + q * {m * n} + r * {n};\n"
             f"        for (int c = 0; c < {n}; ++c) y[c] = 0.0;\n"

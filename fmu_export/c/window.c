@@ -210,22 +210,32 @@ static void evaluate(ModelState *m, int first, double tau)
 {
 #if OPFMU_FIRST_LAYER > 0
     double z[OPFMU_FIRST_LAYER];
-    if (first > m->filled) { /* slots [filled, first) keep the input they last got */
-        for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
-            for (int c = 0; c < N_U; ++c)
-                m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * m->last_u[c];
-        m->filled = first;
-    }
-    memcpy(m->last_u, m->u, sizeof m->u);
-    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
-        double sum = m->z_base[h] + m->z_past[h];
-        for (int c = 0; c < N_U; ++c) sum += SUFFIX(first, c, h) * m->u[c];
-        z[h] = sum;
+#if OPFMU_TRUNK_SIZE > 0
+    /* An input equal to the one the slots from `filled` on hold leaves the sensors as they were, so the
+       coefficients of the last evaluation (or of the window's start) are still those of this window:
+       with a held input a step costs a product with the trunk values, not the network. */
+    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0;
+#else
+    const int sensors_changed = 1;
+#endif
+    if (sensors_changed) {
+        if (first > m->filled) { /* slots [filled, first) keep the input they last got */
+            for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
+                for (int c = 0; c < N_U; ++c)
+                    m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * m->last_u[c];
+            m->filled = first;
+        }
+        memcpy(m->last_u, m->u, sizeof m->u);
+        for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
+            double sum = m->z_base[h] + m->z_past[h];
+            for (int c = 0; c < N_U; ++c) sum += SUFFIX(first, c, h) * m->u[c];
+            z[h] = sum;
+        }
     }
 #if OPFMU_TRUNK_SIZE > 0
     double scratch[OPFMU_TRUNK_SIZE];
     const double *basis = trunk_at(m, tau, scratch);
-    opfmu_coefficients(m->x_window, z, m->coef);
+    if (sensors_changed) opfmu_coefficients(m->x_window, z, m->coef);
     opfmu_head(m->coef, basis, m->x);
     if (m->rest_weight > 0.0) rest_correct(m, basis, m->x);
 #else
@@ -274,7 +284,9 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         memcpy(x_step, m->x, sizeof x_step);
         if (m->swing_weight > 0.0) affine_drive(m->x, m->u, g_start, k_start);
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
-        for (int k = first; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, m->u, sizeof m->u);
+        /* slots from the previous step's first one on hold last_u: rewritten only when the input changed */
+        if (memcmp(m->u, m->last_u, sizeof m->u) != 0)
+            for (int k = first; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, m->u, sizeof m->u);
         evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
         if (m->slow_on) slow_correct(m, end - m->time, rate_start);
         memcpy(m->x_operator, m->x, sizeof m->x);
