@@ -306,7 +306,9 @@ def _compile(binary: Path, sources, include: Path) -> Path:
     except OSError as exc:
         raise BuildError(f"cannot run gcc ({exc.strerror or exc}): a C compiler is needed to build the FMU") from None
     if result.returncode != 0:
-        raise BuildError(f"gcc failed: {result.stderr.strip().splitlines()[-1] if result.stderr else result.returncode}")
+        lines = result.stderr.strip().splitlines()
+        errors = [line for line in lines if "error" in line] or lines or [f"exit code {result.returncode}"]
+        raise BuildError(f"gcc failed: {errors[0][:300]}")
     return binary
 
 
