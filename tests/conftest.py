@@ -1,4 +1,4 @@
-"""Small dataset recipes and the two SM4 FMUs, shared by the tests."""
+"""Small dataset recipes and the SM4 FMUs (surrogate, native and pythonfmu reference), shared by the tests."""
 import json
 from dataclasses import replace
 
@@ -49,8 +49,18 @@ def fmu_path(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def native_reference_path(tmp_path_factory):
+    """The native reference FMU (Dormand-Prince 5(4) in C) of the default machine, built once."""
+    from fmu_export.native_reference import build_native_reference_fmu
+
+    path = tmp_path_factory.mktemp("native_reference") / "SM4Reference.fmu"
+    build_native_reference_fmu(path)
+    return path
+
+
+@pytest.fixture(scope="session")
 def reference_path(tmp_path_factory):
-    """The reference RK45 FMU, built once."""
+    """The pythonfmu reference FMU (scipy RK45) of the default machine, built once."""
     from fmu_export.reference_fmu import build_reference_fmu
 
     path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"

@@ -2,24 +2,16 @@
 co-simulation units."""
 import shutil
 import subprocess
+import sys
 
 import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 
 from fmu_export.builder import fmi_headers
-from fmu_export.native_reference import build_native_reference_fmu
 from fmu_slave import Slave
 
 FUZZ_HARNESS = __file__.rsplit("/", 1)[0] + "/c/fuzz_harness.c"
-
-
-@pytest.fixture(scope="module")
-def native_reference_path(tmp_path_factory):
-    """The native reference FMU (Dormand-Prince 5(4) in C), built once for this module."""
-    path = tmp_path_factory.mktemp("native_reference") / "SM4Reference.fmu"
-    build_native_reference_fmu(path)
-    return path
 
 
 @pytest.fixture(scope="module", params=["fmu_path", "reference_path", "native_reference_path"])
@@ -36,6 +28,43 @@ def test_many_instances_live_side_by_side_and_the_fmu_reloads(unzipped):
     again = Slave(unzipped, "again")
     np.testing.assert_array_equal(again.step(0.01, 0.9), results[0])
     again.close()
+
+
+def test_get_and_set_fmu_state_reproduce_the_run(unzipped):
+    slave = Slave(unzipped)
+    for k in range(30):
+        slave.step(0.01, 1.0 - 0.01 * k, 0.01 * k)
+    saved, t_saved = slave.fmu.getFMUstate(), slave.t
+    first = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
+    slave.fmu.setFMUstate(saved)
+    slave.t = t_saved
+    again = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
+    slave.fmu.freeFMUstate(saved)
+    slave.close()
+    np.testing.assert_array_equal(first, again)
+
+
+def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped, tmp_path):
+    slave = Slave(unzipped)
+    for _ in range(50):
+        slave.step(0.01, 0.95, -0.1)
+    state, t_saved = slave.fmu.getFMUstate(), slave.t
+    (tmp_path / "state.bin").write_bytes(bytes(slave.fmu.serializeFMUstate(state)))
+    expected = [slave.step(0.01, 1.02, 0.0) for _ in range(80)]
+    slave.close()
+    script = f"""
+import numpy as np, sys
+sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
+from fmu_slave import Slave
+from fmpy import read_model_description
+slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})))
+slave.fmu.setFMUstate(slave.fmu.deSerializeFMUstate(open({str(tmp_path / 'state.bin')!r}, 'rb').read()))
+slave.t = {t_saved!r}
+np.save({str(tmp_path / 'out.npy')!r}, np.array([slave.step(0.01, 1.02, 0.0) for _ in range(80)]))
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), expected)
 
 
 def test_the_two_references_agree_on_held_inputs(reference_path, native_reference_path):

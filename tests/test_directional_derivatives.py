@@ -6,7 +6,6 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
-from fmu_export.native_reference import build_native_reference_fmu
 from fmu_slave import Slave
 from reference_models.sm4 import SM4
 
@@ -14,14 +13,7 @@ DEFAULT = SM4.params()
 RUN = [(0.01, 1.0, 0.0)] * 5 + [(0.01, 0.6, 0.2)] * 8 + [(0.02, 1.05, -0.1)] * 10
 
 
-@pytest.fixture(scope="module")
-def native_path(tmp_path_factory):
-    path = tmp_path_factory.mktemp("native_dd") / "SM4Reference.fmu"
-    build_native_reference_fmu(path)
-    return path
-
-
-@pytest.fixture(scope="module", params=["fmu_path", "native_path"])
+@pytest.fixture(scope="module", params=["fmu_path", "native_reference_path"])
 def unzipped(request):
     path = request.getfixturevalue(request.param)
     return extract(str(path)), read_model_description(str(path))
@@ -52,8 +44,8 @@ def finite_difference(slave, outputs, name, eps=1e-6):
     return (hi - lo) / (2 * eps)
 
 
-def test_both_native_fmus_declare_them_and_only_the_reference_interpolates_inputs(fmu_path, native_path):
-    surrogate, reference = read_model_description(str(fmu_path)), read_model_description(str(native_path))
+def test_both_native_fmus_declare_them_and_only_the_reference_interpolates_inputs(fmu_path, native_reference_path):
+    surrogate, reference = read_model_description(str(fmu_path)), read_model_description(str(native_reference_path))
     assert surrogate.coSimulation.providesDirectionalDerivative and reference.coSimulation.providesDirectionalDerivative
     assert reference.coSimulation.canInterpolateInputs and not surrogate.coSimulation.canInterpolateInputs
 

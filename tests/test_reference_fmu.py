@@ -244,26 +244,3 @@ print(last)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert abs(float(done.stdout.split()[-1]) - SM4.steady_state(None, OTHER)[0]) < 1e-9
-
-
-def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped, tmp_path):
-    slave = Slave(unzipped)
-    for _ in range(20):
-        slave.step(0.01, 0.95, -0.1)
-    state, t_saved = slave.fmu.getFMUstate(), slave.t
-    (tmp_path / "state.bin").write_bytes(bytes(slave.fmu.serializeFMUstate(state)))
-    expected = [slave.step(0.01, 1.02, 0.0) for _ in range(20)]
-    slave.close()
-    script = f"""
-import numpy as np, sys
-sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
-from fmu_slave import Slave
-from fmpy import read_model_description
-slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})))
-slave.fmu.setFMUstate(slave.fmu.deSerializeFMUstate(open({str(tmp_path / 'state.bin')!r}, 'rb').read()))
-slave.t = {t_saved!r}
-np.save({str(tmp_path / 'out.npy')!r}, np.array([slave.step(0.01, 1.02, 0.0) for _ in range(20)]))
-"""
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
-    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), expected)

@@ -271,44 +271,6 @@ def test_shorter_rollover_horizon_starts_windows_more_often(unzipped, operator_r
     np.testing.assert_allclose(states, expected, rtol=0, atol=2e-5)
 
 
-def test_get_and_set_fmu_state_reproduce_the_run(unzipped):
-    slave = Slave(unzipped)
-    for k in range(30):
-        slave.step(0.01, 1.0 - 0.002 * k)
-    saved, t_saved = slave.fmu.getFMUstate(), slave.t
-    first = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
-    slave.fmu.setFMUstate(saved)
-    slave.t = t_saved
-    again = [slave.step(0.02, 0.9, 0.1) for _ in range(40)]
-    slave.fmu.freeFMUstate(saved)
-    slave.close()
-    np.testing.assert_array_equal(first, again)
-
-
-def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped, tmp_path):
-    slave = Slave(unzipped)
-    for _ in range(50):
-        slave.step(0.01, 0.95, -0.1)
-    state = slave.fmu.getFMUstate()
-    (tmp_path / "state.bin").write_bytes(bytes(slave.fmu.serializeFMUstate(state)))
-    expected = [slave.step(0.01, 1.02, 0.0) for _ in range(80)]
-    slave.close()
-    script = f"""
-import numpy as np, sys
-sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
-from fmu_slave import Slave
-from fmpy import read_model_description
-slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})), init=False)
-slave.fmu.setupExperiment(startTime=0.0); slave.fmu.enterInitializationMode(); slave.fmu.exitInitializationMode()
-state = slave.fmu.deSerializeFMUstate(open({str(tmp_path / 'state.bin')!r}, 'rb').read())
-slave.fmu.setFMUstate(state)
-slave.t = 0.5
-np.save({str(tmp_path / 'out.npy')!r}, np.array([slave.step(0.01, 1.02, 0.0) for _ in range(80)]))
-"""
-    subprocess.run([sys.executable, "-c", script], check=True)
-    np.testing.assert_array_equal(np.load(tmp_path / "out.npy"), expected)
-
-
 def test_corrupt_serialized_state_is_refused_with_a_reason(unzipped):
     slave = Slave(unzipped)
     with pytest.raises(FMICallException):
