@@ -80,3 +80,10 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         ET.SubElement(init_el, "Unknown", {"index": str(index[v.name]), "dependencies": " ".join(deps)})
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def validation_problems(fmu) -> list[str]:
+    """What fmpy's validator finds wrong with an FMU file (empty: nothing)."""
+    from fmpy.validation import validate_fmu
+
+    return list(validate_fmu(str(fmu)))

@@ -40,9 +40,9 @@ from reference_models.sm4 import SM4
 
 from .builder import BuildError, _c_double, _compile, check_model_name, component_config, derivatives_source
 from .c_equations import equations_c_source
-from .model_description import model_description
+from .model_description import model_description, validation_problems
 from .reference_fmu import machine_params
-from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, vr_header
+from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 STATIC_SOURCES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h",
@@ -107,7 +107,7 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
             fmu.writestr("resources/machine.json", json.dumps(params.to_dict(), indent=2) + "\n")
             for path in sorted(src.iterdir()):
                 fmu.write(path, f"sources/{path.name}")
-        problems = _validate(fmu_tmp)
+        problems = validation_problems(fmu_tmp)
         if problems:
             raise NativeReferenceError("the native reference FMU does not validate: " + "; ".join(problems)[:500])
         try:
@@ -135,16 +135,10 @@ def config_header(model_name: str, guid: str, component: Component, x_start) -> 
 
 def _start_state(component: Component, params) -> np.ndarray:
     """The equilibrium at the inputs' start values [n_x]; NativeReferenceError where there is none."""
-    starts = ", ".join(f"{q.name} = {float(q.start)!r}" for q in component.inputs)
     try:
-        x = np.asarray(component.steady_state(None, params), dtype=float)
-    except (ValueError, ArithmeticError) as exc:
-        raise NativeReferenceError(f"this {component.name} machine has no equilibrium at the start inputs ({starts}) "
-                                   f"to start from: {' '.join(str(exc).split())[:200]}") from None
-    if x.shape != (component.n_states,) or not np.all(np.isfinite(x)):
-        raise NativeReferenceError(f"this {component.name} machine has no finite equilibrium at the start inputs "
-                                   f"({starts})")
-    return x
+        return start_state(component, params)
+    except ValueError as exc:
+        raise NativeReferenceError(str(exc)) from None
 
 
 def _guid(model_name: str, component: Component, params, generated: dict) -> str:
@@ -157,9 +151,3 @@ def _guid(model_name: str, component: Component, params, generated: dict) -> str
         digest.update(name.encode() + b"\0" + (C_DIR / name).read_bytes())
     h = digest.hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
-
-
-def _validate(fmu: Path) -> list[str]:
-    from fmpy.validation import validate_fmu
-
-    return list(validate_fmu(str(fmu)))

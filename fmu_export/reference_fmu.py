@@ -41,8 +41,8 @@ from reference_models.files import atomic_path
 from reference_models.sm4 import SM4
 from reference_models.version import __version__
 
-from .model_description import model_description
-from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, Variable, fmu_variables
+from .model_description import model_description, validation_problems
+from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, Variable, fmu_variables, start_state
 
 SLAVE = Path(__file__).with_name("reference_slave.py")
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
@@ -116,7 +116,7 @@ def build_reference_fmu(out, model_name: str = "SM4Reference", component: Compon
         if result.returncode != 0 or not fmu.exists():
             raise ReferenceBuildError(f"pythonfmu build failed: {(result.stderr or result.stdout).strip()[-2000:]}")
         guid = _rewrite_model_description(fmu, model_name, variables, _description(component))
-        problems = _validate(fmu)
+        problems = validation_problems(fmu)
         if problems:
             raise ReferenceBuildError("the reference FMU does not validate: " + "; ".join(problems))
         with atomic_path(out) as target:
@@ -144,11 +144,9 @@ def _description(component: Component) -> str:
 def _start_state(component: Component, params):
     """The equilibrium at the inputs' start values [n_x]; ReferenceBuildError where there is none."""
     try:
-        return component.steady_state(None, params)
+        return start_state(component, params)
     except ValueError as exc:
-        starts = ", ".join(f"{q.name} = {q.start:g}" for q in component.inputs)
-        raise ReferenceBuildError(f"this machine has no equilibrium at the start inputs ({starts}) to start "
-                                  f"from: {exc}") from None
+        raise ReferenceBuildError(str(exc)) from None
 
 
 def _definition(component: Component):
@@ -201,9 +199,3 @@ def _rewrite_model_description(fmu: Path, model_name: str, variables: list[Varia
             target.writestr(name, data)
     rewritten.replace(fmu)
     return guid
-
-
-def _validate(fmu: Path) -> list[str]:
-    from fmpy.validation import validate_fmu
-
-    return list(validate_fmu(str(fmu)))

@@ -68,6 +68,22 @@ REFERENCE_EXTRAS = (
 REFERENCE_STARTS = {"rtol": 1e-10, "atol": 1e-12}
 
 
+def start_state(component: Component, params):
+    """The default initial state of an FMU [n_x]: the machine's equilibrium at its inputs' start
+    values. ValueError (one line) where there is no finite one."""
+    import numpy as np
+
+    starts = ", ".join(f"{q.name} = {float(q.start)!r}" for q in component.inputs)
+    try:
+        x = np.asarray(component.steady_state(None, params), dtype=float)
+    except (ValueError, ArithmeticError) as exc:
+        raise ValueError(f"the {component.name} machine has no equilibrium at the start inputs ({starts}) to start "
+                         f"from: {' '.join(str(exc).split())[:200]}") from None
+    if x.shape != (component.n_states,) or not np.all(np.isfinite(x)):
+        raise ValueError(f"the {component.name} machine has no finite equilibrium at the start inputs ({starts})")
+    return x
+
+
 def fmu_variables(component: Component, params, x_start, extras=(), starts=None) -> list[Variable]:
     """The variable list of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
