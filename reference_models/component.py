@@ -90,6 +90,17 @@ class Component:
     affine_states: tuple = ()
     rest: Callable | None = None
 
+    def __post_init__(self):
+        names = [q.name for q in self.states + self.inputs + self.outputs]
+        if not (self.states and self.inputs and self.outputs):
+            raise ValueError(f"component {self.name!r} needs at least one state, one input and one derived output")
+        if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
+            raise ValueError(f"component {self.name!r}: variable names must be distinct identifiers, got {names}")
+        if len(self.state_scales) != len(self.states) or not all(s > 0 for s in self.state_scales):
+            raise ValueError(f"component {self.name!r}: one positive state scale per state")
+        if not all(0 <= i < len(self.states) for i in self.affine_states):
+            raise ValueError(f"component {self.name!r}: affine_states must index its states")
+
     @property
     def state_names(self) -> tuple:
         return tuple(q.name for q in self.states)
