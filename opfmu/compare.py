@@ -95,22 +95,21 @@ def fmu_machine(fmu_dir) -> SM4Params:
 
 
 def operator_machine(path) -> SM4Params:
-    """The machine an operator file was trained for: the parameters in its metadata; CompareError
-    when it has none or they are invalid."""
-    import json
-
+    """The machine an operator file was trained for (its validated metadata); CompareError, one
+    line, when the file is unreadable, not an SM4 operator or its metadata is not valid."""
     import onnx
 
+    from surrogate.contract import ContractError, operator_metadata
+
     try:
-        meta = {p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props}
-        if meta.get("component") != SM4.name:
-            raise CompareError(f"the operator in {path} is not of {SM4.name} (component {meta.get('component')!r})")
-        return SM4.params(json.loads(meta["params"]))
-    except CompareError:
-        raise
-    except Exception as exc:  # unreadable file, no or malformed params: one line
-        raise CompareError(f"cannot tell the surrogate FMU's machine from {path}: {' '.join(str(exc).split())[:200]}") \
-            from None
+        meta = operator_metadata(onnx.load(str(path), load_external_data=False))
+    except ContractError as exc:
+        raise CompareError(f"{path}: {exc}") from None
+    except Exception as exc:  # onnx raises several types for unreadable files
+        raise CompareError(f"{path} is not a readable operator file: {' '.join(str(exc).split())[:200]}") from None
+    if meta["component"] is not SM4:
+        raise CompareError(f"the operator {path} is not of {SM4.name} (component {meta['component'].name!r})")
+    return meta["params"]
 
 
 def same_machine(surrogate_dir, reference_dir) -> None:
