@@ -2,9 +2,10 @@
 from __future__ import annotations
 
 from .component import Component
+from .ieee1 import IEEE1
 from .sm4 import SM4
 
-COMPONENTS = {c.name: c for c in (SM4,)}
+COMPONENTS = {c.name: c for c in (SM4, IEEE1)}
 
 
 def component(name) -> Component:
