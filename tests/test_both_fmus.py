@@ -10,6 +10,7 @@ from fmpy import extract, read_model_description
 
 from fmu_export.builder import fmi_headers
 from fmu_slave import Slave
+from reference_models.sm4 import SM4
 
 FUZZ_HARNESS = __file__.rsplit("/", 1)[0] + "/c/fuzz_harness.c"
 
@@ -56,6 +57,7 @@ def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped
 import numpy as np, sys
 sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
 from fmu_slave import Slave
+from reference_models.sm4 import SM4
 from fmpy import read_model_description
 slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})))
 slave.fmu.setFMUstate(slave.fmu.deSerializeFMUstate(open({str(tmp_path / 'state.bin')!r}, 'rb').read()))
@@ -81,6 +83,19 @@ def native(request):
     """A native FMU (the surrogate or the native reference), extracted."""
     path = request.getfixturevalue(request.param)
     return extract(str(path)), read_model_description(str(path))
+
+
+def test_reset_returns_to_the_start(native):
+    slave = Slave(native)
+    for _ in range(20):
+        slave.step(0.01, 0.9)
+    slave.fmu.reset()
+    slave.fmu.setupExperiment(startTime=0.0)
+    slave.fmu.enterInitializationMode()
+    slave.fmu.exitInitializationMode()
+    slave.t = 0.0
+    np.testing.assert_allclose(slave.state(), SM4.steady_state(), atol=1e-12)
+    slave.close()
 
 
 @pytest.fixture(scope="module")

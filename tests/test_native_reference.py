@@ -248,17 +248,6 @@ def test_bad_calls_and_values_are_answered_as_the_surrogate_answers_them(unzippe
     early.fmu.freeInstance()
 
 
-def test_reset_returns_to_the_start(unzipped):
-    slave = Slave(unzipped)
-    for _ in range(20):
-        slave.step(0.01, 0.9)
-    slave.fmu.reset()
-    slave.fmu.setupExperiment(startTime=0.0)
-    slave.fmu.enterInitializationMode()
-    slave.fmu.exitInitializationMode()
-    np.testing.assert_allclose(slave.state(), SM4.steady_state(None, DEFAULT), atol=1e-12)
-    slave.close()
-
 
 def test_many_instances_of_two_machines_live_side_by_side(unzipped, other):
     slaves = [Slave(fmu, f"i{k}") for k in range(3) for fmu in (unzipped, other)]

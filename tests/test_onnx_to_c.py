@@ -102,6 +102,26 @@ def test_graph_with_an_unsupported_op_is_refused_naming_it():
         generate_kernel(helper.make_model(graph), 1001)
 
 
+def branch_trunk_graph(name: str, branch: list, init: list, n_x: int, n_u: int, n_sensors: int):
+    """x [N, M, n_x] = branch [N, n_x] * sin(Gemm(t, Wt)): the `branch` nodes map xu = [x0, flat u] to
+    "branch"; init holds their weights, Wt [1, n_x] and the axes ax0, ax1."""
+    nodes = [helper.make_node("Flatten", ["u"], ["uf"], axis=1),
+             helper.make_node("Concat", ["x0", "uf"], ["xu"], axis=1),
+             *branch,
+             helper.make_node("Unsqueeze", ["t", "ax1"], ["tc"]),
+             helper.make_node("Gemm", ["tc", "Wt"], ["tg"]),
+             helper.make_node("Sin", ["tg"], ["trunk"]),
+             helper.make_node("Unsqueeze", ["branch", "ax1"], ["b3"]),
+             helper.make_node("Unsqueeze", ["trunk", "ax0"], ["t3"]),
+             helper.make_node("Mul", ["b3", "t3"], ["x"])]
+    graph = helper.make_graph(nodes, name, [
+        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
+        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
+        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
+    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+
+
 def small_operator(n_x: int, n_u: int, n_sensors: int):
     """A hand-made operator graph of other sizes: x [N, M, n_x] = tanh(Gemm([x0, u])) * sin(Gemm(t))."""
     rng = np.random.default_rng(0)
@@ -110,22 +130,8 @@ def small_operator(n_x: int, n_u: int, n_sensors: int):
             helper.make_tensor("b", TensorProto.FLOAT, [n_x], rng.normal(size=n_x).tolist()),
             helper.make_tensor("Wt", TensorProto.FLOAT, [1, n_x], rng.normal(size=n_x).tolist()),
             helper.make_tensor("ax1", TensorProto.INT64, [1], [1]), helper.make_tensor("ax0", TensorProto.INT64, [1], [0])]
-    nodes = [helper.make_node("Flatten", ["u"], ["uf"], axis=1),
-             helper.make_node("Concat", ["x0", "uf"], ["xu"], axis=1),
-             helper.make_node("Gemm", ["xu", "W", "b"], ["g"]),
-             helper.make_node("Tanh", ["g"], ["branch"]),
-             helper.make_node("Unsqueeze", ["t", "ax1"], ["tc"]),
-             helper.make_node("Gemm", ["tc", "Wt"], ["tg"]),
-             helper.make_node("Sin", ["tg"], ["trunk"]),
-             helper.make_node("Unsqueeze", ["branch", "ax1"], ["b3"]),
-             helper.make_node("Unsqueeze", ["trunk", "ax0"], ["t3"]),
-             helper.make_node("Mul", ["b3", "t3"], ["x"])]
-    graph = helper.make_graph(nodes, "small", [
-        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
-        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
-        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
-        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
-    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    branch = [helper.make_node("Gemm", ["xu", "W", "b"], ["g"]), helper.make_node("Tanh", ["g"], ["branch"])]
+    return branch_trunk_graph("small", branch, init, n_x, n_u, n_sensors)
 
 
 def test_kernel_takes_the_number_of_states_and_inputs_from_the_graph(tmp_path):
@@ -198,24 +204,9 @@ def layered_operator(n_x: int, n_u: int, n_sensors: int, hidden: int, alpha: flo
     first = ([helper.make_node("Transpose", ["xu"], ["xuT"]),
               helper.make_node("Gemm", ["xuT", "W1", "b1"], ["g"], alpha=alpha, beta=beta, transA=1)] if trans_a else
              [helper.make_node("Gemm", ["xu", "W1", "b1"], ["g"], alpha=alpha, beta=beta)])
-    nodes = [helper.make_node("Flatten", ["u"], ["uf"], axis=1),
-             helper.make_node("Concat", ["x0", "uf"], ["xu"], axis=1),
-             *first,
-             helper.make_node("Tanh", ["g"], ["h"]),
-             helper.make_node("Gemm", ["h", "W2", "b2"], ["g2"], transB=1),
-             helper.make_node("Tanh", ["g2"], ["branch"]),
-             helper.make_node("Unsqueeze", ["t", "ax1"], ["tc"]),
-             helper.make_node("Gemm", ["tc", "Wt"], ["tg"]),
-             helper.make_node("Sin", ["tg"], ["trunk"]),
-             helper.make_node("Unsqueeze", ["branch", "ax1"], ["b3"]),
-             helper.make_node("Unsqueeze", ["trunk", "ax0"], ["t3"]),
-             helper.make_node("Mul", ["b3", "t3"], ["x"])]
-    graph = helper.make_graph(nodes, "layered", [
-        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
-        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
-        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
-        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
-    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    branch = [*first, helper.make_node("Tanh", ["g"], ["h"]),
+              helper.make_node("Gemm", ["h", "W2", "b2"], ["g2"], transB=1), helper.make_node("Tanh", ["g2"], ["branch"])]
+    return branch_trunk_graph("layered", branch, init, n_x, n_u, n_sensors)
 
 
 @pytest.mark.parametrize("portable", [False, True], ids=["avx2", "portable"])

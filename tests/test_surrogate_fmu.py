@@ -334,19 +334,6 @@ def test_input_outside_the_envelope_turns_in_envelope_false_and_warns(unzipped):
     slave.close()
 
 
-def test_reset_returns_to_the_start(unzipped):
-    slave = Slave(unzipped)
-    for _ in range(20):
-        slave.step(0.01, 0.9)
-    slave.fmu.reset()
-    slave.fmu.setupExperiment(startTime=0.0)
-    slave.fmu.enterInitializationMode()
-    slave.fmu.exitInitializationMode()
-    slave.t = 0.0
-    np.testing.assert_allclose(slave.state(), steady_state(1.0, 0.0), atol=1e-12)
-    slave.close()
-
-
 def test_residual_is_small_at_rest_and_large_on_an_inconsistent_state(unzipped):
     rest = Slave(unzipped)
     rest.step(0.01)
