@@ -1,10 +1,15 @@
 """The 4th-order synchronous machine (Sauer-Pai two-axis model) on a bus of varying voltage: `SM4`.
 
 States  x = (delta [rad], omega [rad/s, deviation from synchronous], Ed_p [pu], Eq_p [pu])
-Inputs  u = (Vs [pu], theta_vs [rad]); Pm and Efd are parameters (the machine's operating point).
+Inputs  u = (Vs [pu], theta_vs [rad], Pm [pu] mechanical power, Efd [pu] field voltage)
 Outputs y = (Id, Iq, I_re, I_im, P, Q) [pu]: stator currents, bus current in the network frame,
         power into the bus.
-Arrays carry the state or input on their last axis: x [..., 4], u [..., 2].
+Arrays carry the state or input on their last axis: x [..., 4], u [..., 4].
+
+The equations see delta and theta_vs only through delta - theta_vs, and omega only through
+d delta/dt = omega and the damping torque D omega: `SM4.drift` declares this symmetry
+(reference_models/drift.py), which the operators use to follow a machine whose angle and speed
+drift with its network.
 """
 from __future__ import annotations
 
@@ -19,8 +24,8 @@ from .component import Component, Parameters, Quantity
 
 @dataclass(frozen=True)
 class SM4Params(Parameters):
-    """Machine, network and operating-point parameters (paper Table I); reactances in pu on the
-    machine base, times in s, Wb in rad/s, Pm and Efd in pu."""
+    """Machine and network parameters (paper Table I); reactances in pu on the machine base, times
+    in s, Wb in rad/s. The operating point (Pm, Efd) is an input, not a parameter."""
 
     D: float = 2.0
     H: float = 5.06
@@ -34,8 +39,6 @@ class SM4Params(Parameters):
     Xep: float = 0.1
     Re: float = 0.0
     Wb: float = 314.159
-    Pm: float = 0.7048
-    Efd: float = 1.08
 
     def check(self) -> None:
         for name in ("H", "Td0_p", "Tq0_p", "Xd", "Xd_p", "Xq", "Xq_p", "Wb"):
@@ -65,15 +68,15 @@ def electrical_power(Ed_p, Eq_p, Id, Iq, p: SM4Params):
 
 
 def derivatives(x, u, p: SM4Params, m):
-    """(d delta, d omega, d Ed_p, d Eq_p)/dt for x = (delta, omega, Ed_p, Eq_p), u = (Vs, theta_vs)."""
+    """(d delta, d omega, d Ed_p, d Eq_p)/dt for x = (delta, omega, Ed_p, Eq_p), u = (Vs, theta_vs, Pm, Efd)."""
     delta, omega, Ed_p, Eq_p = x
-    Vs, theta_vs = u
+    Vs, theta_vs, Pm, Efd = u
     Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, m)
     Pe = electrical_power(Ed_p, Eq_p, Id, Iq, p)
     d_delta = omega
-    d_omega = p.Wb / (2.0 * p.H) * (p.Pm - Pe - p.D * omega)
+    d_omega = p.Wb / (2.0 * p.H) * (Pm - Pe - p.D * omega)
     d_Ed_p = (-Ed_p + (p.Xq - p.Xq_p) * Iq) / p.Tq0_p
-    d_Eq_p = (-Eq_p - (p.Xd - p.Xd_p) * Id + p.Efd) / p.Td0_p
+    d_Eq_p = (-Eq_p - (p.Xd - p.Xd_p) * Id + Efd) / p.Td0_p
     return d_delta, d_omega, d_Ed_p, d_Eq_p
 
 
@@ -84,7 +87,7 @@ def derived(x, u, p: SM4Params, m):
     power into the bus: P + jQ = Vs exp(j theta_vs) conj(I).
     """
     delta, _, Ed_p, Eq_p = x
-    Vs, theta_vs = u
+    Vs, theta_vs = u[0], u[1]
     Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, m)
     # exp(j(delta - pi/2)) = sin(delta) - j cos(delta)
     I_re = Id * m.sin(delta) + Iq * m.cos(delta)
@@ -95,49 +98,61 @@ def derived(x, u, p: SM4Params, m):
     return Id, Iq, I_re, I_im, P, Q
 
 
-def _steady_fluxes(angle, Vs, p: SM4Params):
-    """Ed_p, Eq_p [pu] with d Ed_p/dt = d Eq_p/dt = 0 at rotor angle delta - theta_vs = angle (numpy)."""
+def _steady_fluxes(angle, Vs, Efd, p: SM4Params):
+    """Ed_p, Eq_p [pu] (arrays shaped like angle) with d Ed_p/dt = d Eq_p/dt = 0 at rotor angle
+    delta - theta_vs = angle [rad], bus voltage Vs and field voltage Efd [pu] (numpy)."""
     ra, xq, xd = p.Rs + p.Re, p.Xq_p + p.Xep, p.Xd_p + p.Xep
     det = ra * ra + xq * xd
     kq, kd = (p.Xq - p.Xq_p) / det, (p.Xd - p.Xd_p) / det
     # Ed = kq (ra b - xd a), Eq = Efd - kd (ra a + xq b), a = Ed - Vs sin, b = Eq - Vs cos: linear in (Ed, Eq)
     s, c = Vs * np.sin(angle), Vs * np.cos(angle)
-    A = np.array([[1 + kq * xd, -kq * ra], [kd * ra, 1 + kd * xq]])
-    rhs_ = np.array([kq * (xd * s - ra * c), p.Efd + kd * (ra * s + xq * c)])
-    return np.linalg.solve(A, rhs_)
+    inverse = np.linalg.inv(np.array([[1 + kq * xd, -kq * ra], [kd * ra, 1 + kd * xq]]))
+    r0, r1 = kq * (xd * s - ra * c), Efd + kd * (ra * s + xq * c)
+    return inverse[0, 0] * r0 + inverse[0, 1] * r1, inverse[1, 0] * r0 + inverse[1, 1] * r1
+
+
+def _steady_power(angle, Vs, Efd, p: SM4Params):
+    """Pe [pu] at the steady fluxes of rotor angle `angle` (arrays shaped like angle)."""
+    Ed_p, Eq_p = _steady_fluxes(angle, Vs, Efd, p)
+    Id, Iq = stator_currents(angle, Ed_p, Eq_p, Vs, 0.0, p, np)
+    return electrical_power(Ed_p, Eq_p, Id, Iq, p)
+
+
+_ANGLES = np.linspace(-math.pi / 2, math.pi, 301)  # rad: where the stable branch is looked for
 
 
 def equilibrium(u, p: SM4Params) -> np.ndarray:
-    """The stable equilibrium x* [4] for constant inputs u = (Vs, theta_vs): omega = 0, Pe = Pm on
-    the rising side of the steady-state power-angle curve.
+    """The stable equilibrium x* [4] for constant inputs u = (Vs, theta_vs, Pm, Efd): omega = 0,
+    Pe = Pm on the rising side of the steady-state power-angle curve.
 
-    Raises ValueError when the machine cannot transfer Pm at this voltage (no equilibrium).
+    Raises ValueError when the machine cannot transfer Pm at this voltage and field (no equilibrium).
     """
     from scipy.optimize import brentq
 
-    Vs, theta_vs = (float(v) for v in u)
-
-    def excess_power(angle):
-        Ed_p, Eq_p = _steady_fluxes(angle, Vs, p)
-        Id, Iq = stator_currents(angle, Ed_p, Eq_p, Vs, 0.0, p, np)
-        return electrical_power(Ed_p, Eq_p, Id, Iq, p) - p.Pm
-
-    if not (math.isfinite(Vs) and math.isfinite(theta_vs) and Vs > 0):
-        raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad")
-    grid = np.linspace(-math.pi / 2, math.pi, 301)
-    values = np.array([excess_power(a) for a in grid])
+    Vs, theta_vs, Pm, Efd = (float(v) for v in u)
+    if not all(math.isfinite(v) for v in (Vs, theta_vs, Pm, Efd)) or Vs <= 0:
+        raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad, Pm={Pm} pu, Efd={Efd} pu")
+    values = _steady_power(_ANGLES, Vs, Efd, p) - Pm
     rising = np.nonzero((values[:-1] < 0) & (values[1:] >= 0))[0]
     if rising.size == 0:
-        raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad")
+        raise ValueError(f"no stable equilibrium of SM4 at Vs={Vs} pu, theta_vs={theta_vs} rad, Pm={Pm} pu, Efd={Efd} pu")
     i = rising[0]
-    angle = brentq(excess_power, grid[i], grid[i + 1], xtol=1e-15, rtol=1e-15)
-    Ed_p, Eq_p = _steady_fluxes(angle, Vs, p)
-    return np.array([theta_vs + angle, 0.0, Ed_p, Eq_p])
+    angle = brentq(lambda a: float(_steady_power(a, Vs, Efd, p)) - Pm, _ANGLES[i], _ANGLES[i + 1],
+                   xtol=1e-15, rtol=1e-15)
+    Ed_p, Eq_p = _steady_fluxes(angle, Vs, Efd, p)
+    return np.array([theta_vs + angle, 0.0, float(Ed_p), float(Eq_p)])
+
+
+def has_equilibrium(Vs: float, Pm: float, Efd: float, p: SM4Params) -> bool:
+    """Whether SM4 has a stable equilibrium at bus voltage Vs, mechanical power Pm, field Efd [pu]."""
+    values = _steady_power(_ANGLES, Vs, Efd, p) - Pm
+    return bool(np.any((values[:-1] < 0) & (values[1:] >= 0)))
 
 
 def rest(u, p: SM4Params) -> np.ndarray:
-    """The equilibrium [4] at u = (Vs, theta_vs), Vs raised to the lowest voltage that has one."""
-    return equilibrium((max(float(u[0]), min_voltage_with_equilibrium(p)), float(u[1])), p)
+    """The equilibrium [4] at u = (Vs, theta_vs, Pm, Efd), Vs raised to the lowest voltage that has one."""
+    Vs, theta_vs, Pm, Efd = (float(v) for v in u)
+    return equilibrium((max(Vs, min_voltage_with_equilibrium(p, Pm, Efd)), theta_vs, Pm, Efd), p)
 
 
 SM4 = Component(
@@ -148,7 +163,9 @@ SM4 = Component(
             Quantity("Ed_p", "pu", "d-axis transient voltage"),
             Quantity("Eq_p", "pu", "q-axis transient voltage")),
     inputs=(Quantity("Vs", "pu", "bus voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-            Quantity("theta_vs", "rad", "bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
+            Quantity("theta_vs", "rad", "bus voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
+            Quantity("Pm", "pu", "mechanical power", start=0.7048, operating_range=(0.3, 1.0)),
+            Quantity("Efd", "pu", "field voltage", start=1.08, operating_range=(0.8, 2.5))),
     outputs=(Quantity("Id", "pu", "d-axis stator current"),
              Quantity("Iq", "pu", "q-axis stator current"),
              Quantity("I_re", "pu", "bus current, real part (network frame)"),
@@ -183,24 +200,28 @@ def outputs(x, u, p: SM4Params = DEFAULT_PARAMS):
     return SM4.output_values(x, u, p)
 
 
-def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = DEFAULT_PARAMS) -> np.ndarray:
-    """The stable equilibrium x* [4] at constant (Vs, theta_vs); ValueError where there is none."""
-    return SM4.steady_state((Vs, theta_vs), p)
+def steady_state(Vs: float = 1.0, theta_vs: float = 0.0, p: SM4Params = DEFAULT_PARAMS,
+                 Pm: float = SM4.inputs[2].start, Efd: float = SM4.inputs[3].start) -> np.ndarray:
+    """The stable equilibrium x* [4] at constant (Vs, theta_vs, Pm, Efd); ValueError where there is none."""
+    return SM4.steady_state((Vs, theta_vs, Pm, Efd), p)
 
 
-@lru_cache(maxsize=64)
-def min_voltage_with_equilibrium(p: SM4Params = DEFAULT_PARAMS, tol: float = 1e-9) -> float:
-    """The lowest bus voltage Vs [pu] at which an equilibrium exists (bisection on steady_state).
+@lru_cache(maxsize=4096)
+def min_voltage_with_equilibrium(p: SM4Params = DEFAULT_PARAMS, Pm: float = SM4.inputs[2].start,
+                                 Efd: float = SM4.inputs[3].start, tol: float = 1e-9) -> float:
+    """The lowest bus voltage Vs [pu] at which an equilibrium exists at mechanical power Pm and field
+    voltage Efd [pu] (bisection).
 
-    With fixed Efd and Pm there is none below it: the machine cannot deliver Pm there and, held
-    long enough (Td0_p), loses synchronism. Cached per machine (the parameters are frozen).
+    With Pm and Efd held there is none below it: the machine cannot deliver Pm there and, held long
+    enough (Td0_p), loses synchronism. Cached per machine and operating point (all frozen).
     """
-    low, high = 0.05, 10.0
+    low, high = 1e-3, 10.0
+    if not has_equilibrium(high, Pm, Efd, p):
+        return high
     while high - low > tol:
         mid = 0.5 * (low + high)
-        try:
-            steady_state(mid, 0.0, p)
+        if has_equilibrium(mid, Pm, Efd, p):
             high = mid
-        except ValueError:
+        else:
             low = mid
     return high
