@@ -17,6 +17,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from .drift import Drift
+
 MAX_PARAMETER_FILE_BYTES = 64 * 1024
 
 
@@ -75,6 +77,9 @@ class Component:
     state_scales: a typical excursion of each state in its units (how far "near rest" reaches).
     affine_states: indices of states whose own derivative is affine in that state alone,
         dx_i/dt = g(other states, u) - k x_i with k >= 0 constant (integrated exactly over a step).
+    drift: the component's angles and speed, when its equations are invariant under a common
+        rotation and a constant extra speed of its frame (reference_models.drift); operators of
+        it then work in the frame of each window. None: no such symmetry.
     """
 
     name: str
@@ -89,6 +94,7 @@ class Component:
     state_scales: tuple
     affine_states: tuple = ()
     rest: Callable | None = None
+    drift: Drift | None = None
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -100,6 +106,8 @@ class Component:
             raise ValueError(f"component {self.name!r}: one positive state scale per state")
         if not all(0 <= i < len(self.states) for i in self.affine_states):
             raise ValueError(f"component {self.name!r}: affine_states must index its states")
+        if self.drift is not None:
+            self.drift.check(len(self.states), len(self.inputs))
 
     @property
     def state_names(self) -> tuple:

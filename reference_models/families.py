@@ -1,10 +1,19 @@
-"""Input-signal families of SM4: named, seeded samplers of bus-voltage signals (Vs, theta_vs).
+"""Input-signal families of SM4: named, seeded samplers of its input signals (Vs, theta_vs, Pm, Efd).
 
 Each family maps points of the unit hypercube (from Latin hypercube sampling) to signals, one
-parameter per dimension, each uniform in its range. The paper's `slow` and `fast` families are
-exactly section IV-A.2; `step`, `dip`, `ramp`, `zoh` and `mix` are the inputs a co-simulation master
-sends (`mix`: levels held for a while, changed now and then, one change in five a fault; `jump`: the
-same starting with a change at t = 0, which is how the surrogate FMU meets a jump: it starts a window there).
+parameter per dimension, each uniform in its range. A range is either numbers (low, high) or the
+name of an input, which stands for that input's level range: the component's operating range
+unless a dataset preset gives its own (`levels`, e.g. one machine's dispatch and field voltages).
+
+Bus families move the bus voltage and hold Pm and Efd at levels drawn from their ranges: the paper's
+`slow` and `fast` are exactly section IV-A.2; `step`, `dip`, `ramp`, `zoh` and `mix` are the inputs
+a co-simulation master sends (`mix`: levels held for a while, changed now and then, one change in
+five a fault; `jump`: the same starting with a change at t = 0, which is how the surrogate FMU meets
+a jump: it starts a window there). Control families move Pm and Efd: `governor` (steps and ramps of
+Pm), `exciter` (a fault with the field forced towards a ceiling and returning after it, and
+set-point steps of Efd). `drift` is a faulted bus seen from a frame that turns with the network:
+the bus angle as a zero-order-hold master delivers a drifting network's angle (a sawtooth, see
+signals.Sawtooth) with the exciter's field response.
 """
 from __future__ import annotations
 
@@ -14,19 +23,25 @@ from typing import Callable
 
 import numpy as np
 
-from .signals import Dip, FirstOrder, Piecewise, Ramp, SecondOrder, Signal, held
+from .signals import Dip, FirstOrder, Forcing, Piecewise, Ramp, Sawtooth, SecondOrder, Signal, held
 from .sm4 import SM4
 
-Ranges = dict  # parameter name -> (low, high)
+Ranges = dict  # parameter name -> (low, high), or the name of the input whose level range it takes
 
 COMPONENT = SM4  # the component whose inputs these families drive
 VS_RANGE = SM4.inputs[0].operating_range  # pu, bus voltage levels a window may start from
 THETA_RANGE = SM4.inputs[1].operating_range  # rad
 
 
+def default_levels(component=COMPONENT) -> dict:
+    """{input name: (low, high)}: the operating ranges of the component's inputs."""
+    return {q.name: tuple(q.operating_range) for q in component.inputs}
+
+
 @dataclass(frozen=True)
 class Family:
-    """A parametric signal family: `ranges` [name -> (low, high)] and `build(params, horizon)`."""
+    """A parametric signal family: `ranges` [name -> (low, high) or input name] and
+    `build(params, horizon)`."""
 
     name: str
     ranges: Ranges
@@ -37,33 +52,50 @@ class Family:
     def dim(self) -> int:
         return len(self.ranges)
 
-    def sample(self, unit: np.ndarray, horizon: float) -> list[Signal]:
-        """Signals for unit-cube points unit [n, dim] over a window of `horizon` seconds."""
+    def bounds(self, levels: dict | None = None) -> tuple:
+        """(lows [dim], highs [dim]) with input names resolved to their level ranges."""
+        levels = {**default_levels(self.component), **(levels or {})}
+        pairs = [levels[r] if isinstance(r, str) else r for r in self.ranges.values()]
+        return np.array([p[0] for p in pairs], dtype=float), np.array([p[1] for p in pairs], dtype=float)
+
+    def sample(self, unit: np.ndarray, horizon: float, levels: dict | None = None) -> list[Signal]:
+        """Signals for unit-cube points unit [n, dim] over a window of `horizon` seconds, with input
+        levels from `levels` [input name -> (low, high)] (default: the operating ranges)."""
         unit = np.atleast_2d(unit)
         if unit.shape[1] != self.dim:
             raise ValueError(f"family {self.name!r} takes {self.dim} parameters, got {unit.shape[1]}")
-        lows = np.array([r[0] for r in self.ranges.values()])
-        highs = np.array([r[1] for r in self.ranges.values()])
+        lows, highs = self.bounds(levels)
         values = lows + unit * (highs - lows)
         return [self.build(dict(zip(self.ranges, map(float, row))), horizon) for row in values]
 
 
-def bus(Vs, theta_vs, hold: float = 0.0) -> Signal:
-    """A signal of SM4's inputs from its bus-voltage magnitude and angle channels."""
-    return Signal({"Vs": Vs, "theta_vs": theta_vs}, hold)
+def machine(Vs, theta_vs, Pm, Efd, hold: float = 0.0) -> Signal:
+    """A signal of SM4's inputs from its four channels (a number: held constant)."""
+    def channel(c):
+        return Piecewise((float(c),), ()) if isinstance(c, (int, float)) else c
+
+    return Signal({"Vs": channel(Vs), "theta_vs": channel(theta_vs), "Pm": channel(Pm), "Efd": channel(Efd)}, hold)
+
+
+def bus(Vs, theta_vs, Pm: float = SM4.inputs[2].start, Efd: float = SM4.inputs[3].start, hold: float = 0.0) -> Signal:
+    """A signal of SM4's inputs from its bus-voltage channels, Pm and Efd held (default: their start values)."""
+    return machine(Vs, theta_vs, Pm, Efd, hold)
+
+
+CONTROL_LEVELS = {"Pm": "Pm", "Efd": "Efd"}  # the held Pm and Efd levels of the bus families
 
 
 def _slow(p, horizon):
     return bus(
         FirstOrder(p["Vs0"], p["k_v"], p["A_v"], p["w_v"], 1.0),
-        FirstOrder(p["theta0"], p["k_th"], p["A_th"], p["w_th"], 0.0),
+        FirstOrder(p["theta0"], p["k_th"], p["A_th"], p["w_th"], 0.0), p["Pm"], p["Efd"],
     )
 
 
 def _fast(p, horizon):
     return bus(
         SecondOrder(p["Vs0"], p["dVs0"], p["zeta_v"], p["wn_v"], 1.0),
-        SecondOrder(p["theta0"], p["dtheta0"], p["zeta_th"], p["wn_th"], 0.0),
+        SecondOrder(p["theta0"], p["dtheta0"], p["zeta_th"], p["wn_th"], 0.0), p["Pm"], p["Efd"],
     )
 
 
@@ -71,7 +103,7 @@ def _step(p, horizon):
     t_v, t_th = p["t_v"] * horizon, p["t_th"] * horizon
     return bus(
         Piecewise((p["Vs0"], p["Vs1"]), (t_v,)),
-        Piecewise((p["theta0"], p["theta0"] + p["jump"]), (t_th,)),
+        Piecewise((p["theta0"], p["theta0"] + p["jump"]), (t_th,)), p["Pm"], p["Efd"],
     )
 
 
@@ -82,7 +114,7 @@ def _dip(p, horizon):
         Dip(p["Vs0"], p["Vs_fault"], t_fault, p["duration"], p["Vs0"] + p["post_shift"], p["tau"]),
         Piecewise(
             (p["theta0"], p["theta0"] + p["jump"], p["theta0"] + p["jump_post"]), (t_fault, t_clear)
-        ),
+        ), p["Pm"], p["Efd"],
     )
 
 
@@ -91,49 +123,50 @@ def _ramp(p, horizon):
     t_th = p["t_th"] * horizon
     return bus(
         Ramp(p["Vs0"], p["Vs1"], t_v, t_v + p["len_v"] * horizon),
-        Ramp(p["theta0"], p["theta1"], t_th, t_th + p["len_th"] * horizon),
+        Ramp(p["theta0"], p["theta1"], t_th, t_th + p["len_th"] * horizon), p["Pm"], p["Efd"],
     )
 
 
 SLOW = Family(
     "slow",
-    {"k_v": (1.0, 2.0), "A_v": (0.0, 0.03), "w_v": (0.5, 1.5), "Vs0": VS_RANGE,
-     "k_th": (1.0, 3.0), "A_th": (0.0, 0.05), "w_th": (0.1, 0.5), "theta0": THETA_RANGE},
+    {"k_v": (1.0, 2.0), "A_v": (0.0, 0.03), "w_v": (0.5, 1.5), "Vs0": "Vs",
+     "k_th": (1.0, 3.0), "A_th": (0.0, 0.05), "w_th": (0.1, 0.5), "theta0": THETA_RANGE, **CONTROL_LEVELS},
     _slow,
 )
 FAST = Family(
     "fast",
-    {"zeta_v": (0.6, 0.8), "wn_v": (8.0, 12.0), "Vs0": VS_RANGE, "dVs0": (-0.2, 0.2),
-     "zeta_th": (0.2, 0.4), "wn_th": (10.0, 18.0), "theta0": THETA_RANGE, "dtheta0": (-0.8, 0.8)},
+    {"zeta_v": (0.6, 0.8), "wn_v": (8.0, 12.0), "Vs0": "Vs", "dVs0": (-0.2, 0.2),
+     "zeta_th": (0.2, 0.4), "wn_th": (10.0, 18.0), "theta0": THETA_RANGE, "dtheta0": (-0.8, 0.8), **CONTROL_LEVELS},
     _fast,
 )
 STEP = Family(
     "step",
-    {"Vs0": VS_RANGE, "Vs1": VS_RANGE, "t_v": (0.0, 1.0),
-     "theta0": THETA_RANGE, "jump": (-0.3, 0.3), "t_th": (0.0, 1.0)},
+    {"Vs0": "Vs", "Vs1": "Vs", "t_v": (0.0, 1.0),
+     "theta0": THETA_RANGE, "jump": (-0.3, 0.3), "t_th": (0.0, 1.0), **CONTROL_LEVELS},
     _step,
 )
 DIP = Family(
     "dip",
     {"Vs0": (0.9, 1.1), "Vs_fault": (0.2, 0.9), "t_fault": (0.0, 0.8), "duration": (0.02, 0.3),
      "post_shift": (-0.05, 0.05), "tau": (0.0, 0.2),
-     "theta0": THETA_RANGE, "jump": (-0.3, 0.3), "jump_post": (-0.1, 0.1)},
+     "theta0": THETA_RANGE, "jump": (-0.3, 0.3), "jump_post": (-0.1, 0.1), **CONTROL_LEVELS},
     _dip,
 )
 RAMP = Family(
     "ramp",
-    {"Vs0": VS_RANGE, "Vs1": VS_RANGE, "t_v": (0.0, 0.5), "len_v": (0.05, 1.0),
-     "theta0": THETA_RANGE, "theta1": THETA_RANGE, "t_th": (0.0, 0.5), "len_th": (0.05, 1.0)},
+    {"Vs0": "Vs", "Vs1": "Vs", "t_v": (0.0, 0.5), "len_v": (0.05, 1.0),
+     "theta0": THETA_RANGE, "theta1": THETA_RANGE, "t_th": (0.0, 0.5), "len_th": (0.05, 1.0), **CONTROL_LEVELS},
     _ramp,
 )
 
 def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fault_share: float = 0.2,
-                vs_levels=(0.9, 1.1), change_at_start: bool = False) -> Signal:
+                vs_levels=(0.9, 1.1), change_at_start: bool = False, Pm: float = SM4.inputs[2].start,
+                Efd: float = SM4.inputs[3].start) -> Signal:
     """Piecewise-constant bus voltage over [0, stop_time] s: levels held for `dwell` seconds (Vs in
     vs_levels pu; theta_vs moving by up to 0.3 rad within [-0.5, 0.5] rad, at half the changes); a
     `fault_share` of the changes are faults (Vs at 0.2-0.9 pu for 20-200 ms, then a new level).
     change_at_start: the signal starts with a change (a fault or a new level) at t = 0, the way a
-    window of the surrogate FMU starts at an input jump."""
+    window of the surrogate FMU starts at an input jump. Pm and Efd [pu] are held."""
     times, vs, theta = [], [float(rng.uniform(*vs_levels))], [float(rng.uniform(-0.3, 0.3))]
     t = 0.0 if change_at_start else float(rng.uniform(*dwell))
     while t < stop_time:
@@ -151,26 +184,92 @@ def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fa
         t += float(rng.uniform(*dwell))
     if change_at_start:  # the level before t = 0 is never seen: drop it and the breakpoint at 0
         times, vs, theta = times[1:], vs[1:], theta[1:]
-    return bus(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)))
+    return bus(Piecewise(tuple(vs), tuple(times)), Piecewise(tuple(theta), tuple(times)), Pm, Efd)
 
 
 def _mix(p, horizon):
     """held_levels over one window, changing every 5-40% of it, drawn from the seed parameter."""
     rng = np.random.default_rng(int(p["seed"] * 2**31))
-    return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), vs_levels=(0.85, 1.15))
+    return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), vs_levels=(0.85, 1.15),
+                       Pm=p["Pm"], Efd=p["Efd"])
 
 
 def _jump(p, horizon):
     """_mix with its first change at t = 0, a fault two times in five (drawn from the seed parameter)."""
     rng = np.random.default_rng(int(p["seed"] * 2**31))
     return held_levels(rng, horizon, dwell=(0.05 * horizon, 0.4 * horizon), fault_share=0.4,
-                       vs_levels=(0.85, 1.15), change_at_start=True)
+                       vs_levels=(0.85, 1.15), change_at_start=True, Pm=p["Pm"], Efd=p["Efd"])
 
 
-MIX = Family("mix", {"seed": (0.0, 1.0)}, _mix)
-JUMP = Family("jump", {"seed": (0.0, 1.0)}, _jump)
+MIX = Family("mix", {"seed": (0.0, 1.0), **CONTROL_LEVELS}, _mix)
+JUMP = Family("jump", {"seed": (0.0, 1.0), **CONTROL_LEVELS}, _jump)
 
-BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP)}
+
+def _field(p, horizon) -> Forcing:
+    """The exciter's field through the fault of p: forced up by `rise` towards its ceiling, then
+    returning to E_post."""
+    t_fault = p["t_fault"] * horizon
+    return Forcing(p["E0"], p["E0"] + p["rise"], t_fault, p["duration"], p["tau_rise"], p["E_post"], p["tau_return"])
+
+
+def _fault_voltage(p, horizon) -> Dip:
+    """The bus voltage of a fault at t_fault for `duration`."""
+    return Dip(p["Vs0"], p["Vs_fault"], p["t_fault"] * horizon, p["duration"], p["Vs0"] + p["post_shift"], p["tau"])
+
+
+def _governor(p, horizon):
+    t_p = p["t_p"] * horizon
+    return machine(
+        p["Vs0"], Piecewise((p["theta0"], p["theta0"] + p["jump"]), (p["t_th"] * horizon,)),
+        Ramp(p["P0"], p["P1"], t_p, t_p + p["len_p"] * horizon), p["Efd"],
+    )
+
+
+def _exciter(p, horizon):
+    t_fault = p["t_fault"] * horizon
+    theta = Piecewise((p["theta0"], p["theta0"] + p["jump"], p["theta0"] + p["jump_post"]),
+                      (t_fault, t_fault + p["duration"]))
+    return machine(_fault_voltage(p, horizon), theta, p["Pm"], _field(p, horizon))
+
+
+def _avr(p, horizon):
+    t_e = p["t_e"] * horizon
+    return machine(p["Vs0"], p["theta0"], p["Pm"], Forcing(p["E0"], p["E0"], t_e, 0.0, 1.0, p["E1"], p["tau_e"]))
+
+
+def _drift(p, horizon):
+    return machine(_fault_voltage(p, horizon), Sawtooth(p["theta0"], p["rate"], round(math.exp(p["log_period"]), 6)), p["Pm"],
+                   _field(p, horizon))
+
+
+FAULT = {"Vs0": "Vs", "Vs_fault": (0.0, 0.9), "t_fault": (0.0, 0.7), "duration": (0.02, 0.25),
+         "post_shift": (-0.05, 0.05), "tau": (0.0, 0.2)}
+FIELD = {"E0": "Efd", "rise": (0.0, 4.0), "tau_rise": (0.05, 0.5), "E_post": "Efd", "tau_return": (0.2, 2.0)}
+GOVERNOR = Family(
+    "governor",
+    {"Vs0": "Vs", "theta0": THETA_RANGE, "jump": (-0.2, 0.2), "t_th": (0.0, 1.0),
+     "P0": "Pm", "P1": "Pm", "t_p": (0.0, 0.8), "len_p": (0.001, 1.0), "Efd": "Efd"},
+    _governor,
+)
+EXCITER = Family(
+    "exciter",
+    {**FAULT, "theta0": THETA_RANGE, "jump": (-0.5, 0.5), "jump_post": (-0.2, 0.2), "Pm": "Pm", **FIELD},
+    _exciter,
+)
+AVR = Family(
+    "avr",
+    {"Vs0": "Vs", "theta0": THETA_RANGE, "Pm": "Pm", "E0": "Efd", "E1": "Efd", "t_e": (0.0, 0.8),
+     "tau_e": (0.05, 1.0)},
+    _avr,
+)
+DRIFT = Family(
+    "drift",
+    {**FAULT, "theta0": THETA_RANGE, "rate": (-13.0, 13.0), "log_period": (math.log(0.002), math.log(0.02)),
+     "Pm": "Pm", **FIELD},
+    _drift,
+)
+
+BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP, GOVERNOR, EXCITER, AVR, DRIFT)}
 HOLD_RANGE = (0.001, 0.05)  # s, communication steps a ZOH family holds at (log-uniform)
 
 
@@ -183,11 +282,11 @@ def zoh(base: str, hold_range: tuple = HOLD_RANGE) -> Family:
         hold = math.exp(p.pop("log_hold"))
         return held(inner.build(p, horizon), round(hold, 6))
 
-    return Family(f"zoh-{base}", ranges, build)
+    return Family(f"zoh-{base}", ranges, build, inner.component)
 
 
 def family(name: str) -> Family:
-    """A family by name: slow, fast, step, dip, ramp, or zoh-<base> (e.g. zoh-fast)."""
+    """A family by name (BASE_FAMILIES), or zoh-<base> (e.g. zoh-fast)."""
     if name.startswith("zoh-"):
         return zoh(name[4:])
     try:

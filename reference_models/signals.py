@@ -123,12 +123,60 @@ class Dip:
         return (self.t_fault, self.t_fault + self.duration)
 
 
-CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ramp, Dip)}
+@dataclass(frozen=True)
+class Forcing:
+    """An exciter's field voltage through a fault: y0 until t_fault, then rising towards `ceiling`
+    with time constant tau_rise [s] for `duration`, then returning from where it got to towards
+    y_post with time constant tau_return [s]."""
+
+    y0: float
+    ceiling: float
+    t_fault: float
+    duration: float
+    tau_rise: float
+    y_post: float
+    tau_return: float
+
+    def __call__(self, t):
+        if isinstance(t, float):
+            return float(self(np.array(t)))
+        t_clear = self.t_fault + self.duration
+        rise = self.y0 + (self.ceiling - self.y0) * -np.expm1(-np.clip(t - self.t_fault, 0.0, self.duration) / self.tau_rise)
+        at_clear = self.y0 + (self.ceiling - self.y0) * -math.expm1(-self.duration / self.tau_rise)
+        back = self.y_post + (at_clear - self.y_post) * np.exp(-np.maximum(t - t_clear, 0.0) / self.tau_return)
+        return np.where(t < t_clear, rise, back)
+
+    def breakpoints(self):
+        return (self.t_fault, self.t_fault + self.duration)
+
+
+@dataclass(frozen=True)
+class Sawtooth:
+    """y0 - rate (t - period floor(t / period)): an angle that a zero-order-hold master advances by
+    rate * period every period [s], seen from a frame turning at `rate` [rad/s] (the drift of a
+    network delivered at communication step `period`)."""
+
+    y0: float
+    rate: float
+    period: float
+
+    def __call__(self, t):
+        m = _ops(t)
+        return self.y0 - self.rate * (t - self.period * m.floor(t / self.period + 1e-9))
+
+    def breakpoints(self):
+        return ()
+
+    def breakpoints_until(self, horizon: float):
+        return tuple(np.arange(1, int(math.ceil(horizon / self.period)) + 1) * self.period)
+
+
+CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ramp, Dip, Forcing, Sawtooth)}
 
 
 @dataclass(frozen=True)
 class Signal:
-    """u(t): one channel per input, by input name in the component's order (SM4: Vs, theta_vs);
+    """u(t): one channel per input, by input name in the component's order (SM4: Vs, theta_vs, Pm, Efd);
     optionally held piecewise constant every `hold` seconds (ZOH)."""
 
     channels: dict
@@ -160,7 +208,9 @@ class Signal:
         if self.hold > 0:
             points = np.arange(1, int(math.ceil(horizon / self.hold)) + 1) * self.hold
         else:
-            points = np.array([b for c in self.channels.values() for b in c.breakpoints()], dtype=float)
+            points = np.array([b for c in self.channels.values()
+                               for b in (c.breakpoints_until(horizon) if hasattr(c, "breakpoints_until")
+                                         else c.breakpoints())], dtype=float)
         return np.unique(points[(points > 0) & (points < horizon)])
 
     def to_dict(self) -> dict:

@@ -20,6 +20,7 @@ from functools import lru_cache
 import numpy as np
 
 from .component import Component, Parameters, Quantity
+from .drift import Drift
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,8 @@ SM4 = Component(
     # d omega/dt = Wb/(2H) (Pm - Pe(delta, Ed_p, Eq_p, u)) - Wb D/(2H) omega
     affine_states=(1,),
     rest=rest,
+    # delta and theta_vs enter as delta - theta_vs; omega as d delta/dt and the damping torque D omega
+    drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),)),
 )
 
 STATE_NAMES = SM4.state_names

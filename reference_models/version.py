@@ -1,3 +1,3 @@
 """The opfmu version: recorded in datasets, operator files and FMUs."""
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"

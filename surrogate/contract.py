@@ -31,6 +31,19 @@ def random_inputs(envelope: dict, t_grid: np.ndarray, n: int, rng: np.random.Gen
     return x0.astype(np.float32), u.astype(np.float32), t.astype(np.float32)
 
 
+def drifted(frame, x0_f: np.ndarray, u_f: np.ndarray, s: np.ndarray, a: np.ndarray, c: np.ndarray):
+    """(x0 [n, n_x], u [n, S, n_u]) float32: windows given in their frame (x0_f, u_f at window times
+    s [S]) turned by angles a [n] and speeds c [n], the inverse of reference_models.drift.to_frame."""
+    n_x, n_u = x0_f.shape[-1], u_f.shape[-1]
+    angles, speed = np.zeros(n_x), np.zeros(n_x)
+    angles[list(frame.angle_states)] = 1.0
+    speed[frame.speed_state] = 1.0
+    x0 = x0_f + a[:, None] * angles + c[:, None] * speed
+    u = (u_f + a[:, None, None] * frame.input_rates(n_u)
+         + c[:, None, None] * (s[None, :, None] * frame.input_rates(n_u) + frame.input_torques(n_u)))
+    return x0.astype(np.float32), u.astype(np.float32)
+
+
 # ---------------------------------------------------------------------------------------------------
 # The metadata of an operator file, validated: every value a consumer (the FMU builder, inference)
 # uses is parsed here, typed, range-checked and bounded before anything is generated from it.
@@ -60,6 +73,8 @@ def operator_metadata(source) -> dict:
         residual_scale      tuple of n_x finite positive numbers, or None if absent
         residual_limit      finite number >= 0, or None if absent or null
         rollover_horizon_s  float in (0, horizon_s] (default horizon_s)
+        frame               the window frame (reference_models.drift.Frame) of a component with a drift
+                            symmetry, which must be that of the component and parameters; else None
         raw                 the metadata strings as read
 
     Raises ContractError naming the key and what is wrong with it."""
@@ -102,6 +117,7 @@ def operator_metadata(source) -> dict:
         "residual_scale": _residual_scale(raw, comp.n_states),
         "residual_limit": _residual_limit(raw),
         "rollover_horizon_s": _rollover(raw, horizon),
+        "frame": _frame(raw, comp, params),
         "raw": raw,
     }
 
@@ -222,6 +238,25 @@ def _rollover(raw: dict, horizon: float) -> float:
     if not 0.0 < rollover <= horizon:
         raise ContractError(f"metadata rollover_horizon_s = {rollover!r} must lie in (0, horizon_s = {horizon!r}]")
     return rollover
+
+
+def _frame(raw: dict, comp, params):
+    from reference_models.drift import Frame, frame_of
+
+    if comp.drift is None:
+        return None
+    if "frame" not in raw:
+        raise ContractError(f"metadata has no frame: the operator was made before {comp.name} operators worked in "
+                            "the frame of their window (opfmu < 0.3); retrain it")
+    expected = frame_of(comp.drift, params)
+    try:
+        frame = Frame.from_dict(_json(raw, "frame"))
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise ContractError(f"metadata frame {_show(raw['frame'])} is not a frame") from None
+    if frame != expected:
+        raise ContractError(f"metadata frame {_show(raw['frame'])} is not the frame of the {comp.name} component "
+                            f"with these params ({_show(json.dumps(expected.to_dict()))})")
+    return frame
 
 
 def _show(value) -> str:

@@ -17,13 +17,15 @@ import numpy as np
 import torch
 
 from reference_models.version import __version__
+from reference_models.drift import frame_of, from_frame, to_frame
 from reference_models.files import atomic_path
 
-from .contract import TOLERANCE, random_inputs
+from .contract import TOLERANCE, drifted, random_inputs
 from .data import load_metadata, load_split, machine_of
 from .ensemble import Ensemble, EnsembleError, architecture
 from .evaluation import evaluate
 from .folding import fold
+from .frame_graph import wrap_in_frame
 from .losses import residual_scale
 from .training import load_model
 
@@ -84,10 +86,13 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
         "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if causal else 1.0)),
         "opfmu_version": __version__,
     }
+    frame = frame_of(component.drift, params) if component.drift is not None else None
+    if frame is not None:
+        metadata["frame"] = json.dumps(frame.to_dict())
     with atomic_path(out) as tmp:
         _torch_export(fold(model), len(t_grid), component.n_states, component.n_inputs, tmp)
-        _attach_metadata(tmp, metadata, component)
-        worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed)
+        _attach_metadata(tmp, metadata, component, frame, t_grid)
+        worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed, frame)
         if not worst <= TOLERANCE:
             raise ExportError(f"onnxruntime differs from torch by {worst:.2e} (> {TOLERANCE:g}); not written")
     return metadata
@@ -129,10 +134,13 @@ def _torch_export(model, n_sensors: int, n_states: int, n_inputs: int, path: Pat
                           dynamic_axes=dynamic, opset_version=OPSET, dynamo=False)
 
 
-def _attach_metadata(path: Path, metadata: dict, component) -> None:
+def _attach_metadata(path: Path, metadata: dict, component, frame=None, t_grid=None) -> None:
+    """Declares the output's shape, writes the metadata and, for a frame, wraps the network in it."""
     import onnx
 
     proto = onnx.load(str(path))
+    if frame is not None:
+        proto = wrap_in_frame(proto, frame, t_grid)
     output = proto.graph.output[0]  # the exporter leaves the state axis symbolic: declare [N, M, n_x]
     output.CopyFrom(onnx.helper.make_tensor_value_info("x", onnx.TensorProto.FLOAT, ["N", "M", component.n_states]))
     del proto.metadata_props[:]
@@ -143,15 +151,26 @@ def _attach_metadata(path: Path, metadata: dict, component) -> None:
     onnx.save(proto, str(path))
 
 
-def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0) -> float:
-    """Max abs difference [physical units] of onnxruntime against torch on random in-envelope inputs."""
+def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0, frame=None) -> float:
+    """Max abs difference [physical units] of onnxruntime against torch on random in-envelope inputs;
+    with a frame, the inputs are turned by random angles (up to 30 rad) and speeds (up to 12 rad/s)
+    and torch gets them through reference_models.drift."""
     import onnxruntime as ort
 
-    x0, u, t = random_inputs(envelope, t_grid, n, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    x0, u, t = random_inputs(envelope, t_grid, n, rng)
+    if frame is not None:
+        x0, u = drifted(frame, x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n))
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
     got = session.run(["x"], {"x0": x0, "u": u, "t": t})[0]
+    x0_in, u_in = x0.astype(np.float64), u.astype(np.float64)
+    if frame is not None:
+        x0_in, u_in, shift, c = to_frame(frame, x0_in, u_in, t_grid)
     with torch.no_grad():
-        expected = model(torch.from_numpy(x0), torch.from_numpy(u), torch.from_numpy(t)).numpy()
+        expected = model(torch.from_numpy(x0_in.astype(np.float32)), torch.from_numpy(u_in.astype(np.float32)),
+                         torch.from_numpy(t)).numpy().astype(np.float64)
+    if frame is not None:
+        expected = from_frame(frame, expected, t.astype(np.float64), shift, c)
     return float(np.max(np.abs(got - expected)))
 
 

@@ -17,7 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
+from reference_models.drift import from_frame, to_frame
+
 from .contract import ContractError, operator_metadata
+from .frame_graph import network_graph
 
 DEFAULT_OPERATOR = Path(__file__).parent / "default" / "sm4_cosim.onnx"
 
@@ -58,6 +61,9 @@ class Operator:
         self.envelope = contract["envelope"]
         self.state_names, self.input_names = contract["state_names"], contract["input_names"]
         self.component, self.params = contract["component"], contract["params"]
+        self.frame = contract["frame"]
+        self.sensor_times = np.linspace(0.0, self.horizon, self.n_sensors)
+        proto = network_graph(proto)  # with a frame, it is done here (reference_models.drift)
         n_x = len(self.state_names)
         bounds = ([self.envelope["x0"][n] for n in self.state_names] +
                   [self.envelope["u"][n] for n in self.input_names])
@@ -104,9 +110,16 @@ class Operator:
 
     def predict(self, x0, u, t, strict: bool = False) -> np.ndarray:
         """States x [N, M, n_x] at times t [M] (s, within [0, horizon]) from x0 [N, n_x] and inputs u [N, S, n_u]
-        at the operator's sensor times. Outside the training envelope: EnvelopeWarning, or
-        OperatorInputError when strict."""
-        x0, u, t = self._checked(x0, u, t, strict)
+        at the operator's sensor times. Outside the training envelope (in the window frame, see
+        reference_models.drift): EnvelopeWarning, or OperatorInputError when strict."""
+        x0, u, t, back = self._checked(x0, u, t, strict)  # in the window frame, with the way back
+        x = self._network(x0, u, t)
+        if back is None:
+            return x
+        return from_frame(self.frame, x.astype(np.float64), t.astype(np.float64), *back).astype(np.float32)
+
+    def _network(self, x0, u, t) -> np.ndarray:
+        """The network's states [N, M, n_x] (in the window frame, if the operator has one)."""
         if self._branch is None:
             return self._full.run(["x"], {"x0": x0, "u": u, "t": t})[0]
         branch = self._branch_small if len(x0) < self.SMALL_BATCH else self._branch
@@ -143,12 +156,16 @@ class Operator:
             if not np.isfinite(t).all():
                 raise OperatorInputError("t holds NaN or inf")
             raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t_low:g}, {t_high:g}]")
+        back = None
+        if self.frame is not None:
+            x0_f, u_f, shift, c = to_frame(self.frame, x0.astype(np.float64), u.astype(np.float64), self.sensor_times)
+            x0, u, back = x0_f.astype(np.float32), u_f.astype(np.float32), (shift, c)
         # quick test: every value within its bound (NaN compares false); the ranges only when one is not
         flat = u.reshape(len(u), -1)
         x_low, x_high, u_low, u_high = x0.min(0), x0.max(0), flat.min(0), flat.max(0)
         if ((x_low >= self._x_low).all() and (x_high <= self._x_high).all() and (u_low >= self._u_low).all()
                 and (u_high <= self._u_high).all()):
-            return x0, u, t
+            return x0, u, t, back
         for name, a in (("x0", x0), ("u", u)):
             if not np.isfinite(a).all():
                 raise OperatorInputError(f"{name} holds NaN or inf")
@@ -156,11 +173,20 @@ class Operator:
         if strict:
             raise OperatorInputError(message)
         warnings.warn(message, EnvelopeWarning, stacklevel=3)
-        return x0, u, t
+        return x0, u, t, back
+
+    def in_frame(self, x0: np.ndarray, u: np.ndarray):
+        """(x0, u) in the frame of their windows (what the envelope bounds); as given without a frame."""
+        if self.frame is None:
+            return x0, u
+        x0_f, u_f, _, _ = to_frame(self.frame, np.asarray(x0, dtype=np.float64), np.asarray(u, dtype=np.float64),
+                                   self.sensor_times)
+        return x0_f, u_f
 
     def outside_envelope(self, x0: np.ndarray, u: np.ndarray) -> list[str]:
-        """One line per quantity outside the envelope: its range against the trained range."""
-        return self._outside(*self._ranges(np.asarray(x0), np.asarray(u)))
+        """One line per quantity outside the envelope (in the window frame): its range against the
+        trained range."""
+        return self._outside(*self._ranges(*self.in_frame(np.asarray(x0), np.asarray(u))))
 
     @staticmethod
     def _ranges(x0: np.ndarray, u: np.ndarray):

@@ -2,7 +2,7 @@
 
 A dataset directory holds one `.npz` per split with
     x0 [N, n_x]    initial states (physical units)
-    u  [N, S, n_u] the component's inputs at the S sensor times (SM4: Vs, theta_vs)
+    u  [N, S, n_u] the component's inputs at the S sensor times (SM4: Vs, theta_vs, Pm, Efd)
     t  [S]         sensor = query times [s], uniform from 0 to the horizon
     x  [N, S, n_x] reference states at t (labeled splits only)
     family [N]  input family of each trajectory;  signal [N]  its exact signal as JSON
@@ -10,6 +10,10 @@ and `metadata.json` (written last: its presence marks a complete dataset), which
 component and its parameters (`component`, `params`): the machine every solve, loss and export uses. Solves run in chunks
 cached under `.partial/`; a rerun with the same preset and seed skips finished chunks, so an
 interrupted generation resumes and gives the same files. Everything is deterministic for a seed.
+
+Files hold the windows as solved (absolute angles and speeds). A component with a drift symmetry
+(reference_models.drift) is read back in the frame of each window (`load_split`), which is what
+operators learn, and the envelope in the metadata is the one in that frame.
 """
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ import numpy as np
 from reference_models.version import __version__
 from reference_models.component import Component
 from reference_models.components import component
+from reference_models.drift import frame_of, to_frame, trajectories_to_frame
 from reference_models.files import write_json, write_npz
 from reference_models.progress import progress_bar
 
@@ -33,7 +38,7 @@ from .presets import LABELED, SPLITS, Preset
 from .runner import SolveRunner
 from .sampling import sample_split
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 
 
 def time_grid(preset: Preset) -> np.ndarray:
@@ -90,15 +95,15 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
         ic_box, pool = _ordered_box(preset.ic_box, model), None
         if preset.ic == "reachable":
             x0s, signals, names = probe_plan(preset.families, preset.probes_per_family, preset.horizon, rngs["probe"],
-                                             model, params)
+                                             model, params, preset.levels)
             x = _solve(runner, "probe", x0s, signals, t, preset, partial, progress, machine)
-            meta["reachable"] = reachable_summary(x, names, model, params)
+            meta["reachable"] = reachable_summary(x, names, model, params, preset.levels)
             ic_box, pool = reachable_box(meta["reachable"]), x.reshape(-1, model.n_states)
         meta["ic_box"] = {s: list(r) for s, r in ic_box.items()}
         trained_on = []  # (x0, u) of the splits a model trains on: its envelope
         for split in SPLITS:
             x0, signals, names = sample_split(preset.counts[split], preset.families, ic_box, preset.horizon,
-                                              rngs[split], pool, preset.reachable_fraction)
+                                              rngs[split], pool, preset.reachable_fraction, preset.levels)
             _check_channels(signals, model)
             arrays = {"x0": x0, "u": np.stack([s(t) for s in signals]), "t": t,
                       "family": np.array(names), "signal": np.array([json.dumps(s.to_dict()) for s in signals])}
@@ -106,7 +111,7 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
                 arrays["x"] = _solve(runner, split, x0, signals, t, preset, partial, progress, machine)
             write_npz(out / f"{split}.npz", **arrays)
             if split in ("train", "collocation"):
-                trained_on.append((arrays["x0"], arrays["u"]))
+                trained_on.append(in_frame(arrays, model, params)[:2])
     meta["counts"] = {s: preset.counts[s] for s in SPLITS}
     meta["envelope"] = envelope_of(np.concatenate([x for x, _ in trained_on]),
                                    np.concatenate([u for _, u in trained_on]), model)
@@ -158,6 +163,18 @@ def _solve(runner, name, x0s, signals, t, preset, partial: Path, progress: bool,
     return np.concatenate([results[k] for k in sorted(results)])
 
 
+def in_frame(arrays: dict, model: Component, params) -> tuple:
+    """(x0, u[, x]) of a split's arrays in the frame of each window (reference_models.drift); as
+    they are for a component without a drift symmetry."""
+    if model.drift is None:
+        return (arrays["x0"], arrays["u"]) + ((arrays["x"],) if "x" in arrays else ())
+    frame = frame_of(model.drift, params)
+    if "x" in arrays:
+        return trajectories_to_frame(frame, arrays["x0"], arrays["u"], arrays["x"], arrays["t"])
+    x0_f, u_f, _, _ = to_frame(frame, arrays["x0"], arrays["u"], arrays["t"])
+    return x0_f, u_f
+
+
 def envelope_of(x0: np.ndarray, u: np.ndarray, model: Component) -> dict:
     """Min/max of every initial state (x0 [N, n_x]) and input (u [N, S, n_u]): what a model trained
     on them has seen, by the component's names."""
@@ -174,15 +191,23 @@ def _versions() -> dict:
             "scipy": scipy.__version__}
 
 
-def load_split(directory: str | Path, split: str) -> dict:
+def load_split(directory: str | Path, split: str, frame: bool = True) -> dict:
     """Arrays of one split as a dict (see module docstring for names and shapes), and under
-    `component` the component the dataset was solved for."""
+    `component` the component the dataset was solved for. frame: x0, u and x in the frame of each
+    window (see in_frame), as operators learn them; False: as solved."""
     path = Path(directory) / f"{split}.npz"
     if not path.exists():
         raise DatasetError(f"no {split} split at {path}; run `opfmu data` first")
-    model, _ = machine_of(load_metadata(directory))
+    meta = load_metadata(directory)
+    if meta.get("format") != FORMAT_VERSION:
+        raise DatasetError(f"{directory} was made by an older opfmu (dataset format {meta.get('format')}, "
+                           f"now {FORMAT_VERSION}): regenerate it")
+    model, params = machine_of(meta)
     with np.load(path) as data:
-        return {**{k: data[k] for k in data.files}, "component": model}
+        arrays = {k: data[k] for k in data.files}
+    if frame:
+        arrays.update(zip(("x0", "u", "x"), in_frame(arrays, model, params)))
+    return {**arrays, "component": model}
 
 
 def load_metadata(directory: str | Path) -> dict:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -25,6 +26,8 @@ class Preset:
     probes_per_family: reference windows per family for the reachable-set measurement.
     chunk_size: trajectories per solve task (the unit of parallel work and of resume).
     component: the component whose trajectories are solved (reference_models.components).
+    levels: {input name: (low, high)}: the level ranges the families draw each input from (a
+        machine's dispatch and field voltages); inputs not named keep their operating range.
     """
 
     name: str
@@ -39,8 +42,10 @@ class Preset:
     solver: SolverConfig = SolverConfig()
     chunk_size: int = 50
     component: str = "sm4"
+    levels: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        from reference_models.components import component
         from reference_models.families import family
 
         def whole(value, low, high):
@@ -65,21 +70,42 @@ class Preset:
             raise ValueError(f"preset {self.name!r}: probes_per_family must be a whole number (>= 1 when "
                              "ic is reachable)")
 
+        try:
+            inputs = component(str(self.component)).input_names
+        except ValueError as exc:
+            raise ValueError(f"preset {self.name!r}: {exc}") from None
+        if not isinstance(self.levels, dict):
+            raise ValueError(f"preset {self.name!r}: levels must map input names to (low, high)")
+        for name, pair in self.levels.items():
+            ok = (isinstance(pair, (tuple, list)) and len(pair) == 2
+                  and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in pair)
+                  and pair[0] <= pair[1])
+            if name not in inputs or not ok:
+                raise ValueError(f"preset {self.name!r}: levels must map inputs of {self.component} "
+                                 f"({', '.join(inputs)}) to (low, high) with low <= high, got {str(name)[:40]!r}")
+        object.__setattr__(self, "levels", {k: tuple(float(v) for v in p) for k, p in self.levels.items()})
+
     def to_dict(self) -> dict:
         return asdict(self)
 
 
-# `jump` windows start at an input change, as the FMU's windows do at a jump (restart_jump)
+# `jump` windows start at an input change, as the FMU's windows do at a jump (restart_jump); the
+# control families move Pm and Efd, `drift` is a faulted bus of a drifting network under a ZOH master
 COSIM_FAMILIES = (
-    ("slow", 0.1), ("fast", 0.1), ("step", 0.1), ("dip", 0.15), ("ramp", 0.1),
-    ("zoh-slow", 0.05), ("zoh-fast", 0.05), ("zoh-ramp", 0.05), ("mix", 0.1), ("jump", 0.2),
+    ("slow", 0.06), ("fast", 0.06), ("step", 0.06), ("dip", 0.08), ("ramp", 0.06),
+    ("zoh-slow", 0.03), ("zoh-fast", 0.03), ("zoh-ramp", 0.03), ("mix", 0.07), ("jump", 0.14),
+    ("governor", 0.07), ("exciter", 0.1), ("zoh-exciter", 0.04), ("avr", 0.05), ("drift", 0.06),
+    ("zoh-governor", 0.02),
 )
+# the paper's machine at its operating point (Table I): the Table II setting
+PAPER_LEVELS = {"Pm": (0.7048, 0.7048), "Efd": (1.08, 1.08)}
 
 PRESETS = {
     "paper": Preset(
         name="paper",
         counts={"train": 1000, "collocation": 1000, "val": 100, "test": 100},
         families=(("slow", 0.5), ("fast", 0.5)),
+        levels=PAPER_LEVELS,
     ),
     "cosim": Preset(
         name="cosim",
@@ -117,6 +143,7 @@ def load_preset(name_or_path: str) -> Preset:
         fields_ = json.loads(path.read_text())
         solver = SolverConfig(**fields_.pop("solver", {}))
         fields_["families"] = tuple(tuple(f) for f in fields_["families"])
+        fields_["levels"] = {k: tuple(v) for k, v in fields_.get("levels", {}).items()}
         return Preset(solver=solver, **fields_)
     except (ValueError, TypeError, KeyError, AttributeError, RecursionError, OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"preset file {path} is not a valid preset: {' '.join(str(exc).split())[:300]}") from None

@@ -1,0 +1,134 @@
+"""The drift symmetry of a component, and the window frame the operators work in.
+
+A machine in a network sees its angles drift (every angle of the network turns with the system's
+speed) and its speed drift (with no governors and D = 0 every machine speeds up together during a
+fault and keeps the gain). SM4's equations see the rotor angle delta and the bus angle theta_vs
+only through delta - theta_vs (2 pi periodic), and the speed omega only through d delta/dt = omega
+and the damping torque D omega. So for any constants a and c, with
+    delta_f(t) = delta(t) - a - c t,   theta_f(t) = theta_vs(t) - a - c t,
+    omega_f(t) = omega(t) - c,         Pm_f(t) = Pm(t) - D c,
+(delta_f, omega_f, Ed_p, Eq_p) solves the same equations under (Vs, theta_f, Pm_f, Efd).
+
+An operator therefore works in the frame of its window: a is the first angle input at the window
+start (theta_vs(0): theta_f starts at 0), c the speed at the window start (omega_f starts at 0), and
+the angle states are taken modulo the period nearest to a (delta_f(0) = delta(0) - theta_vs(0) in
+[-pi, pi)). What the network sees no longer depends on the absolute angle or speed, so a machine
+whose angle has drifted by 30 rad or whose speed has drifted by 12 rad/s is as much inside the
+trained envelope as one at rest at theta_vs = 0 (for D = 0; with D > 0 a drifted speed is a torque
+D c, which stays an input). The transformation is exact: the operator's error does not change.
+
+Arrays: x0 [N, n_x], u [N, S, n_u] at window times s [S] (s[0] = 0), x [N, M, n_x] at times t [M].
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Which states and inputs are angles [rad], which state is their speed [rad/s] (d angle/dt),
+    which inputs carry a torque k c under a speed offset c (input index, name of the parameter k),
+    and the period of the equations in the angle differences."""
+
+    angle_states: tuple
+    angle_inputs: tuple
+    speed_state: int
+    torque_inputs: tuple = ()
+    period: float = 2.0 * math.pi
+
+    def check(self, n_states: int, n_inputs: int) -> None:
+        if not self.angle_inputs or not all(0 <= i < n_inputs for i in self.angle_inputs):
+            raise ValueError("drift: angle_inputs must name at least one input, by index")
+        if not all(0 <= i < n_states for i in self.angle_states) or not 0 <= self.speed_state < n_states:
+            raise ValueError("drift: angle_states and speed_state must index states")
+        if not all(0 <= i < n_inputs for i, _ in self.torque_inputs) or not self.period > 0:
+            raise ValueError("drift: torque_inputs must index inputs, and the period be positive")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A drift with the machine's torque coefficients resolved: the numbers the ONNX graph and the
+    FMU's C use (`to_dict` is the operator file's `frame` metadata)."""
+
+    angle_states: tuple
+    angle_inputs: tuple
+    speed_state: int
+    torque: tuple  # (input index, coefficient k): input_f = input - k c
+    period: float
+
+    def to_dict(self) -> dict:
+        return {"angle_states": list(self.angle_states), "angle_inputs": list(self.angle_inputs),
+                "speed_state": self.speed_state, "torque": [[int(i), float(k)] for i, k in self.torque],
+                "period": self.period}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Frame":
+        return cls(tuple(int(i) for i in data["angle_states"]), tuple(int(i) for i in data["angle_inputs"]),
+                   int(data["speed_state"]), tuple((int(i), float(k)) for i, k in data["torque"]),
+                   float(data["period"]))
+
+    def input_rates(self, n_inputs: int) -> np.ndarray:
+        """[n_u]: 1 for an angle input (it turns with the frame), else 0."""
+        rates = np.zeros(n_inputs)
+        rates[list(self.angle_inputs)] = 1.0
+        return rates
+
+    def input_torques(self, n_inputs: int) -> np.ndarray:
+        """[n_u]: k for a torque input (it is lowered by k c in the frame), else 0."""
+        torques = np.zeros(n_inputs)
+        for i, k in self.torque:
+            torques[i] += k
+        return torques
+
+
+def frame_of(drift: Drift, params) -> Frame:
+    """The frame numbers of `drift` for the parameters `params` (the torque coefficients' values)."""
+    return Frame(tuple(drift.angle_states), tuple(drift.angle_inputs), int(drift.speed_state),
+                 tuple((int(i), float(getattr(params, name))) for i, name in drift.torque_inputs), float(drift.period))
+
+
+def window_frame(frame: Frame, x0: np.ndarray, u0: np.ndarray):
+    """(input shift a [N], state shift [N], speed c [N]) of windows starting at x0 [N, n_x] under
+    inputs u0 [N, n_u] (the first sensor values): a = the first angle input; the angle states shift
+    by a plus the whole periods that bring them nearest to it."""
+    a = u0[:, frame.angle_inputs[0]]
+    c = x0[:, frame.speed_state]
+    lead = x0[:, frame.angle_states[0]] - a if frame.angle_states else np.zeros_like(a)
+    return a, a + frame.period * np.floor(lead / frame.period + 0.5), c
+
+
+def to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, s: np.ndarray):
+    """(x0_f [N, n_x], u_f [N, S, n_u], state shift [N], speed [N]): windows in their own frame."""
+    a, shift, c = window_frame(frame, x0, u[:, 0])
+    n_x, n_u = x0.shape[-1], u.shape[-1]
+    x0_f = x0 - shift[:, None] * _mask(n_x, frame.angle_states) - c[:, None] * _mask(n_x, (frame.speed_state,))
+    u_f = (u - a[:, None, None] * frame.input_rates(n_u)
+           - c[:, None, None] * (s[None, :, None] * frame.input_rates(n_u) + frame.input_torques(n_u)))
+    return x0_f, u_f, shift, c
+
+
+def from_frame(frame: Frame, x_f: np.ndarray, t: np.ndarray, shift: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """States x [N, M, n_x] at window times t [M] from x_f [N, M, n_x] in the frame of to_frame."""
+    n_x = x_f.shape[-1]
+    angles = _mask(n_x, frame.angle_states)
+    return (x_f + shift[:, None, None] * angles
+            + c[:, None, None] * (t[None, :, None] * angles + _mask(n_x, (frame.speed_state,))))
+
+
+def trajectories_to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, x: np.ndarray, s: np.ndarray):
+    """A dataset's windows (x0 [N, n_x], u and x [N, S, .] on the grid s [S]) in their own frames."""
+    x0_f, u_f, shift, c = to_frame(frame, x0, u, s)
+    n_x = x0.shape[-1]
+    angles = _mask(n_x, frame.angle_states)
+    x_f = (x - shift[:, None, None] * angles
+           - c[:, None, None] * (s[None, :, None] * angles + _mask(n_x, (frame.speed_state,))))
+    return x0_f, u_f, x_f
+
+
+def _mask(n: int, indices) -> np.ndarray:
+    m = np.zeros(n)
+    m[list(indices)] = 1.0
+    return m
