@@ -3,7 +3,9 @@
 The component's equations run on `Dual` values: each carries its C expression and the C
 expressions of its partial derivatives with respect to the states and inputs it depends on
 (forward-mode differentiation, one statement per operation). No derivative is written by hand, and
-a derivative that is structurally zero is never computed.
+a derivative that is structurally zero is never computed. A conditional (`DualMath.where` on a
+comparison of Dual values, reference_models.piecewise.where) selects the value and the partial
+derivatives of the branch taken: exact wherever the equations are differentiable.
 
 Generated functions (n_x states, n_u inputs, columns ordered x then u):
     model_derivatives_jacobian(x, u, J)   J[i * (n_x + n_u) + j] = d f_i / d (x, u)_j
@@ -89,6 +91,25 @@ class Dual:
     def __neg__(self):
         return self._new(f"-{self.code}", {j: f"-{g}" for j, g in self.grads.items()})
 
+    def _compare(self, other, op) -> "DualCondition":
+        return DualCondition(f"{self.code} {op} {self._lift(other).code}", self.recorder)
+
+    __lt__ = lambda self, o: self._compare(o, "<")  # noqa: E731
+    __le__ = lambda self, o: self._compare(o, "<=")  # noqa: E731
+    __gt__ = lambda self, o: self._compare(o, ">")  # noqa: E731
+    __ge__ = lambda self, o: self._compare(o, ">=")  # noqa: E731
+
+
+class DualCondition:
+    """A C comparison of Dual values (`code`), for `DualMath.where`."""
+
+    def __init__(self, code: str, recorder: _Recorder):
+        self.code, self.recorder = code, recorder
+
+    def __bool__(self):
+        raise TypeError("a traced comparison has no Python truth value: select with "
+                        "reference_models.piecewise.where(m, condition, a, b)")
+
 
 class DualMath:
     """The math namespace of Dual values: libm calls and their derivatives."""
@@ -113,6 +134,16 @@ class DualMath:
         value = a._new(f"sqrt({a.code})", {})
         return Dual(value.code, {j: a.recorder.emit(f"{g} / (2.0 * {value.code})") for j, g in a.grads.items()},
                     a.recorder)
+
+    @staticmethod
+    def where(condition, a, b):
+        """a where condition holds, else b, with the partial derivatives of the branch taken."""
+        if not isinstance(condition, DualCondition):
+            return a if condition else b
+        a, b = (v if isinstance(v, Dual) else Dual(_literal(v), {}, condition.recorder) for v in (a, b))
+        keys = sorted(a.grads.keys() | b.grads.keys())
+        return a._new(f"({condition.code}) ? {a.code} : {b.code}",
+                      {j: f"({condition.code}) ? {a.grads.get(j, '0.0')} : {b.grads.get(j, '0.0')}" for j in keys})
 
 
 def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int, doc: str) -> str:

@@ -4,7 +4,9 @@ A component's equations are written against a math namespace; running them on `T
 records every arithmetic step as a C statement, so the C code computes exactly the expressions scipy
 and torch use, with the parameters baked in as literals (shortest round-trip repr, so no digit is
 lost). Each traced value also knows which inputs it depends on, which gives the model description
-its direct input dependencies.
+its direct input dependencies. A comparison of traced values is a `Condition` (a C comparison), which
+`CMath.where` turns into a conditional expression (reference_models.piecewise.where); it has no
+Python truth value, so an equation that branches with `if` on a traced value fails loudly.
 """
 from __future__ import annotations
 
@@ -48,6 +50,27 @@ class Traced:
     def __neg__(self):
         return self.recorder.emit(f"-{self.code}", self.inputs)
 
+    def _compare(self, other, op):
+        traced = isinstance(other, Traced)
+        rhs = other.code if traced else _literal(other)
+        return Condition(f"{self.code} {op} {rhs}", self.recorder, self.inputs | (other.inputs if traced else frozenset()))
+
+    __lt__ = lambda self, o: self._compare(o, "<")  # noqa: E731
+    __le__ = lambda self, o: self._compare(o, "<=")  # noqa: E731
+    __gt__ = lambda self, o: self._compare(o, ">")  # noqa: E731
+    __ge__ = lambda self, o: self._compare(o, ">=")  # noqa: E731
+
+
+class Condition:
+    """A C comparison of traced values (`code`), for `CMath.where`; `inputs` as Traced's."""
+
+    def __init__(self, code: str, recorder: _Recorder, inputs: frozenset):
+        self.code, self.recorder, self.inputs = code, recorder, inputs
+
+    def __bool__(self):
+        raise TypeError("a traced comparison has no Python truth value: select with "
+                        "reference_models.piecewise.where(m, condition, a, b)")
+
 
 def _literal(value: float) -> str:
     text = repr(float(value))
@@ -65,6 +88,15 @@ class CMath:
     cos = staticmethod(lambda a: CMath._call("cos", a))
     exp = staticmethod(lambda a: CMath._call("exp", a))
     sqrt = staticmethod(lambda a: CMath._call("sqrt", a))
+
+    @staticmethod
+    def where(condition, a, b):
+        """a where condition holds, else b: C's conditional expression (a number condition: a or b)."""
+        if not isinstance(condition, Condition):
+            return a if condition else b
+        code = [v.code if isinstance(v, Traced) else _literal(v) for v in (a, b)]
+        inputs = condition.inputs.union(*(v.inputs for v in (a, b) if isinstance(v, Traced)))
+        return condition.recorder.emit(f"({condition.code}) ? {code[0]} : {code[1]}", inputs)
 
 
 def _trace(fn, component: Component, params):

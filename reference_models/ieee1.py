@@ -1,4 +1,4 @@
-"""The IEEE Type I exciter (Sauer-Pai, without regulator limits): `IEEE1`.
+"""The IEEE Type I exciter (Sauer-Pai, optional non-windup regulator limits): `IEEE1`.
 
 States  x = (Efd [pu] field voltage, RF [pu] rate-feedback state, VR [pu] regulator output)
 Inputs  u = (Vt [pu] terminal voltage magnitude, Vref [pu] voltage set point)
@@ -6,19 +6,28 @@ Outputs y = (SE [pu] the saturation function SE(Efd) = Ax exp(Bx Efd))
 
     TE dEfd/dt = -(KE + SE(Efd)) Efd + VR
     TF dRF/dt  = -RF + (KF / TF) Efd
-    TA dVR/dt  = -VR + KA RF - (KA KF / TF) Efd + KA (Vref - Vt)
+    TA dVR/dt  = -VR + KA RF - (KA KF / TF) Efd + KA (Vref - Vt) =: f,   VRmin <= VR <= VRmax
+
+The regulator limit is Sauer-Pai's non-windup limit: VR stops at a limit while the regulator
+pushes beyond it (dVR/dt = 0 where VR >= VRmax and f > 0, or VR <= VRmin and f < 0) and leaves
+it as soon as f turns back. A limit at or beyond NO_LIMIT (1e6 pu) in magnitude is none: the
+defaults VRmin = -1e6, VRmax = 1e6 leave VR unlimited and the traced equations smooth (no
+conditional is generated for an absent limit).
 
 Defaults: the WSCC 9-bus exciters (KA 20, TA 0.2, KE 1, TE 0.314, KF 0.063, TF 0.35,
-SE = 0.0039 exp(1.555 Efd)). The regulator limits VRmin, VRmax are not modelled yet: the traced
-equations are smooth.
+SE = 0.0039 exp(1.555 Efd)), without limits.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .component import Component, Parameters, Quantity
+from .piecewise import where
+
+NO_LIMIT = 1e6  # pu: a regulator limit this large (or larger) in magnitude is no limit
 
 
 @dataclass(frozen=True)
@@ -33,6 +42,8 @@ class IEEE1Params(Parameters):
     TF: float = 0.35
     Ax: float = 0.0039
     Bx: float = 1.555
+    VRmin: float = -NO_LIMIT
+    VRmax: float = NO_LIMIT
 
     def check(self) -> None:
         for name in ("KA", "TA", "TE", "TF"):
@@ -40,6 +51,23 @@ class IEEE1Params(Parameters):
         for name in ("KF", "Ax", "Bx"):
             self.require(name, getattr(self, name) >= 0, "be >= 0")
         self.require("KE", self.KE > 0, "be > 0 (a separately excited exciter; self-excited ones are not modelled)")
+        self.require("VRmax", self.VRmax > self.VRmin, f"exceed VRmin = {self.VRmin!r}")
+
+
+def regulator_limits(p: IEEE1Params) -> tuple:
+    """(low, high) [pu] of the regulator output VR: -inf, inf for an absent limit (|limit| >= NO_LIMIT)."""
+    return (p.VRmin if p.VRmin > -NO_LIMIT else -math.inf, p.VRmax if p.VRmax < NO_LIMIT else math.inf)
+
+
+def non_windup(rate, VR, p: IEEE1Params, m):
+    """dVR/dt under the non-windup limit: `rate` (the unlimited one), held at 0 while VR is at a
+    limit and the rate pushes it beyond."""
+    low, high = regulator_limits(p)
+    if high < math.inf:
+        rate = where(m, VR >= high, where(m, rate > 0.0, 0.0, rate), rate)
+    if low > -math.inf:
+        rate = where(m, VR <= low, where(m, rate < 0.0, 0.0, rate), rate)
+    return rate
 
 
 def derivatives(x, u, p: IEEE1Params, m):
@@ -49,7 +77,7 @@ def derivatives(x, u, p: IEEE1Params, m):
     SE = p.Ax * m.exp(p.Bx * Efd)
     d_Efd = (-(p.KE + SE) * Efd + VR) / p.TE
     d_RF = (-RF + p.KF / p.TF * Efd) / p.TF
-    d_VR = (-VR + p.KA * RF - p.KA * p.KF / p.TF * Efd + p.KA * (Vref - Vt)) / p.TA
+    d_VR = non_windup((-VR + p.KA * RF - p.KA * p.KF / p.TF * Efd + p.KA * (Vref - Vt)) / p.TA, VR, p, m)
     return d_Efd, d_RF, d_VR
 
 
@@ -59,12 +87,16 @@ def derived(x, u, p: IEEE1Params, m):
 
 
 def equilibrium(u, p: IEEE1Params) -> np.ndarray:
-    """The steady state [3] at constant (Vt, Vref): (KE + SE(Efd)) Efd = KA (Vref - Vt), which is
-    increasing in Efd for KE > 0 and Efd >= -1 / Bx; ValueError outside that branch."""
+    """The steady state [3] at constant (Vt, Vref): (KE + SE(Efd)) Efd = VR, VR = KA (Vref - Vt)
+    within the regulator limits (else the limit it rests at), which is increasing in Efd for KE > 0
+    and Efd >= -1 / Bx; ValueError outside that branch."""
     from scipy.optimize import brentq
 
     Vt, Vref = (float(v) for v in u)
-    drive = p.KA * (Vref - Vt)
+    if not (np.isfinite(Vt) and np.isfinite(Vref)):
+        raise ValueError(f"no steady state of IEEE1 at Vt={Vt} pu, Vref={Vref} pu")
+    vr_low, vr_high = regulator_limits(p)
+    drive = min(max(p.KA * (Vref - Vt), vr_low), vr_high)
 
     def balance(Efd):
         return (p.KE + p.Ax * np.exp(p.Bx * Efd)) * Efd - drive
@@ -76,12 +108,14 @@ def equilibrium(u, p: IEEE1Params) -> np.ndarray:
     if not (np.isfinite(drive) and balance(low) <= 0 <= balance(high)):
         raise ValueError(f"no steady state of IEEE1 at Vt={Vt} pu, Vref={Vref} pu")
     Efd = brentq(balance, low, high, xtol=1e-15, rtol=1e-15)
-    return np.array([Efd, p.KF / p.TF * Efd, (p.KE + p.Ax * np.exp(p.Bx * Efd)) * Efd])
+    at_limit = drive in (vr_low, vr_high)  # VR rests exactly at the limit, held there
+    VR = drive if at_limit else (p.KE + p.Ax * np.exp(p.Bx * Efd)) * Efd
+    return np.array([Efd, p.KF / p.TF * Efd, VR])
 
 
 IEEE1 = Component(
     name="ieee1",
-    description="IEEE Type I exciter (Sauer-Pai, no regulator limits)",
+    description="IEEE Type I exciter (Sauer-Pai, optional non-windup regulator limits)",
     states=(Quantity("Efd", "pu", "field voltage"),
             Quantity("RF", "pu", "rate-feedback state"),
             Quantity("VR", "pu", "regulator output")),
@@ -93,6 +127,7 @@ IEEE1 = Component(
     output_equations=derived,
     equilibrium=equilibrium,
     state_scales=(0.5, 0.1, 0.5),
-    # dRF/dt = (KF/TF Efd - RF)/TF and dVR/dt = (... - VR)/TA: each affine in itself
-    affine_states=(1, 2),
+    # dRF/dt = (KF/TF Efd - RF)/TF: affine in RF. dVR/dt = (... - VR)/TA is affine in VR only
+    # without regulator limits (the limit holds VR), so VR is not declared affine
+    affine_states=(1,),
 )
