@@ -122,3 +122,27 @@ def test_bus7_fault_with_field_voltage_held_loses_synchronism():
     assert not r.stable
     assert 0.3 < r.loss_of_synchronism_s < 1.0
     np.testing.assert_allclose(r.Efd, np.broadcast_to(r.Efd[0], r.Efd.shape))
+
+
+def test_solved_voltages_satisfy_the_full_network_equations(grid):
+    """Kron reduction and the affine machine currents against KCL on all nine buses, in a fault-on
+    and a post-trip topology, at states away from the equilibrium."""
+    rng = np.random.default_rng(2)
+    y = grid.x0 + rng.normal(0.0, 0.2, (4, grid.x0.size))
+    for net in (grid.network(7, 0.01 + 0.02j), grid.network(out_of_service=["6-9"])):
+        rows = grid.observe(np.zeros(len(y)), y, net)
+        for n in range(len(y)):
+            injected = np.zeros(9, dtype=complex)
+            for k, p in enumerate(grid.machines):
+                u = np.array([rows["Vs"][n, k], rows["theta_vs"][n, k], 0.0, 0.0])
+                out = SM4.output_values(y[n, grid.machine_slice(k)], u, p)
+                injected[wscc9.bus_index(wscc9.GENERATOR_BUSES[k])] = out[2] + 1j * out[3]
+            np.testing.assert_allclose(net.Y @ rows["V_bus"][n], injected, atol=1e-9)
+
+
+def test_trip_without_fault_and_clearing_after_stop():
+    r = simulate_wscc9(None, 0.1, trip="8-9", stop=0.3, step=0.1)
+    assert [t for t, _ in r.events] == [0.1] and r.stable
+    assert np.max(np.abs(r.omega[1])) < 1e-8 < np.max(np.abs(r.omega[-1]))
+    held = simulate_wscc9(8, 1.0, stop=0.2, step=0.1)  # the fault lasts to the end
+    assert [t for t, _ in held.events] == [0.0] and held.V_bus[-1, wscc9.bus_index(8)] < 1e-4
