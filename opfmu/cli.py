@@ -340,6 +340,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--stop-time", type=float, default=10.0, help="seconds per scenario (default 10)")
     demo.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
     demo.set_defaults(func=cmd_demo)
+
+    from opfmu.init_command import add_init_parser
+
+    add_init_parser(sub)
     return parser
 
 
