@@ -18,13 +18,14 @@ import math
 from numbers import Real
 from pathlib import Path
 
-from reference_models.component import MAX_PARAMETER_FILE_BYTES, ParameterError
+from reference_models.component import ParameterError
 from reference_models.ieee1 import IEEE1
 from reference_models.initialisation import exciter_start, machine_start
 from reference_models.sm4 import SM4
 
 MAX_LOAD_FLOW_BYTES = 1024 * 1024
 MAX_GENERATORS = 1000
+DEFAULT_EXCITER = IEEE1.params()  # the WSCC exciter
 POINT_KEYS = ("V", "theta", "theta_deg", "P", "Q")
 GENERATOR_KEYS = POINT_KEYS + ("name", "bus", "machine", "exciter")
 
@@ -128,7 +129,7 @@ def _point_number(entry: dict, key: str, where: str) -> float:
     raise InitError(f"{where}: {key} must be a finite number, got {_label(json.dumps(value))[:40]}")
 
 
-def load_flow_points(path, machine=None, exciter=IEEE1.params()) -> list:
+def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
     """The generators of a load-flow file: [(name, V, theta [rad], P, Q, machine, exciter)].
 
     The file is a JSON object {"generators": [entry, ...]}, a list of entries or one entry. An entry
@@ -220,7 +221,7 @@ def run_init(args) -> None:
              "--theta-deg/--theta": args.theta if args.theta is not None else args.theta_deg}
     try:
         machine = SM4.params() if args.machine is None else SM4.load_params(args.machine)
-        exciter = None if args.no_exciter else IEEE1.params() if args.exciter is None else IEEE1.load_params(args.exciter)
+        exciter = None if args.no_exciter else DEFAULT_EXCITER if args.exciter is None else IEEE1.load_params(args.exciter)
         if args.load_flow is not None:
             given = [flag for flag, value in point.items() if value is not None]
             if given:
@@ -253,8 +254,8 @@ def format_table(result: dict, name: str | None = None) -> str:
     """The start values of one generator as a readable table."""
     op = result["operating_point"]
     title = f"{name}: " if name else ""
-    lines = [f"{title}bus V = {op['V']:.6g} pu at {op['theta_deg']:.6g} deg, P = {op['P']:.6g} pu, "
-             f"Q = {op['Q']:.6g} pu (injected)"]
+    lines = [(f"{title}bus V = {op['V']:.6g} pu at {op['theta_deg']:.6g} deg, P = {op['P']:.6g} pu, "
+              f"Q = {op['Q']:.6g} pu (injected)")]
     for key, component, label in (("machine", SM4, "machine FMU (sm4)"), ("exciter", IEEE1, "exciter FMU (ieee1)")):
         if key not in result:
             continue
