@@ -15,8 +15,8 @@ S = 21
 
 def small_model(arch):
     torch.manual_seed(0)
-    stats = NormStats(x_mean=(0.1, 0.2, 0.01, 0.9), x_std=(0.8, 0.6, 0.1, 0.1), u_mean=(1.0, 0.0),
-                      u_std=(0.07, 0.12), horizon=1.0, n_sensors=S)
+    stats = NormStats(x_mean=(0.1, 0.2, 0.01, 0.9), x_std=(0.8, 0.6, 0.1, 0.1), u_mean=(1.0, 0.0, 0.7, 1.1),
+                      u_std=(0.07, 0.12, 0.1, 0.2), horizon=1.0, n_sensors=S)
     return build_model(OperatorConfig(arch=arch, width=16, depth=2, latent=8), stats).double()
 
 
@@ -26,7 +26,7 @@ def test_autodiff_time_derivative_matches_central_finite_differences(arch):
     g = torch.Generator().manual_seed(1)
     f64 = dict(generator=g, dtype=torch.float64)
     x0 = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64) + 0.3 * torch.randn(3, 4, **f64)
-    u = 1.0 + 0.1 * torch.randn(3, S, 2, **f64)
+    u = 1.0 + 0.1 * torch.randn(3, S, 4, **f64)
     t = torch.tensor([0.0, 0.004, 0.02, 0.3, 0.97], dtype=torch.float64)
     x, dxdt = value_and_time_derivative(net, x0, u, t)
     h = 1e-6
@@ -38,7 +38,7 @@ def test_autodiff_time_derivative_matches_central_finite_differences(arch):
 def test_time_derivative_is_differentiable_with_respect_to_the_parameters():
     net = small_model("unstacked")
     f64 = dict(dtype=torch.float64)
-    x0, u, t = torch.zeros(2, 4, **f64), torch.ones(2, S, 2, **f64), torch.linspace(0, 1, 5, **f64)
+    x0, u, t = torch.zeros(2, 4, **f64), torch.ones(2, S, 4, **f64), torch.linspace(0, 1, 5, **f64)
     _, dxdt = value_and_time_derivative(net, x0, u, t)
     dxdt.square().sum().backward()
     assert net.trunk_net[0].weight.grad.abs().sum() > 0
@@ -46,8 +46,8 @@ def test_time_derivative_is_differentiable_with_respect_to_the_parameters():
 
 
 def reference_window():
-    """A fast-family reference trajectory on a fine grid: t [S], x [1, S, 4], u [1, S, 2]."""
-    signal = family("fast").sample(np.full((1, 8), 0.7), 0.3)[0]
+    """A fast-family reference trajectory on a fine grid: t [S], x [1, S, 4], u [1, S, 4]."""
+    signal = family("fast").sample(np.full((1, family("fast").dim), 0.7), 0.3)[0]
     t = np.linspace(0.0, 0.3, 3001)
     x0 = steady_state(1.0, 0.0) + np.array([0.3, 0.5, 0.05, 0.1])
     return t, simulate(x0, signal, t)[None], signal(t)[None]
