@@ -12,14 +12,14 @@ S = 21  # sensor times of the small synthetic problems here
 
 
 def stats(n_sensors=S):
-    return NormStats(x_mean=(0.1, 0.2, 0.01, 0.9), x_std=(0.8, 0.6, 0.1, 0.1), u_mean=(1.0, 0.0),
-                     u_std=(0.07, 0.12), horizon=1.0, n_sensors=n_sensors)
+    return NormStats(x_mean=(0.1, 0.2, 0.01, 0.9), x_std=(0.8, 0.6, 0.1, 0.1), u_mean=(1.0, 0.0, 0.7, 1.1),
+                     u_std=(0.07, 0.12, 0.1, 0.2), horizon=1.0, n_sensors=n_sensors)
 
 
 def inputs(n=3, m=7, n_sensors=S, seed=0):
     g = torch.Generator().manual_seed(seed)
     x0 = torch.tensor([0.0, 0.0, 0.0, 1.0]) + 0.3 * torch.randn(n, 4, generator=g)
-    u = torch.tensor([1.0, 0.0]) + 0.1 * torch.randn(n, n_sensors, 2, generator=g)
+    u = torch.tensor([1.0, 0.0, 0.7, 1.1]) + 0.1 * torch.randn(n, n_sensors, 4, generator=g)
     t = torch.linspace(0.0, 1.0, m)
     return x0, u, t
 
@@ -68,8 +68,8 @@ def test_pinn_has_a_parameter_count_comparable_to_the_unstacked_deeponet():
 def test_sensor_values_are_scaled_by_sqrt_of_4_over_the_number_of_sensors():
     net = model("unstacked", sensor_gain=2.0)
     assert float(net.sensor_scale) == pytest.approx(2.0 * math.sqrt(4 / S))
-    u = (net.u_mean + net.u_std).expand(1, S, 2)  # one std above the mean everywhere
-    torch.testing.assert_close(net.encode_sensors(u), torch.full((1, 2 * S), float(net.sensor_scale)))
+    u = (net.u_mean + net.u_std).expand(1, S, 4)  # one std above the mean everywhere
+    torch.testing.assert_close(net.encode_sensors(u), torch.full((1, 4 * S), float(net.sensor_scale)))
 
 
 def test_time_features_are_scaled_time_and_decaying_exponentials():
@@ -85,7 +85,7 @@ def test_norm_stats_give_a_constant_state_unit_std_instead_of_zero():
     rng = np.random.default_rng(0)
     x = rng.normal(size=(5, 11, 4))
     x[..., 2] = 0.0  # Ed_p held at 0 everywhere
-    split = {"x": x, "u": rng.normal(size=(5, 11, 2)), "t": np.linspace(0, 0.5, 11)}
+    split = {"x": x, "u": rng.normal(size=(5, 11, 4)), "t": np.linspace(0, 0.5, 11)}
     fitted = NormStats.fit(split)
     assert fitted.x_std[2] == 1.0 and fitted.n_sensors == 11 and fitted.horizon == 0.5
     np.testing.assert_allclose(fitted.x_std[0], x[..., 0].std())
