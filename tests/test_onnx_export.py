@@ -32,16 +32,19 @@ def exported(request, paper_tiny, tmp_path_factory):
 
 
 def in_envelope_inputs(meta, n=3):
+    """x0 [n, 4] and u [n, S, 4] held at the middle of the envelope, theta_vs at 0 (the envelope is
+    in the window frame, where every window starts at theta_vs = 0 and omega = 0: these are in it as given)."""
     box = meta["envelope"]
-    x0 = np.array([[np.mean(box["x0"][s]) for s in ("delta", "omega", "Ed_p", "Eq_p")]] * n)
-    u = np.tile([np.mean(box["u"]["Vs"]), np.mean(box["u"]["theta_vs"])], (n, meta["n_points"], 1))
+    x0 = np.array([[np.mean(box["x0"][s]) for s in SM4.state_names]] * n)
+    u = np.tile([0.0 if name == "theta_vs" else np.mean(box["u"][name]) for name in SM4.input_names],
+                (n, meta["n_points"], 1))
     return x0, u
 
 
 def test_graph_has_the_contract_inputs_outputs_and_opset(exported):
     model = onnx.load(str(exported[1]))
     dims = lambda v: [d.dim_param or d.dim_value for d in v.type.tensor_type.shape.dim]  # noqa: E731
-    assert [(i.name, dims(i)) for i in model.graph.input] == [("x0", ["N", 4]), ("u", ["N", 1001, 2]), ("t", ["M"])]
+    assert [(i.name, dims(i)) for i in model.graph.input] == [("x0", ["N", 4]), ("u", ["N", 1001, 4]), ("t", ["M"])]
     assert [(o.name, dims(o)) for o in model.graph.output] == [("x", ["N", "M", 4])]
     assert all(i.type.tensor_type.elem_type == onnx.TensorProto.FLOAT for i in model.graph.input)
     assert max(o.version for o in model.opset_import if o.domain in ("", "ai.onnx")) >= 17
@@ -51,7 +54,7 @@ def test_metadata_carries_the_contract_fields(exported, paper_tiny):
     meta = {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}
     assert meta["component"] == "sm4"
     assert json.loads(meta["state_names"]) == ["delta", "omega", "Ed_p", "Eq_p"]
-    assert json.loads(meta["input_names"]) == ["Vs", "theta_vs"]
+    assert json.loads(meta["input_names"]) == ["Vs", "theta_vs", "Pm", "Efd"]
     assert float(meta["horizon_s"]) == 1.0 and int(meta["n_sensors"]) == 1001
     assert json.loads(meta["envelope"]) == load_metadata(paper_tiny[1])["envelope"]
     assert json.loads(meta["physics_informed"]) is True
@@ -126,10 +129,10 @@ def test_predictions_at_any_query_times_match_the_whole_graph(exported, paper_ti
 
 @pytest.mark.parametrize("bad, message", [
     (dict(x0=np.zeros((2, 3))), "x0 must be \\[N, 4\\]"),
-    (dict(u=np.zeros((2, 10, 2))), "u must be \\[N, S, 2\\]"),
+    (dict(u=np.zeros((2, 1001, 2))), "u must be \\[N, S, 4\\]"),
     (dict(t=np.array([0.0, 1.5])), "t must lie in \\[0, 1\\]"),
     (dict(t=np.array([np.nan])), "t holds NaN"),
-    (dict(u=np.full((2, 1001, 2), np.inf)), "u holds NaN or inf"),
+    (dict(u=np.full((2, 1001, 4), np.inf)), "u holds NaN or inf"),
     (dict(x0=np.full((2, 4), np.nan)), "x0 holds NaN"),
 ])
 def test_bad_inputs_are_refused_with_a_clear_message(exported, paper_tiny, bad, message):
@@ -229,8 +232,8 @@ def test_shipped_default_operator_loads_and_its_envelope_holds_the_nominal_equil
     from reference_models.sm4 import steady_state
 
     op = Operator.default()
-    x_eq = steady_state(1.0, 0.0)
-    assert not op.outside_envelope(x_eq[None], np.tile([1.0, 0.0], (1, op.n_sensors, 1)))
+    x_eq = steady_state()  # at the start inputs Vs = 1, theta_vs = 0, Pm, Efd
+    assert not op.outside_envelope(x_eq[None], np.tile(SM4.start_inputs, (1, op.n_sensors, 1)))
     meta = op.metadata
     assert json.loads(meta["training"])["dataset"]["preset"] == "cosim"
     assert json.loads(meta["metrics"])["physical"]["maxae"] < 0.5
@@ -240,8 +243,8 @@ def test_shipped_default_operator_keeps_the_equilibrium_near_rest():
     from reference_models.sm4 import steady_state
 
     op = Operator.default()
-    x_eq = steady_state(1.0, 0.0)
-    x = op.predict(x_eq[None], np.tile([1.0, 0.0], (1, op.n_sensors, 1)), np.linspace(0, op.horizon, 101))
+    x_eq = steady_state()  # at the start inputs Vs = 1, theta_vs = 0, Pm, Efd
+    x = op.predict(x_eq[None], np.tile(SM4.start_inputs, (1, op.n_sensors, 1)), np.linspace(0, op.horizon, 101))
     assert np.all(np.max(np.abs(x[0] - x_eq), axis=0) < [0.05, 0.05, 0.02, 0.02])
 
 
