@@ -8,10 +8,10 @@ from surrogate.folding import fold
 from surrogate.models import NormStats, OperatorConfig, build_model
 
 S = 11
-STATS = NormStats(x_mean=(1.0, 0.05, 0.33, 0.7), x_std=(0.4, 0.2, 0.02, 0.15), u_mean=(1.0, 0.1),
-                  u_std=(0.08, 0.2), horizon=1.0, n_sensors=S)
-OTHER_STATS = NormStats(x_mean=(0.9, 0.0, 0.3, 0.75), x_std=(0.5, 0.25, 0.03, 0.1), u_mean=(0.95, 0.0),
-                        u_std=(0.1, 0.25), horizon=1.0, n_sensors=S)
+STATS = NormStats(x_mean=(1.0, 0.05, 0.33, 0.7), x_std=(0.4, 0.2, 0.02, 0.15), u_mean=(1.0, 0.1, 0.7, 1.1),
+                  u_std=(0.08, 0.2, 0.1, 0.2), horizon=1.0, n_sensors=S)
+OTHER_STATS = NormStats(x_mean=(0.9, 0.0, 0.3, 0.75), x_std=(0.5, 0.25, 0.03, 0.1), u_mean=(0.95, 0.0, 0.6, 1.2),
+                        u_std=(0.1, 0.25, 0.15, 0.3), horizon=1.0, n_sensors=S)
 ANCHORED = OperatorConfig(width=16, depth=2, latent=8, anchored=True)
 
 
@@ -23,7 +23,7 @@ def member(seed, config=ANCHORED, stats=STATS):
 def inputs(n=5, m=7):
     g = torch.Generator().manual_seed(0)
     x0 = torch.tensor(STATS.x_mean) + torch.tensor(STATS.x_std) * torch.randn(n, 4, generator=g)
-    u = torch.tensor(STATS.u_mean) + torch.tensor(STATS.u_std) * torch.randn(n, S, 2, generator=g)
+    u = torch.tensor(STATS.u_mean) + torch.tensor(STATS.u_std) * torch.randn(n, S, 4, generator=g)
     return x0, u, torch.rand(m, generator=g)
 
 

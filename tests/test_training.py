@@ -164,9 +164,9 @@ def test_figures_of_trajectories_and_error_over_time_are_written_as_png(paper_ti
 
 
 def test_held_after_keeps_inputs_up_to_the_cut_and_holds_the_value_at_the_cut_after_it():
-    u = torch.arange(12, dtype=torch.float32).reshape(2, 3, 2)
+    u = torch.arange(24, dtype=torch.float32).reshape(2, 3, 4)
     held = training.held_after(u, torch.tensor([0, 1]))
-    torch.testing.assert_close(held[0], u[0, :1].expand(3, 2))
+    torch.testing.assert_close(held[0], u[0, :1].expand(3, 4))
     torch.testing.assert_close(held[1], torch.stack([u[1, 0], u[1, 1], u[1, 1]]))
 
 
