@@ -242,7 +242,7 @@ def build_parser() -> argparse.ArgumentParser:
     data.add_argument("--out", required=True, help="dataset directory")
     data.add_argument("--machine", default=None, metavar="FILE",
                       help="JSON file of machine parameters (any subset of D, H, Rs, Td0_p, Tq0_p, Xd, Xd_p, Xq, "
-                           "Xq_p, Xep, Re, Wb, Pm, Efd; the rest: paper Table I)")
+                           "Xq_p, Xep, Re, Wb; the rest: paper Table I; Pm and Efd are inputs)")
     data.add_argument("--seed", type=int, default=0, help="base seed; same seed, same files (default 0)")
     data.add_argument("--workers", type=int, default=_cores(),
                       help="local dask worker processes; 0 solves in this process (default: all cores)")
@@ -317,7 +317,8 @@ def build_parser() -> argparse.ArgumentParser:
     cmp.add_argument("--reference", required=True, help="reference FMU")
     source = cmp.add_mutually_exclusive_group(required=True)
     source.add_argument("--scenario", choices=SCENARIOS, help="built-in scenario")
-    source.add_argument("--inputs", help="CSV with columns time, Vs, theta_vs")
+    source.add_argument("--inputs", help="CSV with columns time, Vs, theta_vs and optionally Pm, Efd (absent: held "
+                                         "at their start values)")
     cmp.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     cmp.add_argument("--stop-time", type=float, default=None,
                      help="seconds (default: 10 for a scenario, the last CSV time for --inputs)")

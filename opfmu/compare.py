@@ -1,7 +1,7 @@
 """The surrogate FMU against the reference FMU: fmpy runs both on the same inputs.
 
-Both FMUs are simulated by `fmpy.simulate_fmu` from the same input table (time, Vs, theta_vs) with
-communication step h: at each communication point fmpy sets the table's value there and the FMU holds
+Both FMUs are simulated by `fmpy.simulate_fmu` from the same input table (time, Vs, theta_vs, Pm, Efd)
+with communication step h: at each communication point fmpy sets the table's value there and the FMU holds
 it over the step. Both start from the same state (the parameters delta0..Eq_p0: the equilibrium of the
 first input value). Outputs are recorded at every communication point; the errors are the surrogate
 minus the reference over all of them. Two times are taken per FMU (extracted beforehand; in this
@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.scenarios import rest_state, scenario
-from reference_models.sm4 import DEFAULT_PARAMS, INPUT_NAMES, OUTPUT_NAMES, SM4, STATE_NAMES, STATE_UNITS, SM4Params
+from reference_models.sm4 import (DEFAULT_PARAMS, INPUT_NAMES, INPUT_UNITS, OUTPUT_NAMES, SM4, STATE_NAMES, STATE_UNITS,
+                                  SM4Params)
 
 OUTPUTS = STATE_NAMES + OUTPUT_NAMES
 UNITS = dict(zip(STATE_NAMES, STATE_UNITS)) | {name: "pu" for name in OUTPUT_NAMES}
@@ -32,7 +33,8 @@ class CompareError(ValueError):
 
 @dataclass(frozen=True)
 class Inputs:
-    """What both FMUs are driven with: rows (time [s], Vs [pu], theta_vs [rad]) and the start state [4]."""
+    """What both FMUs are driven with: times [T] (s), values [T, 4] (Vs [pu], theta_vs [rad], Pm [pu],
+    Efd [pu]) and the start state x0 [4]."""
 
     label: str
     times: np.ndarray
@@ -64,21 +66,27 @@ def communication_points(stop_time: float, step: float) -> np.ndarray:
     return np.arange(n + 1) * step
 
 
+REQUIRED_COLUMNS = ("time", "Vs", "theta_vs")  # Pm and Efd may be left out: held at their start values
+
+
 def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
-    """Inputs from a CSV file with the columns time, Vs, theta_vs (seconds, pu, rad; a header row;
-    times non-decreasing from 0; a repeated time is a jump, as fmpy reads it); the machine params
-    starts at rest under the first row."""
+    """Inputs from a CSV file with the columns time, Vs, theta_vs and optionally Pm, Efd (seconds, pu,
+    rad, pu, pu; a header row; times non-decreasing from 0; a repeated time is a jump, as fmpy reads
+    it); a column left out holds its input's start value (Pm 0.7048, Efd 1.08: Table I's operating
+    point). The machine params starts at rest under the first row."""
     path = Path(path)
     try:
         with path.open(newline="") as f:
             rows = list(csv.DictReader(f))
     except (OSError, UnicodeDecodeError) as exc:
         raise CompareError(f"cannot read inputs {path}: {exc}") from None
-    columns = ("time",) + INPUT_NAMES
-    if not rows or any(c not in rows[0] for c in columns):
-        raise CompareError(f"inputs {path} need a header with the columns {', '.join(columns)} and at least one row")
+    if not rows or any(c not in rows[0] for c in REQUIRED_COLUMNS):
+        optional = [n for n in INPUT_NAMES if n not in REQUIRED_COLUMNS]
+        raise CompareError(f"inputs {path} need a header with the columns {', '.join(REQUIRED_COLUMNS)} (and "
+                           f"optionally {', '.join(optional)}) and at least one row")
+    starts = {"time": None} | {q.name: q.start for q in SM4.inputs}
     try:
-        data = np.array([[float(r[c]) for c in columns] for r in rows])
+        data = np.array([[float(r[c]) if c in r else starts[c] for c in starts] for r in rows])
     except (TypeError, ValueError) as exc:
         raise CompareError(f"inputs {path}: not a number ({exc})") from None
     if not np.all(np.isfinite(data)):
@@ -86,7 +94,8 @@ def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
     times = data[:, 0]
     if times[0] != 0 or np.any(np.diff(times) < 0):
         raise CompareError(f"inputs {path}: times must start at 0 and never decrease")
-    return Inputs(path.name, times, data[:, 1:], rest_state(*data[0, 1:], params))
+    Vs, theta_vs, Pm, Efd = data[0, 1:]
+    return Inputs(path.name, times, data[:, 1:], rest_state(Vs, theta_vs, params, Pm, Efd))
 
 
 def fmu_machine(fmu_dir) -> SM4Params:
@@ -204,7 +213,7 @@ def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step
         "messages": {"surrogate": surrogate.messages, "reference": reference.messages},
         "trajectories": {"reference": reference.outputs, "surrogate": surrogate.outputs,
                          "inputs": np.array([np.interp(reference.outputs["time"], inputs.times, inputs.values[:, i])
-                                             for i in range(2)]).T},
+                                             for i in range(len(INPUT_NAMES))]).T},
     }
 
 
@@ -255,16 +264,18 @@ def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
     traj = result["trajectories"]
     t = traj["reference"]["time"]
     paths = []
+    input_rows = (len(INPUT_NAMES) + 1) // 2  # the inputs two a row above the states
     for suffix, names in (("states", STATE_NAMES), ("currents_powers", OUTPUT_NAMES)):
-        rows = len(names) + (1 if suffix == "states" else 0)
+        rows = len(names) + (input_rows if suffix == "states" else 0)
         fig, axes = plt.subplots(rows, 2, figsize=(11, 2.1 * rows), sharex=True, squeeze=False)
         row = 0
         if suffix == "states":
-            for i, (name, unit) in enumerate(zip(INPUT_NAMES, ("pu", "rad"))):
-                axes[0, i].plot(t, traj["inputs"][:, i], color="tab:gray", drawstyle="steps-post")
-                axes[0, i].set_ylabel(f"{name} [{unit}]")
-                axes[0, i].set_title("input" if i == 0 else "")
-            row = 1
+            for i, (name, unit) in enumerate(zip(INPUT_NAMES, INPUT_UNITS)):
+                ax = axes[i // 2, i % 2]
+                ax.plot(t, traj["inputs"][:, i], color="tab:gray", drawstyle="steps-post")
+                ax.set_ylabel(f"{name} [{unit}]")
+                ax.set_title("input" if i == 0 else "")
+            row = input_rows
         for name in names:
             ref, sur = traj["reference"][name], traj["surrogate"][name]
             axes[row, 0].plot(t, ref, label="reference (RK45)", color="black", lw=1.2)
@@ -273,7 +284,7 @@ def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
             axes[row, 1].plot(t, sur - ref, color="tab:red", lw=0.9)
             axes[row, 1].set_ylabel(f"error [{UNITS[name]}]")
             row += 1
-        axes[1 if suffix == "states" else 0, 0].legend(loc="best", fontsize=8)
+        axes[input_rows if suffix == "states" else 0, 0].legend(loc="best", fontsize=8)
         for ax in axes[-1]:
             ax.set_xlabel("time [s]")
         for ax in axes.ravel():

@@ -118,8 +118,10 @@ def write_report(out: Path, operator: Path, config: DemoConfig, results: dict) -
              f"horizon {float(meta['horizon_s']):g} s); on its dataset's test split MSE {metrics.get('mse', float('nan')):.3g}, "
              f"MAE {metrics.get('mae', float('nan')):.3g}, MaxAE {metrics.get('maxae', float('nan')):.3g}.", "",
              f"Each scenario: {config.stop_time:g} s at a communication step of {config.step * 1e3:g} ms, seed "
-             f"{config.seed}, the machine starting at the equilibrium of the first input; fmpy runs both FMUs on "
-             "the same inputs. Errors are surrogate minus reference over every communication point.", "",
+             f"{config.seed}, the machine starting at the equilibrium of the first input (in `drift` turning with its "
+             "network, whose angle drifts at a constant speed); Pm and Efd held at their start values except in "
+             "`governor` (Pm stepped and ramped); fmpy runs both FMUs on the same inputs. Errors are surrogate minus "
+             "reference over every communication point.", "",
              "The reference is native C too (the machine's equations, Dormand-Prince 5(4) at rtol "
              f"{REFERENCE_STARTS['rtol']:g}, atol {REFERENCE_STARTS['atol']:g}), so the cost columns compare the surrogate with a compiled solver of the same ODE, not "
              "with Python. Cost ratio: the surrogate's time over the reference's (above 1: the surrogate is slower).",

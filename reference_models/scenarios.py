@@ -1,16 +1,32 @@
-"""Built-in co-simulation scenarios: one bus-voltage signal over a whole run, drawn with a seed.
+"""Built-in co-simulation scenarios: one signal of SM4's inputs over a whole run, drawn with a seed.
 
-A scenario is a signal of one input family (families.py) sampled over the run's length instead of one
-operator window: `slow` and `fast` are the paper's families (their transients settle within the
-first seconds), `dip` is a fault (Vs drops to 0.2-0.9 pu for 20-300 ms, then recovers, with an angle
-jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the run. `mix` is what a
-grid tool sends over a long run: levels held for 0.2-0.8 s each (Vs in [0.9, 1.1] pu, theta_vs
-moving by up to 0.3 rad within [-0.5, 0.5] rad), one change in five a fault (Vs down to 0.2-0.9 pu
-for 20-200 ms). Every scenario ends at a bus voltage of at least SETTLED_VS, and in none does the
-machine lose synchronism (a voltage held far below the lowest one with an equilibrium for tens of
-seconds makes it slip poles: a loss of the machine, no test of a surrogate). The machine starts at
-rest: at the equilibrium of the first input value (or, below the lowest bus voltage that has an
-equilibrium, of that voltage).
+Bus scenarios move the bus voltage and hold Pm and Efd at their start values (the operating point
+of Table I). A bus scenario is a signal of one input family (families.py) sampled over the run's
+length instead of one operator window: `slow` and `fast` are the paper's families (their transients
+settle within the first seconds), `dip` is a fault (Vs drops to 0.2-0.9 pu for 20-300 ms, then
+recovers, with an angle jump), `step` and `ramp` move Vs and theta_vs to new levels somewhere in the
+run. `mix` is what a grid tool sends over a long run: levels held for 0.2-0.8 s each (Vs in
+[0.9, 1.1] pu, theta_vs moving by up to 0.3 rad within [-0.5, 0.5] rad), one change in five a fault
+(Vs down to 0.2-0.9 pu for 20-200 ms).
+
+Scenarios that move the other inputs:
+* `governor`: the mix bus voltage, and Pm stepped or ramped (over 0.5-2 s) every 2-4 s, the first
+  change after 0.5-2 s, by 10-20 % of its start value each time, within 80-110 % of it (above that
+  the mix's lower voltages have no equilibrium and the machine slips poles).
+* `drift`: the mix scenario of the same seed seen by a machine whose network turns at a constant
+  speed c (|c| in [1, 12] rad/s, drawn after the mix): theta_vs(t) = theta_mix(t) + c t, and the
+  machine starts at the mix's rest state turning with it, omega0 = c (Scenario.speed). SM4 sees its
+  angles only through delta - theta_vs and its speed through the damping torque D omega
+  (reference_models.drift), so Pm carries that torque, Pm = Pm_start + D c (for D = 0, the grid's
+  machines, Pm is its start value): then the run is exactly the mix run turned by c t,
+  delta_drift(t) = delta_mix(t) + c t and omega_drift(t) = omega_mix(t) + c, and an operator that
+  works in its window's frame must give the same errors on both.
+
+Every scenario ends at a bus voltage of at least SETTLED_VS where the machine has an equilibrium at
+the final inputs, and in none does the machine lose synchronism (a voltage held far below the lowest
+one with an equilibrium for tens of seconds makes it slip poles: a loss of the machine, no test of a
+surrogate). The machine starts at rest (in its network's frame for `drift`): at the equilibrium of
+the first input value (or, below the lowest bus voltage that has an equilibrium, of that voltage).
 """
 from __future__ import annotations
 
@@ -18,56 +34,134 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .families import family, held_levels
-from .signals import Signal
+from .drift import frame_of
+from .families import CONTROL_LEVELS, family, held_levels, machine
+from .signals import Signal, Table
 from .simulate import simulate
-from .sm4 import DEFAULT_PARAMS, SM4, SM4Params
+from .sm4 import DEFAULT_PARAMS, SM4, SM4Params, has_equilibrium
 
-SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
+BUS_SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
+SCENARIOS = BUS_SCENARIOS + ("governor", "drift")
 # a scenario is redrawn (from the same seed's stream) until its bus voltage ends at or above this [pu]:
-# below 0.8809 pu the machine has no equilibrium and slowly loses synchronism, no test for a surrogate
+# below 0.8809 pu the default machine has no equilibrium at its start Pm, Efd and slowly loses synchronism
 SETTLED_VS = 0.9
+PM_START, EFD_START = SM4.inputs[2].start, SM4.inputs[3].start  # pu
+GOVERNOR_LEVELS = (0.8, 1.1)  # Pm levels of `governor`, as shares of its start value
+GOVERNOR_CHANGE = (0.1, 0.2)  # size of one change of Pm, as a share of its start value
+DRIFT_SPEEDS = (1.0, 12.0)  # rad/s, |c| of `drift`
+MAX_DRAWS = 200  # redraws before a scenario is refused for this machine
 
 
 @dataclass(frozen=True)
 class Scenario:
-    """A named input signal over [0, stop_time] s and the machine (its parameters) it drives."""
+    """A named input signal over [0, stop_time] s, the machine (its parameters) it drives and the
+    speed [rad/s] its network's angles drift at (the machine starts turning with it; 0: at rest)."""
 
     name: str
     seed: int
     stop_time: float
     signal: Signal
     params: SM4Params = DEFAULT_PARAMS
+    speed: float = 0.0
 
     def inputs(self, times: np.ndarray) -> np.ndarray:
-        """(Vs [pu], theta_vs [rad]) [T, 2] at times [T] (s)."""
+        """(Vs [pu], theta_vs [rad], Pm [pu], Efd [pu]) [T, 4] at times [T] (s)."""
         return np.asarray(self.signal(np.asarray(times, dtype=float)), dtype=float)
 
     def initial_state(self) -> np.ndarray:
-        """The machine's equilibrium [4] at the first input value."""
-        return rest_state(*self.inputs(np.array([0.0]))[0], self.params)
+        """The machine at rest [4] under the first input value, in the frame turning at `speed`:
+        the equilibrium there with Pm less the damping torque D speed, and omega = speed."""
+        frame = frame_of(SM4.drift, self.params)
+        u0 = self.inputs(np.array([0.0]))[0] - self.speed * frame.input_torques(SM4.n_inputs)
+        x0 = rest_state(u0[0], u0[1], self.params, u0[2], u0[3])
+        x0[frame.speed_state] += self.speed
+        return x0
 
 
-def rest_state(Vs: float, theta_vs: float, p: SM4Params = DEFAULT_PARAMS) -> np.ndarray:
-    """Equilibrium [4] of machine p at (Vs, theta_vs), Vs raised to the lowest voltage that has one."""
-    return SM4.rest_state((Vs, theta_vs), p)
+def rest_state(Vs: float, theta_vs: float, p: SM4Params = DEFAULT_PARAMS, Pm: float = PM_START,
+               Efd: float = EFD_START) -> np.ndarray:
+    """Equilibrium [4] of machine p at constant (Vs, theta_vs, Pm, Efd), Vs raised to the lowest voltage
+    that has one at that Pm and Efd."""
+    return SM4.rest_state((Vs, theta_vs, Pm, Efd), p)
 
 
 def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Params = DEFAULT_PARAMS) -> Scenario:
     """The built-in scenario `name` (one of SCENARIOS) drawn with `seed` over stop_time seconds for
-    the machine `params`."""
+    the machine `params`. ValueError for an unknown name, a stop time that is not positive, or a
+    machine that no draw keeps in synchronism."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r} (built in: {', '.join(SCENARIOS)})")
     if not stop_time > 0:
         raise ValueError(f"stop time must be positive, got {stop_time}")
+    stop_time = float(stop_time)
     if name == "mix":
-        return Scenario(name, seed, float(stop_time), held_levels(np.random.default_rng(seed), stop_time), params)
-    fam, rng = family(name), np.random.default_rng(seed)
-    while True:  # a run must end where the machine has an equilibrium (see SETTLED_VS), in step
-        signal = fam.sample(rng.uniform(size=(1, fam.dim)), stop_time)[0]
-        drawn = Scenario(name, seed, float(stop_time), signal, params)
-        if signal(np.array([stop_time]))[0, 0] >= SETTLED_VS and keeps_synchronism(drawn):
+        return Scenario(name, seed, stop_time, held_levels(np.random.default_rng(seed), stop_time), params)
+    if name == "drift":
+        return _drift(seed, stop_time, params)
+    rng = np.random.default_rng(seed)
+    for _ in range(MAX_DRAWS):  # a run must end where the machine has an equilibrium (see SETTLED_VS), in step
+        signal = _governor(rng, stop_time) if name == "governor" else _bus(name, rng, stop_time)
+        drawn = Scenario(name, seed, stop_time, signal, params)
+        if ends_settled(drawn) and keeps_synchronism(drawn):
             return drawn
+    raise ValueError(f"no draw of scenario {name!r} (seed {seed}) keeps this machine in synchronism "
+                     f"over {stop_time:g} s")
+
+
+def _bus(name: str, rng: np.random.Generator, stop_time: float) -> Signal:
+    """A signal of the bus family `name` over the whole run, Pm and Efd held at their start values.
+    Only the bus parameters are drawn (from rng, in the family's order), so a seed gives the bus
+    voltage it gave before Pm and Efd were inputs."""
+    fam = family(name)
+    held = [i for i, key in enumerate(fam.ranges) if key in CONTROL_LEVELS]
+    free = [i for i in range(fam.dim) if i not in held]
+    unit = np.zeros((1, fam.dim))
+    unit[0, free] = rng.uniform(size=len(free))
+    levels = {"Pm": (PM_START, PM_START), "Efd": (EFD_START, EFD_START)}
+    return fam.sample(unit, stop_time, levels)[0]
+
+
+def _governor(rng: np.random.Generator, stop_time: float) -> Signal:
+    """The mix bus voltage with Pm stepped and ramped (see the module docstring), Efd held."""
+    bus = held_levels(rng, stop_time)
+    low, high = (PM_START * share for share in GOVERNOR_LEVELS)
+    times, values = [0.0], [PM_START]
+    t = float(rng.uniform(0.5, 2.0))
+    while t < stop_time:
+        change = PM_START * float(rng.uniform(*GOVERNOR_CHANGE)) * (1.0 if rng.uniform() < 0.5 else -1.0)
+        level = values[-1] + change
+        if not low <= level <= high:
+            level = values[-1] - change
+        length = float(rng.uniform(0.5, 2.0)) if rng.uniform() < 0.5 else 0.0  # a ramp or a step
+        times += [t, t + length]
+        values += [values[-1], float(np.clip(level, low, high))]
+        t += length + float(rng.uniform(2.0, 4.0))
+    return machine(bus.channels["Vs"], bus.channels["theta_vs"], Table(tuple(times), tuple(values)), EFD_START)
+
+
+def _drift(seed: int, stop_time: float, params: SM4Params) -> Scenario:
+    """The mix of `seed` in a network turning at c (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    mix = held_levels(rng, stop_time)
+    c = float(rng.uniform(*DRIFT_SPEEDS)) * (1.0 if rng.uniform() < 0.5 else -1.0)
+    theta = mix.channels["theta_vs"]  # Piecewise: values[k] before times[k], values[k + 1] from it on
+    times, values = [0.0], [theta.values[0]]
+    for k, jump in enumerate(theta.times):
+        if 0.0 < jump < stop_time:
+            times += [jump, jump]
+            values += [theta.values[k] + c * jump, theta.values[k + 1] + c * jump]
+    times.append(stop_time)
+    values.append(theta(stop_time) + c * stop_time)
+    torque = params.D * c  # the damping torque of the extra speed, which the turbine supplies
+    signal = machine(mix.channels["Vs"], Table(tuple(times), tuple(values)), PM_START + torque, EFD_START)
+    return Scenario("drift", seed, stop_time, signal, params, speed=c)
+
+
+def ends_settled(s: Scenario) -> bool:
+    """True if the run ends at a bus voltage of at least SETTLED_VS where the machine has an
+    equilibrium at the final inputs (Pm less the damping torque of the scenario's speed)."""
+    Vs, _, Pm, Efd = s.inputs(np.array([s.stop_time]))[0]
+    return Vs >= SETTLED_VS and has_equilibrium(Vs, Pm - s.params.D * s.speed, Efd, s.params)
 
 
 def keeps_synchronism(s: Scenario, every: float = 0.05) -> bool:

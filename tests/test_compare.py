@@ -9,7 +9,7 @@ import pytest
 from fmpy import extract
 
 from opfmu.compare import CompareError, compare, csv_inputs, scenario_inputs
-from reference_models.scenarios import SCENARIOS, scenario
+from reference_models.scenarios import BUS_SCENARIOS, SCENARIOS, scenario
 from reference_models.simulate import simulate
 from reference_models.sm4 import SM4, min_voltage_with_equilibrium
 
@@ -28,9 +28,13 @@ def extracted(fmu_path, reference_path, tmp_path_factory):
 @pytest.mark.parametrize("name", SCENARIOS)
 def test_every_scenario_starts_the_machine_at_rest_and_is_reproducible_from_its_seed(name):
     s = scenario(name, seed=4, stop_time=10.0)
-    x0, u0 = s.initial_state(), s.inputs(np.array([0.0]))[0]
-    rate = SM4.rhs(x0, np.array([max(u0[0], min_voltage_with_equilibrium()), u0[1]]), SM4.params())
+    x0, (Vs, theta_vs, Pm, Efd) = s.initial_state(), s.inputs(np.array([0.0]))[0]
+    # at rest in the frame of its network (drift: turning at s.speed, the damping torque D speed in Pm)
+    Pm_f = Pm - s.params.D * s.speed
+    u0 = np.array([max(Vs, min_voltage_with_equilibrium(s.params, Pm_f, Efd)), theta_vs, Pm_f, Efd])
+    rate = SM4.rhs(x0 - np.array([0.0, s.speed, 0.0, 0.0]), u0, s.params)
     assert np.max(np.abs(rate)) < 1e-8
+    assert x0[1] == s.speed and (s.speed != 0) == (name == "drift")
     t = np.linspace(0, 10, 1001)
     np.testing.assert_array_equal(scenario(name, seed=4).inputs(t), s.inputs(t))
     assert not np.array_equal(scenario(name, seed=5).inputs(t), s.inputs(t))
@@ -47,6 +51,49 @@ def test_no_scenario_makes_the_machine_slip_a_pole():
 def test_the_dip_scenario_is_a_fault_that_drops_holds_and_recovers():
     u = scenario("dip", seed=0).inputs(np.arange(0, 10, 0.001))[:, 0]
     assert u.min() < u[0] - 0.05 and abs(u[-1] - u[0]) < 0.06
+
+
+@pytest.mark.parametrize("name", BUS_SCENARIOS)
+def test_bus_scenarios_hold_pm_and_efd_at_their_start_values(name):
+    u = scenario(name, seed=2).inputs(np.linspace(0, 10, 1001))
+    np.testing.assert_array_equal(u[:, 2:], np.tile(SM4.start_inputs[2:], (len(u), 1)))
+
+
+def test_the_governor_scenario_steps_and_ramps_pm_every_few_seconds_within_its_levels():
+    start, kinds = SM4.start_inputs[2], set()
+    for seed in range(4):
+        s = scenario("governor", seed=seed)
+        pm = s.signal.channels["Pm"]  # a Table: (0, start), then per change (t, before), (t + length, after)
+        times, values = np.array(pm.times), np.array(pm.values)
+        assert values[0] == start and len(times) >= 5
+        change, length = np.abs(np.diff(values[1:])[::2]), np.diff(times[1:])[::2]
+        assert np.all((change >= 0.1 * start - 1e-12) & (change <= 0.2 * start + 1e-12))
+        assert np.all((length == 0) | ((length >= 0.5) & (length <= 2.0)))
+        assert np.all(np.diff(times[2::2]) >= 2.0) and 0.5 <= times[1] <= 2.0
+        assert np.all((values >= 0.8 * start - 1e-12) & (values <= 1.1 * start + 1e-12))
+        kinds |= {"step" if n == 0 else "ramp" for n in length}
+        u = s.inputs(np.linspace(0, 10, 1001))
+        assert np.all(u[:, 3] == SM4.start_inputs[3]) and np.mean(np.abs(u[:, 0] - 1.0) <= 0.1) > 0.8
+    assert kinds == {"step", "ramp"}
+
+
+@pytest.mark.parametrize("D", [0.0, 2.0])
+def test_the_drift_scenario_is_the_mix_scenario_turned_at_a_constant_speed(D):
+    from reference_models.simulate import SolverConfig
+
+    params = SM4.params({"D": D})
+    drift, mix = scenario("drift", 3, 5.0, params), scenario("mix", 3, 5.0, params)
+    c, t = drift.speed, np.linspace(0, 5, 501)
+    assert 1.0 <= abs(c) <= 12.0
+    u_drift, u_mix = drift.inputs(t), mix.inputs(t)
+    np.testing.assert_allclose(u_drift[:, 1], u_mix[:, 1] + c * t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(u_drift[:, 2], u_mix[:, 2] + D * c, rtol=0, atol=1e-12)  # the damping torque
+    np.testing.assert_array_equal(u_drift[:, [0, 3]], u_mix[:, [0, 3]])
+    tight = SolverConfig(rtol=1e-10, atol=1e-12)
+    x_drift = simulate(drift.initial_state(), drift.signal, t, params, tight)
+    x_mix = simulate(mix.initial_state(), mix.signal, t, params, tight)
+    turned = x_mix + np.stack([c * t, np.full_like(t, c), 0 * t, 0 * t], axis=1)
+    np.testing.assert_allclose(x_drift, turned, rtol=0, atol=1e-6)
 
 
 def test_comparison_reports_every_output_and_both_timings(extracted):
@@ -78,6 +125,23 @@ def test_csv_inputs_with_a_missing_column_are_refused(tmp_path):
     path.write_text("time,Vs\n0,1\n1,1\n")
     with pytest.raises(CompareError, match="columns time, Vs, theta_vs"):
         csv_inputs(path)
+
+
+def test_csv_inputs_without_pm_and_efd_hold_them_at_their_start_values(tmp_path):
+    path = tmp_path / "in.csv"
+    path.write_text("time,Vs,theta_vs\n0,1,0\n1,0.95,0.1\n")
+    inputs = csv_inputs(path)
+    np.testing.assert_array_equal(inputs.values, [[1, 0, *SM4.start_inputs[2:]], [0.95, 0.1, *SM4.start_inputs[2:]]])
+    np.testing.assert_allclose(inputs.x0, SM4.steady_state(), rtol=0, atol=1e-12)
+
+
+def test_csv_inputs_with_pm_and_efd_drive_them_and_start_at_rest_under_the_first_row(tmp_path):
+    path = tmp_path / "in.csv"
+    path.write_text("time,Vs,theta_vs,Pm,Efd\n0,1,0.1,0.6,1.3\n1,1,0.1,0.65,1.2\n")
+    inputs = csv_inputs(path)
+    np.testing.assert_array_equal(inputs.values, [[1, 0.1, 0.6, 1.3], [1, 0.1, 0.65, 1.2]])
+    np.testing.assert_allclose(inputs.x0, SM4.steady_state([1, 0.1, 0.6, 1.3]), rtol=0, atol=1e-12)
+    assert inputs.table().dtype.names == ("time", "Vs", "theta_vs", "Pm", "Efd")
 
 
 def test_csv_inputs_whose_time_goes_back_are_refused(tmp_path):
