@@ -12,6 +12,7 @@ from onnx import TensorProto, helper
 from fmu_export.onnx_to_c import UnsupportedGraph, generate_kernel, graph_interface
 from surrogate.models import OperatorConfig
 from surrogate.contract import random_inputs
+from surrogate.frame_graph import network_graph
 from surrogate.onnx_export import export_onnx
 from surrogate.training import TrainConfig, train
 
@@ -25,8 +26,10 @@ SIZES = {"unstacked": (16, 9, 36), "stacked-n": (16, 9, 36), "pinn": (16, 16, 16
 
 @pytest.fixture(scope="module", params=list(SIZES))
 def kernel(request, paper_tiny, tmp_path_factory):
-    """(onnx path, compiled kernel library, envelope) for a briefly trained model of each architecture
-    (anchored: an anchored Unstacked DeepONet; ensemble: the mean of two)."""
+    """(onnx path of the network, compiled kernel library, envelope) for a briefly trained model of each
+    architecture (anchored: an anchored Unstacked DeepONet; ensemble: the mean of two). The kernel is
+    the network inside the file's frame nodes (surrogate.frame_graph), as the FMU builder compiles it:
+    its inputs are in the window frame, where the envelope is."""
     run = tmp_path_factory.mktemp(f"c_{request.param}")
     arch, anchored = (request.param, False) if request.param in ("unstacked", "stacked-n", "pinn") else ("unstacked", True)
     runs = [run / f"member{seed}" for seed in range(2 if request.param == "ensemble" else 1)]
@@ -34,8 +37,9 @@ def kernel(request, paper_tiny, tmp_path_factory):
         config = TrainConfig(model=OperatorConfig(arch=arch, width=16, depth=2, latent=8, anchored=anchored), epochs=3,
                              time_points=20, seed=seed)
         train(paper_tiny[1], config, member, progress=False)
-    path = run / "op.onnx"
-    meta = export_onnx(runs, path)
+    meta = export_onnx(runs, run / "op.onnx")
+    path = run / "network.onnx"
+    onnx.save(network_graph(onnx.load(str(run / "op.onnx"))), str(path))
     source = run / "kernel.c"
     kernel = generate_kernel(onnx.load(str(path)), 1001)
     # every architecture's sensors enter through one dense layer; the DeepONets' trunk values are the
