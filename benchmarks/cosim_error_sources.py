@@ -10,8 +10,9 @@ reference state at its start:
 * FMU: the surrogate FMU as a user runs it (errors carried over from window to window);
 * restarted, held future: every communication point evaluated as the FMU does (the FMU's step
   semantics, fmu_export.step_mirror, corrections off: sensor slots after the current step hold its
-  input), but from the reference window-start state: the error the FMU would have without what
-  earlier windows left behind;
+  input, in the window frame), but from the reference window-start state, as an FMU initialised
+  there with the window's first input (its frame's origin): the error the FMU would have without
+  what earlier windows left behind;
 * restarted, known future: the same windows with every sensor slot at the input that really comes
   (hindsight): the operator's own error on that input.
 
@@ -19,8 +20,9 @@ The FMU's rest and slow-mode corrections and its exact swing step act in the fir
 --param rest_radius=0 --param slow_weight=0 --param swing_weight=0 to split the operator alone. So
 FMU - restarted/held is the error carried over the rollovers, held - known is the error from not
 knowing the future input, and known is the operator's accuracy on these inputs. Also reported: the
-first window alone (the start from rest), and how many window-start states or inputs left the
-training envelope.
+first window alone (the start from rest), and how many windows left the training envelope (their
+reference start state or their inputs, in the window frame: angles from the window's first bus angle,
+speeds from its start speed).
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ from fmu_pair import extracted_pair, surrogate_parameters, surrogate_setting
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS
 from reference_models.sm4 import STATE_NAMES
-from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator
+from surrogate.operator import DEFAULT_OPERATOR, EnvelopeWarning, Operator, OperatorInputError
 
 
 def zoh(inputs_times: np.ndarray, inputs: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -59,10 +61,20 @@ def restarted(mirror: StepMirror, times: np.ndarray, inputs: np.ndarray, referen
     for start in range(0, len(times) - 1, per_window):
         steps = np.arange(start, min(start + per_window, len(times) - 1))  # steps whose end is in this window
         t0, x0 = times[start], reference[start]
-        held[steps + 1] = mirror.run(x0, [(h, *inputs[i]) for i in steps], rollover_horizon=horizon)
+        held[steps + 1] = mirror.run(x0, [(h, *inputs[i]) for i in steps], rollover_horizon=horizon,
+                                     u_init=inputs[start])
         u_true = zoh(times, inputs, t0 + sensor_t)
         known[steps + 1] = op.predict(x0[None].astype(np.float32), u_true[None], times[steps + 1] - t0)[0]
     return held, known
+
+
+def windows_outside(op: Operator, times: np.ndarray, inputs: np.ndarray, reference: np.ndarray,
+                    per_window: int) -> int:
+    """How many windows (every per_window communication points) start from a reference state [T, n_x]
+    or see inputs (held from each point to the next) outside the operator's envelope, in their frame."""
+    sensor_t = np.linspace(0.0, op.horizon, op.n_sensors)
+    return sum(bool(op.outside_envelope(reference[start][None], zoh(times, inputs, times[start] + sensor_t)[None]))
+               for start in range(0, len(times) - 1, per_window))
 
 
 def maxae(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -83,7 +95,10 @@ def main() -> None:
     parser.add_argument("--out", default="error_sources.json")
     args = parser.parse_args()
     warnings.simplefilter("ignore", EnvelopeWarning)
-    op = Operator.load(args.operator)
+    try:
+        op = Operator.load(args.operator)
+    except (OSError, OperatorInputError) as exc:
+        parser.error(str(exc))
 
     with tempfile.TemporaryDirectory(prefix="opfmu_sources_") as tmp:
         tmp = Path(tmp)
@@ -105,9 +120,7 @@ def main() -> None:
                 fmu = np.stack([result["trajectories"]["surrogate"][s] for s in STATE_NAMES], axis=1)
                 held, known = restarted(mirror, inputs.times, inputs.values, ref, args.step, horizon)
                 first = per_window + 1
-                starts = ref[::per_window]
-                outside = sum(bool(op.outside_envelope(x[None], inputs.values[None, :1])) for x in starts)
-                outside += bool(op.outside_envelope(ref[:1], inputs.values[None]))
+                outside = windows_outside(op, inputs.times, inputs.values, ref, per_window)
                 parts = {"fmu": maxae(fmu, ref), "held": maxae(held, ref), "known": maxae(known, ref),
                          "first_window": maxae(fmu[:first], ref[:first])}
                 cells = "".join(f"{p[0]:>9.2e}/{p[1]:.2e}/{p[3]:.1e}" for p in parts.values())

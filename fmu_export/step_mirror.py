@@ -1,43 +1,59 @@
 """The surrogate FMU's step semantics in Python: what its C (fmu_export/c/: the window, the
-corrections) does per step, with the operator evaluated by onnxruntime (surrogate.operator.Operator).
+corrections) does per step, with the operator's network evaluated by onnxruntime
+(surrogate.operator.Operator).
 
 Tests compare the compiled FMU with this mirror step by step; benchmarks use it to evaluate the
 operator "as the FMU does" without the FMU. It follows the C where the C is generic: the sizes of the
-component (n_x states, n_u inputs), its affine states (`component.affine_states`: the exact swing step
-for SM4's omega) and its state scales (`component.state_scales`: the reach of the rest correction at
-rest_radius = 1). The machine's parameters are the operator's (metadata `params`), else the
-component's defaults, as the FMU's generated equations are.
+component (n_x states, n_u inputs), its window frame (the operator's `frame`, a
+reference_models.drift.Frame, or None: the identity), its affine states (`component.affine_states`:
+the exact swing step for SM4's omega) and its state scales (`component.state_scales`: the reach of the
+rest correction at rest_radius = 1). The machine's parameters are the operator's (metadata `params`),
+else the component's defaults, as the FMU's generated equations are.
+
+The window frame (reference_models/drift.py): the state stays raw; the network sees the window in its
+frame. A window starting at time t_w from state x_w under the input u_w (the input the FMU holds
+then: at a rollover, that of the step that just ended; at initialisation, the start values or what
+the master set in initialization mode) has a = u_w's first angle input, c = x_w's speed state and
+shift = a + period floor((x_w's first angle state - a) / period + 1/2). In the frame, inputs at window
+time tau are u - a R - c (R tau + T) and states x - (shift + c tau) A - c W (R: 1 for angle inputs, T:
+the torque coefficients, e.g. D on SM4's Pm, A: 1 for angle states, W: 1 for the speed state).
 
 Per communication step (h, u) [s, u in the component's input units] (DESIGN section 5):
 
-* an input change above restart_jump (in any input's unit) starts a new window at once, from the
-  state reached, with every sensor slot at the new input;
-* the step is cut at the window's end (rollover_horizon); each piece writes u into the sensor slots
-  from the current time on (slot k at window time k * dt, dt = horizon / (n_sensors - 1); slots not
-  yet reached hold the latest input) and evaluates the operator at the piece's end;
-* rest correction (rest_radius > 0, operators whose FMU kernel splits branch and trunk): each window
-  subtracts w (G(x_rest, u held) - x_rest), x_rest the equilibrium (Newton from the window start) of
-  the input held over the window's first step, w = 1 - max_i |x_window_i - x_rest_i| /
-  (rest_radius * state_scale_i) when positive;
-* slow-mode correction (slow_weight > 0): the slowest real mode of the right-hand side's Jacobian at
-  the window start (inverse iteration, left and right eigenvectors l, r with l . r = 1); the slow
-  coordinate l . x follows the trapezoid integral of l . f(x, u) over the window, and the state moves
-  along r by slow_weight times its miss;
-* exact affine step (swing_weight > 0): each affine state x_i (dx_i/dt = g(x) - k x_i) is integrated
-  exactly over the piece from its value at the piece's start, g linear in time between its values at
-  the piece's start and end states, and x_i moves swing_weight of the way to that solution;
-* at the window's end a new window starts from the state there.
+* an input change above restart_jump (in any input's unit; an angle input is compared after
+  removing c R times the time since the last input was set, the turn of the frame) starts a new
+  window at once, from the state reached, with every sensor slot at the new input;
+* the step is cut at the window's end (rollover_horizon); each piece, ending at window time tau,
+  writes into the sensor slots from the current time on (slot k at window time s_k = k dt, dt =
+  horizon / (n_sensors - 1)) the held input in the frame, u - a R - c (R min(s_k, tau) + T): it ramps
+  with the turning frame until tau and holds that value after it (earlier slots keep what earlier
+  steps wrote), and evaluates the network from the window's start state in the frame at tau; the
+  state is the network's answer x_f + (shift + c tau) A + c W;
+* rest correction (rest_radius > 0, operators whose FMU kernel splits branch and trunk), in the
+  frame: each window subtracts w (G(x_rest, level held) - x_rest) from x_f, level the input held over
+  the window's first step in the frame at tau = 0, x_rest its equilibrium (Newton from the window's
+  start state in the frame), w = 1 - max_i |x_window_f,i - x_rest_i| / (rest_radius * state_scale_i)
+  when positive;
+* slow-mode correction (slow_weight > 0), on raw states and inputs: the slowest real mode of the
+  right-hand side's Jacobian at the window start (inverse iteration, left and right eigenvectors l, r
+  with l . r = 1); the slow coordinate l . x follows the trapezoid integral of l . f(x, u) over the
+  window, and the state moves along r by slow_weight times its miss;
+* exact affine step (swing_weight > 0), on raw states and inputs: each affine state x_i (dx_i/dt =
+  g(x) - k x_i) is integrated exactly over the piece from its value at the piece's start, g linear in
+  time between its values at the piece's start and end states, and x_i moves swing_weight of the way
+  to that solution;
+* at the window's end a new window starts from the state there, under the step's input.
 
 The diagnostics (residual, in_envelope, warnings) are not mirrored.
 """
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 from reference_models.component import Component
+from reference_models.drift import window_frame
 
 TIME_EPS = 1e-9  # s: times closer than this are the same time (TIME_EPS in the C)
 SETTINGS = ("rollover_horizon", "restart_jump", "rest_radius", "slow_weight", "swing_weight")
@@ -169,7 +185,8 @@ class StepMirror:
     """The surrogate FMU's steps for one operator, in Python.
 
     operator: a surrogate.operator.Operator or the path of an exported .onnx; component and params:
-    default the machine its metadata names.
+    default the machine its metadata names. The window frame is the operator's (`operator.frame`, as
+    the FMU's config.h has it from the same metadata; None: the identity).
     """
 
     def __init__(self, operator, component: Component | None = None, params=None):
@@ -183,86 +200,129 @@ class StepMirror:
         self.params = operator.params if params is None else params
         self.n_sensors, self.horizon = operator.n_sensors, float(operator.horizon)
         self.sensor_dt = self.horizon / (self.n_sensors - 1)
+        self.slot_times = np.arange(self.n_sensors) * self.sensor_dt  # s_k = k SENSOR_DT, as the C
         self.default_rollover = float(meta.get("rollover_horizon_s", self.horizon))
         self.rest_scale = np.asarray(self.component.state_scales, dtype=float)
+        n_x, n_u = self.component.n_states, self.component.n_inputs
+        self.frame = frame = getattr(operator, "frame", None)
+        # the frame tables of config.h: R (angle inputs), T (torque inputs), A (angle states), W (speed)
+        self.rates = frame.input_rates(n_u) if frame else np.zeros(n_u)
+        self.torques = frame.input_torques(n_u) if frame else np.zeros(n_u)
+        self.angles, self.speed = np.zeros(n_x), np.zeros(n_x)
+        if frame:
+            self.angles[list(frame.angle_states)] = 1.0
+            self.speed[frame.speed_state] = 1.0
 
     def f(self, x, u) -> np.ndarray:
         """The component's right-hand side dx/dt [n_x] at state x [n_x] under input u [n_u]."""
         return np.asarray(self.component.rhs(np.asarray(x, float), np.asarray(u, float), self.params), dtype=float)
 
-    def predict(self, x_window, sensors, tau: float) -> np.ndarray:
-        """The operator's state [n_x] at window time tau [s] from x_window [n_x] and the sensor buffer
-        [n_sensors, n_u] (float32 evaluation, EnvelopeWarning silenced: the FMU flags it instead)."""
-        from surrogate.operator import EnvelopeWarning
+    def window_frame(self, x, u) -> tuple[float, float, float]:
+        """(a, shift, c) of a window starting at state x [n_x] under input u [n_u]
+        (reference_models.drift.window_frame; zeros without a frame)."""
+        if self.frame is None:
+            return 0.0, 0.0, 0.0
+        a, shift, c = window_frame(self.frame, np.asarray(x, float)[None], np.asarray(u, float)[None])
+        return float(a[0]), float(shift[0]), float(c[0])
 
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", EnvelopeWarning)
-            x = self.operator.predict(np.asarray(x_window, np.float32)[None], np.asarray(sensors, np.float32)[None],
-                                      np.array([tau], np.float32))
+    def input_in_frame(self, window: dict, u, tau) -> np.ndarray:
+        """u [n_u] at window time tau [s] (a number, or [k, 1] for k slots) in the window's frame:
+        u - a R - c (R tau + T)."""
+        return u - window["a"] * self.rates - window["c"] * (self.rates * tau + self.torques)
+
+    def network(self, x0_f, sensors_f, tau: float) -> np.ndarray:
+        """The operator's network [n_x] at window time tau [s] from x0_f [n_x] and the sensor buffer
+        [n_sensors, n_u], both in the window frame, and its answer in the frame (float32 evaluation
+        by onnxruntime, the file's network graph without its frame nodes, as the FMU's kernel).
+
+        Operator._network, not Operator.predict: predict takes physical values and takes the frame
+        from their first sensor slot, while the FMU's frame is the window's (from the input it started
+        with, which need not be the input of its first slot) and its slots hold held-then-ramped
+        values; and the frame is done here in float64 before the cast to float32, as the C does it in
+        double (predict casts physical angles of tens of rad first). No envelope check: the FMU flags
+        that instead (not mirrored)."""
+        x = self.operator._network(np.asarray(x0_f, np.float32)[None], np.ascontiguousarray(sensors_f, np.float32)[None],
+                                   np.array([tau], np.float32))
         return x[0, 0].astype(float)
 
-    def rest_correction(self, x_window, u, rest_radius: float):
-        """(weight, x_rest) of a window starting at x_window [n_x] whose first step holds u [n_u]:
-        None where the correction does not apply (off, no equilibrium, too far from rest, or an
-        operator the FMU evaluates whole)."""
+    def rest_correction(self, x_window_f, level, rest_radius: float):
+        """(weight, x_rest) of a window starting at x_window_f [n_x] (in its frame) whose first step
+        holds the input `level` [n_u] (in the frame at window time 0): x_rest the equilibrium of
+        `level` held, in the frame (a machine turning with it); None where the correction does not
+        apply (off, no equilibrium, too far from rest, or an operator the FMU evaluates whole)."""
         if not (rest_radius > 0 and self.operator.separable):
             return None
-        rest = equilibrium(self.f, x_window, u)
+        rest = equilibrium(self.f, x_window_f, level)
         if rest is None:
             return None
-        distance = np.max(np.abs(np.asarray(x_window, float) - rest) / (rest_radius * self.rest_scale))
+        distance = np.max(np.abs(np.asarray(x_window_f, float) - rest) / (rest_radius * self.rest_scale))
         return (1.0 - distance, rest) if distance < 1.0 else None
 
+    def start_window(self, time: float, x, u) -> dict:
+        """A window starting at `time` from state x [n_x] under input u [n_u] (the FMU's start_window):
+        its frame, its start state in the frame, every slot at u's level in the frame."""
+        a, shift, c = self.window_frame(x, u)
+        window = {"t": time, "x": np.array(x, dtype=float), "a": a, "shift": shift, "c": c, "corrections": None}
+        window["x_f"] = window["x"] - shift * self.angles - c * self.speed
+        window["sensors"] = np.tile(self.input_in_frame(window, u, 0.0), (self.n_sensors, 1))
+        return window
+
     def run(self, x0, steps, rollover_horizon: float | None = None, restart_jump: float = 0.0,
-            rest_radius: float = 0.0, slow_weight: float = 0.0, swing_weight: float = 0.0) -> np.ndarray:
+            rest_radius: float = 0.0, slow_weight: float = 0.0, swing_weight: float = 0.0,
+            u_init=None) -> np.ndarray:
         """States [len(steps), n_x] at the end of each communication step (h, u_1, ..., u_n_u), from x0
         [n_x] at t = 0, with the FMU's settings (names and meanings of its parameters; default: the
         bare operator, windows of the operator's rollover horizon). fmu_settings(md) gives a surrogate
-        FMU's defaults."""
+        FMU's defaults. u_init [n_u]: the inputs the FMU holds when it is initialised, which give the
+        first window its frame: its start values (default), or what the master set in initialization
+        mode (fmpy's simulate_fmu sets the first input row there)."""
         n_u = self.component.n_inputs
         horizon = float(rollover_horizon or self.default_rollover)
         steps = [(float(s[0]), np.asarray(s[1:], dtype=float)) for s in steps]
         if any(u.shape != (n_u,) for _, u in steps):
             raise ValueError(f"each step is (h, {', '.join(self.component.input_names)})")
+        u_init = np.asarray(self.component.start_inputs if u_init is None else u_init, dtype=float)
+        if u_init.shape != (n_u,):
+            raise ValueError(f"u_init must hold {n_u} inputs ({', '.join(self.component.input_names)})")
         t, x = 0.0, np.array(x0, dtype=float)
-        window = None  # {t: start time, x: start state, sensors: [n_sensors, n_u], corrections: None until its first step}
-        last_u = steps[0][1] if steps else None
+        window = self.start_window(0.0, x, u_init)
+        last_u, input_time = u_init, 0.0  # the input written last and the time it was set
         out = []
-
-        def start_window(time, state, u):
-            return {"t": time, "x": state.copy(), "sensors": np.tile(u, (self.n_sensors, 1)), "corrections": None}
-
-        if steps:
-            window = start_window(0.0, x, steps[0][1])
         for h, u in steps:
-            if restart_jump > 0 and t > window["t"] + TIME_EPS and np.max(np.abs(u - last_u)) > restart_jump:
-                window = start_window(t, x, u)
-            stop = t + h
+            if restart_jump > 0 and t > window["t"] + TIME_EPS:
+                turned = window["c"] * self.rates * (t - input_time)  # an angle turning with the frame
+                if np.max(np.abs(u - last_u - turned)) > restart_jump:
+                    window = self.start_window(t, x, u)
+            input_time, stop = t, t + h
             while t < stop - TIME_EPS:
                 end = min(stop, window["t"] + horizon)
                 first = min(max(int(np.ceil((t - window["t"]) / self.sensor_dt - 1e-6)), 0), self.n_sensors)
                 if window["corrections"] is None:  # for the input held over the window's first step
+                    level = self.input_in_frame(window, u, 0.0)
                     window["corrections"] = {
-                        "rest": self.rest_correction(window["x"], u, rest_radius),
-                        "rest_sensors": np.tile(u, (self.n_sensors, 1)),
+                        "rest": self.rest_correction(window["x_f"], level, rest_radius),
+                        "rest_sensors": np.tile(level, (self.n_sensors, 1)),
                         "slow": slow_mode(self.f, window["x"], u) if slow_weight > 0 else None,
                         "slow_integral": 0.0}
-                c = window["corrections"]
-                slow = c["slow"]
+                fix = window["corrections"]
+                slow = fix["slow"]
                 rate_start = slow[0] @ self.f(x, u) if slow else 0.0
                 x_start = x.copy()
                 drives = {i: affine_drive(self.f, i, x, u) for i in self.component.affine_states} \
                     if swing_weight > 0 else {}
-                window["sensors"][first:] = u
                 tau = min(end - window["t"], self.horizon)
-                x = self.predict(window["x"], window["sensors"], tau)
-                if c["rest"] is not None:
-                    weight, rest = c["rest"]
-                    x = x - weight * (self.predict(rest, c["rest_sensors"], tau) - rest)
+                # slots from the current time on: u in the frame, ramping with it until tau, then held
+                window["sensors"][first:] = self.input_in_frame(
+                    window, u, np.minimum(self.slot_times[first:], tau)[:, None])
+                x_f = self.network(window["x_f"], window["sensors"], tau)
+                if fix["rest"] is not None:
+                    weight, rest = fix["rest"]
+                    x_f = x_f - weight * (self.network(rest, fix["rest_sensors"], tau) - rest)
+                x = x_f + (window["shift"] + window["c"] * tau) * self.angles + window["c"] * self.speed
                 if slow:
                     l, r = slow
-                    c["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u))
-                    x = x + slow_weight * (l @ window["x"] + c["slow_integral"] - l @ x) * r
+                    fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u))
+                    x = x + slow_weight * (l @ window["x"] + fix["slow_integral"] - l @ x) * r
                 for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's
                     g_end, _ = affine_drive(self.f, i, x, u)
                     x[i] += swing_weight * (affine_step(x_start[i], g_start, g_end, k, end - t) - x[i])
@@ -270,7 +330,7 @@ class StepMirror:
                 if not np.all(np.isfinite(x)):
                     raise FloatingPointError(f"t = {t:.6g} s: the operator returned a non-finite state")
                 if t >= window["t"] + horizon - TIME_EPS:
-                    window = start_window(t, x, u)
+                    window = self.start_window(t, x, u)
             t = stop
             out.append(x.copy())
         return np.array(out).reshape(len(steps), self.component.n_states)
