@@ -95,6 +95,7 @@ def test_variables_and_value_references_are_the_reference_fmus(unzipped):
     assert got == [(v.name, v.vr, v.causality) for v in native_reference_variables(SM4, DEFAULT)]
     starts = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}
     assert starts["rtol"] == SOLVER_STARTS["rtol"] <= 1e-8 and starts["atol"] == SOLVER_STARTS["atol"] <= 1e-10
+    assert [starts[n] for n in SM4.input_names] == [1.0, 0.0, 0.7048, 1.08]  # the operating point of Table I
     assert md.coSimulation.canInterpolateInputs and md.coSimulation.providesDirectionalDerivative
     by_vr = {v.valueReference: v.name for v in md.modelVariables}
     deps = {by_vr[o.variable.valueReference]: [d.name for d in o.dependencies] for o in md.outputs}
@@ -113,7 +114,7 @@ def test_default_initial_state_is_that_machines_equilibrium_and_stays_at_rest(un
 
 
 @pytest.mark.parametrize("machine", ["default", "other"])
-@pytest.mark.parametrize("name", ["dip", "mix", "step"])
+@pytest.mark.parametrize("name", ["dip", "mix", "step", "governor", "drift"])
 def test_states_agree_with_dop853_on_60_s_of_held_inputs(unzipped, other, name, machine):
     fmu, p = (unzipped, DEFAULT) if machine == "default" else (other, OTHER)
     h, s = 0.01, scenario(name, 0, 60.0, params=p)
@@ -133,17 +134,18 @@ def test_the_pythonfmu_reference_agrees_with_dop853_too(reference_path):
 
 def test_inputs_are_linear_over_a_step_where_their_derivatives_are_set(unzipped):
     slave = Slave(unzipped)
-    vs, theta = slave.vr["Vs"], slave.vr["theta_vs"]
+    refs = [slave.vr[n] for n in SM4.input_names]
     x, got, expected = slave.state(), [], []
-    for u, du in [((0.9, 0.1), (2.0, -3.0)), ((1.1, -0.2), (-1.5, 0.5)), ((0.95, 0.0), (0.0, 0.0))]:
-        slave.fmu.setRealInputDerivatives([vs, theta], [1, 1], list(du))
+    for u, du in [((0.9, 0.1, 0.75, 1.1), (2.0, -3.0, 0.4, -1.0)), ((1.1, -0.2, 0.65, 1.2), (-1.5, 0.5, -0.6, 2.0)),
+                  ((0.95, 0.0, 0.7048, 1.08), (0.0, 0.0, 0.0, 0.0))]:
+        slave.fmu.setRealInputDerivatives(refs, [1] * len(refs), list(du))
         got.append(slave.step(0.05, *u))
-        x = solve_ivp(lambda t, y: SM4.derivatives(y.tolist(), (u[0] + du[0] * t, u[1] + du[1] * t), DEFAULT, math),
+        x = solve_ivp(lambda t, y: SM4.derivatives(y.tolist(), [a + b * t for a, b in zip(u, du)], DEFAULT, math),
                       (0.0, 0.05), x, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1]
         expected.append(x)
     np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
     held = Slave(unzipped, "held")  # without derivatives: another answer
-    assert np.abs(held.step(0.05, 0.9, 0.1) - got[0]).max() > 1e-4
+    assert np.abs(held.step(0.05, 0.9, 0.1, 0.75, 1.1) - got[0]).max() > 1e-4
     held.close()
     slave.close()
 
@@ -155,7 +157,8 @@ def test_after_a_step_with_input_derivatives_the_inputs_are_those_at_its_end(unz
     slave.fmu.doStep(currentCommunicationPoint=0.0, communicationStepSize=0.01)
     assert slave.get("Vs")[0] == pytest.approx(0.88, abs=1e-15)
     y = slave.get(*SM4.output_names)
-    np.testing.assert_allclose(y, SM4.output_values(slave.state(), np.array([0.88, 0.0]), DEFAULT), atol=1e-14)
+    u = np.array([0.88, 0.0, *SM4.start_inputs[2:]])
+    np.testing.assert_allclose(y, SM4.output_values(slave.state(), u, DEFAULT), atol=1e-14)
     slave.fmu.doStep(currentCommunicationPoint=0.01, communicationStepSize=0.01)  # the derivative still holds
     assert slave.get("Vs")[0] == pytest.approx(0.86, abs=1e-15)
     slave.close()
@@ -260,7 +263,9 @@ def test_many_instances_of_two_machines_live_side_by_side(unzipped, other):
 
 @pytest.mark.parametrize("changes, reason", [
     ({"model_name": "1bad"}, "must be a C identifier"), ({"params": {"Xd_p": 2.0}}, "Xd_p"),
-    ({"params": {"bogus": 1}}, "unknown sm4 parameter"), ({"params": {"Pm": 5.0}}, "no equilibrium")])
+    ({"params": {"bogus": 1}}, "unknown sm4 parameter"), ({"params": {"Pm": 0.7}}, "unknown sm4 parameter(s) 'Pm'"),
+    # a machine behind a long line (2 pu) cannot deliver the start Pm at the start Efd
+    ({"params": {"Xep": 2.0}}, "no equilibrium")])
 def test_a_build_that_cannot_be_done_is_a_one_line_error(tmp_path, changes, reason):
     with pytest.raises(NativeReferenceError) as info:
         build_native_reference_fmu(tmp_path / "x.fmu", **changes)
