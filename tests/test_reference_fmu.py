@@ -17,7 +17,9 @@ from fmu_slave import Slave
 from reference_models.component import ParameterError
 from reference_models.sm4 import SM4
 
-STEPS = [(0.01, 1.0, 0.0)] * 5 + [(0.02, 0.6, 0.1)] * 10 + [(0.005, 0.95, 0.25)] * 40 + [(0.05, 1.05, 0.2)] * 6
+# (h, Vs, theta_vs, Pm, Efd): a dip at the start operating point, then new bus, mechanical and field levels
+STEPS = ([(0.01, 1.0, 0.0, 0.7048, 1.08)] * 5 + [(0.02, 0.6, 0.1, 0.7048, 1.08)] * 10
+         + [(0.005, 0.95, 0.25, 0.6, 1.3)] * 40 + [(0.05, 1.05, 0.2, 0.75, 1.0)] * 6)
 # a machine other than the default (DESIGN section 2): no damping, no external reactance
 MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
            "Tq0_p": 0.6, "Xep": 0, "Re": 0}
@@ -43,10 +45,11 @@ def machine(machine_path):
 
 
 def held_input_solution(x0, steps, p=DEFAULT):
-    """States after each (h, Vs, theta) step by solve_ivp (DOP853, tight) with the inputs held over the step."""
+    """States after each (h, Vs, theta_vs[, Pm, Efd]) step by solve_ivp (DOP853, tight) with the inputs
+    held over the step (an input not given at its start value, as Slave.step sets it)."""
     x, out = np.array(x0, dtype=float), []
     for h, *u in steps:
-        u = np.array(u)
+        u = np.concatenate([u, SM4.start_inputs[len(u):]])
         x = solve_ivp(lambda _t, y: SM4.rhs(y, u, p), (0.0, h), x, method="DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
         out.append(x)
     return np.array(out)
@@ -75,6 +78,8 @@ def test_variables_and_value_references_are_the_tables(unzipped):
     by_vr = {v.valueReference: v.name for v in md.modelVariables}
     deps = {by_vr[o.variable.valueReference]: [d.name for d in o.dependencies] for o in md.outputs}
     assert all(deps[s] == [] for s in SM4.state_names) and deps["P"] == ["Vs", "theta_vs"]
+    starts = {v.name: v.start for v in md.modelVariables}
+    assert [float(starts[n]) for n in SM4.input_names] == [1.0, 0.0, 0.7048, 1.08]  # Table I's operating point
 
 
 def test_fmu_carries_the_model_code_and_the_machine_it_runs(reference_path, machine_path):
@@ -121,16 +126,17 @@ def test_derived_outputs_follow_the_inputs_set_after_a_step(unzipped, machine, w
     fmu, p = (unzipped, DEFAULT) if which == "default" else (machine, OTHER)
     slave = Slave(fmu)
     x = slave.step(0.01, 0.9, 0.1)
-    slave.set(Vs=0.8, theta_vs=-0.2)
+    slave.set(Vs=0.8, theta_vs=-0.2, Pm=0.5, Efd=1.5)
     got = slave.get(*SM4.output_names)
     slave.close()
-    np.testing.assert_allclose(got, SM4.output_values(x, np.array([0.8, -0.2]), p), rtol=1e-12, atol=1e-12)
+    u = np.array([0.8, -0.2, 0.5, 1.5])
+    np.testing.assert_allclose(got, SM4.output_values(x, u, p), rtol=1e-12, atol=1e-12)
     other = DEFAULT if p is OTHER else OTHER
-    assert np.abs(got - SM4.output_values(x, np.array([0.8, -0.2]), other)).max() > 1e-3
+    assert np.abs(got - SM4.output_values(x, u, other)).max() > 1e-3
 
 
 def test_initial_state_parameters_start_the_run(unzipped):
-    x0 = SM4.steady_state((0.95, 0.1), DEFAULT)
+    x0 = SM4.steady_state((0.95, 0.1, 0.7048, 1.08), DEFAULT)
     start = dict(zip(SM4.state_names, x0), omega=0.05)
     slave = Slave(unzipped, **{f"{n}0": v for n, v in start.items()})
     np.testing.assert_allclose(slave.state(), list(start.values()))
@@ -201,8 +207,10 @@ def test_a_missing_or_corrupt_machine_resource_is_refused_with_a_reason(machine_
 def test_the_builder_refuses_an_unknown_parameter_and_a_machine_without_equilibrium(tmp_path):
     with pytest.raises(ParameterError, match="unknown sm4 parameter"):
         build_reference_fmu(tmp_path / "x.fmu", params={"inertia": 5.0})
-    with pytest.raises(ReferenceBuildError, match="no equilibrium at the start inputs"):
-        build_reference_fmu(tmp_path / "x.fmu", params={"Pm": 5.0})
+    with pytest.raises(ParameterError, match="unknown sm4 parameter\\(s\\) 'Pm'"):  # an input, no parameter
+        build_reference_fmu(tmp_path / "x.fmu", params={"Pm": 0.7})
+    with pytest.raises(ReferenceBuildError, match="no equilibrium at the start inputs"):  # behind a 2 pu line
+        build_reference_fmu(tmp_path / "x.fmu", params={"Xep": 2.0})
     with pytest.raises(ValueError, match="Python identifier"):
         build_reference_fmu(tmp_path / "x.fmu", model_name="not-a-name")
     assert not (tmp_path / "x.fmu").exists()
