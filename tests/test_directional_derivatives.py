@@ -10,7 +10,7 @@ from fmu_slave import Slave
 from reference_models.sm4 import SM4
 
 DEFAULT = SM4.params()
-RUN = [(0.01, 1.0, 0.0)] * 5 + [(0.01, 0.6, 0.2)] * 8 + [(0.02, 1.05, -0.1)] * 10
+RUN = [(0.01, 1.0, 0.0)] * 5 + [(0.01, 0.6, 0.2, 0.6, 1.4)] * 8 + [(0.02, 1.05, -0.1, 0.75, 1.2)] * 10
 
 
 @pytest.fixture(scope="module", params=["fmu_path", "native_reference_path"])
@@ -20,7 +20,7 @@ def unzipped(request):
 
 
 def moving(unzipped, steps=RUN):
-    """An instance after `steps` (h, Vs, theta): away from rest, inputs off their starts."""
+    """An instance after `steps` (h, Vs, theta_vs[, Pm, Efd]): away from rest, inputs off their starts."""
     slave = Slave(unzipped)
     for h, *u in steps:
         slave.step(h, *u)
@@ -60,10 +60,12 @@ def test_derived_outputs_have_the_derivatives_of_their_finite_differences_and_st
             exact = derivative(slave, outputs, [name], [1.0])
             np.testing.assert_allclose(exact, finite_difference(slave, outputs, name), rtol=1e-7, atol=1e-8)
             np.testing.assert_array_equal(derivative(slave, SM4.state_names, [name], [1.0]), 0.0)
-        # a seed over both inputs is the combination of the columns; unknowns in any order, repeated
+        for name in ("Pm", "Efd"):  # no derived output depends on them within a step
+            np.testing.assert_array_equal(derivative(slave, outputs, [name], [1.0]), 0.0)
+        # a seed over several inputs is the combination of the columns; unknowns in any order, repeated
         columns = np.array([derivative(slave, outputs, [n], [1.0]) for n in SM4.input_names]).T
-        combined = derivative(slave, outputs[::-1] + ["delta", "P"], ["theta_vs", "Vs"], [-0.3, 2.0])
-        expected = columns @ np.array([2.0, -0.3])
+        combined = derivative(slave, outputs[::-1] + ["delta", "P"], ["theta_vs", "Pm", "Vs"], [-0.3, 5.0, 2.0])
+        expected = columns @ np.array([2.0, -0.3, 5.0, 0.0])
         np.testing.assert_allclose(combined, np.concatenate([expected[::-1], [0.0, expected[4]]]), rtol=1e-14,
                                    atol=1e-15)
     slave.close()
@@ -72,8 +74,8 @@ def test_derived_outputs_have_the_derivatives_of_their_finite_differences_and_st
 def test_outputs_follow_inputs_set_without_a_step(unzipped):
     slave = moving(unzipped)
     x = slave.state()
-    for u in [(0.7, 0.4), (1.2, -0.3), (0.0, 0.0)]:
-        slave.set(Vs=u[0], theta_vs=u[1])
+    for u in [(0.7, 0.4, 0.7048, 1.08), (1.2, -0.3, 0.5, 1.6), (0.0, 0.0, 0.9, 0.9)]:
+        slave.set(**dict(zip(SM4.input_names, u)))
         np.testing.assert_allclose(slave.get(*SM4.output_names), SM4.output_values(x, np.array(u), DEFAULT),
                                    rtol=0, atol=1e-13)
     np.testing.assert_array_equal(slave.state(), x)  # no step was taken
