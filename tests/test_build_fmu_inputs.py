@@ -14,6 +14,7 @@ from fmpy import extract, read_model_description
 
 from fmu_slave import Slave
 from opfmu.cli import main
+from reference_models.drift import frame_of
 from reference_models.sm4 import SM4, SM4Params
 from surrogate.operator import DEFAULT_OPERATOR
 
@@ -64,7 +65,10 @@ CASES = {
     "unknown component": (lambda s: {"component": INJECTION}, (), "unknown component"),
     "code as a state name": (lambda s: {"state_names": json.dumps(["delta", INJECTION, "Ed_p", "Eq_p"])}, (),
                              "state_names"),
-    "inputs in another order": (lambda s: {"input_names": json.dumps(["theta_vs", "Vs"])}, (), "input_names"),
+    "inputs in another order": (lambda s: {"input_names": json.dumps(["theta_vs", "Vs", "Pm", "Efd"])}, (),
+                                "input_names"),
+    "the two inputs of the first operators": (lambda s: {"input_names": json.dumps(["Vs", "theta_vs"])}, (),
+                                              "input_names"),
     "code as n_sensors": (lambda s: {"n_sensors": INJECTION}, (), "n_sensors is not valid JSON"),
     "n_sensors 1e8": (lambda s: {"n_sensors": "1e8"}, (), "n_sensors = 100000000 must be an integer in"),
     "n_sensors abc": (lambda s: {"n_sensors": "abc"}, (), "n_sensors is not valid JSON"),
@@ -78,14 +82,25 @@ CASES = {
     "params H = -1": (lambda s: {"params": json.dumps({"H": -1})}, (), "parameter H = -1.0 must be > 0"),
     "params H huge": (lambda s: {"params": '{"H": ' + "9" * 400 + "}"}, (), "metadata params"),
     "params not an object": (lambda s: {"params": "[1, 2]"}, (), "must be a JSON object"),
-    "machine without equilibrium": (lambda s: {"params": json.dumps({"Pm": 5.0})}, (), "no stable equilibrium"),
+    "Pm as a parameter": (lambda s: {"params": json.dumps({**SM4Params().to_dict(), "Pm": 0.7})}, (),
+                          "unknown sm4 parameter(s) 'Pm'"),
+    # behind a 2 pu line the machine cannot deliver the start Pm at the start Efd
+    "machine without equilibrium": (lambda s: {"params": json.dumps({"Xep": 2.0})}, (), "no stable equilibrium"),
+    "frame removed": (lambda s: {}, ("frame",), "metadata has no frame"),
+    "frame of another machine": (lambda s: {"frame": json.dumps(frame_of(SM4.drift, SM4Params(D=0.5)).to_dict())}, (),
+                                 "is not the frame of the sm4 component"),
+    "frame with code": (lambda s: {"frame": json.dumps({"angle_states": INJECTION})}, (), "is not a frame"),
     "envelope with wrong names": (lambda s: {"envelope": json.dumps(
         {"x0": {INJECTION: [0, 1], "omega": [0, 1], "Ed_p": [0, 1], "Eq_p": [0, 1]},
          "u": {"Vs": [0, 1], "theta_vs": [0, 1]}})}, (), "envelope x0 must give [low, high] for exactly"),
     "envelope low above high": (lambda s: {"envelope": json.dumps(
-        {**meta_of(s, "envelope"), "u": {"Vs": [1.2, 0.2], "theta_vs": [0, 1]}})}, (), "has low > high"),
+        {**meta_of(s, "envelope"), "u": {**meta_of(s, "envelope")["u"], "Vs": [1.2, 0.2]}})}, (), "has low > high"),
     "envelope with code as a bound": (lambda s: {"envelope": json.dumps(
-        {**meta_of(s, "envelope"), "u": {"Vs": [INJECTION, 1.0], "theta_vs": [0, 1]}})}, (), "must be a number"),
+        {**meta_of(s, "envelope"), "u": {**meta_of(s, "envelope")["u"], "Pm": [INJECTION, 1.0]}})}, (),
+        "must be a number"),
+    "envelope without Pm and Efd": (lambda s: {"envelope": json.dumps(
+        {**meta_of(s, "envelope"), "u": {"Vs": [0.7, 1.2], "theta_vs": [-0.5, 0.5]}})}, (),
+        "envelope u must give [low, high] for exactly"),
     "residual_scale with code": (lambda s: {"residual_scale": json.dumps([1, 1, INJECTION, 1])}, (),
                                  "residual_scale[2]"),
     "residual_scale negative": (lambda s: {"residual_scale": "[1, -1, 1, 1]"}, (), "positive numbers"),
@@ -143,11 +158,17 @@ assert "torch" not in sys.modules
 
 @pytest.fixture(scope="module")
 def undamped_fmu(shipped, tmp_path_factory):
-    """The FMU of the shipped operator relabelled for an undamped machine (D = 0, other reactances)."""
+    """The FMU of the shipped operator relabelled for an undamped machine (D = 0, other reactances):
+    its network wrapped in that machine's frame (no damping torque), as an export for it would."""
     from fmu_export.builder import build_surrogate_fmu
+    from surrogate.frame_graph import network_graph, wrap_in_frame
 
     directory = tmp_path_factory.mktemp("undamped")
-    path = rewritten(shipped, directory / "op.onnx", {"params": json.dumps(UNDAMPED)})
+    frame = frame_of(SM4.drift, SM4Params(**UNDAMPED))
+    horizon, n_sensors = meta_of(shipped, "horizon_s"), meta_of(shipped, "n_sensors")
+    relabelled = wrap_in_frame(network_graph(shipped), frame, np.linspace(0.0, horizon, n_sensors))
+    path = rewritten(relabelled, directory / "op.onnx", {"params": json.dumps(UNDAMPED),
+                                                         "frame": json.dumps(frame.to_dict())})
     build_surrogate_fmu(path, directory / "Undamped.fmu", model_name="Undamped", n_check=4)
     return directory / "Undamped.fmu"
 
