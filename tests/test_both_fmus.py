@@ -73,7 +73,7 @@ def test_the_two_references_agree_on_held_inputs(reference_path, native_referenc
     runs = []
     for path in (reference_path, native_reference_path):
         slave = Slave((extract(str(path)), read_model_description(str(path))), rtol=1e-10, atol=1e-12)
-        runs.append([slave.step(h, *u) for h, *u in [(0.01, 0.9, 0.1)] * 20 + [(0.05, 1.05, -0.2)] * 10])
+        runs.append([slave.step(h, *u) for h, *u in [(0.01, 0.9, 0.1)] * 20 + [(0.05, 1.05, -0.2, 0.6, 1.4)] * 10])
         slave.close()
     np.testing.assert_allclose(runs[0], runs[1], rtol=0, atol=1e-9)
 

@@ -166,9 +166,11 @@ static void call_one(Slot *slots, const char *guid, int n_reals)
             s->phase = status == fmi2OK ? 2 : 4;
             break;
         case 2: {
-            fmi2ValueReference inputs[2] = {0, 1};
-            fmi2Real u[2] = {0.2 + uniform(), uniform() - 0.5};
-            count(F.fmi2SetReal(c, inputs, 2, u));
+            /* SM4's inputs Vs, theta_vs, Pm, Efd (value references 0-3, fmu_export/variables.py); Pm and
+               Efd near their start values 0.7048 and 1.08 */
+            fmi2ValueReference inputs[4] = {0, 1, 2, 3};
+            fmi2Real u[4] = {0.2 + uniform(), uniform() - 0.5, 0.6548 + 0.1 * uniform(), 0.98 + 0.2 * uniform()};
+            count(F.fmi2SetReal(c, inputs, 4, u));
             status = F.fmi2DoStep(c, now, below(2) ? 0.01 : 0.001 + 0.05 * uniform(), fmi2True);
             steps_done += status == fmi2OK;
             if (status == fmi2Error) s->phase = 4;

@@ -30,13 +30,14 @@ int main(int argc, char **argv)
         for (int c = 0; c < cycles; ++c) {
             fmi2Component fmu = fmi2Instantiate("leak", fmi2CoSimulation, argv[2], "", &callbacks, fmi2False, fmi2False);
             if (!fmu) return 1;
-            fmi2ValueReference vr[2] = {0, 1};
-            fmi2Real u[2] = {0.95, 0.1}, x[4];
-            fmi2ValueReference states[4] = {2, 3, 4, 5};
+            /* SM4's value references (fmu_export/variables.py): inputs Vs, theta_vs, Pm, Efd 0-3, states 4-7 */
+            fmi2ValueReference vr[4] = {0, 1, 2, 3};
+            fmi2Real u[4] = {0.95, 0.1, 0.7048, 1.08}, x[4];
+            fmi2ValueReference states[4] = {4, 5, 6, 7};
             fmi2SetupExperiment(fmu, fmi2False, 0.0, 0.0, fmi2False, 0.0);
             fmi2EnterInitializationMode(fmu);
             fmi2ExitInitializationMode(fmu);
-            fmi2SetReal(fmu, vr, 2, u);
+            fmi2SetReal(fmu, vr, 4, u);
             for (int k = 0; k < 3; ++k)
                 if (fmi2DoStep(fmu, 0.01 * k, 0.01, fmi2True) != fmi2OK) return 1;
             fmi2GetReal(fmu, states, 4, x);
