@@ -80,8 +80,8 @@ def test_derived_outputs_follow_the_users_machines_equations(user_run, tmp_path,
     x0 = SM4.steady_state(None, params) + np.array([0.1, 0.0, 0.02, -0.03])
     slave = Slave((directory, read_model_description(directory)), **dict(zip(
         [f"{s}0" for s in SM4.state_names], x0)))
-    u = np.array([0.95, 0.1])
-    slave.set(Vs=u[0], theta_vs=u[1])
+    u = np.array([0.95, 0.1, 0.6, 1.3])
+    slave.set(**dict(zip(SM4.input_names, u)))
     got = slave.get(*SM4.output_names)
     slave.close()
     np.testing.assert_allclose(got, SM4.output_values(x0, u, params), rtol=0, atol=1e-12)
@@ -92,9 +92,9 @@ def test_the_reference_fmu_agrees_with_an_independent_solve_for_the_users_machin
     directory = extract(str(root / "R.fmu"), unzipdir=str(tmp_path / "r"))
     x0 = SM4.steady_state(None, params)
     slave = Slave((directory, read_model_description(directory)))
-    states = [slave.step(0.01, Vs=0.9, theta_vs=0.05) for _ in range(50)]
+    states = [slave.step(0.01, Vs=0.9, theta_vs=0.05, Pm=0.6, Efd=1.2) for _ in range(50)]
     slave.close()
-    exact = solve_ivp(lambda _t, x: SM4.rhs(x, np.array([0.9, 0.05]), params), (0, 0.5), x0, method="DOP853",
+    exact = solve_ivp(lambda _t, x: SM4.rhs(x, np.array([0.9, 0.05, 0.6, 1.2]), params), (0, 0.5), x0, method="DOP853",
                       rtol=1e-11, atol=1e-12, t_eval=[0.5]).y[:, -1]
     np.testing.assert_allclose(states[-1], exact, rtol=0, atol=1e-6)
 
@@ -127,6 +127,7 @@ def test_compare_refuses_fmus_of_two_different_machines(user_run, tmp_path):
     ('{"H": 1e400}', "parameter H"),
     ('{"H": 1' + '0' * 400 + '}', "parameter H"),
     ('{"Xd_p": 2.0}', "not exceed Xd"),
+    ('{"Pm": 0.7}', "unknown sm4 parameter(s) 'Pm'"),  # an input, not a parameter
     ("not json", "cannot read machine file"),
 ])
 def test_a_bad_machine_file_is_one_line_and_exit_code_2(tmp_path, content, says):
