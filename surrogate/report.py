@@ -46,7 +46,8 @@ def check_operator(operator, data_dir, out, split: str = "test") -> str:
     from .operator import EnvelopeWarning
 
     data = load_split(data_dir, split)
-    outside = sum(bool(operator.outside_envelope(data["x0"][i:i + 1], data["u"][i])) for i in range(len(data["x0"])))
+    outside = sum(bool(operator.outside_envelope(data["x0"][i:i + 1], data["u"][i:i + 1]))
+                  for i in range(len(data["x0"])))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", EnvelopeWarning)
         x_hat = operator.predict(data["x0"], data["u"], data["t"]).astype(np.float64)
