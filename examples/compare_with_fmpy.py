@@ -2,11 +2,12 @@
 
     python examples/compare_with_fmpy.py SM4Surrogate.fmu SM4Reference.fmu [--plot compare.png]
 
-Both FMUs see the same bus voltage, sampled at the communication points and held over each step: a
-fault to 0.5 pu at t = 1 s, cleared after 150 ms, with a 0.1 rad jump of the voltage angle. Both
-start from their default state (the machine at rest at Vs = 1 pu, theta_vs = 0). Every output the two
-model descriptions share is compared; the states (the outputs with an initial-state parameter
-<name>0) are plotted.
+Both FMUs see the same inputs, sampled at the communication points and held over each step: a fault
+of the bus voltage to 0.5 pu at t = 1 s, cleared after 150 ms, with a 0.1 rad jump of the voltage
+angle, and the mechanical power Pm lowered by 10 % at t = 3 s, the field voltage Efd held. Both
+start from their default state (the machine at rest at its inputs' start values: Vs = 1 pu,
+theta_vs = 0, Pm = 0.7048 pu, Efd = 1.08 pu). Every output the two model descriptions share is
+compared; the states (the outputs with an initial-state parameter <name>0) are plotted.
 """
 import argparse
 import time
@@ -15,6 +16,7 @@ import numpy as np
 from fmpy import read_model_description, simulate_fmu
 
 STOP_TIME, STEP = 5.0, 0.01
+PM_START, EFD_START = 0.7048, 1.08  # pu, the start values of the FMUs' inputs Pm and Efd (paper Table I)
 
 
 def shared_outputs(*fmus) -> tuple[list, list]:
@@ -29,10 +31,13 @@ def shared_outputs(*fmus) -> tuple[list, list]:
 
 def fault() -> np.ndarray:
     t = np.arange(0.0, STOP_TIME + STEP / 2, STEP)
-    signal = np.zeros(len(t), dtype=[("time", float), ("Vs", float), ("theta_vs", float)])
+    names = ("time", "Vs", "theta_vs", "Pm", "Efd")
+    signal = np.zeros(len(t), dtype=[(name, float) for name in names])
     signal["time"] = t
     signal["Vs"] = np.where((t >= 1.0) & (t < 1.15), 0.5, 1.0)
     signal["theta_vs"] = np.where(t >= 1.0, 0.1, 0.0)
+    signal["Pm"] = np.where(t >= 3.0, 0.9 * PM_START, PM_START)
+    signal["Efd"] = EFD_START
     return signal
 
 
