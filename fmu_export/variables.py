@@ -3,8 +3,8 @@
 Real value references, in this order: the component's inputs, its states (outputs at the
 communication point), its derived outputs, the initial-state parameters `<state>0`, then the
 variables a kind of FMU adds (`SURROGATE_EXTRAS`, `REFERENCE_EXTRAS`) in the order listed. Boolean
-value references count from 0 on their own. For SM4 this is Vs 0, theta_vs 1, delta..Eq_p 2-5,
-Id..Q 6-11, delta0..Eq_p0 12-15, then 16 on. The C sources get the same table as generated
+value references count from 0 on their own. For SM4 this is Vs 0, theta_vs 1, Pm 2, Efd 3,
+delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, then 18 on. The C sources get the same table as generated
 `#define`s (`vr_header`); tests, benchmarks and importers read the model description.
 """
 from __future__ import annotations
