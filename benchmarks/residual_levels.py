@@ -21,11 +21,12 @@ from opfmu.compare import Inputs, communication_points, compare, fmu_machine, sc
 from fmu_pair import extracted_pair
 from reference_models.files import write_json
 from reference_models.scenarios import SCENARIOS, rest_state
+from reference_models.sm4 import SM4
 
 
 def stress(name: str, stop_time: float, step: float, machine) -> Inputs:
-    """A run of `machine` (SM4Params) from rest at Vs = 1, theta_vs = 0 with one event at t = 2 s that
-    leaves the envelope."""
+    """A run of `machine` (SM4Params) from rest at the start inputs (Vs = 1, theta_vs = 0, Pm and Efd at
+    their start values, held) with one event of the bus voltage at t = 2 s that leaves the envelope."""
     t = communication_points(stop_time, step)
     vs, theta = np.ones_like(t), np.zeros_like(t)
     event = t >= 2.0 - 1e-9
@@ -35,7 +36,8 @@ def stress(name: str, stop_time: float, step: float, machine) -> Inputs:
         vs[event] = 1.35
     else:  # angle jump
         theta[event] = 1.0
-    return Inputs(name, t, np.stack([vs, theta], axis=1), rest_state(1.0, 0.0, machine))
+    Pm, Efd = (np.full_like(t, q.start) for q in SM4.inputs[2:])
+    return Inputs(name, t, np.stack([vs, theta, Pm, Efd], axis=1), rest_state(1.0, 0.0, machine))
 
 
 def main() -> None:
@@ -57,14 +59,14 @@ def main() -> None:
         runs = [scenario_inputs(n, seed, args.stop_time, args.step, machine) for n in SCENARIOS for seed in args.seeds]
         runs += [stress(n, args.stop_time, args.step, machine) for n in ("deep fault", "overvoltage", "angle jump")]
         print(f"residual_limit {limit:.3g}; {args.stop_time:g} s at h = {args.step * 1e3:g} ms")
-        print(f"{'run':<16}{'max residual':>13}{'MaxAE delta':>13}{'MaxAE omega':>13}{'MaxAE Eq_p':>12}"
+        print(f"{'run':<18}{'max residual':>13}{'MaxAE delta':>13}{'MaxAE omega':>13}{'MaxAE Eq_p':>12}"
               f"{'warnings':>10}{'envelope':>10}")
         rows = []
         for inputs in runs:
             result = compare(*dirs, inputs, args.stop_time, args.step)
             m = result["metrics"]
             warnings = sum("residual" in message for message in result["messages"]["surrogate"])
-            print(f"{inputs.label:<16}{result['max_residual']:>13.3g}{m['delta']['maxae']:>13.2e}"
+            print(f"{inputs.label:<18}{result['max_residual']:>13.3g}{m['delta']['maxae']:>13.2e}"
                   f"{m['omega']['maxae']:>13.2e}{m['Eq_p']['maxae']:>12.2e}{warnings:>10}"
                   f"{'in' if result['in_envelope'] else 'left':>10}", flush=True)
             rows.append({"run": inputs.label, "max_residual": result["max_residual"], "warnings": warnings,
