@@ -4,7 +4,8 @@
 fmu_export/c/dopri5.c and benchmarks/c/batch_solver.c (gcc -O3, the flags of the FMUs) into a
 library that solves a batch of trajectories in C, one after another on one core, with dense output
 on the query grid (cubic Hermite between the solver's own steps). Inputs are the closed-form
-channels scipy's rows integrate (FirstOrder, SecondOrder: the paper's families).
+channels scipy's rows integrate (FirstOrder, SecondOrder: the paper's families; constants: Piecewise
+channels without breakpoints, which hold SM4's Pm and Efd in them).
 """
 from __future__ import annotations
 
@@ -16,12 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from fmu_export.c_equations import equations_c_source
-from reference_models.signals import FirstOrder, SecondOrder
+from reference_models.signals import FirstOrder, Piecewise, SecondOrder
 
 ROOT = Path(__file__).resolve().parent.parent
 DOPRI5 = ROOT / "fmu_export" / "c" / "dopri5.c"
 DRIVER = Path(__file__).resolve().parent / "c" / "batch_solver.c"
 KINDS = {FirstOrder: (0, ("y0", "k", "A", "w", "y_ref")), SecondOrder: (1, ("y0", "dy0", "zeta", "wn", "y_ref"))}
+CONSTANT = 2  # a Piecewise channel without breakpoints: its one value
 
 
 class CompiledSolver:
@@ -48,10 +50,15 @@ class CompiledSolver:
         rows = []
         for signal in signals:
             per_input = []
+            if signal.hold > 0:
+                raise ValueError("the compiled solver takes signals without a zero-order hold")
             for channel in signal.channels.values():
+                if isinstance(channel, Piecewise) and not channel.times:
+                    per_input.append([CONSTANT, float(channel.values[0]), 0.0, 0.0, 0.0, 0.0])
+                    continue
                 if type(channel) not in KINDS:
-                    raise ValueError(f"the compiled solver takes FirstOrder and SecondOrder channels, not "
-                                     f"{type(channel).__name__}")
+                    raise ValueError(f"the compiled solver takes FirstOrder, SecondOrder and constant channels, "
+                                     f"not {type(channel).__name__}")
                 kind, names = KINDS[type(channel)]
                 per_input.append([kind, *(getattr(channel, n) for n in names)])
             rows.append(per_input)

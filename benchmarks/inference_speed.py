@@ -75,7 +75,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.simplefilter("ignore", EnvelopeWarning)
 
-    data = load_split(args.data, "test")
+    data = load_split(args.data, "test", frame=False)  # as solved: what the solvers and Operator.predict take
     component, params = machine_of(load_metadata(args.data))
     signals = [Signal.from_dict(json.loads(s)) for s in data["signal"]]
     exact = np.stack([simulate(x0, s, data["t"], params, EXACT, component) for x0, s in zip(data["x0"], signals)])

@@ -4,14 +4,14 @@
    Compiled with the component's generated equations (model_derivatives, N_STATES, N_INPUTS from the
    including unit) and fmu_export/c/dopri5.c. Inputs are the closed-form channels of
    reference_models/signals.py that have no breakpoints (FirstOrder, SecondOrder: the paper's
-   families), so the solver sees exactly the signal scipy's rows see. States between the solver's
+   families; a constant: a Piecewise without breakpoints, as they hold Pm and Efd), so the solver sees exactly the signal scipy's rows see. States between the solver's
    steps come from cubic Hermite interpolation of the states and rates at both ends of a step. */
 #include <math.h>
 #include <string.h>
 
 #include "dopri5.h"
 
-enum { FIRST_ORDER = 0, SECOND_ORDER = 1 };
+enum { FIRST_ORDER = 0, SECOND_ORDER = 1, CONSTANT = 2 };
 
 typedef struct {
     const double *channels; /* per input: kind, then 5 parameters (see channel_value) */
@@ -20,9 +20,11 @@ typedef struct {
     double *out;            /* states [S, N_STATES] */
 } Trajectory;
 
-/* y(t) of one channel: FirstOrder (y0, k, A, w, y_ref) or SecondOrder (y0, dy0, zeta, wn, y_ref) */
+/* y(t) of one channel: FirstOrder (y0, k, A, w, y_ref), SecondOrder (y0, dy0, zeta, wn, y_ref) or a
+   constant (y0) */
 static double channel_value(const double *c, double t)
 {
+    if ((int)c[0] == CONSTANT) return c[1];
     if ((int)c[0] == FIRST_ORDER) {
         const double y0 = c[1], k = c[2], A = c[3], w = c[4], y_ref = c[5], kw2 = k * k + w * w;
         return y_ref + (y0 - y_ref + A * w / kw2) * exp(-k * t) + A * (k * sin(w * t) - w * cos(w * t)) / kw2;
