@@ -44,9 +44,10 @@ def main() -> None:
     if recipe.ic == "box":
         box = recipe.ic_box
     else:  # initial states among the equilibria: enough to time the solves without a probe run
-        rest = equilibria(SM4, SM4.params())
+        rest = equilibria(SM4, SM4.params(), recipe.levels)
         box = {name: (rest[:, i].min(), rest[:, i].max()) for i, name in enumerate(SM4.state_names)}
-    x0, signals, _ = sample_split(args.n, recipe.families, box, recipe.horizon, np.random.default_rng(0))
+    x0, signals, _ = sample_split(args.n, recipe.families, box, recipe.horizon, np.random.default_rng(0),
+                                  levels=recipe.levels)
     t = time_grid(recipe)
     chunks = {f"c{k:05d}": (x0[i:i + args.chunk], [s.to_dict() for s in signals[i:i + args.chunk]])
               for k, i in enumerate(range(0, args.n, args.chunk))}
