@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.files import atomic_path
-from surrogate.contract import TOLERANCE, ContractError, operator_metadata, random_inputs
+from surrogate.contract import TOLERANCE, ContractError, drifted, operator_metadata, random_inputs
+from surrogate.frame_graph import network_graph
 
 from .c_derivatives import jacobians_c_source
 from .c_equations import equations_c_source
@@ -168,9 +169,31 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"static const double OPFMU_ENV_U_MIN[{n_u}] = {_c_array(envelope['u'][s][0] for s in component.input_names)};",
         f"static const double OPFMU_ENV_U_MAX[{n_u}] = {_c_array(envelope['u'][s][1] for s in component.input_names)};",
         f"static const double OPFMU_RESIDUAL_SCALE[{n_x}] = {_c_array(residual_scale)};",
+        *frame_config(meta.get("frame"), n_x, n_u),
         "#endif", "",
     ]
     return "\n".join(lines)
+
+
+def frame_config(frame, n_x: int, n_u: int) -> list[str]:
+    """config.h lines of the window frame (reference_models.drift.Frame; None: the identity)."""
+    rates = frame.input_rates(n_u) if frame else np.zeros(n_u)
+    torques = frame.input_torques(n_u) if frame else np.zeros(n_u)
+    angles, speed = np.zeros(n_x), np.zeros(n_x)
+    if frame:
+        angles[list(frame.angle_states)] = 1.0
+        speed[frame.speed_state] = 1.0
+    return [
+        f"#define OPFMU_FRAME {1 if frame else 0} /* the operator works in the frame of its window */",
+        f"#define OPFMU_FRAME_ANGLE_INPUT {frame.angle_inputs[0] if frame else 0}",
+        f"#define OPFMU_FRAME_SPEED_STATE {frame.speed_state if frame else 0}",
+        f"#define OPFMU_FRAME_ANGLE_STATE {frame.angle_states[0] if frame and frame.angle_states else -1}",
+        f"#define OPFMU_FRAME_PERIOD {_c_double(frame.period if frame else 1.0)}",
+        f"static const double OPFMU_FRAME_INPUT_RATES[{n_u}] = {_c_array(rates)}; /* R */",
+        f"static const double OPFMU_FRAME_INPUT_TORQUES[{n_u}] = {_c_array(torques)}; /* T */",
+        f"static const double OPFMU_FRAME_ANGLES[{n_x}] = {_c_array(angles)}; /* A */",
+        f"static const double OPFMU_FRAME_SPEED[{n_x}] = {_c_array(speed)}; /* W */",
+    ]
 
 
 def residual_limit(meta: dict) -> float:
@@ -237,8 +260,9 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
     component, params = meta["component"], meta["params"]
     x_default = default_state(meta, onnx_path)
     n_sensors = meta["n_sensors"]
+    network = network_graph(proto)  # the frame is done by the engine (window.c)
     try:
-        kernel = generate_kernel(proto, n_sensors)
+        kernel = generate_kernel(network, n_sensors)
     except Exception as exc:  # an unsupported or malformed graph, found by the generator or shape inference
         raise BuildError(f"{onnx_path}: cannot generate C for the operator graph ({type(exc).__name__}: "
                          f"{str(exc)[:200]})") from None
@@ -266,10 +290,11 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             probe = _compile(Path(tmp) / "probe.so", [src / "operator_kernel.c"], src)
             suffix = sensor_suffix_sums(probe, n_sensors, first_layer, component.n_states, component.n_inputs)
             first_layer = first_layer if suffix is not None else 0
-        (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer))
+        (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer, meta.get("frame"),
+                                                              meta["horizon_s"]))
         (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel))
         binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
-        worst = check_kernel(binary, onnx_path, meta, n_check)
+        worst = check_kernel(binary, proto, meta, n_check)
         if not worst <= TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
         xml = model_description(model_name, guid, variables,
@@ -355,38 +380,65 @@ def sensor_suffix_sums(library: Path, n_sensors: int, width: int, n_states: int,
     return suffix
 
 
-def sensor_sums_source(suffix, n_sensors: int, width: int) -> str:
-    """C definition of OPFMU_SENSOR_SUFFIX [(S + 1) * n_u * H] (one zero when there is no split)."""
-    values = suffix.ravel() if suffix is not None and width else np.zeros(1)
+def ramp_suffix_sums(suffix, frame, horizon: float) -> np.ndarray:
+    """[S + 1, H]: sum over slots j >= k of s_j R . slope_j, with slope_j = suffix[j] - suffix[j + 1]
+    and R the frame's input rates (zeros without a frame): how the frame's ramp reaches z."""
+    n_sensors, n_inputs, width = suffix.shape[0] - 1, suffix.shape[1], suffix.shape[2]
+    if frame is None:
+        return np.zeros((n_sensors + 1, width))
+    per_slot = np.einsum("jch,c->jh", suffix[:-1] - suffix[1:], frame.input_rates(n_inputs))
+    s = np.linspace(0.0, horizon, n_sensors)
+    ramp = np.zeros((n_sensors + 1, width))
+    ramp[:-1] = np.cumsum((s[:, None] * per_slot)[::-1], axis=0)[::-1]
+    return ramp
+
+
+def _c_table(name: str, values: np.ndarray) -> str:
     if not np.all(np.isfinite(values)):
         raise BuildError("the operator's sensor layer has non-finite weights")
     body = ",\n".join(",".join(repr(float(v)) for v in values[i:i + 8]) for i in range(0, values.size, 8))
+    return f"OPFMU_INTERNAL const double {name}[{values.size}] = {{\n{body}}};\n"
+
+
+def sensor_sums_source(suffix, n_sensors: int, width: int, frame=None, horizon: float = 1.0) -> str:
+    """C definitions of OPFMU_SENSOR_SUFFIX [(S + 1) * n_u * H] and OPFMU_RAMP_SUFFIX [(S + 1) * H]
+    (one zero each when there is no split)."""
+    split = suffix is not None and width
+    values = suffix.ravel() if split else np.zeros(1)
+    ramp = ramp_suffix_sums(suffix, frame, horizon).ravel() if split else np.zeros(1)
     return ("/* Generated by opfmu: suffix sums over sensor slots of the sensor layer's slope. */\n"
-            '#include "model.h"\n'
-            f"OPFMU_INTERNAL const double OPFMU_SENSOR_SUFFIX[{values.size}] = {{\n{body}}};\n")
+            '#include "model.h"\n' + _c_table("OPFMU_SENSOR_SUFFIX", values) + _c_table("OPFMU_RAMP_SUFFIX", ramp))
 
 
-def check_kernel(binary: Path, onnx_path: Path, meta: dict, n: int, seed: int = 0) -> float:
-    """Max abs difference of the compiled kernel (inside the FMU binary) against onnxruntime."""
+def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> float:
+    """Max abs difference against onnxruntime of the compiled kernel (inside the FMU binary) on the
+    network's graph and, for an operator with a frame, of the kernel with the engine's frame on the
+    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s)."""
     import onnxruntime as ort
 
     n_sensors, horizon = meta["n_sensors"], meta["horizon_s"]
     t_grid = np.linspace(0.0, horizon, n_sensors)
-    x0, u, t = random_inputs(meta["envelope"], t_grid, n, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    x0, u, t = random_inputs(meta["envelope"], t_grid, n, rng)
     t = t[:: max(1, len(t) // 9)]
-    try:
-        expected = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"]).run(
-            ["x"], {"x0": x0, "u": u, "t": t})[0]
-    except Exception as exc:  # onnxruntime's own errors for graphs it cannot load or run
-        raise BuildError(f"{onnx_path}: onnxruntime cannot run the operator ({str(exc)[:200]})") from None
     library = ctypes.CDLL(str(binary))
-    fn = library.opfmu_operator
-    double_p = ctypes.POINTER(ctypes.c_double)
-    fn.argtypes = [double_p, double_p, ctypes.c_double, double_p]
-    worst, out = 0.0, np.zeros(x0.shape[1])
-    for i in range(n):
-        xi, ui = np.ascontiguousarray(x0[i], np.float64), np.ascontiguousarray(u[i], np.float64)
-        for j, tj in enumerate(t):
-            fn(xi.ctypes.data_as(double_p), ui.ctypes.data_as(double_p), float(tj), out.ctypes.data_as(double_p))
-            worst = max(worst, float(np.max(np.abs(out - expected[i, j]))))
+    cases = [(network_graph(proto), library.opfmu_operator, x0, u)]
+    if meta.get("frame") is not None:
+        cases.append((proto, library.opfmu_framed_operator,
+                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n))))
+    worst = 0.0
+    for graph, fn, x0_, u_ in cases:
+        try:
+            expected = ort.InferenceSession(graph.SerializeToString(), providers=["CPUExecutionProvider"]).run(
+                ["x"], {"x0": x0_, "u": u_, "t": t})[0]
+        except Exception as exc:  # onnxruntime's own errors for graphs it cannot load or run
+            raise BuildError(f"onnxruntime cannot run the operator ({str(exc)[:200]})") from None
+        double_p = ctypes.POINTER(ctypes.c_double)
+        fn.argtypes = [double_p, double_p, ctypes.c_double, double_p]
+        out = np.zeros(x0_.shape[1])
+        for i in range(n):
+            xi, ui = np.ascontiguousarray(x0_[i], np.float64), np.ascontiguousarray(u_[i], np.float64)
+            for j, tj in enumerate(t):
+                fn(xi.ctypes.data_as(double_p), ui.ctypes.data_as(double_p), float(tj), out.ctypes.data_as(double_p))
+                worst = max(worst, float(np.max(np.abs(out - expected[i, j]))))
     return worst

@@ -293,6 +293,9 @@ class StepMirror:
                 turned = window["c"] * self.rates * (t - input_time)  # an angle turning with the frame
                 if np.max(np.abs(u - last_u - turned)) > restart_jump:
                     window = self.start_window(t, x, u)
+            if t < window["t"] + TIME_EPS and not np.array_equal(u, last_u):
+                window = self.start_window(t, x, u)  # a window not run yet takes its first step's input
+                last_u = u
             input_time, stop = t, t + h
             while t < stop - TIME_EPS:
                 end = min(stop, window["t"] + horizon)

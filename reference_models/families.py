@@ -13,7 +13,9 @@ a jump: it starts a window there). Control families move Pm and Efd: `governor` 
 Pm), `exciter` (a fault with the field forced towards a ceiling and returning after it, and
 set-point steps of Efd). `drift` is a faulted bus seen from a frame that turns with the network:
 the bus angle as a zero-order-hold master delivers a drifting network's angle (a sawtooth, see
-signals.Sawtooth) with the exciter's field response.
+signals.Sawtooth) with the exciter's field response. `network` windows are recorded from the machine
+itself in a closed loop with its exciter and a network that accelerates in a fault (smib.py): the bus
+angle swings with the machine, and the window's initial state comes with the signal (Signal.x0).
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import smib
 from .signals import Dip, FirstOrder, Forcing, Piecewise, Ramp, Sawtooth, SecondOrder, Signal, held
 from .sm4 import SM4
 
@@ -47,6 +50,7 @@ class Family:
     ranges: Ranges
     build: Callable[[dict, float], Signal]
     component: object = COMPONENT
+    needs_machine: bool = False  # build(params, horizon, machine): the signal depends on the machine
 
     @property
     def dim(self) -> int:
@@ -58,15 +62,21 @@ class Family:
         pairs = [levels[r] if isinstance(r, str) else r for r in self.ranges.values()]
         return np.array([p[0] for p in pairs], dtype=float), np.array([p[1] for p in pairs], dtype=float)
 
-    def sample(self, unit: np.ndarray, horizon: float, levels: dict | None = None) -> list[Signal]:
+    def sample(self, unit: np.ndarray, horizon: float, levels: dict | None = None, machine=None) -> list[Signal]:
         """Signals for unit-cube points unit [n, dim] over a window of `horizon` seconds, with input
-        levels from `levels` [input name -> (low, high)] (default: the operating ranges)."""
+        levels from `levels` [input name -> (low, high)] (default: the operating ranges), for the
+        component's parameters `machine` (default: its defaults; only families that need_machine
+        use them)."""
         unit = np.atleast_2d(unit)
         if unit.shape[1] != self.dim:
             raise ValueError(f"family {self.name!r} takes {self.dim} parameters, got {unit.shape[1]}")
         lows, highs = self.bounds(levels)
         values = lows + unit * (highs - lows)
-        return [self.build(dict(zip(self.ranges, map(float, row))), horizon) for row in values]
+        rows = [dict(zip(self.ranges, map(float, row))) for row in values]
+        if self.needs_machine:
+            machine = self.component.params() if machine is None else machine
+            return [self.build(row, horizon, machine) for row in rows]
+        return [self.build(row, horizon) for row in rows]
 
 
 def machine(Vs, theta_vs, Pm, Efd, hold: float = 0.0) -> Signal:
@@ -269,7 +279,21 @@ DRIFT = Family(
     _drift,
 )
 
-BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP, GOVERNOR, EXCITER, AVR, DRIFT)}
+def _network(p, horizon, machine):
+    _, signal = smib.record(machine, p["E"], p["Vt0"], p["Xe"], p["P0"], p["t_fault"], p["duration"], p["Xf"],
+                            p["trip"], p["accel"], p["t0"], horizon)
+    return signal
+
+
+NETWORK = Family(
+    "network",
+    {"E": (0.95, 1.1), "Vt0": (0.98, 1.06), "Xe": (0.05, 0.6), "P0": "Pm", "t_fault": (0.0, 1.0),
+     "duration": (0.03, 0.25), "Xf": (0.0, 0.3), "trip": (0.0, 0.8), "accel": (0.0, 30.0), "t0": (0.0, 2.0)},
+    _network,
+    needs_machine=True,
+)
+
+BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP, GOVERNOR, EXCITER, AVR, DRIFT, NETWORK)}
 HOLD_RANGE = (0.001, 0.05)  # s, communication steps a ZOH family holds at (log-uniform)
 
 
@@ -278,11 +302,11 @@ def zoh(base: str, hold_range: tuple = HOLD_RANGE) -> Family:
     inner = family(base)
     ranges = {**inner.ranges, "log_hold": (math.log(hold_range[0]), math.log(hold_range[1]))}
 
-    def build(p, horizon):
+    def build(p, horizon, *machine):
         hold = math.exp(p.pop("log_hold"))
-        return held(inner.build(p, horizon), round(hold, 6))
+        return held(inner.build(p, horizon, *machine), round(hold, 6))
 
-    return Family(f"zoh-{base}", ranges, build, inner.component)
+    return Family(f"zoh-{base}", ranges, build, inner.component, inner.needs_machine)
 
 
 def family(name: str) -> Family:

@@ -171,16 +171,47 @@ class Sawtooth:
         return tuple(np.arange(1, int(math.ceil(horizon / self.period)) + 1) * self.period)
 
 
-CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ramp, Dip, Forcing, Sawtooth)}
+@dataclass(frozen=True)
+class Table:
+    """Piecewise linear through (times[i], values[i]), times ascending; a time given twice is a jump
+    (the second value holds from it on). Constant before the first and after the last time."""
+
+    times: tuple
+    values: tuple
+
+    def __call__(self, t):
+        if isinstance(t, float):  # the solver's hot path: plain Python
+            times, values = self.times, self.values
+            i = min(max(bisect.bisect_right(times, t) - 1, 0), len(times) - 1)
+            j = min(i + 1, len(times) - 1)
+            span = times[j] - times[i]
+            frac = min(max((t - times[i]) / span, 0.0), 1.0) if span > 0 else 0.0
+            return values[i] + frac * (values[j] - values[i])
+        times, values = np.asarray(self.times, dtype=float), np.asarray(self.values, dtype=float)
+        t = np.asarray(t, dtype=float)
+        i = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 1)
+        j = np.minimum(i + 1, len(times) - 1)
+        span = times[j] - times[i]
+        frac = np.where(span > 0, (t - times[i]) / np.where(span > 0, span, 1.0), 0.0)
+        return values[i] + np.clip(frac, 0.0, 1.0) * (values[j] - values[i])
+
+    def breakpoints(self):
+        """Every tabulated time: the slope changes at each."""
+        return tuple(dict.fromkeys(self.times))
+
+
+CHANNELS = {cls.__name__: cls for cls in (FirstOrder, SecondOrder, Piecewise, Ramp, Dip, Forcing, Sawtooth, Table)}
 
 
 @dataclass(frozen=True)
 class Signal:
     """u(t): one channel per input, by input name in the component's order (SM4: Vs, theta_vs, Pm, Efd);
-    optionally held piecewise constant every `hold` seconds (ZOH)."""
+    optionally held piecewise constant every `hold` seconds (ZOH). x0: the state the signal's source
+    had the component in at t = 0 (a signal recorded from a closed loop, families.NETWORK), else None."""
 
     channels: dict
     hold: float = 0.0
+    x0: tuple | None = None
 
     @property
     def names(self) -> tuple:
@@ -218,7 +249,8 @@ class Signal:
         def channel(c):
             return {"kind": type(c).__name__, **{f.name: getattr(c, f.name) for f in fields(c)}}
 
-        return {**{name: channel(c) for name, c in self.channels.items()}, "hold": self.hold}
+        extra = {} if self.x0 is None else {"x0": list(self.x0)}
+        return {**{name: channel(c) for name, c in self.channels.items()}, "hold": self.hold, **extra}
 
     @classmethod
     def from_dict(cls, data: dict) -> "Signal":
@@ -227,10 +259,12 @@ class Signal:
             kind = CHANNELS[d.pop("kind")]
             return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
-        return cls({name: channel(d) for name, d in data.items() if name != "hold"}, float(data.get("hold", 0.0)))
+        x0 = data.get("x0")
+        return cls({name: channel(d) for name, d in data.items() if name not in ("hold", "x0")},
+                   float(data.get("hold", 0.0)), None if x0 is None else tuple(float(v) for v in x0))
 
 
 def held(signal: Signal, hold: float) -> Signal:
     """The same signal sampled and held every `hold` seconds (zero-order hold, as a co-simulation
     master with communication step `hold` delivers it)."""
-    return Signal(signal.channels, hold)
+    return Signal(signal.channels, hold, signal.x0)

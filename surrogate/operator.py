@@ -142,6 +142,7 @@ class Operator:
         return self._basis[key]
 
     def _checked(self, x0, u, t, strict: bool):
+        given = (np.asarray(x0, dtype=np.float64), np.asarray(u, dtype=np.float64))  # the frame is done in float64
         x0, u, t = (np.ascontiguousarray(a, dtype=np.float32) for a in (x0, u, t))
         n_x, n_u = len(self.state_names), len(self.input_names)
         if x0.ndim != 2 or x0.shape[1] != n_x:
@@ -158,7 +159,7 @@ class Operator:
             raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t_low:g}, {t_high:g}]")
         back = None
         if self.frame is not None:
-            x0_f, u_f, shift, c = to_frame(self.frame, x0.astype(np.float64), u.astype(np.float64), self.sensor_times)
+            x0_f, u_f, shift, c = to_frame(self.frame, *given, self.sensor_times)
             x0, u, back = x0_f.astype(np.float32), u_f.astype(np.float32), (shift, c)
         # quick test: every value within its bound (NaN compares false); the ranges only when one is not
         flat = u.reshape(len(u), -1)
@@ -166,7 +167,7 @@ class Operator:
         if ((x_low >= self._x_low).all() and (x_high <= self._x_high).all() and (u_low >= self._u_low).all()
                 and (u_high <= self._u_high).all()):
             return x0, u, t, back
-        for name, a in (("x0", x0), ("u", u)):
+        for name, a in (("x0", given[0]), ("u", given[1])):  # as given: the frame mixes x0 and u
             if not np.isfinite(a).all():
                 raise OperatorInputError(f"{name} holds NaN or inf")
         message = "outside the training envelope: " + "; ".join(self._outside(*self._ranges(x0, u)))

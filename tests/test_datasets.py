@@ -21,7 +21,7 @@ def test_splits_have_the_documented_arrays_and_shapes(paper_tiny):
     for split in SPLITS:
         data = load_split(out, split)
         n, s = recipe.counts[split], recipe.n_points
-        assert data["x0"].shape == (n, 4) and data["u"].shape == (n, s, 2) and data["t"].shape == (s,)
+        assert data["x0"].shape == (n, 4) and data["u"].shape == (n, s, 4) and data["t"].shape == (s,)
         assert data["family"].shape == data["signal"].shape == (n,)
         if split == "collocation":
             assert "x" not in data
@@ -44,14 +44,14 @@ def test_trajectories_recompute_independently_from_x0_and_sampled_inputs(paper_t
     data = load_split(paper_tiny[1], "val")
     t = data["t"]
     for x0, u, x in zip(data["x0"], data["u"], data["x"]):
-        u_of_t = lambda tt: np.array([np.interp(tt, t, u[:, 0]), np.interp(tt, t, u[:, 1])])
+        u_of_t = lambda tt: np.array([np.interp(tt, t, u[:, c]) for c in range(4)])  # noqa: E731
         sol = solve_ivp(lambda tt, y: rhs(y, u_of_t(tt)), (0, 1), x0, method="DOP853", t_eval=t,
                         rtol=1e-10, atol=1e-12, max_step=1e-3)
         np.testing.assert_allclose(sol.y.T, x, rtol=0, atol=1e-4)
 
 
 def test_paper_initial_states_fill_the_paper_box(paper_tiny):
-    x0 = load_split(paper_tiny[1], "train")["x0"]
+    x0 = load_split(paper_tiny[1], "train", frame=False)["x0"]
     assert np.all((-2 <= x0[:, 0]) & (x0[:, 0] <= 2) & (-1 <= x0[:, 1]) & (x0[:, 1] <= 1))
     assert np.all(x0[:, 2] == 0) and np.all((0.9 <= x0[:, 3]) & (x0[:, 3] <= 1.1))
 
@@ -64,9 +64,27 @@ def test_paper_splits_are_half_slow_half_fast(paper_tiny):
 def test_stored_signal_reproduces_the_stored_inputs(paper_tiny):
     from reference_models.signals import Signal
 
-    data = load_split(paper_tiny[1], "collocation")
+    data = load_split(paper_tiny[1], "collocation", frame=False)
     for text, u in zip(data["signal"], data["u"]):
         np.testing.assert_array_equal(Signal.from_dict(json.loads(text))(data["t"]), u)
+
+
+def test_windows_are_read_in_their_own_frame_where_they_solve_the_same_equations(paper_tiny):
+    from reference_models.sm4 import SM4
+
+    raw, framed = load_split(paper_tiny[1], "train", frame=False), load_split(paper_tiny[1], "train")
+    assert np.all(framed["x0"][:, 1] == 0.0) and np.all(framed["u"][:, 0, 1] == 0.0)
+    assert np.all(np.abs(framed["x0"][:, 0]) <= np.pi)
+    c = raw["x0"][:, 1]
+    np.testing.assert_allclose(framed["u"][..., 2], raw["u"][..., 2] - 2.0 * c[:, None])  # Pm - D c
+    np.testing.assert_allclose(framed["x"][..., 1], raw["x"][..., 1] - c[:, None])
+    relative = lambda d: d["x"][..., 0] - d["u"][..., 1]  # noqa: E731
+    np.testing.assert_allclose(np.cos(relative(framed)), np.cos(relative(raw)), atol=1e-9)
+    t = framed["t"]
+    mid = slice(1, -1)
+    rate = (framed["x"][:, 2:] - framed["x"][:, :-2]) / (t[2] - t[0])
+    f = SM4.rhs(framed["x"][:, mid], framed["u"][:, mid], SM4.params())
+    assert np.median(np.abs(rate - f)) < 1e-3
 
 
 def test_metadata_records_preset_seed_envelope_and_versions(paper_tiny):

@@ -5,7 +5,7 @@ from scipy.integrate import solve_ivp
 from reference_models.families import bus, family
 from reference_models.signals import Piecewise
 from reference_models.simulate import SolverConfig, simulate
-from reference_models.sm4 import rhs, steady_state
+from reference_models.sm4 import SM4, rhs, steady_state
 
 T = np.linspace(0.0, 1.0, 1001)
 
@@ -30,9 +30,10 @@ def test_step_input_is_integrated_piecewise_like_two_separate_solves():
     x0 = steady_state(1.0, 0.0)
     f = lambda u: (lambda t, x: rhs(x, np.array(u)))
     tight = dict(method="DOP853", rtol=1e-12, atol=1e-12)
-    a = solve_ivp(f([1.0, 0.0]), (0, 0.3037), x0, **tight).y[:, -1]
-    b = solve_ivp(f([0.8, 0.0]), (0.3037, 0.6511), a, **tight).y[:, -1]
-    c = solve_ivp(f([0.8, 0.2]), (0.6511, 1.0), b, t_eval=[1.0], **tight).y[:, -1]
+    pm, efd = SM4.inputs[2].start, SM4.inputs[3].start
+    a = solve_ivp(f([1.0, 0.0, pm, efd]), (0, 0.3037), x0, **tight).y[:, -1]
+    b = solve_ivp(f([0.8, 0.0, pm, efd]), (0.3037, 0.6511), a, **tight).y[:, -1]
+    c = solve_ivp(f([0.8, 0.2, pm, efd]), (0.6511, 1.0), b, t_eval=[1.0], **tight).y[:, -1]
     np.testing.assert_allclose(simulate(x0, s, T)[-1], c, rtol=0, atol=1e-7)
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 import torch
 
-from reference_models.sm4 import (SM4Params, min_voltage_with_equilibrium, outputs, rhs,
+from reference_models.sm4 import (SM4, SM4Params, min_voltage_with_equilibrium, outputs, rhs,
                                   steady_state)
 
 
@@ -11,8 +11,11 @@ def random_points(n=200, seed=0):
     rng = np.random.default_rng(seed)
     x = np.column_stack([rng.uniform(-3, 3, n), rng.uniform(-2, 2, n), rng.uniform(-0.5, 0.5, n),
                          rng.uniform(0.2, 1.3, n)])
-    u = np.column_stack([rng.uniform(0.2, 1.3, n), rng.uniform(-1, 1, n)])
+    u = np.column_stack([rng.uniform(0.2, 1.3, n), rng.uniform(-1, 1, n), rng.uniform(0, 1.5, n),
+                         rng.uniform(0.5, 3, n)])
     return x, u
+
+PM, EFD = SM4.inputs[2].start, SM4.inputs[3].start
 
 
 def test_numpy_and_torch_right_hand_sides_agree_in_float64():
@@ -30,15 +33,28 @@ def test_numpy_and_torch_derived_outputs_agree_in_float64():
 def test_torch_right_hand_side_is_differentiable_and_batched():
     x, u = random_points(6)
     xt = torch.tensor(x.reshape(2, 3, 4), requires_grad=True)
-    ut = torch.tensor(u.reshape(2, 3, 2))
+    ut = torch.tensor(u.reshape(2, 3, 4))
     assert rhs(xt, ut).shape == (2, 3, 4)
     assert torch.autograd.gradcheck(lambda z: rhs(z, ut), (xt,))
 
 
-@pytest.mark.parametrize("Vs, theta", [(1.0, 0.0), (0.9, -0.5), (1.2, 0.5), (1.05, 0.2)])
-def test_steady_state_has_zero_derivative(Vs, theta):
-    x = steady_state(Vs, theta)
-    assert np.max(np.abs(rhs(x, np.array([Vs, theta])))) < 1e-12
+@pytest.mark.parametrize("Vs, theta, Pm, Efd", [(1.0, 0.0, PM, EFD), (0.9, -0.5, PM, EFD), (1.2, 0.5, 0.3, 1.5),
+                                                (1.05, 0.2, 1.0, 2.4), (0.5, 3.0, 0.2, 1.0)])
+def test_steady_state_has_zero_derivative(Vs, theta, Pm, Efd):
+    x = steady_state(Vs, theta, Pm=Pm, Efd=Efd)
+    assert np.max(np.abs(rhs(x, np.array([Vs, theta, Pm, Efd])))) < 1e-12
+
+
+def test_the_equations_see_angles_only_through_their_difference_and_speed_through_pm_minus_d_omega():
+    x, u = random_points()
+    p = SM4Params()
+    a, c = 30.0, 12.0
+    turned_x, turned_u = x + [a, c, 0, 0], u + [0, a, p.D * c, 0]
+    expected = rhs(x, u) + [c, 0, 0, 0]  # d delta/dt = omega carries the extra speed
+    np.testing.assert_allclose(rhs(turned_x, turned_u), expected, rtol=0, atol=1e-9)
+    # the stator currents and the power too: only the network-frame current turns with the angle
+    same = [0, 1, 4, 5]
+    np.testing.assert_allclose(outputs(x + [a, 0, 0, 0], u + [0, a, 0, 0])[:, same], outputs(x, u)[:, same], atol=1e-9)
 
 
 def test_steady_state_at_nominal_voltage_is_the_documented_equilibrium():
@@ -46,7 +62,7 @@ def test_steady_state_at_nominal_voltage_is_the_documented_equilibrium():
 
 
 def test_steady_state_is_stable():
-    x, u = steady_state(1.0, 0.0), np.array([1.0, 0.0])
+    x, u = steady_state(1.0, 0.0), np.array([1.0, 0.0, PM, EFD])
     eps = 1e-7
     jac = np.column_stack([(rhs(x + eps * e, u) - rhs(x - eps * e, u)) / (2 * eps) for e in np.eye(4)])
     assert np.all(np.linalg.eigvals(jac).real < 0)
@@ -58,6 +74,14 @@ def test_no_equilibrium_below_the_minimum_voltage():
     steady_state(v_min + 1e-6)
     with pytest.raises(ValueError, match="no stable equilibrium"):
         steady_state(v_min - 1e-3)
+
+
+def test_more_field_or_less_power_lowers_the_minimum_voltage():
+    p = SM4Params()
+    v_min = min_voltage_with_equilibrium(p, PM, EFD)
+    assert min_voltage_with_equilibrium(p, PM, 2.0 * EFD) < v_min
+    assert min_voltage_with_equilibrium(p, 0.5 * PM, EFD) < v_min
+    steady_state(0.8, 0.0, p, Pm=PM, Efd=2.0 * EFD)
 
 
 def test_bus_power_equals_air_gap_power_without_resistance():
@@ -77,5 +101,5 @@ def test_network_frame_current_has_the_dq_current_magnitude():
 def test_resistance_makes_bus_power_smaller_than_air_gap_power():
     p = SM4Params(Re=0.05)
     x = steady_state(1.0, 0.0, p)
-    Id, Iq, _, _, P, _ = outputs(x, np.array([1.0, 0.0]), p)
-    assert P == pytest.approx(p.Pm - 0.05 * (Id**2 + Iq**2), abs=1e-10)
+    Id, Iq, _, _, P, _ = outputs(x, np.array([1.0, 0.0, PM, EFD]), p)
+    assert P == pytest.approx(PM - 0.05 * (Id**2 + Iq**2), abs=1e-10)

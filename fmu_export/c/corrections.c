@@ -9,7 +9,8 @@
    true answer is x_rest itself, and subtracts that error: x = G(x_window, u) - w (G(x_rest, u_start) -
    x_rest). The weight w falls from 1 at x_rest to 0 at OPFMU_STATE_SCALE (times the parameter
    rest_radius) from it, since the error at rest says little about the error far from rest. A
-   component at rest under a held input thus stays exactly at rest.
+   component at rest under a held input thus stays exactly at rest. All of it is in the window frame
+   (window.c): a machine turning at a constant speed with its network is at rest there.
 
    Slow-mode correction (any kernel): away from rest the same accumulation remains along the slowest
    mode. Each window takes the Jacobian of the right-hand side at its start state and input, and its
@@ -75,16 +76,17 @@ static int equilibrium(const double x[N_X], const double u[N_U], double rest[N_X
    from x_rest under the start input held. */
 static void start_rest_correction(ModelState *m)
 {
-    double distance = 0.0;
+    double distance = 0.0, level[N_U];
     m->rest_weight = 0.0;
-    if (m->rest_radius <= 0.0 || !equilibrium(m->x_window, m->u, m->x_rest)) return;
+    input_in_frame(m, m->u, 0.0, level); /* at rest in the window frame: the machine turning with it */
+    if (m->rest_radius <= 0.0 || !equilibrium(m->x_window_f, level, m->x_rest)) return;
     for (int i = 0; i < N_X; ++i)
-        distance = fmax(distance, fabs(m->x_window[i] - m->x_rest[i]) / (m->rest_radius * OPFMU_STATE_SCALE[i]));
+        distance = fmax(distance, fabs(m->x_window_f[i] - m->x_rest[i]) / (m->rest_radius * OPFMU_STATE_SCALE[i]));
     if (distance >= 1.0) return;
     m->rest_weight = 1.0 - distance;
     double base[OPFMU_FIRST_LAYER];
     first_layer_base(m->x_rest, base);
-    held_coefficients(m->x_rest, base, m->u, m->rest_coef);
+    held_coefficients(m->x_rest, base, level, m->rest_coef);
 }
 
 void rest_correct(const ModelState *m, const double *basis, double x[N_X])

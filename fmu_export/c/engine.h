@@ -15,12 +15,18 @@ static const double TIME_EPS = 1e-9;
 
 /* the operator kernel (operator_kernel.c, generated from the ONNX graph) */
 void opfmu_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X]);
+/* the operator on physical values with the window frame done as the engine does it (window.c) */
+void opfmu_framed_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X]);
 #if OPFMU_FIRST_LAYER > 0
 void opfmu_first_layer(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double z[OPFMU_FIRST_LAYER]);
 void opfmu_from_first_layer(const double x0[N_X], const double z[OPFMU_FIRST_LAYER], double t, double x[N_X]);
 /* suffix sums over sensor slots of the sensor layer's slope (sensor_sums.c, generated) */
 OPFMU_INTERNAL extern const double OPFMU_SENSOR_SUFFIX[(OPFMU_N_SENSORS + 1) * N_U * OPFMU_FIRST_LAYER];
 #define SUFFIX(k, c, h) OPFMU_SENSOR_SUFFIX[((k) * N_U + (c)) * OPFMU_FIRST_LAYER + (h)]
+/* suffix sums over slots k of the slope along the frame's input ramp R times the slot's time s_k
+   (sum over j >= k of s_j R . slope_j; zeros without a frame) */
+OPFMU_INTERNAL extern const double OPFMU_RAMP_SUFFIX[(OPFMU_N_SENSORS + 1) * OPFMU_FIRST_LAYER];
+#define RAMP_SUFFIX(k, h) OPFMU_RAMP_SUFFIX[(k) * OPFMU_FIRST_LAYER + (h)]
 #endif
 #if OPFMU_TRUNK_SIZE > 0
 void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
@@ -29,6 +35,8 @@ void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SI
 #endif
 
 /* window.c */
+/* the input u at window time tau in the window frame */
+OPFMU_INTERNAL void input_in_frame(const ModelState *m, const double u[N_U], double tau, double u_f[N_U]);
 /* the operator's physics residual at the current time (RMS over the states, per state scaled) */
 OPFMU_INTERNAL double window_residual(const ModelState *m);
 #if OPFMU_TRUNK_SIZE > 0

@@ -24,6 +24,11 @@ typedef struct {
     double x_operator[OPFMU_N_STATES]; /* the operator's state at `time`, before the exact step (residual) */
     double window_start;          /* start time of the current operator window [s] */
     double x_window[OPFMU_N_STATES]; /* state at the window start */
+    /* the window's frame (reference_models/drift.py; zeros for a component without one): inputs at
+       window time tau are seen as u - a R - c (R tau + T), states as x - (shift + c tau) A - c W, with
+       R, T, A, W the frame tables of config.h */
+    double frame_a, frame_shift, frame_c;
+    double x_window_f[OPFMU_N_STATES]; /* the window's start state in its frame */
     int in_envelope;              /* false once an input or a window start left the envelope */
     double sensors[OPFMU_N_INPUTS * OPFMU_N_SENSORS]; /* the inputs at the window's sensor times, slot-major */
     /* the sensor layer's output z, tracked incrementally (OPFMU_FIRST_LAYER > 0): z = z_base (x0 part
@@ -31,6 +36,8 @@ typedef struct {
     double z_base[OPFMU_Z_SIZE], z_past[OPFMU_Z_SIZE];
     int filled;                   /* slots before this index hold final values */
     double last_u[OPFMU_N_INPUTS]; /* the input written from slot `filled` on */
+    double last_end;              /* window time the last step ended at (the frame's ramp of last_u stops there) */
+    double input_time;            /* time the input last_u was set at (start of the previous step) */
     /* the trunk values at each sensor time, computed when first needed (OPFMU_TRUNK_SIZE > 0): they
        depend on the window time alone, so every window after the first reuses them */
     unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];

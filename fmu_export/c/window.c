@@ -5,7 +5,16 @@
    sensor slot from the current time on (slots not yet known hold the latest value), and the state
    at t + h is the operator at t + h - window_start, corrected (corrections.c). When a window's
    horizon is reached, a new one starts from the state there; a step that crosses the horizon is
-   split at it. An input change above restart_jump starts a new window at once. */
+   split at it. An input change above restart_jump starts a new window at once.
+
+   The window frame (reference_models/drift.py): for a component with a drift symmetry the operator
+   learned its windows in their own frame, which turns with the window's start: the first angle
+   input at the window start is the angle origin a and the speed state there is the frame's speed c.
+   The engine keeps the state raw and the operator's view in the frame: the sensors hold u - a R -
+   c (R tau + T), held inputs ramp in the frame over their step (a held angle stands still while the
+   frame turns) and hold their last value in the frame after it, and the operator's states come back
+   as x_f + (shift + c tau) A + c W. Angles and speeds that drifted with a network thus reach the
+   network only as what it was trained on. The frame tables are zeros for other components. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -31,6 +40,74 @@ void model_defaults(ModelState *m)
     memcpy(m->x_operator, m->x, sizeof m->x);
     m->in_envelope = 1;
 }
+
+void input_in_frame(const ModelState *m, const double u[N_U], double tau, double u_f[N_U])
+{
+    for (int c = 0; c < N_U; ++c)
+        u_f[c] = u[c] - m->frame_a * OPFMU_FRAME_INPUT_RATES[c]
+                 - m->frame_c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
+}
+
+/* x (raw, at window time tau) in the window frame, and back */
+static void state_in_frame(const ModelState *m, const double x[N_X], double tau, double x_f[N_X])
+{
+    for (int i = 0; i < N_X; ++i)
+        x_f[i] = x[i] - (m->frame_shift + m->frame_c * tau) * OPFMU_FRAME_ANGLES[i] - m->frame_c * OPFMU_FRAME_SPEED[i];
+}
+
+static void state_from_frame(const ModelState *m, const double x_f[N_X], double tau, double x[N_X])
+{
+    for (int i = 0; i < N_X; ++i)
+        x[i] = x_f[i] + (m->frame_shift + m->frame_c * tau) * OPFMU_FRAME_ANGLES[i] + m->frame_c * OPFMU_FRAME_SPEED[i];
+}
+
+/* the frame of a window starting at state x under input u: (a, shift, c) of drift.window_frame */
+static void window_frame(const double x[N_X], const double u[N_U], double *a, double *shift, double *c)
+{
+#if OPFMU_FRAME
+    *a = u[OPFMU_FRAME_ANGLE_INPUT];
+    *c = x[OPFMU_FRAME_SPEED_STATE];
+#if OPFMU_FRAME_ANGLE_STATE >= 0
+    *shift = *a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - *a) / OPFMU_FRAME_PERIOD + 0.5);
+#else
+    *shift = *a;
+#endif
+#else
+    (void)x;
+    (void)u;
+    *a = *shift = *c = 0.0;
+#endif
+}
+
+/* The operator on physical values, the frame done here as the engine does it: what the ONNX file's
+   whole graph computes (the builder checks the two against each other). */
+void opfmu_framed_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X])
+{
+    static ModelState scratch; /* only its frame fields are used */
+    double x0_f[N_X], x_f[N_X], u_f[N_U * OPFMU_N_SENSORS];
+    window_frame(x0, u, &scratch.frame_a, &scratch.frame_shift, &scratch.frame_c);
+    state_in_frame(&scratch, x0, 0.0, x0_f);
+    for (int k = 0; k < OPFMU_N_SENSORS; ++k) input_in_frame(&scratch, u + k * N_U, (double)k * SENSOR_DT, u_f + k * N_U);
+    opfmu_operator(x0_f, u_f, t, x_f);
+    state_from_frame(&scratch, x_f, t, x);
+}
+
+#if OPFMU_FIRST_LAYER > 0
+/* sum over slots k0 <= k < k1 of the sensor layer's slope along the frame's input ramp R times
+   min(s_k, tau): what the ramp of a held input in the frame adds to z */
+static void ramp_sum(int k0, int k1, double tau, double out[OPFMU_FIRST_LAYER])
+{
+    long knee = (long)ceil(tau / SENSOR_DT - 1e-6);
+    int mid = knee < k0 ? k0 : (knee > k1 ? k1 : (int)knee);
+    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
+        double flat = 0.0; /* slots from `mid` on see tau itself */
+        for (int c = 0; c < N_U; ++c)
+            if (OPFMU_FRAME_INPUT_RATES[c] != 0.0)
+                flat += OPFMU_FRAME_INPUT_RATES[c] * (SUFFIX(mid, c, h) - SUFFIX(k1, c, h));
+        out[h] = RAMP_SUFFIX(k0, h) - RAMP_SUFFIX(mid, h) + tau * flat;
+    }
+}
+#endif
 
 #if OPFMU_TRUNK_SIZE > 0
 /* The sensor slot window time tau is on, or -1 when it lies between sensor times. */
@@ -78,7 +155,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     const double *basis_lo = trunk_seen(m, lo, scratch_lo), *basis_hi = trunk_seen(m, hi, scratch_hi);
     opfmu_head(m->coef, basis_lo, a);
     opfmu_head(m->coef, basis_hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame_c * OPFMU_FRAME_ANGLES[i];
     if (m->rest_weight > 0.0) /* the rest correction moves with window time too */
         rest_correct_rate(m, basis_lo, basis_hi, hi - lo, rate);
 }
@@ -106,9 +183,9 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     const double d = 1e-4;
     double lo = fmax(tau - d, 0.0), hi = fmin(tau + d, OPFMU_HORIZON);
     double a[N_X], b[N_X];
-    opfmu_operator(m->x_window, m->sensors, lo, a);
-    opfmu_operator(m->x_window, m->sensors, hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo);
+    opfmu_operator(m->x_window_f, m->sensors, lo, a);
+    opfmu_operator(m->x_window_f, m->sensors, hi, b);
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame_c * OPFMU_FRAME_ANGLES[i];
 }
 #endif
 
@@ -152,21 +229,25 @@ static void append_number(char *message, size_t size, size_t *used, const char *
     append(message, size, used, text);
 }
 
-/* Checks a window start state and the held input against the envelope (sticky flag). */
-static ModelStatus check_envelope(ModelState *m, char *message, size_t size)
+/* Checks a window start state and the input held over the next h seconds against the envelope, in
+   the window frame (sticky flag). */
+static ModelStatus check_envelope(ModelState *m, double h, char *message, size_t size)
 {
     size_t used = 0;
+    double tau = m->time - m->window_start, u_start[N_U], u_end[N_U];
     if (!m->in_envelope) return MODEL_OK;
-    if (outside(m->u, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U)) {
+    input_in_frame(m, m->u, tau, u_start);
+    input_in_frame(m, m->u, fmin(tau + h, m->rollover_horizon), u_end);
+    if (outside(u_start, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U) || outside(u_end, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U)) {
         m->in_envelope = 0;
         append_number(message, size, &used, "t = %.6g s: input (", m->time);
         for (int c = 0; c < N_U; ++c) {
             append(message, size, &used, c ? ", " : "");
             append(message, size, &used, OPFMU_INPUT_NAMES[c]);
-            append_number(message, size, &used, " %.4g ", m->u[c]);
+            append_number(message, size, &used, " %.4g ", u_start[c]);
             append(message, size, &used, OPFMU_INPUT_UNITS[c]);
         }
-        append(message, size, &used, ") left the trained envelope (");
+        append(message, size, &used, OPFMU_FRAME ? ", in the window frame) left the trained envelope (" : ") left the trained envelope (");
         for (int c = 0; c < N_U; ++c) {
             append(message, size, &used, c ? ", " : "");
             append(message, size, &used, OPFMU_INPUT_NAMES[c]);
@@ -176,10 +257,11 @@ static ModelStatus check_envelope(ModelState *m, char *message, size_t size)
         append(message, size, &used, "); results are extrapolated");
         return MODEL_WARNING;
     }
-    if (outside(m->x_window, OPFMU_ENV_X0_MIN, OPFMU_ENV_X0_MAX, N_X)) {
+    if (outside(m->x_window_f, OPFMU_ENV_X0_MIN, OPFMU_ENV_X0_MAX, N_X)) {
         m->in_envelope = 0;
         append_number(message, size, &used, "t = %.6g s: window start state (", m->window_start);
-        for (int i = 0; i < N_X; ++i) append_number(message, size, &used, i ? ", %.4g" : "%.4g", m->x_window[i]);
+        for (int i = 0; i < N_X; ++i) append_number(message, size, &used, i ? ", %.4g" : "%.4g", m->x_window_f[i]);
+        if (OPFMU_FRAME) append(message, size, &used, " in the window frame");
         append(message, size, &used, ") left the trained envelope; results are extrapolated");
         return MODEL_WARNING;
     }
@@ -188,63 +270,86 @@ static ModelStatus check_envelope(ModelState *m, char *message, size_t size)
 
 static void start_window(ModelState *m)
 {
+    double level[N_U];
     m->window_start = m->time;
     memcpy(m->x_window, m->x, sizeof m->x);
     memcpy(m->x_operator, m->x, sizeof m->x); /* an anchored operator starts from the window's state */
-    for (int k = 0; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, m->u, sizeof m->u);
+    window_frame(m->x, m->u, &m->frame_a, &m->frame_shift, &m->frame_c);
+    state_in_frame(m, m->x_window, 0.0, m->x_window_f);
+    input_in_frame(m, m->u, 0.0, level);
+    for (int k = 0; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, level, sizeof level);
     m->filled = 0;
+    m->last_end = 0.0;
     memcpy(m->last_u, m->u, sizeof m->u);
 #if OPFMU_FIRST_LAYER > 0
-    opfmu_first_layer(m->x_window, ZERO_SENSORS, m->z_base);
+    opfmu_first_layer(m->x_window_f, ZERO_SENSORS, m->z_base);
     memset(m->z_past, 0, sizeof m->z_past);
 #endif
 #if OPFMU_TRUNK_SIZE > 0
-    held_coefficients(m->x_window, m->z_base, m->u, m->coef); /* so the residual at the window start is the new window's */
+    held_coefficients(m->x_window_f, m->z_base, level, m->coef); /* so the residual at the window start is the new window's */
 #endif
     start_corrections(m, 1);
 }
 
-/* The operator at window time tau after the held input was written from slot `first` on. Per step
-   this costs the network after its sensor layer plus O(layer width), not the whole sensor layer. */
+/* The operator at window time tau after the input held over a step that ends there was written
+   from slot `first` on (in the frame: its level, ramping until tau, then held). Per step this costs
+   the network after its sensor layer plus O(layer width), not the whole sensor layer. */
 static void evaluate(ModelState *m, int first, double tau)
 {
-#if OPFMU_FIRST_LAYER > 0
-    double z[OPFMU_FIRST_LAYER];
+    double level[N_U], x_f[N_X]; /* the held input in the frame at window time 0 (its ramp apart) */
+    input_in_frame(m, m->u, 0.0, level);
+    /* an input equal to the one the slots from `filled` on hold leaves the sensors as they were
+       (unless the frame turns: its ramp goes on), so the coefficients of the last evaluation (or of
+       the window's start) are still those of this window: a step costs a product with the trunk values */
 #if OPFMU_TRUNK_SIZE > 0
-    /* An input equal to the one the slots from `filled` on hold leaves the sensors as they were, so the
-       coefficients of the last evaluation (or of the window's start) are still those of this window:
-       with a held input a step costs a product with the trunk values, not the network. */
-    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0;
+    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0 || m->frame_c != 0.0;
 #else
-    const int sensors_changed = 1;
+    const int sensors_changed = 1; /* z is computed anew each step */
 #endif
+#if OPFMU_TRUNK_SIZE == 0 /* the sensors themselves: for the kernel and its rate (residual) */
+    if (sensors_changed)
+        for (int k = first; k < OPFMU_N_SENSORS; ++k)
+            input_in_frame(m, m->u, fmin((double)k * SENSOR_DT, tau), m->sensors + k * N_U);
+#endif
+#if OPFMU_FIRST_LAYER > 0
+    double z[OPFMU_FIRST_LAYER], ramp[OPFMU_FIRST_LAYER];
     if (sensors_changed) {
-        if (first > m->filled) { /* slots [filled, first) keep the input they last got */
+        if (first > m->filled) { /* slots [filled, first) keep what the last step wrote */
+            double last_level[N_U];
+            input_in_frame(m, m->last_u, 0.0, last_level);
             for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
                 for (int c = 0; c < N_U; ++c)
-                    m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * m->last_u[c];
+                    m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * last_level[c];
+            if (m->frame_c != 0.0) {
+                ramp_sum(m->filled, first, m->last_end, ramp);
+                for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) m->z_past[h] -= m->frame_c * ramp[h];
+            }
             m->filled = first;
         }
-        memcpy(m->last_u, m->u, sizeof m->u);
         for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
             double sum = m->z_base[h] + m->z_past[h];
-            for (int c = 0; c < N_U; ++c) sum += SUFFIX(first, c, h) * m->u[c];
+            for (int c = 0; c < N_U; ++c) sum += SUFFIX(first, c, h) * level[c];
             z[h] = sum;
+        }
+        if (m->frame_c != 0.0) {
+            ramp_sum(first, OPFMU_N_SENSORS, tau, ramp);
+            for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) z[h] -= m->frame_c * ramp[h];
         }
     }
 #if OPFMU_TRUNK_SIZE > 0
     double scratch[OPFMU_TRUNK_SIZE];
     const double *basis = trunk_at(m, tau, scratch);
-    if (sensors_changed) opfmu_coefficients(m->x_window, z, m->coef);
-    opfmu_head(m->coef, basis, m->x);
-    if (m->rest_weight > 0.0) rest_correct(m, basis, m->x);
+    if (sensors_changed) opfmu_coefficients(m->x_window_f, z, m->coef);
+    opfmu_head(m->coef, basis, x_f);
+    if (m->rest_weight > 0.0) rest_correct(m, basis, x_f);
 #else
-    opfmu_from_first_layer(m->x_window, z, tau, m->x);
+    opfmu_from_first_layer(m->x_window_f, z, tau, x_f);
 #endif
 #else
-    (void)first;
-    opfmu_operator(m->x_window, m->sensors, tau, m->x);
+    opfmu_operator(m->x_window_f, m->sensors, tau, x_f);
 #endif
+    state_from_frame(m, x_f, tau, m->x);
+    m->last_end = tau;
 }
 
 ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
@@ -252,26 +357,36 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
     m->time = start_time;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
+    m->input_time = start_time;
     start_window(m);
-    return check_envelope(m, message, size);
+    return check_envelope(m, 0.0, message, size);
 }
 
-/* an input differs from the one written last by more than restart_jump */
+/* an input differs from the one written last by more than restart_jump, both seen in the window frame
+   at the times they were set (an angle a master advances with a network turning at the frame's speed
+   does not jump) */
 static int input_jumped(const ModelState *m)
 {
-    for (int c = 0; c < N_U; ++c)
-        if (fabs(m->u[c] - m->last_u[c]) > m->restart_jump) return 1;
+    for (int c = 0; c < N_U; ++c) {
+        double turned = m->frame_c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
+        if (fabs(m->u[c] - m->last_u[c] - turned) > m->restart_jump) return 1;
+    }
     return 0;
 }
 
 ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
-    ModelStatus status = check_envelope(m, message, size);
     double stop = m->time + h;
     /* an input jump starts a new window here, so the jump is at window time 0, where the operator
        learned its transients (every training window starts with one) */
     if (m->restart_jump > 0.0 && m->time > m->window_start + TIME_EPS && input_jumped(m))
         start_window(m);
+    /* a window that has not run yet starts from the input held over its first step: its frame's
+       origin is that input's angle (theta_f(0) = 0, as in every training window) */
+    if (m->time < m->window_start + TIME_EPS && memcmp(m->u, m->last_u, sizeof m->u) != 0)
+        start_window(m);
+    m->input_time = m->time;
+    ModelStatus status = check_envelope(m, h, message, size);
     while (m->time < stop - TIME_EPS) {
         double window_end = m->window_start + m->rollover_horizon;
         double end = fmin(stop, window_end);
@@ -284,9 +399,6 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         memcpy(x_step, m->x, sizeof x_step);
         if (m->swing_weight > 0.0) affine_drive(m->x, m->u, g_start, k_start);
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
-        /* slots from the previous step's first one on hold last_u: rewritten only when the input changed */
-        if (memcmp(m->u, m->last_u, sizeof m->u) != 0)
-            for (int k = first; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, m->u, sizeof m->u);
         evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
         if (m->slow_on) slow_correct(m, end - m->time, rate_start);
         memcpy(m->x_operator, m->x, sizeof m->x);
@@ -301,7 +413,7 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         }
         if (m->time >= window_end - TIME_EPS) {
             start_window(m);
-            if (status == MODEL_OK) status = check_envelope(m, message, size);
+            if (status == MODEL_OK) status = check_envelope(m, stop - m->time, message, size);
         }
     }
     m->time = stop;

@@ -20,12 +20,12 @@ def probe_plan(families, per_family: int, horizon: float, rng: np.random.Generat
                levels: dict | None = None):
     """Initial states x0 [n, n_x], signals [n] and family names [n] of the probe windows of the
     component `model` with parameters `params`: x0 is the state at rest under the signal's u(0)
-    (Component.rest_state)."""
+    (Component.rest_state), or the state a recorded signal comes with (Signal.x0)."""
     x0s, signals, names = [], [], []
     for name, _ in families:
         fam = family(name)
-        for signal in fam.sample(qmc.LatinHypercube(d=fam.dim, rng=rng).random(per_family), horizon, levels):
-            x0s.append(model.rest_state(signal.at(0.0), params))
+        for signal in fam.sample(qmc.LatinHypercube(d=fam.dim, rng=rng).random(per_family), horizon, levels, params):
+            x0s.append(np.asarray(signal.x0) if signal.x0 is not None else model.rest_state(signal.at(0.0), params))
             signals.append(signal)
             names.append(name)
     return np.array(x0s), signals, names

@@ -18,14 +18,17 @@ def split_counts(n: int, weights) -> list[int]:
 
 
 def sample_split(n: int, families, ic_box: dict, horizon: float, rng: np.random.Generator,
-                 pool: np.ndarray | None = None, pool_fraction: float = 0.0, levels: dict | None = None):
+                 pool: np.ndarray | None = None, pool_fraction: float = 0.0, levels: dict | None = None,
+                 machine=None):
     """Initial states x0 [n, n_x], signals [n] and family names [n] for one split; ic_box maps every
     state name, in the component's order, to its (low, high).
 
     Per family, one scrambled Latin hypercube spans the varying initial-state dimensions of ic_box
     and the family's parameters. With a pool of reachable states [P, n_x], a `pool_fraction` of the
     initial states is drawn from it instead. `levels` [input -> (low, high)]: the input level ranges
-    (default: the component's operating ranges). Rows are shuffled so families interleave.
+    (default: the component's operating ranges); `machine`: the component's parameters (the families
+    that record a closed loop need them). A signal that brings its own initial state (Signal.x0)
+    keeps it. Rows are shuffled so families interleave.
     """
     lows, highs = np.array(list(ic_box.values()), dtype=float).T
     varying = np.nonzero(highs > lows)[0]
@@ -38,11 +41,14 @@ def sample_split(n: int, families, ic_box: dict, horizon: float, rng: np.random.
         x0 = np.tile(lows, (count, 1))
         x0[:, varying] = lows[varying] + unit[:, : varying.size] * (highs - lows)[varying]
         x0_parts.append(x0)
-        signals += fam.sample(unit[:, varying.size:], horizon, levels)
+        signals += fam.sample(unit[:, varying.size:], horizon, levels, machine)
         names += [name] * count
     x0 = np.concatenate(x0_parts)
     if pool is not None and pool_fraction > 0:
         chosen = rng.random(n) < pool_fraction
         x0[chosen] = pool[rng.integers(0, len(pool), chosen.sum())]
+    for i, s in enumerate(signals):
+        if s.x0 is not None:
+            x0[i] = s.x0
     order = rng.permutation(n)
     return x0[order], [signals[i] for i in order], [names[i] for i in order]
