@@ -413,7 +413,8 @@ def sensor_sums_source(suffix, n_sensors: int, width: int, frame=None, horizon: 
 def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> float:
     """Max abs difference against onnxruntime of the compiled kernel (inside the FMU binary) on the
     network's graph and, for an operator with a frame, of the kernel with the engine's frame on the
-    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s)."""
+    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s),
+    relative to max(1, |x|) there (onnxruntime's float32 holds an angle of 36 rad to 4e-6)."""
     import onnxruntime as ort
 
     n_sensors, horizon = meta["n_sensors"], meta["horizon_s"]
@@ -422,12 +423,12 @@ def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> floa
     x0, u, t = random_inputs(meta["envelope"], t_grid, n, rng)
     t = t[:: max(1, len(t) // 9)]
     library = ctypes.CDLL(str(binary))
-    cases = [(network_graph(proto), library.opfmu_operator, x0, u)]
+    cases = [(network_graph(proto), library.opfmu_operator, x0, u, False)]
     if meta.get("frame") is not None:
         cases.append((proto, library.opfmu_framed_operator,
-                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n))))
+                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n)), True))
     worst = 0.0
-    for graph, fn, x0_, u_ in cases:
+    for graph, fn, x0_, u_, turned in cases:
         try:
             expected = ort.InferenceSession(graph.SerializeToString(), providers=["CPUExecutionProvider"]).run(
                 ["x"], {"x0": x0_, "u": u_, "t": t})[0]
@@ -440,5 +441,6 @@ def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> floa
             xi, ui = np.ascontiguousarray(x0_[i], np.float64), np.ascontiguousarray(u_[i], np.float64)
             for j, tj in enumerate(t):
                 fn(xi.ctypes.data_as(double_p), ui.ctypes.data_as(double_p), float(tj), out.ctypes.data_as(double_p))
-                worst = max(worst, float(np.max(np.abs(out - expected[i, j]))))
+                scale = np.maximum(1.0, np.abs(expected[i, j])) if turned else 1.0  # float32 angles of 36 rad
+                worst = max(worst, float(np.max(np.abs(out - expected[i, j]) / scale)))
     return worst

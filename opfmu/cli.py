@@ -343,8 +343,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=cmd_demo)
 
     from opfmu.init_command import add_init_parser
+    from opfmu.operator_command import add_operator_parser
 
     add_init_parser(sub)
+    add_operator_parser(sub)
     return parser
 
 

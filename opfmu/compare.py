@@ -50,9 +50,11 @@ class Inputs:
         return rows
 
 
-def scenario_inputs(name: str, seed: int, stop_time: float, step: float, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
-    """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h, for machine params."""
-    s = scenario(name, seed, stop_time, params)
+def scenario_inputs(name: str, seed: int, stop_time: float, step: float, params: SM4Params = DEFAULT_PARAMS,
+                    operating: tuple | None = None) -> Inputs:
+    """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h, for machine
+    params at the operating point (Pm, Efd) (default: their start values)."""
+    s = scenario(name, seed, stop_time, params, operating)
     times = communication_points(stop_time, step)
     return Inputs(f"{name} (seed {seed})", times, s.inputs(times), s.initial_state())
 

@@ -85,22 +85,26 @@ def rest_state(Vs: float, theta_vs: float, p: SM4Params = DEFAULT_PARAMS, Pm: fl
     return SM4.rest_state((Vs, theta_vs, Pm, Efd), p)
 
 
-def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Params = DEFAULT_PARAMS) -> Scenario:
+def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Params = DEFAULT_PARAMS,
+             operating: tuple | None = None) -> Scenario:
     """The built-in scenario `name` (one of SCENARIOS) drawn with `seed` over stop_time seconds for
-    the machine `params`. ValueError for an unknown name, a stop time that is not positive, or a
+    the machine `params` at the operating point `operating` = (Pm, Efd) [pu] (default: their start
+    values), which the scenarios hold or move from. ValueError for an unknown name, a stop time that is not positive, or a
     machine that no draw keeps in synchronism."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r} (built in: {', '.join(SCENARIOS)})")
     if not stop_time > 0:
         raise ValueError(f"stop time must be positive, got {stop_time}")
     stop_time = float(stop_time)
+    pm, efd = (PM_START, EFD_START) if operating is None else (float(operating[0]), float(operating[1]))
     if name == "mix":
-        return Scenario(name, seed, stop_time, held_levels(np.random.default_rng(seed), stop_time), params)
+        return Scenario(name, seed, stop_time, held_levels(np.random.default_rng(seed), stop_time, Pm=pm, Efd=efd),
+                        params)
     if name == "drift":
-        return _drift(seed, stop_time, params)
+        return _drift(seed, stop_time, params, pm, efd)
     rng = np.random.default_rng(seed)
     for _ in range(MAX_DRAWS):  # a run must end where the machine has an equilibrium (see SETTLED_VS), in step
-        signal = _governor(rng, stop_time) if name == "governor" else _bus(name, rng, stop_time)
+        signal = _governor(rng, stop_time, pm, efd) if name == "governor" else _bus(name, rng, stop_time, pm, efd)
         drawn = Scenario(name, seed, stop_time, signal, params)
         if ends_settled(drawn) and keeps_synchronism(drawn):
             return drawn
@@ -108,8 +112,8 @@ def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Param
                      f"over {stop_time:g} s")
 
 
-def _bus(name: str, rng: np.random.Generator, stop_time: float) -> Signal:
-    """A signal of the bus family `name` over the whole run, Pm and Efd held at their start values.
+def _bus(name: str, rng: np.random.Generator, stop_time: float, pm: float, efd: float) -> Signal:
+    """A signal of the bus family `name` over the whole run, Pm and Efd held at pm, efd.
     Only the bus parameters are drawn (from rng, in the family's order), so a seed gives the bus
     voltage it gave before Pm and Efd were inputs."""
     fam = family(name)
@@ -117,18 +121,18 @@ def _bus(name: str, rng: np.random.Generator, stop_time: float) -> Signal:
     free = [i for i in range(fam.dim) if i not in held]
     unit = np.zeros((1, fam.dim))
     unit[0, free] = rng.uniform(size=len(free))
-    levels = {"Pm": (PM_START, PM_START), "Efd": (EFD_START, EFD_START)}
+    levels = {"Pm": (pm, pm), "Efd": (efd, efd)}
     return fam.sample(unit, stop_time, levels)[0]
 
 
-def _governor(rng: np.random.Generator, stop_time: float) -> Signal:
-    """The mix bus voltage with Pm stepped and ramped (see the module docstring), Efd held."""
-    bus = held_levels(rng, stop_time)
-    low, high = (PM_START * share for share in GOVERNOR_LEVELS)
-    times, values = [0.0], [PM_START]
+def _governor(rng: np.random.Generator, stop_time: float, pm: float, efd: float) -> Signal:
+    """The mix bus voltage with Pm stepped and ramped from pm (see the module docstring), Efd held."""
+    bus = held_levels(rng, stop_time, Pm=pm, Efd=efd)
+    low, high = (pm * share for share in GOVERNOR_LEVELS)
+    times, values = [0.0], [pm]
     t = float(rng.uniform(0.5, 2.0))
     while t < stop_time:
-        change = PM_START * float(rng.uniform(*GOVERNOR_CHANGE)) * (1.0 if rng.uniform() < 0.5 else -1.0)
+        change = pm * float(rng.uniform(*GOVERNOR_CHANGE)) * (1.0 if rng.uniform() < 0.5 else -1.0)
         level = values[-1] + change
         if not low <= level <= high:
             level = values[-1] - change
@@ -136,10 +140,10 @@ def _governor(rng: np.random.Generator, stop_time: float) -> Signal:
         times += [t, t + length]
         values += [values[-1], float(np.clip(level, low, high))]
         t += length + float(rng.uniform(2.0, 4.0))
-    return machine(bus.channels["Vs"], bus.channels["theta_vs"], Table(tuple(times), tuple(values)), EFD_START)
+    return machine(bus.channels["Vs"], bus.channels["theta_vs"], Table(tuple(times), tuple(values)), efd)
 
 
-def _drift(seed: int, stop_time: float, params: SM4Params) -> Scenario:
+def _drift(seed: int, stop_time: float, params: SM4Params, pm: float, efd: float) -> Scenario:
     """The mix of `seed` in a network turning at c (see the module docstring)."""
     rng = np.random.default_rng(seed)
     mix = held_levels(rng, stop_time)
@@ -153,7 +157,7 @@ def _drift(seed: int, stop_time: float, params: SM4Params) -> Scenario:
     times.append(stop_time)
     values.append(theta(stop_time) + c * stop_time)
     torque = params.D * c  # the damping torque of the extra speed, which the turbine supplies
-    signal = machine(mix.channels["Vs"], Table(tuple(times), tuple(values)), PM_START + torque, EFD_START)
+    signal = machine(mix.channels["Vs"], Table(tuple(times), tuple(values)), pm + torque, efd)
     return Scenario("drift", seed, stop_time, signal, params, speed=c)
 
 

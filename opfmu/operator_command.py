@@ -1,0 +1,241 @@
+"""`opfmu operator`: a user's machine from data to FMU in one command, with the shipped recipe.
+
+    opfmu operator --machine m.json --out DIR [--pm LOW HIGH] [--efd LOW HIGH] [--operating-point PM EFD]
+                   [--horizon S] [--epochs N] [--workers N] [--threads N] [--name NAME]
+
+Stages, each resumed where an interrupted run left it (rerun the same command):
+1. DIR/data: the `machine` recipe's dataset for this machine (every co-simulation family of the
+   `cosim` preset and the `network` family recorded from the machine itself in a closed loop),
+   with Pm and Efd drawn from the given level ranges;
+2. DIR/run: the PI-DeepONet of the shipped operator (anchored Unstacked, 3 x 128 tanh, 96 basis
+   functions per state, causal training, physics losses), resumed from its last checkpoint;
+3. DIR/operator.onnx (export, checked against torch) and the FMUs DIR/<NAME>Surrogate.fmu (checked
+   against onnxruntime) and DIR/<NAME>Reference.fmu (native Dormand-Prince 5(4) of the same machine);
+4. DIR/report.md: the single-window metrics on the test split and 60 s co-simulations of both FMUs
+   under fmpy at h = 10 ms on the built-in scenarios at the machine's operating point, with plots.
+"""
+from __future__ import annotations
+
+import json
+import re
+import time
+from dataclasses import replace
+from pathlib import Path
+
+RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the families of `cosim`, and this
+RECIPE_COUNTS = {"train": 3000, "collocation": 1500, "val": 150, "test": 150}
+RECIPE_TRAINING = {"physics": True, "epochs": 1500, "time_points": 200, "causal": True, "state_weights": [5, 1, 1, 5],
+                   "model": {"anchored": True, "width": 128, "latent": 96}}
+REPORT_SCENARIOS = ("mix", "dip", "governor", "drift")
+REPORT_STOP_S, REPORT_STEP_S = 60.0, 0.01
+
+
+def add_operator_parser(sub) -> None:
+    op = sub.add_parser("operator", help="your machine from data to FMU: data, training, export, FMUs, report",
+                        description=__doc__.split("\n\n")[0] + " Resumable: rerun the same command after an "
+                        "interruption. Takes about 20-30 minutes on 2 cores.")
+    op.add_argument("--machine", required=True, metavar="FILE", help="JSON file of machine parameters (SM4Params)")
+    op.add_argument("--out", required=True, help="run directory")
+    op.add_argument("--pm", nargs=2, type=float, default=None, metavar=("LOW", "HIGH"),
+                    help="Pm levels [pu] the windows draw from (default: the component's operating range)")
+    op.add_argument("--efd", nargs=2, type=float, default=None, metavar=("LOW", "HIGH"),
+                    help="Efd levels [pu] the windows draw from (default: the component's operating range)")
+    op.add_argument("--vs", nargs=2, type=float, default=None, metavar=("LOW", "HIGH"),
+                    help="bus voltage levels [pu] (default: the component's operating range)")
+    op.add_argument("--operating-point", nargs=2, type=float, default=None, metavar=("PM", "EFD"),
+                    help="Pm and Efd [pu] the report's scenarios hold or move from (default: the middle of the levels)")
+    op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.5 for a machine "
+                    "in a network with D = 0, whose swings within a window are large)")
+    op.add_argument("--epochs", type=int, default=RECIPE_TRAINING["epochs"], help="training epochs (default 1500)")
+    op.add_argument("--windows", type=int, default=RECIPE_COUNTS["train"],
+                    help=f"training windows (default {RECIPE_COUNTS['train']}; collocation, validation and test "
+                         "windows scale with it)")
+    op.add_argument("--report-stop", type=float, default=REPORT_STOP_S,
+                    help=f"seconds of each report co-simulation (default {REPORT_STOP_S:g})")
+    op.add_argument("--seed", type=int, default=0, help="dataset and training seed (default 0)")
+    op.add_argument("--workers", type=int, default=2, help="dask workers for the dataset (default 2)")
+    op.add_argument("--threads", type=int, default=None, help="torch threads for training (default: torch's)")
+    op.add_argument("--name", default="SM4", help="FMU model name prefix (default SM4: SM4Surrogate, SM4Reference)")
+    op.add_argument("--quiet", action="store_true", help="no progress bars")
+    op.set_defaults(func=cmd_operator)
+
+
+class OperatorError(ValueError):
+    """A request `opfmu operator` cannot run."""
+
+
+def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"]):
+    """The `machine` dataset preset: the cosim families and `network`, with input levels `levels`
+    [input -> (low, high)] over windows of `horizon` seconds (1 ms sensor spacing), `windows`
+    training windows (the other splits in the recipe's proportions)."""
+    from surrogate.data.presets import preset
+
+    cosim = preset("cosim")
+    n_points = int(round(horizon / 0.001)) + 1
+    counts = {split: max(4, int(round(n * windows / RECIPE_COUNTS["train"]))) for split, n in RECIPE_COUNTS.items()}
+    probes = max(2, int(round(cosim.probes_per_family * windows / cosim.counts["train"])))
+    return replace(cosim, name="machine", counts=counts, probes_per_family=probes,
+                   families=cosim.families + RECIPE_FAMILIES_EXTRA, horizon=float(horizon), n_points=n_points,
+                   levels=levels)
+
+
+def _levels(args) -> dict:
+    levels = {}
+    for name, pair in (("Pm", args.pm), ("Efd", args.efd), ("Vs", args.vs)):
+        if pair is not None:
+            low, high = pair
+            if not low <= high:
+                raise OperatorError(f"--{name.lower()} LOW HIGH needs LOW <= HIGH, got {low:g} {high:g}")
+            levels[name] = (low, high)
+    return levels
+
+
+def cmd_operator(args) -> None:
+    from opfmu.cli import UserError
+    from reference_models.component import ParameterError
+
+    try:
+        _run(args)
+    except (OperatorError, ParameterError) as exc:
+        raise UserError(str(exc)) from None
+
+
+def _run(args) -> None:
+    from reference_models.components import component
+
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,40}", args.name):
+        raise OperatorError(f"--name {args.name[:60]!r} must be a C identifier of at most 41 characters")
+    if not (0.05 <= args.horizon <= 10.0) or args.epochs < 1 or args.workers < 0 or args.windows < 4:
+        raise OperatorError("--horizon must lie in [0.05, 10] s, --epochs be >= 1, --workers >= 0 and --windows >= 4")
+    if not 0 < args.report_stop <= 3600:
+        raise OperatorError("--report-stop must lie in (0, 3600] s")
+    model = component("sm4")
+    params = model.load_params(args.machine)
+    levels = _levels(args)
+    try:
+        preset = recipe(levels, args.horizon, args.windows)
+    except ValueError as exc:
+        raise OperatorError(str(exc)) from None
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    timings = {}
+    say = (lambda text: None) if args.quiet else print
+
+    from surrogate.data import generate
+    from surrogate.data.runner import SolveRunner
+
+    t = time.perf_counter()
+    meta = generate(preset, out / "data", seed=args.seed, runner=SolveRunner(args.workers), progress=not args.quiet,
+                    params=params)
+    timings["data"] = time.perf_counter() - t
+    say(f"dataset: {out / 'data'} ({sum(meta['counts'].values())} windows of {args.horizon:g} s)")
+
+    from surrogate.training import TrainConfig, train
+
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    config = TrainConfig.from_dict({**RECIPE_TRAINING, "epochs": args.epochs, "seed": args.seed})
+    t = time.perf_counter()
+    result = train(out / "data", config, out / "run", progress=not args.quiet)
+    timings["training"] = time.perf_counter() - t
+    say(f"trained: {result.epochs} epochs, best at {result.best_epoch}")
+
+    from fmu_export.builder import build_surrogate_fmu
+    from fmu_export.native_reference import build_native_reference_fmu
+    from surrogate.onnx_export import export_onnx
+
+    t = time.perf_counter()
+    onnx_path = out / "operator.onnx"
+    export_onnx(out / "run", onnx_path)
+    surrogate_fmu, reference_fmu = out / f"{args.name}Surrogate.fmu", out / f"{args.name}Reference.fmu"
+    info = build_surrogate_fmu(onnx_path, surrogate_fmu, model_name=f"{args.name}Surrogate")
+    build_native_reference_fmu(reference_fmu, f"{args.name}Reference", model, params)
+    timings["export_and_fmus"] = time.perf_counter() - t
+    say(f"built {surrogate_fmu} (kernel within {info['max_abs_diff']:.1e} of onnxruntime) and {reference_fmu}")
+
+    operating = tuple(args.operating_point) if args.operating_point else tuple(
+        0.5 * sum((levels.get(n) or model.inputs[model.input_names.index(n)].operating_range)) for n in ("Pm", "Efd"))
+    t = time.perf_counter()
+    results = long_runs(surrogate_fmu, reference_fmu, out, operating, args.report_stop, say)
+    timings["long_runs"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - started
+    report = write_report(out, onnx_path, args, operating, results, timings)
+    say(f"report: {report}")
+
+
+def long_runs(surrogate_fmu: Path, reference_fmu: Path, out: Path, operating: tuple, stop: float, say) -> dict:
+    """Both FMUs under fmpy over `stop` seconds at REPORT_STEP_S on each report scenario (seed 0)."""
+    import tempfile
+
+    from fmpy import extract
+
+    from opfmu.compare import compare, fmu_machine, plot_comparison, scenario_inputs, summary
+    from reference_models.files import write_json
+
+    results = {}
+    with tempfile.TemporaryDirectory(prefix="opfmu_operator_") as tmp:
+        surrogate_dir = extract(str(surrogate_fmu), unzipdir=str(Path(tmp) / "surrogate"))
+        reference_dir = extract(str(reference_fmu), unzipdir=str(Path(tmp) / "reference"))
+        machine = fmu_machine(surrogate_dir)
+        for name in REPORT_SCENARIOS:
+            try:
+                inputs = scenario_inputs(name, 0, stop, REPORT_STEP_S, machine, operating)
+            except ValueError as exc:  # no draw keeps this machine in step at this operating point
+                say(f"{name}: skipped ({exc})")
+                continue
+            result = compare(surrogate_dir, reference_dir, inputs, stop, REPORT_STEP_S)
+            directory = out / "report" / name
+            result["plots"] = [str(p.relative_to(out)) for p in plot_comparison(result, directory, name)]
+            results[name] = summary(result)
+            write_json(directory / "comparison.json", results[name])
+            m = results[name]["metrics"]
+            say(f"{name}: MaxAE delta {m['delta']['maxae']:.2e} rad, omega {m['omega']['maxae']:.2e} rad/s, "
+                f"Ed_p {m['Ed_p']['maxae']:.2e}, Eq_p {m['Eq_p']['maxae']:.2e} pu")
+    return results
+
+
+def write_report(out: Path, onnx_path: Path, args, operating: tuple, results: dict, timings: dict) -> Path:
+    """report.md: recipe, timings, single-window metrics, the long co-simulations against the goal."""
+    import onnx
+
+    from opfmu.demo import GOAL_MAXAE, meets_goal
+    from reference_models.files import atomic_path
+
+    meta = {p.key: p.value for p in onnx.load(str(onnx_path)).metadata_props}
+    metrics = json.loads(meta["metrics"])
+    envelope = json.loads(meta["envelope"])
+    phys = metrics["physical"]
+    lines = [f"# opfmu operator: {Path(args.machine).name}", "",
+             f"Machine `{args.machine}`: {meta['params']}.", "",
+             f"Recipe: the `machine` preset (the cosim families and `network`; {args.windows} training "
+             f"windows of {args.horizon:g} s), an anchored Unstacked PI-DeepONet trained causally for "
+             f"{args.epochs} epochs (seed {args.seed}); windows in their own frame (reference_models/drift.py).", "",
+             "| stage | wall time [s] |", "| --- | --- |"]
+    lines += [f"| {k} | {v:.0f} |" for k, v in timings.items()]
+    lines += ["", f"## Single window (test split, {metrics['n_trajectories']} windows, physical units)", "",
+              f"MSE {phys['mse']:.3g}, MAE {phys['mae']:.3g}, MaxAE {phys['maxae']:.3g}; MaxAE per state: "
+              + ", ".join(f"{k} {v:.3g}" for k, v in metrics["maxae_per_state"].items()) + ".", "",
+              "Training envelope (in the window frame):", "", "| quantity | min | max |", "| --- | --- | --- |"]
+    for group in ("x0", "u"):
+        lines += [f"| {group} {name} | {lo:.4g} | {hi:.4g} |" for name, (lo, hi) in envelope[group].items()]
+    lines += ["", f"## {args.report_stop:g} s co-simulation against the native reference (h = {REPORT_STEP_S * 1e3:g} ms)",
+              "", f"Scenarios at the operating point Pm = {operating[0]:.4g} pu, Efd = {operating[1]:.4g} pu, seed 0. "
+              "Goal: MaxAE delta <= " + f"{GOAL_MAXAE['delta']} rad, omega <= {GOAL_MAXAE['omega']} rad/s, Ed_p, Eq_p "
+              f"<= {GOAL_MAXAE['Ed_p']} pu.", "",
+              "| scenario | MaxAE delta | MaxAE omega | MaxAE Ed_p | MaxAE Eq_p | in envelope | goal |",
+              "| --- | --- | --- | --- | --- | --- | --- |"]
+    for name, r in results.items():
+        m = r["metrics"]
+        lines.append(f"| {name} | {m['delta']['maxae']:.2e} | {m['omega']['maxae']:.2e} | {m['Ed_p']['maxae']:.2e} "
+                     f"| {m['Eq_p']['maxae']:.2e} | {'yes' if r['in_envelope'] else 'no'} "
+                     f"| {'met' if meets_goal(r) else 'missed'} |")
+    lines.append("")
+    for name, r in results.items():
+        lines += [f"![{name} {Path(p).stem}]({p})" for p in r["plots"]]
+    report = out / "report.md"
+    with atomic_path(report) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+    return report
