@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.files import atomic_path
-from surrogate.contract import TOLERANCE, ContractError, drifted, operator_metadata, random_inputs
+from surrogate.contract import TOLERANCE, ContractError, check_scale, drifted, operator_metadata, random_inputs
 from surrogate.frame_graph import network_graph
 
 from .c_derivatives import jacobians_c_source
@@ -413,8 +413,8 @@ def sensor_sums_source(suffix, n_sensors: int, width: int, frame=None, horizon: 
 def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> float:
     """Max abs difference against onnxruntime of the compiled kernel (inside the FMU binary) on the
     network's graph and, for an operator with a frame, of the kernel with the engine's frame on the
-    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s),
-    relative to max(1, |x|) there (onnxruntime's float32 holds an angle of 36 rad to 4e-6)."""
+    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s);
+    relative to contract.check_scale, as the export's check (onnxruntime computes in float32)."""
     import onnxruntime as ort
 
     n_sensors, horizon = meta["n_sensors"], meta["horizon_s"]
@@ -423,12 +423,12 @@ def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> floa
     x0, u, t = random_inputs(meta["envelope"], t_grid, n, rng)
     t = t[:: max(1, len(t) // 9)]
     library = ctypes.CDLL(str(binary))
-    cases = [(network_graph(proto), library.opfmu_operator, x0, u, False)]
+    cases = [(network_graph(proto), library.opfmu_operator, x0, u)]
     if meta.get("frame") is not None:
         cases.append((proto, library.opfmu_framed_operator,
-                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n)), True))
+                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n))))
     worst = 0.0
-    for graph, fn, x0_, u_, turned in cases:
+    for graph, fn, x0_, u_ in cases:
         try:
             expected = ort.InferenceSession(graph.SerializeToString(), providers=["CPUExecutionProvider"]).run(
                 ["x"], {"x0": x0_, "u": u_, "t": t})[0]
@@ -441,6 +441,5 @@ def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> floa
             xi, ui = np.ascontiguousarray(x0_[i], np.float64), np.ascontiguousarray(u_[i], np.float64)
             for j, tj in enumerate(t):
                 fn(xi.ctypes.data_as(double_p), ui.ctypes.data_as(double_p), float(tj), out.ctypes.data_as(double_p))
-                scale = np.maximum(1.0, np.abs(expected[i, j])) if turned else 1.0  # float32 angles of 36 rad
-                worst = max(worst, float(np.max(np.abs(out - expected[i, j]) / scale)))
+                worst = max(worst, float(np.max(np.abs(out - expected[i, j]) / check_scale(meta, expected[i, j]))))
     return worst

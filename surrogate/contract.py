@@ -71,6 +71,8 @@ def operator_metadata(source) -> dict:
         sensor_times_s      tuple of n_sensors uniform times from 0 to horizon_s, or None if absent
         envelope            {"x0": {state: (lo, hi)}, "u": {input: (lo, hi)}} in the component's order
         residual_scale      tuple of n_x finite positive numbers, or None if absent
+        state_scale         tuple of n_x finite positive numbers (each state's standard deviation in
+                            training, what the checks measure differences against), or None
         residual_limit      finite number >= 0, or None if absent or null
         rollover_horizon_s  float in (0, horizon_s] (default horizon_s)
         frame               the window frame (reference_models.drift.Frame) of a component with a drift
@@ -115,6 +117,7 @@ def operator_metadata(source) -> dict:
         "sensor_times_s": _sensor_times(raw, n_sensors, horizon),
         "envelope": _envelope(raw, comp),
         "residual_scale": _residual_scale(raw, comp.n_states),
+        "state_scale": _residual_scale(raw, comp.n_states, "state_scale"),
         "residual_limit": _residual_limit(raw),
         "rollover_horizon_s": _rollover(raw, horizon),
         "frame": _frame(raw, comp, params),
@@ -207,16 +210,25 @@ def _envelope(raw: dict, comp) -> dict:
     return out
 
 
-def _residual_scale(raw: dict, n_states: int):
-    if "residual_scale" not in raw:
+def _residual_scale(raw: dict, n_states: int, key: str = "residual_scale"):
+    if key not in raw:
         return None
-    scale = _json(raw, "residual_scale")
+    scale = _json(raw, key)
     if not isinstance(scale, list) or len(scale) != n_states:
-        raise ContractError(f"metadata residual_scale must be a list of {n_states} numbers, one per state")
-    scale = tuple(_number(raw, "residual_scale", s, f"[{i}]") for i, s in enumerate(scale))
+        raise ContractError(f"metadata {key} must be a list of {n_states} numbers, one per state")
+    scale = tuple(_number(raw, key, s, f"[{i}]") for i, s in enumerate(scale))
     if not all(s > 0.0 for s in scale):
-        raise ContractError(f"metadata residual_scale {list(scale)} must hold positive numbers")
+        raise ContractError(f"metadata {key} {list(scale)} must hold positive numbers")
     return scale
+
+
+def check_scale(meta_or_scale, x: np.ndarray) -> np.ndarray:
+    """What a difference in x [..., n_x] is measured against in the export's and the build's checks:
+    max(1, |x|, the state's spread in training): float32 keeps about 7 digits of each (a machine in
+    a network swings its speed by 10 rad/s within a window and turns its angle by 36 rad)."""
+    spread = meta_or_scale.get("state_scale") if isinstance(meta_or_scale, dict) else meta_or_scale
+    spread = np.ones(x.shape[-1]) if spread is None else np.asarray(spread, dtype=float)
+    return np.maximum(np.maximum(1.0, np.abs(x)), spread)
 
 
 def _residual_limit(raw: dict):

@@ -20,7 +20,7 @@ from reference_models.version import __version__
 from reference_models.drift import frame_of, from_frame, to_frame
 from reference_models.files import atomic_path
 
-from .contract import TOLERANCE, drifted, random_inputs
+from .contract import TOLERANCE, check_scale, drifted, random_inputs
 from .data import load_metadata, load_split, machine_of
 from .ensemble import Ensemble, EnsembleError, architecture
 from .evaluation import evaluate
@@ -82,6 +82,7 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
         "training": json.dumps(summaries[0] if len(models) == 1 else {"ensemble": summaries}),
         "metrics": json.dumps(_test_metrics(model, data_dir)),
         "residual_scale": json.dumps(_residual_scale(data_dir)),
+        "state_scale": json.dumps(model.x_std.detach().double().tolist()),
         "residual_limit": json.dumps(residual_limit(model, data_dir, component, params)),
         "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if causal else 1.0)),
         "opfmu_version": __version__,
@@ -92,7 +93,8 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
     with atomic_path(out) as tmp:
         _torch_export(fold(model), len(t_grid), component.n_states, component.n_inputs, tmp)
         _attach_metadata(tmp, metadata, component, frame, t_grid)
-        worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed, frame)
+        worst = check_against_torch(model, tmp, envelope, t_grid, n_check, seed, frame,
+                                    json.loads(metadata["state_scale"]))
         if not worst <= TOLERANCE:
             raise ExportError(f"onnxruntime differs from torch by {worst:.2e} (> {TOLERANCE:g}); not written")
     return metadata
@@ -151,21 +153,22 @@ def _attach_metadata(path: Path, metadata: dict, component, frame=None, t_grid=N
     onnx.save(proto, str(path))
 
 
-def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0, frame=None) -> float:
-    """Max abs difference [physical units] of onnxruntime against torch on random in-envelope inputs;
-    with a frame, also on those inputs turned by random angles (up to 30 rad) and speeds (up to
-    12 rad/s), with torch getting them through reference_models.drift, where the difference is taken
-    relative to max(1, |x|) (float32 holds an angle of 36 rad to 4e-6)."""
+def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: int = 0, frame=None,
+                        state_scale=None) -> float:
+    """Max difference of onnxruntime against torch on random in-envelope inputs and, with a frame,
+    on those inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s), torch getting
+    them through reference_models.drift. The difference is in physical units relative to
+    contract.check_scale: max(1, |x|, the state's spread in training)."""
     import onnxruntime as ort
 
     rng = np.random.default_rng(seed)
     x0, u, t = random_inputs(envelope, t_grid, n, rng)
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
-    cases = [(x0, u, False)]
+    cases = [(x0, u)]
     if frame is not None:
-        cases.append((*drifted(frame, x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n)), True))
+        cases.append(drifted(frame, x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n)))
     worst = 0.0
-    for x0_, u_, turned in cases:
+    for x0_, u_ in cases:
         got = session.run(["x"], {"x0": x0_, "u": u_, "t": t})[0].astype(np.float64)
         x0_in, u_in = x0_.astype(np.float64), u_.astype(np.float64)
         if frame is not None:
@@ -175,8 +178,7 @@ def check_against_torch(model, onnx_path, envelope: dict, t_grid, n: int, seed: 
                              torch.from_numpy(t)).numpy().astype(np.float64)
         if frame is not None:
             expected = from_frame(frame, expected, t.astype(np.float64), shift, c)
-        scale = np.maximum(1.0, np.abs(expected)) if turned else 1.0
-        worst = max(worst, float(np.max(np.abs(got - expected) / scale)))
+        worst = max(worst, float(np.max(np.abs(got - expected) / check_scale(state_scale, expected))))
     return worst
 
 
