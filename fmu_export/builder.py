@@ -36,7 +36,7 @@ from .c_derivatives import jacobians_c_source
 from .c_equations import equations_c_source
 from .model_description import model_description
 from .onnx_to_c import generate_kernel
-from .variables import SURROGATE_EXTRAS, fmu_variables, start_state, vr_header
+from .variables import SURROGATE_EXTRAS, fmu_variables, start_inputs, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 # residual above which the FMU warns, for an operator whose metadata names none (the export writes
@@ -111,7 +111,7 @@ def mode_start(n: int) -> list[float]:
 
 
 def component_config(kind: str, model_name: str, guid: str, component, state_header: str, interpolates: bool,
-                     x_default) -> tuple[list, list]:
+                     x_default, operating_point: dict | None = None) -> tuple[list, list]:
     """The config.h lines every native FMU of `component` has: (the opening, the closing tables).
     kind names the FMU in the comment; state_header is the model's ModelState header."""
     n_x, n_u = component.n_states, component.n_inputs
@@ -130,7 +130,7 @@ def component_config(kind: str, model_name: str, guid: str, component, state_hea
     ]
     tables = [
         f"static const double OPFMU_DEFAULT_X0[{n_x}] = {_c_array(x_default)}; /* equilibrium at the start inputs */",
-        f"static const double OPFMU_START_U[{n_u}] = {_c_array(component.start_inputs)};",
+        f"static const double OPFMU_START_U[{n_u}] = {_c_array(start_inputs(component, operating_point))};",
         f"static const double OPFMU_INPUT_MIN[{n_u}] = {_c_array(input_minima(component))};",
         f"static const char *const OPFMU_INPUT_NAMES[{n_u}] = {_c_strings(component.input_names)};",
         f"static const char *const OPFMU_INPUT_UNITS[{n_u}] = {_c_strings(q.unit for q in component.inputs)};",
@@ -145,7 +145,8 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
     n_x, n_u = component.n_states, component.n_inputs
     affine = [int(i) for i in component.affine_states]
     residual_scale = meta["residual_scale"] or [1.0] * n_x
-    opening, tables = component_config("surrogate", model_name, guid, component, "surrogate_state.h", False, x_default)
+    opening, tables = component_config("surrogate", model_name, guid, component, "surrogate_state.h", False, x_default,
+                                       meta.get("operating_point"))
     lines = opening + [
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {_c_double(meta['horizon_s'])}",
@@ -241,10 +242,11 @@ def load_operator(onnx_path: Path):
 
 
 def default_state(meta: dict, onnx_path: Path) -> np.ndarray:
-    """The default initial state: the machine's equilibrium at its inputs' start values."""
+    """The default initial state: the machine's equilibrium at its inputs' start values (those of the
+    operator's operating point, if it has one)."""
     component, params = meta["component"], meta["params"]
     try:
-        x = start_state(component, params)
+        x = start_state(component, params, meta.get("operating_point"))
     except ValueError as exc:
         raise BuildError(f"{onnx_path}: {exc}") from None
     if not all(math.isfinite(s) and s > 0 for s in component.state_scales):
@@ -270,7 +272,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         raise BuildError(f"{onnx_path}: the graph takes x0 [N, {kernel.n_states}] and u [N, S, {kernel.n_inputs}], "
                          f"but the {component.name} component has {component.n_states} states and "
                          f"{component.n_inputs} inputs")
-    variables = fmu_variables(component, params, x_default, SURROGATE_EXTRAS, surrogate_starts(meta))
+    variables = fmu_variables(component, params, x_default, SURROGATE_EXTRAS, surrogate_starts(meta),
+                              meta.get("operating_point"))
     equations = '#include "engine.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
     derivatives = derivatives_source(component, params)
 

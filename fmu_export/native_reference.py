@@ -64,9 +64,11 @@ def native_reference_variables(component: Component = SM4, params=None):
 
 
 def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
-                               params=None) -> dict:
+                               params=None, operating_point: dict | None = None) -> dict:
     """Write the native reference FMU of `component` with parameters `params` (None: its defaults; a
-    mapping of some of them; or a parameter object) to `out`, atomically.
+    mapping of some of them; or a parameter object) to `out`, atomically; its inputs start at
+    `operating_point` ({input: value}, the rest at the component's start values) and its initial
+    state at the equilibrium there.
 
     Returns {"path", "size_bytes", "guid", "params"} (params: every parameter of the machine built
     in). Raises NativeReferenceError (a ValueError, subclass of builder.BuildError) with a one-line
@@ -77,15 +79,15 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         params = machine_params(component, params)
     except (BuildError, ParameterError) as exc:
         raise NativeReferenceError(str(exc)) from None
-    x_start = _start_state(component, params)
-    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS)
+    x_start = _start_state(component, params, operating_point)
+    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point)
     generated = {
         "variables.h": vr_header(variables, component),
         "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL"),
         "derivatives.c": derivatives_source(component, params),
     }
-    guid = _guid(model_name, component, params, generated)
-    generated["config.h"] = config_header(model_name, guid, component, x_start)
+    guid = _guid(model_name, component, params, generated, operating_point)
+    generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
                             interpolates_inputs=True)
@@ -118,11 +120,11 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     return {"path": str(out), "size_bytes": out.stat().st_size, "guid": guid, "params": params.to_dict()}
 
 
-def config_header(model_name: str, guid: str, component: Component, x_start) -> str:
+def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None) -> str:
     """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
     escaped names."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
-                                       x_start)
+                                       x_start, operating_point)
     lines = opening + [
         f"#define OPFMU_RTOL {_c_double(SOLVER_STARTS['rtol'])} /* default of the parameter rtol */",
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
@@ -133,18 +135,20 @@ def config_header(model_name: str, guid: str, component: Component, x_start) -> 
     return "\n".join(lines)
 
 
-def _start_state(component: Component, params) -> np.ndarray:
+def _start_state(component: Component, params, operating_point=None) -> np.ndarray:
     """The equilibrium at the inputs' start values [n_x]; NativeReferenceError where there is none."""
     try:
-        return start_state(component, params)
+        return start_state(component, params, operating_point)
     except ValueError as exc:
         raise NativeReferenceError(str(exc)) from None
 
 
-def _guid(model_name: str, component: Component, params, generated: dict) -> str:
-    """A GUID that changes with everything compiled into the binary: name, machine and C sources."""
+def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None) -> str:
+    """A GUID that changes with everything compiled into the binary: name, machine, operating point
+    and C sources."""
     digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
-                            + json.dumps(params.to_dict(), sort_keys=True).encode())
+                            + json.dumps(params.to_dict(), sort_keys=True).encode() + b"\0"
+                            + json.dumps(operating_point or {}, sort_keys=True).encode())
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())
     for name in STATIC_SOURCES:

@@ -68,14 +68,24 @@ REFERENCE_EXTRAS = (
 REFERENCE_STARTS = {"rtol": 1e-10, "atol": 1e-12}
 
 
-def start_state(component: Component, params):
-    """The default initial state of an FMU [n_x]: the machine's equilibrium at its inputs' start
-    values. ValueError (one line) where there is no finite one."""
+def start_inputs(component: Component, operating_point: dict | None = None):
+    """The FMU's input start values [n_u]: the component's, with those of `operating_point`
+    ({input name: value}, e.g. a machine's Pm and Efd from its load flow) instead."""
     import numpy as np
 
-    starts = ", ".join(f"{q.name} = {float(q.start)!r}" for q in component.inputs)
+    point = operating_point or {}
+    return np.array([float(point.get(q.name, q.start)) for q in component.inputs])
+
+
+def start_state(component: Component, params, operating_point: dict | None = None):
+    """The default initial state of an FMU [n_x]: the machine's equilibrium at its inputs' start
+    values (start_inputs). ValueError (one line) where there is no finite one."""
+    import numpy as np
+
+    u = start_inputs(component, operating_point)
+    starts = ", ".join(f"{q.name} = {float(v)!r}" for q, v in zip(component.inputs, u))
     try:
-        x = np.asarray(component.steady_state(None, params), dtype=float)
+        x = np.asarray(component.steady_state(u, params), dtype=float)
     except (ValueError, ArithmeticError) as exc:
         raise ValueError(f"the {component.name} machine has no equilibrium at the start inputs ({starts}) to start "
                          f"from: {' '.join(str(exc).split())[:200]}") from None
@@ -84,13 +94,15 @@ def start_state(component: Component, params):
     return x
 
 
-def fmu_variables(component: Component, params, x_start, extras=(), starts=None) -> list[Variable]:
+def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
+                  operating_point: dict | None = None) -> list[Variable]:
     """The variable list of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
-    their start values by name (parameters need one)."""
+    their start values by name (parameters need one); the inputs start at start_inputs."""
     starts = starts or {}
     dependencies = output_input_dependencies(component, params)
-    out = [Variable(q.name, i, "input", q.description, q.unit, q.start) for i, q in enumerate(component.inputs)]
+    u_start = start_inputs(component, operating_point)
+    out = [Variable(q.name, i, "input", q.description, q.unit, float(u_start[i])) for i, q in enumerate(component.inputs)]
     out += [Variable(q.name, len(out) + i, "output", f"{q.description} at the communication point", q.unit)
             for i, q in enumerate(component.states)]
     out += [Variable(q.name, len(out) + i, "output", q.description, q.unit, dependencies=deps)

@@ -147,12 +147,22 @@ def cmd_build_reference_fmu(args) -> None:
     build = build_reference_fmu if args.python else build_native_reference_fmu
     try:
         params = operator_machine(args.operator) if args.operator else _machine(args.machine)
-        info = build(args.output, model_name=args.name, params=params)
+        point = _operating_point(args.operator) if args.operator and not args.python else None
+        info = build(args.output, model_name=args.name, params=params, **({"operating_point": point} if point else {}))
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
     kind = "pythonfmu (scipy RK45)" if args.python else "native (Dormand-Prince 5(4) in C)"
     print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, {kind}, model {args.name}, guid {info['guid']}); "
           "fmpy validates it")
+
+
+def _operating_point(onnx_path):
+    """The operating point an operator file's FMUs start at (None: the component's start values)."""
+    import onnx
+
+    from surrogate.contract import operator_metadata
+
+    return operator_metadata(onnx.load(str(onnx_path))).get("operating_point")
 
 
 def cmd_compare(args) -> None:

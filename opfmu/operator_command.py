@@ -147,17 +147,18 @@ def _run(args) -> None:
     from fmu_export.native_reference import build_native_reference_fmu
     from surrogate.onnx_export import export_onnx
 
+    operating = tuple(args.operating_point) if args.operating_point else tuple(
+        0.5 * sum((levels.get(n) or model.inputs[model.input_names.index(n)].operating_range)) for n in ("Pm", "Efd"))
+    point = {"Pm": operating[0], "Efd": operating[1]}
     t = time.perf_counter()
     onnx_path = out / "operator.onnx"
-    export_onnx(out / "run", onnx_path)
+    export_onnx(out / "run", onnx_path, operating_point=point)
     surrogate_fmu, reference_fmu = out / f"{args.name}Surrogate.fmu", out / f"{args.name}Reference.fmu"
     info = build_surrogate_fmu(onnx_path, surrogate_fmu, model_name=f"{args.name}Surrogate")
-    build_native_reference_fmu(reference_fmu, f"{args.name}Reference", model, params)
+    build_native_reference_fmu(reference_fmu, f"{args.name}Reference", model, params, point)
     timings["export_and_fmus"] = time.perf_counter() - t
     say(f"built {surrogate_fmu} (kernel within {info['max_abs_diff']:.1e} of onnxruntime) and {reference_fmu}")
 
-    operating = tuple(args.operating_point) if args.operating_point else tuple(
-        0.5 * sum((levels.get(n) or model.inputs[model.input_names.index(n)].operating_range)) for n in ("Pm", "Efd"))
     t = time.perf_counter()
     results = long_runs(surrogate_fmu, reference_fmu, out, operating, args.report_stop, say)
     timings["long_runs"] = time.perf_counter() - t

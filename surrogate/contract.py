@@ -75,6 +75,8 @@ def operator_metadata(source) -> dict:
                             training, what the checks measure differences against), or None
         residual_limit      finite number >= 0, or None if absent or null
         rollover_horizon_s  float in (0, horizon_s] (default horizon_s)
+        operating_point     {input name: value} the FMUs start their inputs at (a machine's Pm and Efd
+                            from its load flow), or None: the component's start values
         frame               the window frame (reference_models.drift.Frame) of a component with a drift
                             symmetry, which must be that of the component and parameters; else None
         raw                 the metadata strings as read
@@ -121,6 +123,7 @@ def operator_metadata(source) -> dict:
         "residual_limit": _residual_limit(raw),
         "rollover_horizon_s": _rollover(raw, horizon),
         "frame": _frame(raw, comp, params),
+        "operating_point": _operating_point(raw, comp),
         "raw": raw,
     }
 
@@ -250,6 +253,16 @@ def _rollover(raw: dict, horizon: float) -> float:
     if not 0.0 < rollover <= horizon:
         raise ContractError(f"metadata rollover_horizon_s = {rollover!r} must lie in (0, horizon_s = {horizon!r}]")
     return rollover
+
+
+def _operating_point(raw: dict, comp):
+    if "operating_point" not in raw:
+        return None
+    point = _json(raw, "operating_point")
+    if not isinstance(point, dict) or not all(k in comp.input_names for k in point):
+        raise ContractError(f"metadata operating_point {_show(raw['operating_point'])} must map inputs of "
+                            f"{comp.name} ({', '.join(comp.input_names)}) to numbers")
+    return {k: _number(raw, "operating_point", v, f" {k}") for k, v in point.items()}
 
 
 def _frame(raw: dict, comp, params):

@@ -40,7 +40,7 @@ class ExportError(ValueError):
     """A model that cannot be exported as asked (or whose export disagrees with torch)."""
 
 
-def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> dict:
+def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0, operating_point: dict | None = None) -> dict:
     """Write the best model of a run directory, or the mean of several runs' (ensemble.py), to `out`
     (.onnx); returns the metadata written.
 
@@ -48,6 +48,8 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
     gives the envelope and its test split the metrics. An ensemble's envelope is that intersected with
     every member's training dataset's: each member is trusted only where it was trained. The file is
     written only if onnxruntime matches torch to TOLERANCE on n_check random in-envelope inputs.
+    operating_point: {input name: value} the FMUs built from the file start their inputs at (and
+    their initial state at the equilibrium there), e.g. a grid machine's Pm and Efd.
     """
     run_dirs = [Path(runs)] if isinstance(runs, (str, Path)) else [Path(r) for r in runs]
     out = Path(out)
@@ -87,6 +89,11 @@ def export_onnx(runs, out, data_dir=None, n_check: int = 64, seed: int = 0) -> d
         "rollover_horizon_s": repr(float(data_meta["horizon_s"]) * (CAUSAL_ROLLOVER_SHARE if causal else 1.0)),
         "opfmu_version": __version__,
     }
+    if operating_point:
+        unknown = [k for k in operating_point if k not in component.input_names]
+        if unknown:
+            raise ExportError(f"operating point names {', '.join(unknown)}, not inputs of {component.name}")
+        metadata["operating_point"] = json.dumps({k: float(v) for k, v in operating_point.items()})
     frame = frame_of(component.drift, params) if component.drift is not None else None
     if frame is not None:
         metadata["frame"] = json.dumps(frame.to_dict())
