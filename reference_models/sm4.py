@@ -194,12 +194,12 @@ DEFAULT_PARAMS = SM4Params()
 
 
 def rhs(x, u, p: SM4Params = DEFAULT_PARAMS):
-    """dx/dt [..., 4] for states x [..., 4] and inputs u [..., 2] (numpy or torch, broadcast)."""
+    """dx/dt [..., 4] for states x [..., 4] and inputs u [..., 4] (numpy or torch, broadcast)."""
     return SM4.rhs(x, u, p)
 
 
 def outputs(x, u, p: SM4Params = DEFAULT_PARAMS):
-    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 2]."""
+    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 4]."""
     return SM4.output_values(x, u, p)
 
 

@@ -49,7 +49,7 @@ class TrainConfig:
     """Training settings (defaults: paper IV-C).
 
     optimizer: "soap" (heavyball.SOAP; factors of size <= max_precond_dim are preconditioned, the
-        2006-wide branch input is not) or "adam" (AdamW: decoupled weight decay like SOAP's).
+        4008-wide branch input of 1001 sensors of 4 inputs is not) or "adam" (AdamW: decoupled weight decay like SOAP's).
     epochs: maximum number of full-batch epochs; early stopping ends the run when the validation
         MSE (standardised states) has not improved by min_delta for `patience` epochs.
     physics: add the physics losses (eqs. 6, 7) with `weights`; off, only the data loss is used.
