@@ -22,7 +22,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the families of `cosim`, and this
+RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the `machine` recipe: the families of `cosim`, and this
+# the `grid` recipe, for a machine in a network (D = 0, no governor): open-loop bus signals make such
+# a machine slip poles within a window (its bus angle stands still while it accelerates), which a
+# machine in a network never sees; its bus voltage is what the closed loop of `network` records
+GRID_FAMILIES = (("network", 0.7), ("drift", 0.1), ("governor", 0.1), ("avr", 0.1))
 RECIPE_COUNTS = {"train": 3000, "collocation": 1500, "val": 150, "test": 150}
 RECIPE_TRAINING = {"physics": True, "epochs": 1500, "time_points": 200, "causal": True, "state_weights": [5, 1, 1, 5],
                    "model": {"anchored": True, "width": 128, "latent": 96}}
@@ -44,6 +48,9 @@ def add_operator_parser(sub) -> None:
                     help="bus voltage levels [pu] (default: the component's operating range)")
     op.add_argument("--operating-point", nargs=2, type=float, default=None, metavar=("PM", "EFD"),
                     help="Pm and Efd [pu] the report's scenarios hold or move from (default: the middle of the levels)")
+    op.add_argument("--recipe", choices=("machine", "grid"), default="machine",
+                    help="machine: every co-simulation family and network (a machine on a bus of given "
+                         "voltage); grid: mostly network windows, for a machine in a network with D = 0 (default machine)")
     op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.5 for a machine "
                     "in a network with D = 0, whose swings within a window are large)")
     op.add_argument("--epochs", type=int, default=RECIPE_TRAINING["epochs"], help="training epochs (default 1500)")
@@ -64,19 +71,20 @@ class OperatorError(ValueError):
     """A request `opfmu operator` cannot run."""
 
 
-def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"]):
-    """The `machine` dataset preset: the cosim families and `network`, with input levels `levels`
-    [input -> (low, high)] over windows of `horizon` seconds (1 ms sensor spacing), `windows`
-    training windows (the other splits in the recipe's proportions)."""
+def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"], name: str = "machine"):
+    """The dataset preset of recipe `name`: `machine`, the cosim families and `network`, or `grid`
+    (GRID_FAMILIES), with input levels `levels` [input -> (low, high)] over windows of `horizon`
+    seconds (1 ms sensor spacing), `windows` training windows (the other splits in the recipe's
+    proportions)."""
     from surrogate.data.presets import preset
 
     cosim = preset("cosim")
     n_points = int(round(horizon / 0.001)) + 1
     counts = {split: max(4, int(round(n * windows / RECIPE_COUNTS["train"]))) for split, n in RECIPE_COUNTS.items()}
     probes = max(2, int(round(cosim.probes_per_family * windows / cosim.counts["train"])))
-    return replace(cosim, name="machine", counts=counts, probes_per_family=probes,
-                   families=cosim.families + RECIPE_FAMILIES_EXTRA, horizon=float(horizon), n_points=n_points,
-                   levels=levels)
+    families = cosim.families + RECIPE_FAMILIES_EXTRA if name == "machine" else GRID_FAMILIES
+    return replace(cosim, name=name, counts=counts, probes_per_family=probes,
+                   families=families, horizon=float(horizon), n_points=n_points, levels=levels)
 
 
 def _levels(args) -> dict:
@@ -113,7 +121,7 @@ def _run(args) -> None:
     params = model.load_params(args.machine)
     levels = _levels(args)
     try:
-        preset = recipe(levels, args.horizon, args.windows)
+        preset = recipe(levels, args.horizon, args.windows, args.recipe)
     except ValueError as exc:
         raise OperatorError(str(exc)) from None
     out = Path(args.out)
@@ -211,7 +219,7 @@ def write_report(out: Path, onnx_path: Path, args, operating: tuple, results: di
     phys = metrics["physical"]
     lines = [f"# opfmu operator: {Path(args.machine).name}", "",
              f"Machine `{args.machine}`: {meta['params']}.", "",
-             f"Recipe: the `machine` preset (the cosim families and `network`; {args.windows} training "
+             f"Recipe: the `{args.recipe}` preset ({'the cosim families and `network`' if args.recipe == 'machine' else 'mostly `network`'}; {args.windows} training "
              f"windows of {args.horizon:g} s), an anchored Unstacked PI-DeepONet trained causally for "
              f"{args.epochs} epochs (seed {args.seed}); windows in their own frame (reference_models/drift.py).", "",
              "| stage | wall time [s] |", "| --- | --- |"]
