@@ -123,9 +123,11 @@ class NormStats:
 
 
 def _safe_std(a: np.ndarray) -> np.ndarray:
-    """Std per column; a constant column gets 1 so it maps to a constant instead of a division by 0."""
+    """Std per column; a constant column gets 1 so it maps to a constant instead of a division by 0
+    (a column of one value has a std of rounding noise, 1e-11 for 1e6 values of 1.08: below 1e-9 of
+    its size a column counts as constant)."""
     std = a.std(0)
-    return np.where(std > 1e-12 * np.maximum(1.0, np.abs(a).max(0)), std, 1.0)
+    return np.where(std > 1e-9 * np.maximum(1.0, np.abs(a).max(0)), std, 1.0)
 
 
 def mlp(n_in: int, width: int, depth: int, n_out: int, activation: str, out_activation: bool = False):

@@ -107,3 +107,18 @@ def test_normalisation_buffers_and_outputs_survive_save_and_load(arch, tmp_path)
 def test_unknown_architecture_is_refused_with_the_known_ones_named():
     with pytest.raises(ValueError, match="unstacked"):
         OperatorConfig(arch="stacked")
+
+
+def test_an_input_held_at_one_value_is_normalised_by_one_not_by_its_rounding_noise():
+    """The paper preset holds Efd at 1.08 pu in every window: the std of a million copies is 1e-11
+    of rounding noise, which as a divisor made the folded export's float32 weights 1e9 too large."""
+    from surrogate.models import NormStats
+
+    rng = np.random.default_rng(0)
+    n, s = 200, 1001
+    u = np.stack([rng.uniform(0.7, 1.2, (n, s)), rng.uniform(-1, 1, (n, s)), np.full((n, s), 0.7048),
+                  np.full((n, s), 1.08)], axis=-1)
+    x = rng.normal(size=(n, s, 4))
+    stats = NormStats.fit({"x0": x[:, 0], "u": u, "x": x, "t": np.linspace(0.0, 1.0, s)})
+    assert stats.u_std[2] == 1.0 and stats.u_std[3] == 1.0
+    assert 0.1 < stats.u_std[0] < 0.2
