@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from reference_models.files import atomic_path
-from surrogate.contract import TOLERANCE, ContractError, check_scale, drifted, operator_metadata, random_inputs
+from surrogate.contract import ContractError, check_scale, drifted, operator_metadata, random_inputs
 from surrogate.frame_graph import network_graph
 
 from .c_derivatives import jacobians_c_source
@@ -56,6 +56,11 @@ C_KEYWORDS = frozenset("auto break case char const continue default do double el
                        "inline int long register restrict return short signed sizeof static struct switch typedef "
                        "union unsigned void volatile while".split())
 
+
+# the compiled kernel (double arithmetic on the float32 weights) against onnxruntime (float32
+# arithmetic), relative to contract.check_scale: onnxruntime's own rounding through three 128-wide
+# layers and 4 x 96 basis products reaches 1.1e-5 of the scale for the WSCC machines' operators
+KERNEL_TOLERANCE = 5e-5
 
 class BuildError(ValueError):
     """The FMU cannot be built as asked (bad operator file, compiler failure, kernel mismatch); the
@@ -298,8 +303,9 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel))
         binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
         worst = check_kernel(binary, proto, meta, n_check)
-        if not worst <= TOLERANCE:
-            raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {TOLERANCE:g}); FMU not written")
+        if not worst <= KERNEL_TOLERANCE:
+            raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {KERNEL_TOLERANCE:g}); "
+                             "FMU not written")
         xml = model_description(model_name, guid, variables,
                                 f"{component.description}; PI-DeepONet surrogate evaluated from buffered input sensors",
                                 directional_derivatives=True)

@@ -696,13 +696,7 @@ def without_trunk(operator_path, tmp_path_factory):
     return directory / "op.onnx", (extract(str(path)), read_model_description(str(path)))
 
 
-@pytest.mark.parametrize("speed", [
-    3.0,
-    pytest.param(0.0, marks=pytest.mark.xfail(reason="window.c evaluate(): with a sensor layer but no trunk "
-                                                     "(OPFMU_TRUNK_SIZE 0) a held input in a frame that does not "
-                                                     "turn leaves z unset (sensors_changed is 0 there), and the "
-                                                     "kernel reads it uninitialised")),
-])
+@pytest.mark.parametrize("speed", [3.0, 0.0])
 def test_the_fmu_equals_the_mirror_on_a_kernel_without_a_trunk(without_trunk, speed):
     """The same semantics where the FMU keeps the sensor buffer and the sensor layer's output instead
     of coefficients: held inputs, then a change, then held again, in a frame turning at `speed`."""
