@@ -84,6 +84,10 @@ def main() -> None:
     parser.add_argument("--stop", type=float, default=5.0, help="seconds per contingency (default 5)")
     parser.add_argument("--out", default="benchmarks/wscc9_operator_envelopes.json")
     args = parser.parse_args()
+    missing = [name for name in OPERATORS.values() if not (Path(args.operators) / name).exists()]
+    if missing:
+        sys.exit(f"no {', '.join(missing)} in {args.operators}: train them with `opfmu operator --recipe grid` "
+                 "(docs/results.md, WSCC 9-bus machine operators) and point --operators there")
     operators = load(Path(args.operators))
     started = time.perf_counter()
     cases = contingencies()
