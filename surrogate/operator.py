@@ -159,7 +159,8 @@ class Operator:
             raise OperatorInputError(f"t must lie in [0, {self.horizon:g}] s (the horizon), got [{t_low:g}, {t_high:g}]")
         back = None
         if self.frame is not None:
-            x0_f, u_f, shift, c = to_frame(self.frame, *given, self.sensor_times)
+            with np.errstate(invalid="ignore", over="ignore"):  # non-finite inputs are refused just below
+                x0_f, u_f, shift, c = to_frame(self.frame, *given, self.sensor_times)
             x0, u, back = x0_f.astype(np.float32), u_f.astype(np.float32), (shift, c)
         # quick test: every value within its bound (NaN compares false); the ranges only when one is not
         flat = u.reshape(len(u), -1)
