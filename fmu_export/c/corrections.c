@@ -78,7 +78,7 @@ static void start_rest_correction(ModelState *m)
 {
     double distance = 0.0, level[N_U];
     m->rest_weight = 0.0;
-    input_in_frame(m, m->u, 0.0, level); /* at rest in the window frame: the machine turning with it */
+    input_in_frame(&m->frame, m->u, 0.0, level); /* at rest in the window frame: the machine turning with it */
     if (m->rest_radius <= 0.0 || !equilibrium(m->x_window_f, level, m->x_rest)) return;
     for (int i = 0; i < N_X; ++i)
         distance = fmax(distance, fabs(m->x_window_f[i] - m->x_rest[i]) / (m->rest_radius * OPFMU_STATE_SCALE[i]));

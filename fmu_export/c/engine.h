@@ -36,7 +36,7 @@ void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SI
 
 /* window.c */
 /* the input u at window time tau in the window frame */
-OPFMU_INTERNAL void input_in_frame(const ModelState *m, const double u[N_U], double tau, double u_f[N_U]);
+OPFMU_INTERNAL void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, double u_f[N_U]);
 /* the operator's physics residual at the current time (RMS over the states, per state scaled) */
 OPFMU_INTERNAL double window_residual(const ModelState *m);
 #if OPFMU_TRUNK_SIZE > 0

@@ -9,6 +9,12 @@
 #define OPFMU_TRUNK_CACHE (OPFMU_TRUNK_SIZE > 0 ? OPFMU_N_SENSORS * OPFMU_TRUNK_SIZE : 1)
 #define OPFMU_COEF_CAP (OPFMU_COEF_SIZE > 0 ? OPFMU_COEF_SIZE : 1)
 
+/* a window's frame: angle origin a [rad], shift of the angle states (a plus whole periods) [rad],
+   speed c [rad/s] */
+typedef struct {
+    double a, shift, c;
+} WindowFrame;
+
 typedef struct {
     double u[OPFMU_N_INPUTS];     /* inputs, held over the next step */
     double x_start[OPFMU_N_STATES]; /* parameters: initial state */
@@ -27,7 +33,7 @@ typedef struct {
     /* the window's frame (reference_models/drift.py; zeros for a component without one): inputs at
        window time tau are seen as u - a R - c (R tau + T), states as x - (shift + c tau) A - c W, with
        R, T, A, W the frame tables of config.h */
-    double frame_a, frame_shift, frame_c;
+    WindowFrame frame;
     double x_window_f[OPFMU_N_STATES]; /* the window's start state in its frame */
     int in_envelope;              /* false once an input or a window start left the envelope */
     double sensors[OPFMU_N_INPUTS * OPFMU_N_SENSORS]; /* the inputs at the window's sensor times, slot-major */

@@ -41,55 +41,55 @@ void model_defaults(ModelState *m)
     m->in_envelope = 1;
 }
 
-void input_in_frame(const ModelState *m, const double u[N_U], double tau, double u_f[N_U])
+void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, double u_f[N_U])
 {
     for (int c = 0; c < N_U; ++c)
-        u_f[c] = u[c] - m->frame_a * OPFMU_FRAME_INPUT_RATES[c]
-                 - m->frame_c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
+        u_f[c] = u[c] - f->a * OPFMU_FRAME_INPUT_RATES[c]
+                 - f->c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
 }
 
 /* x (raw, at window time tau) in the window frame, and back */
-static void state_in_frame(const ModelState *m, const double x[N_X], double tau, double x_f[N_X])
+static void state_in_frame(const WindowFrame *f, const double x[N_X], double tau, double x_f[N_X])
 {
     for (int i = 0; i < N_X; ++i)
-        x_f[i] = x[i] - (m->frame_shift + m->frame_c * tau) * OPFMU_FRAME_ANGLES[i] - m->frame_c * OPFMU_FRAME_SPEED[i];
+        x_f[i] = x[i] - (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] - f->c * OPFMU_FRAME_SPEED[i];
 }
 
-static void state_from_frame(const ModelState *m, const double x_f[N_X], double tau, double x[N_X])
+static void state_from_frame(const WindowFrame *f, const double x_f[N_X], double tau, double x[N_X])
 {
     for (int i = 0; i < N_X; ++i)
-        x[i] = x_f[i] + (m->frame_shift + m->frame_c * tau) * OPFMU_FRAME_ANGLES[i] + m->frame_c * OPFMU_FRAME_SPEED[i];
+        x[i] = x_f[i] + (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] + f->c * OPFMU_FRAME_SPEED[i];
 }
 
 /* the frame of a window starting at state x under input u: (a, shift, c) of drift.window_frame */
-static void window_frame(const double x[N_X], const double u[N_U], double *a, double *shift, double *c)
+static WindowFrame window_frame(const double x[N_X], const double u[N_U])
 {
+    WindowFrame f = {0.0, 0.0, 0.0};
 #if OPFMU_FRAME
-    *a = u[OPFMU_FRAME_ANGLE_INPUT];
-    *c = x[OPFMU_FRAME_SPEED_STATE];
+    f.a = u[OPFMU_FRAME_ANGLE_INPUT];
+    f.c = x[OPFMU_FRAME_SPEED_STATE];
 #if OPFMU_FRAME_ANGLE_STATE >= 0
-    *shift = *a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - *a) / OPFMU_FRAME_PERIOD + 0.5);
+    f.shift = f.a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - f.a) / OPFMU_FRAME_PERIOD + 0.5);
 #else
-    *shift = *a;
+    f.shift = f.a;
 #endif
 #else
     (void)x;
     (void)u;
-    *a = *shift = *c = 0.0;
 #endif
+    return f;
 }
 
 /* The operator on physical values, the frame done here as the engine does it: what the ONNX file's
    whole graph computes (the builder checks the two against each other). */
 void opfmu_framed_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X])
 {
-    static ModelState scratch; /* only its frame fields are used */
+    const WindowFrame frame = window_frame(x0, u);
     double x0_f[N_X], x_f[N_X], u_f[N_U * OPFMU_N_SENSORS];
-    window_frame(x0, u, &scratch.frame_a, &scratch.frame_shift, &scratch.frame_c);
-    state_in_frame(&scratch, x0, 0.0, x0_f);
-    for (int k = 0; k < OPFMU_N_SENSORS; ++k) input_in_frame(&scratch, u + k * N_U, (double)k * SENSOR_DT, u_f + k * N_U);
+    state_in_frame(&frame, x0, 0.0, x0_f);
+    for (int k = 0; k < OPFMU_N_SENSORS; ++k) input_in_frame(&frame, u + k * N_U, (double)k * SENSOR_DT, u_f + k * N_U);
     opfmu_operator(x0_f, u_f, t, x_f);
-    state_from_frame(&scratch, x_f, t, x);
+    state_from_frame(&frame, x_f, t, x);
 }
 
 #if OPFMU_FIRST_LAYER > 0
@@ -155,7 +155,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     const double *basis_lo = trunk_seen(m, lo, scratch_lo), *basis_hi = trunk_seen(m, hi, scratch_hi);
     opfmu_head(m->coef, basis_lo, a);
     opfmu_head(m->coef, basis_hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame_c * OPFMU_FRAME_ANGLES[i];
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_ANGLES[i];
     if (m->rest_weight > 0.0) /* the rest correction moves with window time too */
         rest_correct_rate(m, basis_lo, basis_hi, hi - lo, rate);
 }
@@ -185,7 +185,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     double a[N_X], b[N_X];
     opfmu_operator(m->x_window_f, m->sensors, lo, a);
     opfmu_operator(m->x_window_f, m->sensors, hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame_c * OPFMU_FRAME_ANGLES[i];
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_ANGLES[i];
 }
 #endif
 
@@ -236,8 +236,8 @@ static ModelStatus check_envelope(ModelState *m, double h, char *message, size_t
     size_t used = 0;
     double tau = m->time - m->window_start, u_start[N_U], u_end[N_U];
     if (!m->in_envelope) return MODEL_OK;
-    input_in_frame(m, m->u, tau, u_start);
-    input_in_frame(m, m->u, fmin(tau + h, m->rollover_horizon), u_end);
+    input_in_frame(&m->frame, m->u, tau, u_start);
+    input_in_frame(&m->frame, m->u, fmin(tau + h, m->rollover_horizon), u_end);
     if (outside(u_start, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U) || outside(u_end, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U)) {
         m->in_envelope = 0;
         append_number(message, size, &used, "t = %.6g s: input (", m->time);
@@ -274,9 +274,9 @@ static void start_window(ModelState *m)
     m->window_start = m->time;
     memcpy(m->x_window, m->x, sizeof m->x);
     memcpy(m->x_operator, m->x, sizeof m->x); /* an anchored operator starts from the window's state */
-    window_frame(m->x, m->u, &m->frame_a, &m->frame_shift, &m->frame_c);
-    state_in_frame(m, m->x_window, 0.0, m->x_window_f);
-    input_in_frame(m, m->u, 0.0, level);
+    m->frame = window_frame(m->x, m->u);
+    state_in_frame(&m->frame, m->x_window, 0.0, m->x_window_f);
+    input_in_frame(&m->frame, m->u, 0.0, level);
     for (int k = 0; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, level, sizeof level);
     m->filled = 0;
     m->last_end = 0.0;
@@ -297,32 +297,32 @@ static void start_window(ModelState *m)
 static void evaluate(ModelState *m, int first, double tau)
 {
     double level[N_U], x_f[N_X]; /* the held input in the frame at window time 0 (its ramp apart) */
-    input_in_frame(m, m->u, 0.0, level);
+    input_in_frame(&m->frame, m->u, 0.0, level);
     /* an input equal to the one the slots from `filled` on hold leaves the sensors as they were
        (unless the frame turns: its ramp goes on), so the coefficients of the last evaluation (or of
        the window's start) are still those of this window: a step costs a product with the trunk values */
 #if OPFMU_TRUNK_SIZE > 0
-    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0 || m->frame_c != 0.0;
+    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0 || m->frame.c != 0.0;
 #else
     const int sensors_changed = 1; /* z is computed anew each step */
 #endif
 #if OPFMU_TRUNK_SIZE == 0 /* the sensors themselves: for the kernel and its rate (residual) */
     if (sensors_changed)
         for (int k = first; k < OPFMU_N_SENSORS; ++k)
-            input_in_frame(m, m->u, fmin((double)k * SENSOR_DT, tau), m->sensors + k * N_U);
+            input_in_frame(&m->frame, m->u, fmin((double)k * SENSOR_DT, tau), m->sensors + k * N_U);
 #endif
 #if OPFMU_FIRST_LAYER > 0
     double z[OPFMU_FIRST_LAYER], ramp[OPFMU_FIRST_LAYER];
     if (sensors_changed) {
         if (first > m->filled) { /* slots [filled, first) keep what the last step wrote */
             double last_level[N_U];
-            input_in_frame(m, m->last_u, 0.0, last_level);
+            input_in_frame(&m->frame, m->last_u, 0.0, last_level);
             for (int h = 0; h < OPFMU_FIRST_LAYER; ++h)
                 for (int c = 0; c < N_U; ++c)
                     m->z_past[h] += (SUFFIX(m->filled, c, h) - SUFFIX(first, c, h)) * last_level[c];
-            if (m->frame_c != 0.0) {
+            if (m->frame.c != 0.0) {
                 ramp_sum(m->filled, first, m->last_end, ramp);
-                for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) m->z_past[h] -= m->frame_c * ramp[h];
+                for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) m->z_past[h] -= m->frame.c * ramp[h];
             }
             m->filled = first;
         }
@@ -331,9 +331,9 @@ static void evaluate(ModelState *m, int first, double tau)
             for (int c = 0; c < N_U; ++c) sum += SUFFIX(first, c, h) * level[c];
             z[h] = sum;
         }
-        if (m->frame_c != 0.0) {
+        if (m->frame.c != 0.0) {
             ramp_sum(first, OPFMU_N_SENSORS, tau, ramp);
-            for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) z[h] -= m->frame_c * ramp[h];
+            for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) z[h] -= m->frame.c * ramp[h];
         }
     }
 #if OPFMU_TRUNK_SIZE > 0
@@ -348,7 +348,7 @@ static void evaluate(ModelState *m, int first, double tau)
 #else
     opfmu_operator(m->x_window_f, m->sensors, tau, x_f);
 #endif
-    state_from_frame(m, x_f, tau, m->x);
+    state_from_frame(&m->frame, x_f, tau, m->x);
     m->last_end = tau;
 }
 
@@ -368,7 +368,7 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 static int input_jumped(const ModelState *m)
 {
     for (int c = 0; c < N_U; ++c) {
-        double turned = m->frame_c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
+        double turned = m->frame.c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
         if (fabs(m->u[c] - m->last_u[c] - turned) > m->restart_jump) return 1;
     }
     return 0;
