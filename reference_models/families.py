@@ -20,7 +20,7 @@ angle swings with the machine, and the window's initial state comes with the sig
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 import numpy as np
@@ -279,16 +279,25 @@ DRIFT = Family(
     _drift,
 )
 
+NETWORK_JITTER = {"d_delta": (-0.05, 0.05), "d_omega": (-0.25, 0.25), "d_Ed_p": (-0.05, 0.05), "d_Eq_p": (-0.05, 0.05)}
+# rad, rad/s, pu, pu: how far a `network` window's initial state lies off the recorded loop
+
+
 def _network(p, horizon, machine):
-    _, signal = smib.record(machine, p["E"], p["Vt0"], p["Xe"], p["P0"], p["t_fault"], p["duration"], p["Xf"],
-                            p["trip"], p["accel"], p["t0"], horizon)
-    return signal
+    x0, signal = smib.record(machine, p["E"], p["Vt0"], p["Xe"], p["P0"], p["t_fault"], p["duration"], p["Xf"],
+                             p["trip"], p["accel"], p["t0"], horizon)
+    # the window starts a little off the loop's state: a co-simulation starts each window from its own
+    # last state, and (for Xq = Xq_p, where the loop holds Ed_p at 0) the operator must see the
+    # states return, not only the loop's path
+    jitter = np.array([p["d_delta"], p["d_omega"], p["d_Ed_p"], p["d_Eq_p"]])
+    return replace(signal, x0=tuple(float(v) for v in np.asarray(x0) + jitter))
 
 
 NETWORK = Family(
     "network",
     {"E": (0.95, 1.1), "Vt0": (0.98, 1.06), "Xe": (0.05, 0.6), "P0": "Pm", "t_fault": (0.0, 1.0),
-     "duration": (0.03, 0.25), "Xf": (0.0, 0.3), "trip": (0.0, 0.8), "accel": (0.0, 30.0), "t0": (0.0, 2.0)},
+     "duration": (0.03, 0.25), "Xf": (0.0, 0.3), "trip": (0.0, 0.8), "accel": (0.0, 30.0), "t0": (0.0, 2.0),
+     **NETWORK_JITTER},
     _network,
     needs_machine=True,
 )
