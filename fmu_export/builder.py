@@ -195,6 +195,7 @@ def frame_config(frame, n_x: int, n_u: int) -> list[str]:
         f"#define OPFMU_FRAME_SPEED_STATE {frame.speed_state if frame else 0}",
         f"#define OPFMU_FRAME_ANGLE_STATE {frame.angle_states[0] if frame and frame.angle_states else -1}",
         f"#define OPFMU_FRAME_PERIOD {_c_double(frame.period if frame else 1.0)}",
+        f"#define OPFMU_FRAME_SPEED_STEP {_c_double(frame.speed_step if frame else 0.0)} /* 0: c = the start speed */",
         f"static const double OPFMU_FRAME_INPUT_RATES[{n_u}] = {_c_array(rates)}; /* R */",
         f"static const double OPFMU_FRAME_INPUT_TORQUES[{n_u}] = {_c_array(torques)}; /* T */",
         f"static const double OPFMU_FRAME_ANGLES[{n_x}] = {_c_array(angles)}; /* A */",

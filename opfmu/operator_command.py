@@ -4,9 +4,10 @@
                    [--horizon S] [--epochs N] [--workers N] [--threads N] [--name NAME]
 
 Stages, each resumed where an interrupted run left it (rerun the same command):
-1. DIR/data: the `machine` recipe's dataset for this machine (every co-simulation family of the
-   `cosim` preset and the `network` family recorded from the machine itself in a closed loop),
-   with Pm and Efd drawn from the given level ranges;
+1. DIR/data: the recipe's dataset for this machine (`machine`: every co-simulation family of the
+   `cosim` preset and the `network` family recorded from the machine itself in a closed loop;
+   `grid`: `network` windows only, for a machine in a network with D = 0), with Pm and Efd drawn
+   from the given level ranges;
 2. DIR/run: the PI-DeepONet of the shipped operator (anchored Unstacked, 3 x 128 tanh, 96 basis
    functions per state, causal training, physics losses), resumed from its last checkpoint;
 3. DIR/operator.onnx (export, checked against torch) and the FMUs DIR/<NAME>Surrogate.fmu (checked
@@ -54,9 +55,9 @@ def add_operator_parser(sub) -> None:
                     help="Pm and Efd [pu] the report's scenarios hold or move from (default: the middle of the levels)")
     op.add_argument("--recipe", choices=("machine", "grid"), default="machine",
                     help="machine: every co-simulation family and network (a machine on a bus of given "
-                         "voltage); grid: network windows and a few Pm steps, for a machine in a network with D = 0 "
+                         "voltage); grid: network windows only, for a machine in a network with D = 0 "
                          "(default machine)")
-    op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.5 for a machine "
+    op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.3 for a machine "
                     "in a network with D = 0, whose swings within a window are large)")
     op.add_argument("--epochs", type=int, default=RECIPE_TRAINING["epochs"], help="training epochs (default 1500)")
     op.add_argument("--windows", type=int, default=RECIPE_COUNTS["train"],
@@ -245,6 +246,11 @@ def write_report(out: Path, onnx_path: Path, args, operating: tuple, results: di
     for name, r in results.items():
         lines.append(f"| {name} | {state_maxae_cells(r)} | {'yes' if r['in_envelope'] else 'no'} "
                      f"| {'met' if meets_goal(r) else 'missed'} |")
+    if args.recipe == "grid":
+        lines += ["", "These scenarios put the machine on an infinite bus (open loop), which the `grid` recipe does "
+                  "not train on: with D = 0 its swings there never decay, and a scenario outside the envelope "
+                  "says nothing of the machine in its network. Check it on windows of its network instead "
+                  "(for the WSCC 9-bus machines: benchmarks/wscc9_operator_envelopes.py)."]
     lines.append("")
     for name, r in results.items():
         lines += [f"![{name} {Path(p).stem}]({p})" for p in r["plots"]]

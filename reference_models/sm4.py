@@ -182,7 +182,7 @@ SM4 = Component(
     affine_states=(1,),
     rest=rest,
     # delta and theta_vs enter as delta - theta_vs; omega as d delta/dt and the damping torque D omega
-    drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),)),
+    drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=2.0),
 )
 
 STATE_NAMES = SM4.state_names

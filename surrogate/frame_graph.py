@@ -50,7 +50,11 @@ def wrap_in_frame(proto, frame: Frame, sensor_times: np.ndarray):
     ramp = s[:, None] * frame.input_rates(n_u) + frame.input_torques(n_u)  # [S, n_u]: what c multiplies
     u0 = op("Gather", ["u", const("first", 0, np.int64)], "u0", axis=1)  # [N, n_u]
     a = op("Gather", [u0, const("angle_input", frame.angle_inputs[0], np.int64)], "a", axis=1)  # [N]
-    c = op("Gather", ["x0", const("speed_state", frame.speed_state, np.int64)], "c", axis=1)  # [N]
+    c = op("Gather", ["x0", const("speed_state", frame.speed_state, np.int64)], "speed0", axis=1)  # [N]
+    if frame.speed_step:  # whole speed steps (drift.frame_speed)
+        steps = op("Floor", [op("Add", [op("Mul", [c, const("per_step", 1.0 / frame.speed_step)], "speed_steps"),
+                                        const("half_step", 0.5)], "rounded_steps")], "whole_steps")
+        c = op("Mul", [steps, const("speed_step", frame.speed_step)], "c")
     if frame.angle_states:
         lead = op("Sub", [op("Gather", ["x0", const("angle_state", frame.angle_states[0], np.int64)], "angle0",
                              axis=1), a], "lead")

@@ -10,7 +10,7 @@
    x_rest). The weight w falls from 1 at x_rest to 0 at OPFMU_STATE_SCALE (times the parameter
    rest_radius) from it, since the error at rest says little about the error far from rest. A
    component at rest under a held input thus stays exactly at rest. All of it is in the window frame
-   (window.c): a machine turning at a constant speed with its network is at rest there.
+   (window.c): a machine turning with its network at the frame's speed is at rest there.
 
    Slow-mode correction (any kernel): away from rest the same accumulation remains along the slowest
    mode. Each window takes the Jacobian of the right-hand side at its start state and input, and its

@@ -68,6 +68,7 @@ static WindowFrame window_frame(const double x[N_X], const double u[N_U])
 #if OPFMU_FRAME
     f.a = u[OPFMU_FRAME_ANGLE_INPUT];
     f.c = x[OPFMU_FRAME_SPEED_STATE];
+    if (OPFMU_FRAME_SPEED_STEP > 0.0) f.c = OPFMU_FRAME_SPEED_STEP * floor(f.c / OPFMU_FRAME_SPEED_STEP + 0.5);
 #if OPFMU_FRAME_ANGLE_STATE >= 0
     f.shift = f.a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - f.a) / OPFMU_FRAME_PERIOD + 0.5);
 #else
