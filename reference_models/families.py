@@ -295,7 +295,7 @@ def _network(p, horizon, machine):
 
 NETWORK = Family(
     "network",
-    {"E": (0.95, 1.2), "Vt0": (0.98, 1.08), "Xe": (0.05, 0.6), "P0": "Pm", "t_fault": (0.0, 1.0),
+    {"E": (0.95, 1.2), "Vt0": (0.98, 1.15), "Xe": (0.05, 0.6), "P0": "Pm", "t_fault": (0.0, 1.0),
      "duration": (0.03, 0.25), "Xf": (0.0, 0.3), "trip": (0.0, 0.8), "accel": (0.0, 30.0), "t0": (0.0, 2.0),
      **NETWORK_JITTER},
     _network,
