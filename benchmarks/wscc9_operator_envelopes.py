@@ -1,6 +1,6 @@
 """Do the WSCC 9-bus machine operators cover what their machines see in the grid issue's faults?
 
-    python benchmarks/wscc9_operator_envelopes.py [--operators surrogate/default] [--stop 5] [--workers 2]
+    python benchmarks/wscc9_operator_envelopes.py [--operators surrogate/default] [--stop 5]
 
 For every contingency of benchmarks/wscc9_envelope.py (bolted faults at buses 4-9 cleared after
 3-6 cycles, with and without a line trip at clearing; exciters in; the monolithic reference at
