@@ -19,7 +19,6 @@ benchmarks/wscc9_operator_envelopes.json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import warnings
@@ -50,8 +49,7 @@ def load(directory: Path) -> dict:
         op = Operator.load(directory / name)
         low = np.array([op.envelope["x0"][n][0] for n in op.state_names] + [op.envelope["u"][n][0] for n in op.input_names])
         high = np.array([op.envelope["x0"][n][1] for n in op.state_names] + [op.envelope["u"][n][1] for n in op.input_names])
-        rollover = float(json.loads(op.metadata.get("rollover_horizon_s", repr(op.horizon))))
-        out[bus] = (op, low, high, rollover)
+        out[bus] = (op, low, high, op.rollover_horizon)
     return out
 
 

@@ -18,8 +18,8 @@ speed rounded to whole steps `speed_step` (2 rad/s for SM4): a machine near rest
 a state (omega_f(0) in [-1, 1) rad/s), which the network learns far better than the same speed
 passed on as a torque D c and a ramp of the bus angle (on the paper's families it halves the MSE,
 all of it in omega), while a machine whose speed has drifted by 12 rad/s is still brought back
-into the envelope. The FMU's unchanged-input path also needs c = 0. What the network sees no longer depends on the absolute angle or speed, so a machine
-whose angle has drifted by 30 rad or whose speed has drifted by 12 rad/s is as much inside the
+into the envelope. The FMU's unchanged-input path also needs c = 0. What the network sees no
+longer depends on the absolute angle or speed, so a machine whose angle has drifted by 30 rad or whose speed has drifted by 12 rad/s is as much inside the
 trained envelope as one at rest at theta_vs = 0 (for D = 0; with D > 0 a drifted speed is a torque
 D c, which stays an input). The transformation is exact: the operator's error does not change.
 

@@ -58,6 +58,7 @@ class Operator:
         except ContractError as exc:
             raise OperatorInputError(f"{path}: {exc}") from None
         self.horizon, self.n_sensors = contract["horizon_s"], contract["n_sensors"]
+        self.rollover_horizon = contract["rollover_horizon_s"]  # s: where a co-simulation starts a new window
         self.envelope = contract["envelope"]
         self.state_names, self.input_names = contract["state_names"], contract["input_names"]
         self.component, self.params = contract["component"], contract["params"]
