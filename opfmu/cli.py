@@ -352,12 +352,28 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
     demo.set_defaults(func=cmd_demo)
 
+    from opfmu.grid.command import add_grid_parser
     from opfmu.init_command import add_init_parser
     from opfmu.operator_command import add_operator_parser
 
     add_init_parser(sub)
     add_operator_parser(sub)
+    add_grid_parser(sub)
     return parser
+
+
+def _run(args) -> None:
+    """args.func(args); a grid command's refusals (a bad contingency, an FMU that cannot play its
+    role, a build that fails) are user errors."""
+    if getattr(args, "command", None) != "grid":
+        args.func(args)
+        return
+    from opfmu.grid.slave import CouplingError
+
+    try:
+        args.func(args)
+    except (ValueError, CouplingError) as exc:
+        raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
 
 
 def _version() -> str:
@@ -371,7 +387,7 @@ def main(argv=None) -> int:
 
     try:
         args = build_parser().parse_args(argv)
-        args.func(args)
+        _run(args)
     except (UserError, DatasetError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -31,6 +31,7 @@ import numpy as np
 from ..ieee1 import IEEE1
 from ..sm4 import SM4
 from . import wscc9
+from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency
 
 N_GEN = len(wscc9.GENERATOR_BUSES)
 N_MACHINE_STATES = SM4.n_states
@@ -39,7 +40,6 @@ N_STATES = N_GEN * (N_MACHINE_STATES + N_EXCITER_STATES)
 _I_RE, _I_IM = SM4.output_names.index("I_re"), SM4.output_names.index("I_im")
 _GEN_ROWS = [wscc9.bus_index(b) for b in wscc9.GENERATOR_BUSES]
 _OTHER_ROWS = [i for i in range(len(wscc9.BUSES)) if i not in _GEN_ROWS]
-BOLTED_FAULT_IMPEDANCE = 1e-6  # pu
 
 
 @dataclass(frozen=True)
@@ -273,36 +273,45 @@ def system() -> WSCC9:
     return _SYSTEM
 
 
-def _pair_events():
-    """solve_ivp event functions (delta_i - delta_j)^2 - pi^2 for every pair of machines."""
+def _pair_events(terminal: bool = False):
+    """solve_ivp event functions (delta_i - delta_j)^2 - pi^2 for every pair of machines (terminal:
+    the solve stops at the first)."""
     events = []
     for i in range(N_GEN):
         for j in range(i + 1, N_GEN):
             a, b = WSCC9.machine_slice(i).start, WSCC9.machine_slice(j).start
-
-            events.append(_pair_event(a, b))
+            events.append(_pair_event(a, b, terminal))
     return events
 
 
-def _pair_event(a: int, b: int):
+def _pair_event(a: int, b: int, terminal: bool):
     def event(t, y, *args):
         return (y[a] - y[b]) ** 2 - math.pi ** 2
 
     event.direction = 1.0
+    event.terminal = terminal
     return event
+
+
+def simulate_contingency(contingency: Contingency, stop: float = 5.0, **options) -> GridResult:
+    """simulate_wscc9 of a contingency.Contingency (options: those of simulate_wscc9)."""
+    c = contingency
+    return simulate_wscc9(c.fault_bus, c.clear_s, c.trip, c.fault_start, stop,
+                          fault_impedance=c.fault_impedance, **options)
 
 
 def simulate_wscc9(fault_bus: int | None, clear_s: float | None, trip=None, fault_start: float = 0.0,
                    stop: float = 5.0, t_eval=None, *, step: float = 0.01, exciters: bool = True,
                    fault_impedance: complex = BOLTED_FAULT_IMPEDANCE, method: str = "DOP853",
                    rtol: float = 1e-10, atol: float = 1e-12, event_rows: bool = False,
-                   grid: WSCC9 | None = None) -> GridResult:
+                   grid: WSCC9 | None = None, stop_at_loss: bool = False) -> GridResult:
     """The system from its load-flow equilibrium, with a fault at `fault_bus` (None: no fault) from
     `fault_start` to `clear_s` [s, absolute], at clearing branch `trip` ("a-b" or (a, b); None: none)
     opened, until `stop` [s].
 
     Rows at t_eval (default: every `step` s from 0 to stop); `event_rows`: the state just before
-    each event too. `exciters=False`: every Efd held at its initial value. Raises ValueError for an
+    each event too. `exciters=False`: every Efd held at its initial value. `stop_at_loss`: the
+    solve ends where two rotor angles get pi apart (the rows stop there). Raises ValueError for an
     unknown bus or branch, a trip that disconnects a generator, or clearing before the fault."""
     from scipy.integrate import solve_ivp
 
@@ -338,7 +347,7 @@ def simulate_wscc9(fault_bus: int | None, clear_s: float | None, trip=None, faul
                     (t_c, stop, after, clearing)]
         segments = [s for s in segments if s[0] < stop or s is segments[0]]
 
-    events = _pair_events()
+    events = _pair_events(stop_at_loss)
     y = np.array(grid.x0)
     pieces, event_log, lost, n_rhs = [], [], None, 0
     for n, (a, b, network, what) in enumerate(segments):
@@ -360,6 +369,8 @@ def simulate_wscc9(fault_bus: int | None, clear_s: float | None, trip=None, faul
             crossings = [float(te[0]) for te in sol.t_events if len(te)]
             if crossings and lost is None:
                 lost = min(crossings)
+            if sol.status == 1:  # stopped at the loss of synchronism
+                times = [t for t in times if t <= sol.t[-1]]
             states = sol.sol(np.array(times)).T if times else np.empty((0, N_STATES))
             if times and times[0] == a:
                 states[0] = y
@@ -368,6 +379,8 @@ def simulate_wscc9(fault_bus: int | None, clear_s: float | None, trip=None, faul
             states = np.tile(y, (len(times), 1))
         if times:
             pieces.append(grid.observe(np.array(times), states, network, exciters))
+        if b > a and sol.status == 1:
+            break
     rows = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
     theta_bus = np.unwrap(np.angle(rows["V_bus"]), axis=0)
     theta_bus[:, _GEN_ROWS] = rows["theta_vs"]

@@ -265,15 +265,33 @@ def _pandapower_ybus(net, V_expected) -> np.ndarray:
     return np.asarray(Y[np.ix_(rows, rows)], dtype=complex)
 
 
+FMU_KINDS = ("surrogate", "reference", "python", "file")
+
+
+@dataclass(frozen=True)
+class GeneratorFMU:
+    """Which FMUs a co-simulation runs for a generator: `kind` surrogate (the machine's operator
+    file `operator`, an IEEE1 native reference exciter), reference (native reference machine and
+    exciter), python (pythonfmu reference machine and exciter) or file (the FMU files `machine_fmu`
+    and `exciter_fmu` as they are). Paths are resolved against the dynamic-data file's folder; an
+    operator not found there is looked up among the shipped ones by the grid layer."""
+
+    kind: str = "reference"
+    operator: str | None = None
+    machine_fmu: str | None = None
+    exciter_fmu: str | None = None
+
+
 @dataclass(frozen=True)
 class GeneratorDynamics:
-    """A generator's dynamic data: its bus, SM4 machine parameters (and the file they came from) and
-    IEEE1 exciter parameters."""
+    """A generator's dynamic data: its bus, SM4 machine parameters (and the file they came from),
+    IEEE1 exciter parameters and the FMUs a co-simulation runs for it."""
 
     bus: int
     machine: SM4Params
     exciter: IEEE1Params
     machine_file: Path
+    fmu: GeneratorFMU = GeneratorFMU()
 
 
 def machine_file(bus: int) -> Path:
@@ -281,6 +299,35 @@ def machine_file(bus: int) -> Path:
     if bus not in GENERATOR_BUSES:
         raise ValueError(f"wscc9 has generators at buses {GENERATOR_BUSES}, not {bus!r}")
     return DATA_DIR / f"wscc9_gen{bus}.json"
+
+
+def _generator_fmu(path: Path, generator: dict) -> GeneratorFMU:
+    """The `fmu` entry of a generator in the dynamic-data file at `path` (default: native reference)."""
+    entry = generator.get("fmu", {"kind": "reference"})
+    entry = {"kind": entry} if isinstance(entry, str) else entry
+    if not isinstance(entry, dict) or entry.get("kind") not in FMU_KINDS:
+        raise ValueError(f"{path}: generator at bus {generator.get('bus')}: fmu kind must be one of "
+                         f"{', '.join(FMU_KINDS)}, got {str(entry)[:60]!r}")
+    unknown = set(entry) - {"kind", "operator", "machine_fmu", "exciter_fmu"}
+    if unknown:
+        raise ValueError(f"{path}: generator at bus {generator.get('bus')}: unknown fmu keys {', '.join(sorted(unknown))}")
+
+    def resolved(key):
+        value = entry.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"{path}: generator at bus {generator.get('bus')}: fmu {key} must be a file name")
+        beside = path.parent / value
+        return str(beside) if beside.exists() or key != "operator" else value
+
+    fmu = GeneratorFMU(kind=entry["kind"], operator=resolved("operator"), machine_fmu=resolved("machine_fmu"),
+                       exciter_fmu=resolved("exciter_fmu"))
+    if fmu.kind == "surrogate" and fmu.operator is None:
+        raise ValueError(f"{path}: generator at bus {generator.get('bus')}: a surrogate needs its operator file")
+    if fmu.kind == "file" and (fmu.machine_fmu is None or fmu.exciter_fmu is None):
+        raise ValueError(f"{path}: generator at bus {generator.get('bus')}: kind file needs machine_fmu and exciter_fmu")
+    return fmu
 
 
 def dynamic_data(path=DYNAMIC_DATA_FILE) -> tuple:
@@ -295,7 +342,8 @@ def dynamic_data(path=DYNAMIC_DATA_FILE) -> tuple:
             raise ValueError(f"{path}: generator at bus {g['bus']}: only sm4 machines with ieee1 exciters are modelled")
         file = path.parent / machine["file"]
         by_bus[int(g["bus"])] = GeneratorDynamics(bus=int(g["bus"]), machine=SM4.load_params(file),
-                                                  exciter=IEEE1.params(exciter.get("params", {})), machine_file=file)
+                                                  exciter=IEEE1.params(exciter.get("params", {})), machine_file=file,
+                                                  fmu=_generator_fmu(path, g))
     if sorted(by_bus) != list(GENERATOR_BUSES):
         raise ValueError(f"{path}: needs one generator at each of the buses {GENERATOR_BUSES}, got {sorted(by_bus)}")
     return tuple(by_bus[bus] for bus in GENERATOR_BUSES)

@@ -1,0 +1,197 @@
+"""What a grid run leaves in its folder: result.csv (DESIGN section 8's columns, then the rest of
+GridResult.columns), a figure of rotor angles relative to machine 1, speeds, terminal voltages and
+field voltages with every compared run on the same axes, and a Markdown report. All written
+atomically."""
+from __future__ import annotations
+
+import csv
+import io
+import math
+
+import numpy as np
+
+from reference_models.files import atomic_path
+
+LABELS = {"surrogate": "surrogate FMUs", "reference": "native reference FMUs", "python": "pythonfmu reference FMUs",
+          "file": "user FMUs", "monolithic": "monolithic DAE"}
+STYLES = {"monolithic": dict(color="k", lw=2.2, alpha=0.35), "reference": dict(ls="--", lw=1.2),
+          "surrogate": dict(lw=1.0), "python": dict(ls=":", lw=1.2), "file": dict(ls="-.", lw=1.0)}
+
+
+def write_csv(path, result) -> None:
+    """result.csv: one row per communication point (17 significant digits)."""
+    columns = result.columns()
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(names)
+    for row in data:
+        writer.writerow([f"{v:.17g}" for v in row])
+    with atomic_path(path) as tmp:
+        tmp.write_text(text.getvalue())
+
+
+def on_times(result, times: np.ndarray, column: np.ndarray) -> np.ndarray:
+    """A result column [n] or [n, k] at `times` (linear between rows; at a repeated time the row
+    after an event)."""
+    t = result.time
+    keep = np.r_[np.diff(t) > 0, True]
+    column = np.asarray(column)
+    if column.ndim == 1:
+        return np.interp(times, t[keep], column[keep])
+    return np.stack([np.interp(times, t[keep], column[keep, j]) for j in range(column.shape[1])], axis=1)
+
+
+def errors(result, reference, fault=None) -> dict:
+    """Largest differences from `reference` over the rows of `result`: rotor angles relative to
+    machine 1 [deg], speeds [rad/s], terminal voltages outside the fault's own steps [pu] (rows
+    within (fault_start, clear] are left out: fault = (start, clear) or None), Efd [pu]."""
+    t = result.time
+    out = {}
+    angle = max(float(np.max(np.abs(result.angle_difference(b) - on_times(reference, t, reference.angle_difference(b)))))
+                for b in result.gen_buses[1:])
+    out["angle_deg"] = math.degrees(angle)
+    out["omega"] = float(np.max(np.abs(result.omega - on_times(reference, t, reference.omega))))
+    rows = np.ones(len(t), bool)
+    if fault is not None:
+        rows &= ~((t > fault[0] + 1e-12) & (t <= fault[1] + 1e-12))
+    out["V"] = float(np.max(np.abs(result.Vs - on_times(reference, t, reference.Vs))[rows]))
+    out["Efd"] = float(np.max(np.abs(result.Efd - on_times(reference, t, reference.Efd))))
+    return out
+
+
+def plot(path, runs: dict, title: str) -> None:
+    """The figure: runs {kind: GridResult}, 2 x 2 panels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
+    first = next(iter(runs.values()))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for kind, result in runs.items():
+        style = STYLES.get(kind, {})
+        for k, bus in enumerate(result.gen_buses):
+            color = style.get("color", colors[k % len(colors)])
+            kw = {key: v for key, v in style.items() if key != "color"}
+            label = f"{LABELS.get(kind, kind)}, machine {bus}"
+            if k > 0:
+                axes[0, 0].plot(result.time, np.degrees(result.angle_difference(bus)), color=color, label=label, **kw)
+            axes[0, 1].plot(result.time, result.omega[:, k], color=color, label=label, **kw)
+            axes[1, 0].plot(result.time, result.Vs[:, k], color=color, label=label, **kw)
+            axes[1, 1].plot(result.time, result.Efd[:, k], color=color, label=label, **kw)
+    axes[0, 0].set_ylabel(f"rotor angle - machine {first.gen_buses[0]} [deg]")
+    axes[0, 1].set_ylabel("speed deviation [rad/s]")
+    axes[1, 0].set_ylabel("terminal voltage [pu]")
+    axes[1, 1].set_ylabel("field voltage Efd [pu]")
+    for ax in axes[1]:
+        ax.set_xlabel("time [s]")
+    for ax in axes.flat:
+        ax.grid(alpha=0.3)
+    axes[0, 1].legend(fontsize=7, ncol=1 if len(runs) < 3 else 2)
+    fig.suptitle(title)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def _number(value, digits=4) -> str:
+    return "-" if value is None else f"{value:.{digits}g}"
+
+
+def report(path, title: str, runs: dict, timings: dict, contingency, notes=()) -> None:
+    """report.md: the contingency, per run its verdict, first-swing peak and time split, and each
+    FMU run's largest differences from the monolithic run (when there is one)."""
+    from .stability import first_swing_peak
+
+    lines = [f"# {title}", "", f"Contingency: {contingency.label}.", ""]
+    lines += ["| run | stable | loss of synchronism [s] | first-swing peak [deg] | wall time [s] |",
+              "| --- | --- | --- | --- | --- |"]
+    for kind, result in runs.items():
+        peak = math.degrees(first_swing_peak(result, contingency.clear_s))
+        wall = timings.get(kind, {}).get("total_s")
+        lines.append(f"| {LABELS.get(kind, kind)} | {'yes' if result.stable else 'no'} | "
+                     f"{_number(result.loss_of_synchronism_s)} | {peak:.2f} | {_number(wall, 3)} |")
+    fmu_timings = {k: v for k, v in timings.items() if "fmu_step_s" in v}
+    if fmu_timings:
+        lines += ["", "Time split of the co-simulation runs [s]:", "",
+                  "| run | total | FMU steps | network solves | rollback | overhead | passes per step |",
+                  "| --- | --- | --- | --- | --- | --- | --- |"]
+        for kind, tm in fmu_timings.items():
+            lines.append(f"| {LABELS.get(kind, kind)} | {tm['total_s']:.3f} | {tm['fmu_step_s']:.3f} | "
+                         f"{tm['network_s']:.3f} | {tm['rollback_s']:.3f} | {tm['overhead_s']:.3f} | "
+                         f"{tm['passes'] / max(tm['steps'], 1):.2f} |")
+    if "monolithic" in runs and len(runs) > 1:
+        fault = (contingency.fault_start, contingency.clear_s) if contingency.fault_bus is not None else None
+        lines += ["", "Largest differences from the monolithic run (terminal voltages outside the fault's own steps):", "",
+                  "| run | rotor angle rel. machine 1 [deg] | speed [rad/s] | terminal voltage [pu] | Efd [pu] |",
+                  "| --- | --- | --- | --- | --- |"]
+        for kind, result in runs.items():
+            if kind == "monolithic":
+                continue
+            e = errors(result, runs["monolithic"], fault)
+            lines.append(f"| {LABELS.get(kind, kind)} | {e['angle_deg']:.3f} | {e['omega']:.3g} | {e['V']:.3g} | "
+                         f"{e['Efd']:.3g} |")
+    if notes:
+        lines += ["", *notes]
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n")
+
+
+SCREENING_COLUMNS = ("bus", "trip", "clear_s", "stable", "first_swing_peak_deg", "cct_s", "bounded", "runs")
+
+
+def screening_table(rows) -> str:
+    """The screening as a Markdown table, one contingency per row."""
+    lines = ["| fault bus | trip | verdict at clearing | first-swing peak [deg] | CCT [s] |",
+             "| --- | --- | --- | --- | --- |"]
+    for r in rows:
+        cct = "-" if r["cct_s"] is None else (f"> {r['cct_s']:.3f}" if not r["bounded"] else f"{r['cct_s']:.3f}")
+        peak = "-" if r["first_swing_peak_deg"] is None else f"{r['first_swing_peak_deg']:.1f}"
+        lines.append(f"| {r['bus']} | {r['trip'] or '-'} | {'stable' if r['stable'] else 'unstable'} "
+                     f"({r['clear_s']:g} s) | {peak} | {cct} |")
+    return "\n".join(lines)
+
+
+def write_screening(out, rows, title: str) -> None:
+    """screening.csv, screening.json, screening.md and screening.png (CCT per contingency) in `out`."""
+    import json
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out)
+    text = io.StringIO()
+    writer = csv.writer(text, lineterminator="\n")
+    writer.writerow(SCREENING_COLUMNS)
+    for r in rows:
+        writer.writerow(["" if r[c] is None else r[c] for c in SCREENING_COLUMNS])
+    with atomic_path(out / "screening.csv") as tmp:
+        tmp.write_text(text.getvalue())
+    with atomic_path(out / "screening.json") as tmp:
+        tmp.write_text(json.dumps(rows, indent=1) + "\n")
+    with atomic_path(out / "screening.md") as tmp:
+        tmp.write_text(f"# {title}\n\n{screening_table(rows)}\n\nCCT: critical clearing time by bisection "
+                       "(stable: no two rotor angles pi apart before the run's stop); '> x': stable up to x.\n")
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.45 * len(rows)), 4.0))
+    labels = [f"{r['bus']}" + (f"\n{r['trip']}" if r["trip"] else "") for r in rows]
+    values = [np.nan if r["cct_s"] is None else r["cct_s"] * 1e3 for r in rows]
+    colors = ["tab:green" if r["stable"] else "tab:red" for r in rows]
+    ax.bar(range(len(rows)), values, color=colors)
+    if rows:
+        ax.axhline(rows[0]["clear_s"] * 1e3, color="k", lw=0.8, ls="--", label="screening clearing time")
+        ax.legend(fontsize=8)
+    ax.set_xticks(range(len(rows)), labels, fontsize=7)
+    ax.set_xlabel("fault bus / line opened")
+    ax.set_ylabel("critical clearing time [ms]")
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    with atomic_path(out / "screening.png") as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
