@@ -45,8 +45,9 @@ def on_times(result, times: np.ndarray, column: np.ndarray) -> np.ndarray:
 
 def errors(result, reference, fault=None) -> dict:
     """Largest differences from `reference` over the rows of `result`: rotor angles relative to
-    machine 1 [deg], speeds [rad/s], terminal voltages outside the fault's own steps [pu] (rows
-    within (fault_start, clear] are left out: fault = (start, clear) or None), Efd [pu]."""
+    machine 1 [deg], speeds [rad/s], terminal voltages outside the fault's own steps [pu] (the rows
+    with the fault on, times in [fault_start, clear), are left out: fault = (start, clear) or
+    None), Efd [pu]."""
     t = result.time
     out = {}
     angle = max(float(np.max(np.abs(result.angle_difference(b) - on_times(reference, t, reference.angle_difference(b)))))
@@ -55,7 +56,7 @@ def errors(result, reference, fault=None) -> dict:
     out["omega"] = float(np.max(np.abs(result.omega - on_times(reference, t, reference.omega))))
     rows = np.ones(len(t), bool)
     if fault is not None:
-        rows &= ~((t > fault[0] + 1e-12) & (t <= fault[1] + 1e-12))
+        rows &= ~((t >= fault[0] - 1e-12) & (t < fault[1] - 1e-12))
     out["V"] = float(np.max(np.abs(result.Vs - on_times(reference, t, reference.Vs))[rows]))
     out["Efd"] = float(np.max(np.abs(result.Efd - on_times(reference, t, reference.Efd))))
     return out

@@ -77,9 +77,10 @@ def critical_clearing_time(stable, contingency: Contingency, resolution: float =
         else:
             hi = d
             break
-    while hi - lo > resolution:
+    slack = 1e-9 * resolution  # so rounding never repeats a trial
+    while hi - lo > resolution + slack:
         mid = 0.5 * (lo + hi)
-        if hi - lo < 2.0 * resolution:  # the last split lands on the resolution grid
+        if hi - lo < 2.0 * resolution:  # the last split lands one resolution above lo
             mid = lo + resolution
         if trial(mid):
             lo = mid

@@ -363,7 +363,7 @@ def simulate_wscc9(fault_bus: int | None, clear_s: float | None, trip=None, faul
         if b > a:
             sol = solve_ivp(grid.rhs, (a, b), y, method=method, rtol=rtol, atol=atol, dense_output=True,
                             events=events, args=(network, exciters))
-            if sol.status != 0:
+            if sol.status < 0:
                 raise RuntimeError(f"solve_ivp failed on [{a}, {b}] s ({network.description}): {sol.message}")
             n_rhs += sol.nfev
             crossings = [float(te[0]) for te in sol.t_events if len(te)]
