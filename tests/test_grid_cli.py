@@ -1,0 +1,106 @@
+"""`opfmu grid run|cct|screen`: the DESIGN section 8 contract (result.csv columns, one row per
+communication point, cct --json with cct_s), the surrogate FMUs against the monolithic run and its
+critical clearing time, and one-line errors with exit code 2 for what cannot run."""
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from opfmu.cli import main
+from reference_models.grid import wscc9
+
+
+@pytest.fixture(autouse=True)
+def fmu_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("OPFMU_FMU_CACHE", str(tmp_path_factory.getbasetemp() / "grid_cli_fmus"))
+
+
+def read_csv(path):
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    return rows[0], np.array(rows[1:], dtype=float)
+
+
+def test_grid_run_writes_the_contracted_columns_plots_and_a_report(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["grid", "run", "--case", "wscc9", "--fault", "8", "--clear", "0.0717", "--trip", "8-9",
+                 "--stop", "1.2", "--fmus", "reference", "--out", str(out)]) == 0
+    names, data = read_csv(out / "result.csv")
+    expected = (["time"] + [f"{q}_{b}" for q in ("delta", "omega", "Efd") for b in wscc9.GENERATOR_BUSES]
+                + [f"V_{b}" for b in wscc9.BUSES])
+    assert names[:len(expected)] == expected
+    time = data[:, 0]
+    assert np.all(np.diff(time) > 0) and time[0] == 0.0 and abs(time[-1] - 1.2) < 1e-12
+    assert np.any(np.abs(time - 0.0717) < 1e-12)  # the clearing is a communication point
+    assert (out / "result.png").stat().st_size > 10_000
+    report = (out / "report.md").read_text()
+    assert "monolithic DAE" in report and "Largest differences from the monolithic run" in report
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stable"] and summary["difference_from_monolithic"]["reference"]["angle_deg"] < 0.6
+    assert "stable" in capsys.readouterr().out
+
+
+def test_surrogate_fmus_follow_the_monolithic_run_of_a_fault_with_a_trip(tmp_path):
+    out = tmp_path / "surrogate"
+    assert main(["grid", "run", "--fault", "4", "--clear", "0.095", "--trip", "4-5", "--stop", "3", "--fmus",
+                 "surrogate", "--compare", "reference,monolithic", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stable"]
+    differences = summary["difference_from_monolithic"]
+    assert differences["surrogate"]["angle_deg"] < 1.0
+    assert differences["surrogate"]["V"] < 0.01
+    assert differences["reference"]["angle_deg"] < 0.6
+
+
+def test_grid_cct_of_the_surrogate_fmus_is_within_5_ms_of_the_monolithic_one(capsys):
+    found = {}
+    for kind in ("monolithic", "surrogate"):
+        assert main(["grid", "cct", "--case", "wscc9", "--fault", "9", "--trip", "8-9", "--stop", "2",
+                     "--fmus", kind, "--json"]) == 0
+        found[kind] = json.loads(capsys.readouterr().out)
+    assert found["monolithic"]["bounded"] and found["monolithic"]["cct_s"] > 0.05
+    assert abs(found["surrogate"]["cct_s"] - found["monolithic"]["cct_s"]) <= 0.005
+
+
+def test_grid_screen_tabulates_ccts_verdicts_and_first_swing_peaks_on_dask(tmp_path):
+    out = tmp_path / "screen"
+    assert main(["grid", "screen", "--faults", "5", "--trips", "each", "--fmus", "reference", "--clear", "0.1",
+                 "--stop", "1.5", "--resolution", "0.004", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+    rows = json.loads((out / "screening.json").read_text())
+    assert [(r["bus"], r["trip"]) for r in rows] == [(5, ""), (5, "4-5"), (5, "5-7")]
+    for r in rows:
+        assert r["bounded"] and r["cct_s"] is not None
+        assert r["stable"] == (r["cct_s"] >= 0.1)  # the verdict at 0.1 s agrees with the CCT
+        assert (r["first_swing_peak_deg"] is None) == (not r["stable"])
+    assert (out / "screening.png").exists() and "CCT" in (out / "screening.md").read_text()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["grid", "run", "--case", "ieee14", "--fault", "7", "--clear", "0.1", "--out", "x"], "unknown case"),
+    (["grid", "run", "--fault", "12", "--clear", "0.1", "--out", "x"], "no bus 12"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--trip", "2-7", "--out", "x"], "disconnects a generator"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--trip", "seven", "--out", "x"], "FROM-TO"),
+    (["grid", "run", "--fault", "7", "--clear", "-1", "--out", "x"], "finite and >= 0"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--step", "0", "--out", "x"], "communication step"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--compare", "psse", "--out", "x"], "unknown run kind"),
+    (["grid", "cct", "--fault", "7", "--resolution", "0", "--fmus", "monolithic"], "resolution"),
+    (["grid", "screen", "--faults", "4,x", "--out", "x"], "bus numbers"),
+])
+def test_grid_mistakes_end_in_one_line_and_exit_code_2(argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("content", ["{not json", '{"generators": 3}', '{"generators": [{"bus": 1}]}',
+                                     "[]", '{"generators": [{"bus": 1, "machine": {"component": "sm4", "file": '
+                                                             '"../../../../etc/passwd"}, "exciter": {}}]}'])
+def test_a_malformed_dynamic_data_file_is_one_line_and_exit_code_2(content, capsys, tmp_path):
+    path = tmp_path / "dyn.json"
+    path.write_text(content)
+    assert main(["grid", "run", "--fault", "7", "--clear", "0.1", "--dynamic-data", str(path),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1
