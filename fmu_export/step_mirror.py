@@ -18,17 +18,20 @@ shift = a + period floor((x_w's first angle state - a) / period + 1/2). In the f
 time tau are u - a R - c (R tau + T) and states x - (shift + c tau) A - c W (R: 1 for angle inputs, T:
 the torque coefficients, e.g. D on SM4's Pm, A: 1 for angle states, W: 1 for the speed state).
 
-Per communication step (h, u) [s, u in the component's input units] (DESIGN section 5):
+Per communication step (h, u) [s, u in the component's input units] (DESIGN section 5), with the
+inputs' derivatives du over it (fmi2SetRealInputDerivatives; 0: held), u(s) = u + du (s - t):
 
-* an input change above restart_jump (in any input's unit; an angle input is compared after
-  removing c R times the time since the last input was set, the turn of the frame) starts a new
-  window at once, from the state reached, with every sensor slot at the new input;
-* the step is cut at the window's end (rollover_horizon); each piece, ending at window time tau,
-  writes into the sensor slots from the current time on (slot k at window time s_k = k dt, dt =
-  horizon / (n_sensors - 1)) the held input in the frame, u - a R - c (R min(s_k, tau) + T): it ramps
-  with the turning frame until tau and holds that value after it (earlier slots keep what earlier
-  steps wrote), and evaluates the network from the window's start state in the frame at tau; the
-  state is the network's answer x_f + (shift + c tau) A + c W;
+* an input change above restart_jump (in any input's unit) starts a new window at once, from the
+  state reached, with every sensor slot at the new input: the step's u against the value the
+  previous step ended at, u + du h of that step; a held angle input (du = 0 over the previous step)
+  is compared after removing c R times the time since the last input was set, the turn of the frame;
+* the step is cut at the window's end (rollover_horizon; the input there starts the new window,
+  and its ramp goes on in it); each piece, from window time tau0 to tau, writes into the sensor
+  slots from the current time on (slot k at window time s_k = k dt, dt = horizon / (n_sensors - 1))
+  the input in the frame, u(min(s_k, tau)) - a R - c (R min(s_k, tau) + T): it ramps along its
+  derivatives and with the turning frame until tau and holds that value after it (earlier slots keep
+  what earlier steps wrote), and evaluates the network from the window's start state in the frame at
+  tau; the state is the network's answer x_f + (shift + c tau) A + c W;
 * rest correction (rest_radius > 0, operators whose FMU kernel splits branch and trunk), in the
   frame: each window subtracts w (G(x_rest, level held) - x_rest) from x_f, level the input held over
   the window's first step in the frame at tau = 0, x_rest its equilibrium (Newton from the window's
@@ -37,12 +40,14 @@ Per communication step (h, u) [s, u in the component's input units] (DESIGN sect
 * slow-mode correction (slow_weight > 0), on raw states and inputs: the slowest real mode of the
   right-hand side's Jacobian at the window start (inverse iteration, left and right eigenvectors l, r
   with l . r = 1); the slow coordinate l . x follows the trapezoid integral of l . f(x, u) over the
-  window, and the state moves along r by slow_weight times its miss;
+  window (u at each piece's start and end), and the state moves along r by slow_weight times its miss;
 * exact affine step (swing_weight > 0), on raw states and inputs: each affine state x_i (dx_i/dt =
   g(x) - k x_i) is integrated exactly over the piece from its value at the piece's start, g linear in
-  time between its values at the piece's start and end states, and x_i moves swing_weight of the way
-  to that solution;
-* at the window's end a new window starts from the state there, under the step's input.
+  time between its values at the piece's start and end states (and inputs), and x_i moves
+  swing_weight of the way to that solution;
+* at the window's end a new window starts from the state there, under the input there.
+
+The rest correction and the slow mode of a window take the input at its first step's start.
 
 The diagnostics (residual, in_envelope, warnings) are not mirrored.
 """
@@ -269,38 +274,47 @@ class StepMirror:
 
     def run(self, x0, steps, rollover_horizon: float | None = None, restart_jump: float = 0.0,
             rest_radius: float = 0.0, slow_weight: float = 0.0, swing_weight: float = 0.0,
-            u_init=None) -> np.ndarray:
+            u_init=None, derivatives=None) -> np.ndarray:
         """States [len(steps), n_x] at the end of each communication step (h, u_1, ..., u_n_u), from x0
         [n_x] at t = 0, with the FMU's settings (names and meanings of its parameters; default: the
         bare operator, windows of the operator's rollover horizon). fmu_settings(md) gives a surrogate
         FMU's defaults. u_init [n_u]: the inputs the FMU holds when it is initialised, which give the
         first window its frame: its start values (default), or what the master set in initialization
-        mode (fmpy's simulate_fmu sets the first input row there)."""
+        mode (fmpy's simulate_fmu sets the first input row there). derivatives [len(steps), n_u]: the
+        inputs' first derivatives over each step, as set by fmi2SetRealInputDerivatives (default:
+        all 0, the inputs held)."""
         n_u = self.component.n_inputs
         horizon = float(rollover_horizon or self.default_rollover)
         steps = [(float(s[0]), np.asarray(s[1:], dtype=float)) for s in steps]
         if any(u.shape != (n_u,) for _, u in steps):
             raise ValueError(f"each step is (h, {', '.join(self.component.input_names)})")
+        rates = np.zeros((len(steps), n_u)) if derivatives is None else np.asarray(derivatives, dtype=float)
+        if rates.shape != (len(steps), n_u):
+            raise ValueError(f"derivatives must be [{len(steps)}, {n_u}]: one row of input derivatives per step")
         u_init = np.asarray(self.component.start_inputs if u_init is None else u_init, dtype=float)
         if u_init.shape != (n_u,):
             raise ValueError(f"u_init must hold {n_u} inputs ({', '.join(self.component.input_names)})")
         t, x = 0.0, np.array(x0, dtype=float)
         window = self.start_window(0.0, x, u_init)
-        last_u, input_time = u_init, 0.0  # the input written last and the time it was set
+        last_u, input_time = u_init, 0.0  # the input written last and the time the last step started
+        end_u, end_du = u_init, np.zeros(n_u)  # the inputs the last step ended at, their derivatives over it
         out = []
-        for h, u in steps:
+        for (h, u_step), du in zip(steps, rates):
             if restart_jump > 0 and t > window["t"] + TIME_EPS:
-                turned = window["c"] * self.rates * (t - input_time)  # an angle turning with the frame
-                if np.max(np.abs(u - last_u - turned)) > restart_jump:
-                    window = self.start_window(t, x, u)
-            if t < window["t"] + TIME_EPS and not np.array_equal(u, last_u):
-                window = self.start_window(t, x, u)  # a window not run yet takes its first step's input
-                last_u = u
-            input_time, stop = t, t + h
+                turned = np.where(end_du != 0, 0.0, window["c"] * self.rates * (t - input_time))  # a held angle
+                if np.max(np.abs(u_step - end_u - turned)) > restart_jump:  # turning with the frame is no jump
+                    window = self.start_window(t, x, u_step)
+            if t < window["t"] + TIME_EPS and not np.array_equal(u_step, last_u):
+                window = self.start_window(t, x, u_step)  # a window not run yet takes its first step's input
+                last_u = u_step
+            input_time, step_start, stop = t, t, t + h
+            u, u_stop = u_step, np.where(du != 0, u_step + du * h, u_step)  # u: the input at t
             while t < stop - TIME_EPS:
                 end = min(stop, window["t"] + horizon)
+                # the input at the piece's end (bit for bit the step's where du = 0)
+                u_end = u_stop if end >= stop else np.where(du != 0, u_step + du * (end - step_start), u_step)
                 first = min(max(int(np.ceil((t - window["t"]) / self.sensor_dt - 1e-6)), 0), self.n_sensors)
-                if window["corrections"] is None:  # for the input held over the window's first step
+                if window["corrections"] is None:  # for the input at the start of the window's first step
                     level = self.input_in_frame(window, u, 0.0)
                     window["corrections"] = {
                         "rest": self.rest_correction(window["x_f"], level, rest_radius),
@@ -313,10 +327,12 @@ class StepMirror:
                 x_start = x.copy()
                 drives = {i: affine_drive(self.f, i, x, u) for i in self.component.affine_states} \
                     if swing_weight > 0 else {}
-                tau = min(end - window["t"], self.horizon)
-                # slots from the current time on: u in the frame, ramping with it until tau, then held
-                window["sensors"][first:] = self.input_in_frame(
-                    window, u, np.minimum(self.slot_times[first:], tau)[:, None])
+                tau0, tau = t - window["t"], min(end - window["t"], self.horizon)
+                # slots from the current time on: u in the frame, ramping along du and with the frame until
+                # tau, then held
+                s = np.minimum(self.slot_times[first:], tau)[:, None]
+                ramp = np.where(du != 0, u + du * (s - tau0), u)
+                window["sensors"][first:] = self.input_in_frame(window, ramp, s)
                 x_f = self.network(window["x_f"], window["sensors"], tau)
                 if fix["rest"] is not None:
                     weight, rest = fix["rest"]
@@ -324,16 +340,18 @@ class StepMirror:
                 x = x_f + (window["shift"] + window["c"] * tau) * self.angles + window["c"] * self.speed
                 if slow:
                     l, r = slow
-                    fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u))
+                    fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u_end))
                     x = x + slow_weight * (l @ window["x"] + fix["slow_integral"] - l @ x) * r
                 for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's
-                    g_end, _ = affine_drive(self.f, i, x, u)
+                    g_end, _ = affine_drive(self.f, i, x, u_end)
                     x[i] += swing_weight * (affine_step(x_start[i], g_start, g_end, k, end - t) - x[i])
-                last_u, t = u, end
+                last_u, t, u = u, end, u_end
                 if not np.all(np.isfinite(x)):
                     raise FloatingPointError(f"t = {t:.6g} s: the operator returned a non-finite state")
                 if t >= window["t"] + horizon - TIME_EPS:
                     window = self.start_window(t, x, u)
+                    last_u = u
             t = stop
+            end_u, end_du = u_stop, du
             out.append(x.copy())
         return np.array(out).reshape(len(steps), self.component.n_states)

@@ -27,6 +27,10 @@ OPFMU_INTERNAL extern const double OPFMU_SENSOR_SUFFIX[(OPFMU_N_SENSORS + 1) * N
    (sum over j >= k of s_j R . slope_j; zeros without a frame) */
 OPFMU_INTERNAL extern const double OPFMU_RAMP_SUFFIX[(OPFMU_N_SENSORS + 1) * OPFMU_FIRST_LAYER];
 #define RAMP_SUFFIX(k, h) OPFMU_RAMP_SUFFIX[(k) * OPFMU_FIRST_LAYER + (h)]
+/* suffix sums over slots k of each input's slope times the slot's time s_k (sum over j >= k of s_j
+   slope_j): how an input ramping over a step (its derivative set) reaches z */
+OPFMU_INTERNAL extern const double OPFMU_TIME_SUFFIX[(OPFMU_N_SENSORS + 1) * N_U * OPFMU_FIRST_LAYER];
+#define TIME_SUFFIX(k, c, h) OPFMU_TIME_SUFFIX[((k) * N_U + (c)) * OPFMU_FIRST_LAYER + (h)]
 #endif
 #if OPFMU_TRUNK_SIZE > 0
 void opfmu_trunk(double t, double tau[OPFMU_TRUNK_SIZE]);
@@ -37,6 +41,9 @@ void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SI
 /* window.c */
 /* the input u at window time tau in the window frame */
 OPFMU_INTERNAL void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, double u_f[N_U]);
+/* the inputs dt after they were u0, along their derivatives m->du (u0 itself, bit for bit, where a
+   derivative is 0) */
+OPFMU_INTERNAL void input_after(const ModelState *m, const double u0[N_U], double dt, double u[N_U]);
 /* the operator's physics residual at the current time (RMS over the states, per state scaled) */
 OPFMU_INTERNAL double window_residual(const ModelState *m);
 #if OPFMU_TRUNK_SIZE > 0

@@ -16,7 +16,9 @@ typedef struct {
 } WindowFrame;
 
 typedef struct {
-    double u[OPFMU_N_INPUTS];     /* inputs, held over the next step */
+    double u[OPFMU_N_INPUTS];     /* inputs at `time` */
+    double du[OPFMU_N_INPUTS];    /* their first time derivatives over the next steps (0: held;
+                                     fmi2SetRealInputDerivatives) */
     double x_start[OPFMU_N_STATES]; /* parameters: initial state */
     double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
     double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
@@ -41,9 +43,13 @@ typedef struct {
        and bias) + z_past (slots before `filled`, final) + the held input times the remaining slots */
     double z_base[OPFMU_Z_SIZE], z_past[OPFMU_Z_SIZE];
     int filled;                   /* slots before this index hold final values */
-    double last_u[OPFMU_N_INPUTS]; /* the input written from slot `filled` on */
-    double last_end;              /* window time the last step ended at (the frame's ramp of last_u stops there) */
-    double input_time;            /* time the input last_u was set at (start of the previous step) */
+    double last_u[OPFMU_N_INPUTS]; /* the input written from slot `filled` on (at window time last_start) */
+    double last_du[OPFMU_N_INPUTS]; /* and its derivative: slot k holds last_u + last_du (min(s_k, last_end) - last_start) */
+    double last_start;            /* window time the last step (or part of one) started at */
+    double last_end;              /* window time the last step ended at (its ramps, the frame's too, stop there) */
+    double input_time;            /* time the previous step started at (its input was set for it) */
+    double prev_end_u[OPFMU_N_INPUTS]; /* the inputs at the end of the previous step (restart_jump compares with them) */
+    double prev_du[OPFMU_N_INPUTS]; /* their derivatives over the previous step */
     /* the trunk values at each sensor time, computed when first needed (OPFMU_TRUNK_SIZE > 0): they
        depend on the window time alone, so every window after the first reuses them */
     unsigned char trunk_ready[OPFMU_TRUNK_SLOTS];

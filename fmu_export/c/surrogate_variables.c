@@ -1,5 +1,7 @@
 /* The surrogate FMU's own variables (after the component's, variables.c): the residual, the
-   window and correction parameters with their range checks, and the Boolean in_envelope. */
+   window and correction parameters with their range checks, the Boolean in_envelope, and the
+   inputs' derivatives (fmi2SetRealInputDerivatives: the inputs linear over the next steps, window.c). */
+#include <math.h>
 #include <stdio.h>
 
 #include "engine.h"
@@ -82,4 +84,14 @@ const char *model_no_derivative(unsigned int vr)
         return "residual is a diagnostic (the RMS of the operator's physics residual), not a function of the "
                "inputs with a derivative; fmi2GetDirectionalDerivative does not provide one";
     return NULL;
+}
+
+ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
+{
+    if (!isfinite(value)) {
+        snprintf(message, size, "the derivative of %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], value);
+        return MODEL_ERROR;
+    }
+    m->du[c] = value;
+    return MODEL_OK;
 }

@@ -1,11 +1,17 @@
 /* The surrogate's window-and-sensor engine: the operator evaluated from a buffer of input sensors
    (DESIGN section 5), for any component with the sizes of config.h.
 
-   A window starts at (window_start, x_window). The input held over a step is written into every
-   sensor slot from the current time on (slots not yet known hold the latest value), and the state
-   at t + h is the operator at t + h - window_start, corrected (corrections.c). When a window's
-   horizon is reached, a new one starts from the state there; a step that crosses the horizon is
-   split at it. An input change above restart_jump starts a new window at once.
+   A window starts at (window_start, x_window). The input over a step is written into every sensor
+   slot from the current time on: held, or, where the master set its derivative du
+   (fmi2SetRealInputDerivatives, canInterpolateInputs), the ramp u(t) + du (s - t) in the slots the
+   step covers; slots not yet known hold the latest value, the one at t + h. The state at t + h is
+   the operator at t + h - window_start, corrected (corrections.c, with the input at the start and
+   at the end of the step where it uses both). When a window's horizon is reached, a new one starts
+   from the state there; a step that crosses the horizon is split at it, and a ramp goes on in the
+   new window from its value there. An input change above restart_jump starts a new window at once:
+   the step's input against the value the previous one ended at (a ramp carried on is no jump).
+   After a step the inputs are those at t + h and their derivatives stay set (as the native
+   reference FMU's). With every derivative 0 each step is what it is without them, bit for bit.
 
    The window frame (reference_models/drift.py): for a component with a drift symmetry the operator
    learned its windows in their own frame, which turns with the window's start: the first angle
@@ -46,6 +52,18 @@ void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, doubl
     for (int c = 0; c < N_U; ++c)
         u_f[c] = u[c] - f->a * OPFMU_FRAME_INPUT_RATES[c]
                  - f->c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
+}
+
+void input_after(const ModelState *m, const double u0[N_U], double dt, double u[N_U])
+{
+    for (int c = 0; c < N_U; ++c) u[c] = m->du[c] != 0.0 ? u0[c] + m->du[c] * dt : u0[c];
+}
+
+static int any_nonzero(const double v[N_U])
+{
+    for (int c = 0; c < N_U; ++c)
+        if (v[c] != 0.0) return 1;
+    return 0;
 }
 
 /* x (raw, at window time tau) in the window frame, and back */
@@ -106,6 +124,24 @@ static void ramp_sum(int k0, int k1, double tau, double out[OPFMU_FIRST_LAYER])
             if (OPFMU_FRAME_INPUT_RATES[c] != 0.0)
                 flat += OPFMU_FRAME_INPUT_RATES[c] * (SUFFIX(mid, c, h) - SUFFIX(k1, c, h));
         out[h] = RAMP_SUFFIX(k0, h) - RAMP_SUFFIX(mid, h) + tau * flat;
+    }
+}
+
+/* what inputs ramping at du from window time tau0 to tau1 (and holding their value there after it)
+   add to z in slots k0 <= k < k1 beyond their value at tau0: the sum over those slots and the
+   inputs of du_c slope_{k,c} (min(s_k, tau1) - tau0) */
+static void input_ramp_sum(int k0, int k1, double tau0, double tau1, const double du[N_U],
+                           double out[OPFMU_FIRST_LAYER])
+{
+    long knee = (long)ceil(tau1 / SENSOR_DT - 1e-6);
+    int mid = knee < k0 ? k0 : (knee > k1 ? k1 : (int)knee);
+    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
+        double sum = 0.0;
+        for (int c = 0; c < N_U; ++c)
+            if (du[c] != 0.0)
+                sum += du[c] * (TIME_SUFFIX(k0, c, h) - TIME_SUFFIX(mid, c, h) + tau1 * (SUFFIX(mid, c, h) - SUFFIX(k1, c, h))
+                                - tau0 * (SUFFIX(k0, c, h) - SUFFIX(k1, c, h)));
+        out[h] = sum;
     }
 }
 #endif
@@ -230,15 +266,17 @@ static void append_number(char *message, size_t size, size_t *used, const char *
     append(message, size, used, text);
 }
 
-/* Checks a window start state and the input held over the next h seconds against the envelope, in
-   the window frame (sticky flag). */
+/* Checks a window start state and the input over the next h seconds (at their start and end, or the
+   window's end if that comes first) against the envelope, in the window frame (sticky flag). */
 static ModelStatus check_envelope(ModelState *m, double h, char *message, size_t size)
 {
     size_t used = 0;
-    double tau = m->time - m->window_start, u_start[N_U], u_end[N_U];
+    double tau = m->time - m->window_start, u_start[N_U], u_end[N_U], u_last[N_U];
     if (!m->in_envelope) return MODEL_OK;
+    const double tau_end = fmin(tau + h, m->rollover_horizon);
     input_in_frame(&m->frame, m->u, tau, u_start);
-    input_in_frame(&m->frame, m->u, fmin(tau + h, m->rollover_horizon), u_end);
+    input_after(m, m->u, tau_end - tau, u_last);
+    input_in_frame(&m->frame, u_last, tau_end, u_end);
     if (outside(u_start, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U) || outside(u_end, OPFMU_ENV_U_MIN, OPFMU_ENV_U_MAX, N_U)) {
         m->in_envelope = 0;
         append_number(message, size, &used, "t = %.6g s: input (", m->time);
@@ -280,8 +318,9 @@ static void start_window(ModelState *m)
     input_in_frame(&m->frame, m->u, 0.0, level);
     for (int k = 0; k < OPFMU_N_SENSORS; ++k) memcpy(m->sensors + k * N_U, level, sizeof level);
     m->filled = 0;
-    m->last_end = 0.0;
+    m->last_start = m->last_end = 0.0;
     memcpy(m->last_u, m->u, sizeof m->u);
+    memset(m->last_du, 0, sizeof m->last_du); /* every slot holds the level */
 #if OPFMU_FIRST_LAYER > 0
     opfmu_first_layer(m->x_window_f, ZERO_SENSORS, m->z_base);
     memset(m->z_past, 0, sizeof m->z_past);
@@ -292,25 +331,33 @@ static void start_window(ModelState *m)
     start_corrections(m, 1);
 }
 
-/* The operator at window time tau after the input held over a step that ends there was written
-   from slot `first` on (in the frame: its level, ramping until tau, then held). Per step this costs
-   the network after its sensor layer plus O(layer width), not the whole sensor layer. */
-static void evaluate(ModelState *m, int first, double tau)
+/* The operator at window time tau after the input over a step from window time tau0 to tau was
+   written from slot `first` on (in the frame: its level, ramping with the frame and along its
+   derivatives until tau, then held). Per step this costs the network after its sensor layer plus
+   O(layer width), not the whole sensor layer. */
+static void evaluate(ModelState *m, int first, double tau0, double tau)
 {
-    double level[N_U], x_f[N_X]; /* the held input in the frame at window time 0 (its ramp apart) */
+    double level[N_U], x_f[N_X]; /* the step's input in the frame at window time 0 (its ramps apart) */
     input_in_frame(&m->frame, m->u, 0.0, level);
-    /* an input equal to the one the slots from `filled` on hold leaves the sensors as they were
-       (unless the frame turns: its ramp goes on), so the coefficients of the last evaluation (or of
-       the window's start) are still those of this window: a step costs a product with the trunk values */
+    const int ramps = any_nonzero(m->du), ramped = any_nonzero(m->last_du);
+    (void)ramps; /* unused by a kernel without a sensor layer or a trunk */
+    (void)ramped;
+    /* a held input equal to the held one the slots from `filled` on hold leaves the sensors as they
+       were (unless the frame turns: its ramp goes on), so the coefficients of the last evaluation (or
+       of the window's start) are still those of this window: a step costs a product with the trunk values */
 #if OPFMU_TRUNK_SIZE > 0
-    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0 || m->frame.c != 0.0;
+    const int sensors_changed = memcmp(m->u, m->last_u, sizeof m->u) != 0 || m->frame.c != 0.0 || ramps || ramped;
 #else
     const int sensors_changed = 1; /* z is computed anew each step */
 #endif
 #if OPFMU_TRUNK_SIZE == 0 /* the sensors themselves: for the kernel and its rate (residual) */
     if (sensors_changed)
-        for (int k = first; k < OPFMU_N_SENSORS; ++k)
-            input_in_frame(&m->frame, m->u, fmin((double)k * SENSOR_DT, tau), m->sensors + k * N_U);
+        for (int k = first; k < OPFMU_N_SENSORS; ++k) {
+            const double s = fmin((double)k * SENSOR_DT, tau);
+            double u[N_U];
+            input_after(m, m->u, s - tau0, u);
+            input_in_frame(&m->frame, u, s, m->sensors + k * N_U);
+        }
 #endif
 #if OPFMU_FIRST_LAYER > 0
     double z[OPFMU_FIRST_LAYER], ramp[OPFMU_FIRST_LAYER];
@@ -325,6 +372,10 @@ static void evaluate(ModelState *m, int first, double tau)
                 ramp_sum(m->filled, first, m->last_end, ramp);
                 for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) m->z_past[h] -= m->frame.c * ramp[h];
             }
+            if (ramped) {
+                input_ramp_sum(m->filled, first, m->last_start, m->last_end, m->last_du, ramp);
+                for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) m->z_past[h] += ramp[h];
+            }
             m->filled = first;
         }
         for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
@@ -335,6 +386,10 @@ static void evaluate(ModelState *m, int first, double tau)
         if (m->frame.c != 0.0) {
             ramp_sum(first, OPFMU_N_SENSORS, tau, ramp);
             for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) z[h] -= m->frame.c * ramp[h];
+        }
+        if (ramps) {
+            input_ramp_sum(first, OPFMU_N_SENSORS, tau0, tau, m->du, ramp);
+            for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) z[h] += ramp[h];
         }
     }
 #if OPFMU_TRUNK_SIZE > 0
@@ -350,6 +405,9 @@ static void evaluate(ModelState *m, int first, double tau)
     opfmu_operator(m->x_window_f, m->sensors, tau, x_f);
 #endif
     state_from_frame(&m->frame, x_f, tau, m->x);
+    memcpy(m->last_u, m->u, sizeof m->u);
+    memcpy(m->last_du, m->du, sizeof m->du);
+    m->last_start = tau0;
     m->last_end = tau;
 }
 
@@ -359,25 +417,40 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
     memcpy(m->x, m->x_start, sizeof m->x);
     m->in_envelope = 1;
     m->input_time = start_time;
+    memcpy(m->prev_end_u, m->u, sizeof m->u);
+    memset(m->prev_du, 0, sizeof m->prev_du);
     start_window(m);
     return check_envelope(m, 0.0, message, size);
 }
 
-/* an input differs from the one written last by more than restart_jump, both seen in the window frame
-   at the times they were set (an angle a master advances with a network turning at the frame's speed
-   does not jump) */
+/* an input differs from the one the previous step ended at by more than restart_jump: a held one
+   with both seen in the window frame at the times they were set (an angle a master advances with a
+   network turning at the frame's speed does not jump), a ramped one against its value at the end of
+   its ramp (a ramp carried on does not jump) */
 static int input_jumped(const ModelState *m)
 {
     for (int c = 0; c < N_U; ++c) {
-        double turned = m->frame.c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
-        if (fabs(m->u[c] - m->last_u[c] - turned) > m->restart_jump) return 1;
+        double turned = m->prev_du[c] != 0.0 ? 0.0 : m->frame.c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
+        if (fabs(m->u[c] - m->prev_end_u[c] - turned) > m->restart_jump) return 1;
     }
     return 0;
 }
 
 ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
-    double stop = m->time + h;
+    const double start = m->time, stop = m->time + h;
+    double u_start[N_U], u_stop[N_U]; /* the inputs at the step's start and end */
+    memcpy(u_start, m->u, sizeof u_start);
+    input_after(m, u_start, h, u_stop);
+    for (int c = 0; c < N_U; ++c) {
+        if (m->du[c] != 0.0 && (!isfinite(u_stop[c]) || u_stop[c] < OPFMU_INPUT_MIN[c])) {
+            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
+                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
+                     m->du[c], OPFMU_INPUT_UNITS[c], u_stop[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
+                     OPFMU_INPUT_UNITS[c]);
+            return MODEL_ERROR;
+        }
+    }
     /* an input jump starts a new window here, so the jump is at window time 0, where the operator
        learned its transients (every training window starts with one) */
     if (m->restart_jump > 0.0 && m->time > m->window_start + TIME_EPS && input_jumped(m))
@@ -391,20 +464,23 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
     while (m->time < stop - TIME_EPS) {
         double window_end = m->window_start + m->rollover_horizon;
         double end = fmin(stop, window_end);
-        /* the held input from the current time on: the first slot at or after m->time */
+        /* the input from the current time on (m->u: its value now): the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
         if (m->time < m->window_start + TIME_EPS)
-            start_corrections(m, 0); /* for the input held over the window's first step */
+            start_corrections(m, 0); /* for the input at the start of the window's first step */
         double rate_start = m->slow_on ? slow_rate(m, m->x) : 0.0;
         double x_step[N_X], g_start[N_AFFINE_CAP], k_start[N_AFFINE_CAP];
         memcpy(x_step, m->x, sizeof x_step);
         if (m->swing_weight > 0.0) affine_drive(m->x, m->u, g_start, k_start);
         first = first < 0 ? 0 : (first > OPFMU_N_SENSORS ? OPFMU_N_SENSORS : first);
-        evaluate(m, first, fmin(end - m->window_start, OPFMU_HORIZON));
+        evaluate(m, first, m->time - m->window_start, fmin(end - m->window_start, OPFMU_HORIZON));
+        if (end < stop) /* the input at the end of this part: the corrections' end values, a new window's start */
+            input_after(m, u_start, end - start, m->u);
+        else
+            memcpy(m->u, u_stop, sizeof m->u);
         if (m->slow_on) slow_correct(m, end - m->time, rate_start);
         memcpy(m->x_operator, m->x, sizeof m->x);
         if (m->swing_weight > 0.0) affine_step(m, x_step, g_start, k_start, end - m->time);
-        memcpy(m->last_u, m->u, sizeof m->u);
         m->time = end;
         for (int i = 0; i < N_X; ++i) {
             if (!isfinite(m->x[i])) {
@@ -418,6 +494,9 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         }
     }
     m->time = stop;
+    memcpy(m->u, u_stop, sizeof m->u); /* the inputs at the new communication point */
+    memcpy(m->prev_end_u, m->u, sizeof m->u);
+    memcpy(m->prev_du, m->du, sizeof m->du);
     if (m->residual_limit > 0.0) {
 #if OPFMU_TRUNK_SIZE > 0
         double tau = m->time - m->window_start, scratch[OPFMU_TRUNK_SIZE]; /* keep the trunk values the rate needs */
