@@ -45,8 +45,12 @@ def _common(p, kinds_default: str | None) -> None:
     p.add_argument("--fault-impedance", type=float, default=None, metavar="PU",
                    help="fault reactance in pu (default 1e-6: bolted)")
     p.add_argument("--step", type=float, default=0.01, help="communication step in s (default 0.01)")
+    p.add_argument("--coupling", choices=("iterated", "extrapolated", "held"), default="iterated",
+                   help="iterated: inputs linear over each step to a consistent end voltage, the step redone "
+                        "from a saved FMU state (default); extrapolated: linear to the extrapolated end, one pass; "
+                        "held: the start voltages held over the step (a plain master)")
     p.add_argument("--passes", type=int, default=3,
-                   help="most passes of a step with rollback to a consistent end voltage (default 3)")
+                   help="most passes of an iterated step (default 3)")
     p.add_argument("--fmu-cache", default=None, metavar="DIR", help="where built FMUs are kept")
 
 
@@ -115,7 +119,7 @@ def _setup(args):
     except (ValueError, KeyError, TypeError, OSError, AttributeError) as exc:
         raise GridUserError(f"cannot use the dynamic data {args.dynamic_data}: {type(exc).__name__}: "
                             f"{str(exc)[:200]}") from None
-    settings = MasterSettings(step=args.step, passes=args.passes)
+    settings = MasterSettings(step=args.step, coupling=args.coupling, passes=args.passes)
     z = _fault_impedance(args)
     clear = getattr(args, "clear", None)
     if clear is None:  # cct: a provisional clearing time, replaced by the bisection
@@ -155,10 +159,12 @@ def cmd_run(args) -> None:
     title = f"WSCC 9-bus: {contingency.label}"
     outputs.plot(out / "result.png", runs, title)
     messages = {k: t.pop("messages", {}) for k, t in timings.items()}
-    notes = [f"{_label(kind)}, generator {bus}: {text}" for kind, per_bus in messages.items()
-             for bus, logged in per_bus.items() for _, text in logged[:3]]
+    logged = [f"{_label(kind)}, generator {bus}: {text}" for kind, per_bus in messages.items()
+              for bus, texts in per_bus.items() for _, text in texts[:3]]
+    notes = [f"{_label(kind)}: {note}" for kind, t in timings.items() for note in t.pop("notes", [])]
     outputs.report(out / "report.md", title, runs, timings, contingency,
-                   (["FMU log (first messages per generator):", ""] + [f"- {n}" for n in notes]) if notes else ())
+                   [f"Note: {n}" for n in notes]
+                   + ((["", "FMU log (first messages per generator):", ""] + [f"- {n}" for n in logged]) if logged else []))
     summary = {"contingency": contingency.label, "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
                "passes": settings.passes}

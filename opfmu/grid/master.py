@@ -53,14 +53,21 @@ EXCITER_OUTPUTS = ("Efd", "RF", "VR")
 _I = (4, 5)  # rows of I_re, I_im in MACHINE_OUTPUTS
 
 
+COUPLINGS = ("iterated", "extrapolated", "held")
+
+
 @dataclass(frozen=True)
 class MasterSettings:
-    """step [s]: the communication step; passes: the most passes of a step (1: no iteration);
-    tolerance [pu]: the change of the end voltages below which a step is consistent;
-    newton_tolerance [pu]: the network's current mismatch that ends Newton; stop_at_loss: end a
-    run when two rotor angles are pi apart (a critical-clearing-time run needs no more)."""
+    """step [s]: the communication step; coupling: `iterated` (inputs linear to a consistent end,
+    the step redone up to `passes` times), `extrapolated` (inputs linear to the end guess, one
+    pass) or `held` (the inputs at the step's start held over it, one pass: what a plain master
+    does); passes: the most passes of an iterated step; tolerance [pu]: the change of the end
+    voltages below which a step is consistent; newton_tolerance [pu]: the network's current
+    mismatch that ends Newton; stop_at_loss: end a run when two rotor angles are pi apart (a
+    critical-clearing-time run needs no more)."""
 
     step: float = 0.01
+    coupling: str = "iterated"
     passes: int = 3
     tolerance: float = 1e-6
     newton_tolerance: float = 1e-10
@@ -70,6 +77,8 @@ class MasterSettings:
     def __post_init__(self):
         if not (isinstance(self.step, (int, float)) and math.isfinite(self.step) and 1e-5 <= self.step <= 1.0):
             raise ValueError(f"the communication step must be a time from 1e-5 to 1 s, got {self.step!r}")
+        if self.coupling not in COUPLINGS:
+            raise ValueError(f"coupling must be one of {', '.join(COUPLINGS)}, got {self.coupling!r}")
         if not (isinstance(self.passes, int) and 1 <= self.passes <= 20):
             raise ValueError(f"passes must be an integer from 1 to 20, got {self.passes!r}")
         if not (self.tolerance > 0 and self.newton_tolerance > 0):
@@ -103,12 +112,14 @@ class Timing:
 @dataclass
 class CosimResult:
     """A co-simulation run: `result` (monolithic.GridResult, one row per communication point), its
-    `timing`, and per generator the FMU kind and what the FMUs logged (status, message)."""
+    `timing`, per generator the FMU kind and what the FMUs logged (status, message), and the
+    master's notes on how it coupled them."""
 
     result: GridResult
     timing: Timing
     kinds: tuple
     messages: dict = field(default_factory=dict)
+    notes: tuple = ()
 
 
 def _wrap(angle: float) -> float:
@@ -145,6 +156,11 @@ class GridMaster:
             self.close()
             raise
         self.rolls_back = all(s.rolls_back for s in self.machines + self.exciters)
+        self.notes = ()
+        if not self.rolls_back and settings.coupling == "iterated" and settings.passes > 1:
+            names = ", ".join(s.model_name for s in self.machines + self.exciters if not s.rolls_back)
+            self.notes = (f"{names} cannot restore an FMU state: steps are not iterated (one pass, inputs "
+                          "linear to the extrapolated end voltage)",)
         self._Pm = [float(p) for p in self.grid.Pm]
         self._runs = 0
 
@@ -212,14 +228,20 @@ class GridMaster:
 
     def _step(self, t0, h, V0, theta0, Vt0, Efd0, V1, theta1, Vt1, timing):
         """One pass over [t0, t0 + h] with the inputs linear from (V0, Vt0, Efd0) to (V1, Vt1) and
-        Efd to the exciters' new values; returns the exciters' Efd at t0 + h."""
+        Efd to the exciters' new values (held at the start values with coupling "held"); returns
+        the exciters' Efd at t0 + h."""
         started = time.perf_counter()
         n = len(self.machines)
         Efd1 = np.empty(n)
+        held = self.settings.coupling == "held"
         for k in range(n):
             e, m = self.exciters[k], self.machines[k]
             Vref = self.grid.Vref[k]
-            if e.interpolates:
+            if held:
+                e.set_inputs((Vt0[k], Vref))
+                if e.interpolates:
+                    e.set_input_derivatives((0.0, 0.0))
+            elif e.interpolates:
                 e.set_inputs((Vt0[k], Vref))
                 e.set_input_derivatives(((Vt1[k] - Vt0[k]) / h, 0.0))
             else:
@@ -228,7 +250,11 @@ class GridMaster:
             Efd1[k] = e.outputs()[0]
             Vs0, Vs1 = abs(V0[k]), abs(V1[k])
             Pm = self.grid.Pm[k]
-            if m.interpolates:
+            if held:
+                m.set_inputs((Vs0, theta0[k], Pm, Efd0[k]))
+                if m.interpolates:
+                    m.set_input_derivatives((0.0, 0.0, 0.0, 0.0))
+            elif m.interpolates:
                 m.set_inputs((Vs0, theta0[k], Pm, Efd0[k]))
                 m.set_input_derivatives(((Vs1 - Vs0) / h, (theta1[k] - theta0[k]) / h, 0.0, (Efd1[k] - Efd0[k]) / h))
             else:
@@ -273,19 +299,20 @@ class GridMaster:
             t0, t1 = points[j - 1], points[j]
             h = t1 - t0
             Vt0 = self._terminal(V, I)
-            if V_prev is not None:
+            if V_prev is not None and s.coupling != "held":
                 V1 = V + (V - V_prev) * (h / h_prev)
             else:
                 V1 = V.copy()
             theta1 = np.array([theta[k] + _wrap(cmath.phase(V1[k]) - theta[k]) for k in range(n)])
             I1 = I
             saved = None
-            if s.passes > 1 and self.rolls_back:
+            passes = s.passes if s.coupling == "iterated" else 1
+            if passes > 1 and self.rolls_back:
                 t_save = time.perf_counter()
                 saved = [slave.save() for slave in self.machines + self.exciters]
                 timing.rollback_s += time.perf_counter() - t_save
             try:
-                for p in range(s.passes if saved is not None else 1):
+                for p in range(passes if saved is not None else 1):
                     if p > 0:
                         t_save = time.perf_counter()
                         for slave, snap in zip(self.machines + self.exciters, saved):
@@ -319,7 +346,7 @@ class GridMaster:
         result = self._result(rows, topologies, lost)
         messages = {f.bus: list(m.messages) + list(e.messages)
                     for f, m, e in zip(self.files, self.machines, self.exciters)}
-        return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages)
+        return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages, notes=self.notes)
 
     def _row(self, t, V, I, theta) -> dict:
         machine = np.array([m.outputs()[:4] for m in self.machines])

@@ -52,7 +52,7 @@ class MasterRunner:
     def run(self, contingency, stop: float, stop_at_loss: bool = False):
         self.master.settings = replace(self.settings, stop_at_loss=stop_at_loss)
         run = self.master.run(contingency, stop)
-        return run.result, {**run.timing.to_dict(), "messages": run.messages}
+        return run.result, {**run.timing.to_dict(), "messages": run.messages, "notes": list(run.notes)}
 
     def close(self):
         self.master.close()
