@@ -96,8 +96,10 @@ class Slave:
             self._initial = self.save()
 
     def _log(self, env, instance, status, category, message):
-        self.messages.append((int(status), message.decode(errors="replace")))
-        del self.messages[:-LOG_KEPT]
+        entry = (int(status), message.decode(errors="replace"))
+        if entry not in self.messages[-4:]:  # a step redone from a saved state logs its message again
+            self.messages.append(entry)
+            del self.messages[:-LOG_KEPT]
 
     def last_message(self) -> str:
         return self.messages[-1][1] if self.messages else "(no message logged)"
