@@ -39,7 +39,8 @@ def angle_error_deg(run, reference) -> float:
     return errors(run, reference)["angle_deg"]
 
 
-@pytest.mark.parametrize("contingency", [Contingency(6, 0.09, "6-9"), Contingency(8, 0.065), Contingency(5, 0.0725, "5-7")])
+@pytest.mark.parametrize("contingency", [Contingency(6, 0.09, "6-9"), Contingency(8, 0.065), Contingency(5, 0.0725, "5-7"),
+                                         Contingency(9, 0.21, fault_start=0.04, fault_impedance=0.02j)])
 def test_native_reference_fmus_follow_the_monolithic_solve_within_the_coupling_error(reference_master, contingency):
     run = reference_master.run(contingency, 2.0).result
     mono = monolithic_on(run, contingency, 2.0)
