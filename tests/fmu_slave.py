@@ -1,8 +1,11 @@
-"""An fmpy FMU2Slave of a component's FMU, driven step by step, recording what the FMU logs.
+"""An fmpy FMU2Slave of a component's FMU, driven step by step, recording what the FMU logs; and the
+step mirror (fmu_export.step_mirror) evaluated on a surrogate FMU's own compiled kernel.
 
 Value references come from the FMU's model description, by name; the component says which
 variables are its inputs and states (default SM4).
 """
+import ctypes
+
 import numpy as np
 from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 
@@ -73,3 +76,20 @@ class Slave:
     def close(self):
         self.fmu.terminate()
         self.fmu.freeInstance()
+
+
+def on_the_fmus_kernel(mirror, unzipped):
+    """The StepMirror `mirror` of the FMU unzipped = (directory, model description), with its network evaluated by the FMU's own compiled kernel (opfmu_operator, in
+    double) instead of onnxruntime (float32): what is left between it and the FMU is round-off."""
+    library = ctypes.CDLL(f"{unzipped[0]}/binaries/linux64/{unzipped[1].coSimulation.modelIdentifier}.so")
+    double_p = ctypes.POINTER(ctypes.c_double)
+    library.opfmu_operator.argtypes = [double_p, double_p, ctypes.c_double, double_p]
+
+    def network(x0_f, sensors_f, tau):
+        x0, u, out = np.array(x0_f, np.float64), np.ascontiguousarray(sensors_f, np.float64), np.zeros(len(x0_f))
+        library.opfmu_operator(x0.ctypes.data_as(double_p), u.ctypes.data_as(double_p), float(tau),
+                               out.ctypes.data_as(double_p))
+        return out
+
+    mirror.network = network
+    return mirror

@@ -123,15 +123,21 @@ def test_fmus_without_directional_derivatives_are_differentiated_numerically(fmu
     assert angle_error_deg(run, monolithic_on(run, contingency, 0.6)) < 0.3
 
 
-def test_a_dynamic_data_file_mixes_fmu_kinds_per_generator(fmu_cache, tmp_path):
+def dynamic_data_with(tmp_path, fmus):
+    """The shipped dynamic data with each generator's `fmu` entry replaced, written beside copies of
+    its machine files; the path."""
     data = json.loads(wscc9.DYNAMIC_DATA_FILE.read_text())
-    for name in ("wscc9_gen1.json", "wscc9_gen2.json", "wscc9_gen3.json"):
-        shutil.copy(wscc9.DATA_DIR / name, tmp_path / name)
-    data["generators"][0]["fmu"] = {"kind": "surrogate", "operator": "wscc9_gen1.onnx"}
-    data["generators"][1]["fmu"] = "reference"
-    data["generators"][2]["fmu"] = {"kind": "python"}
-    path = tmp_path / "mixed.json"
+    for bus, generator in zip(wscc9.GENERATOR_BUSES, data["generators"]):
+        shutil.copy(wscc9.DATA_DIR / f"wscc9_gen{bus}.json", tmp_path / f"wscc9_gen{bus}.json")
+        generator["fmu"] = fmus.get(bus, generator["fmu"])
+    path = tmp_path / "dynamic.json"
     path.write_text(json.dumps(data))
+    return path
+
+
+def test_a_dynamic_data_file_mixes_fmu_kinds_per_generator(fmu_cache, tmp_path):
+    path = dynamic_data_with(tmp_path, {1: {"kind": "surrogate", "operator": "wscc9_gen1.onnx"}, 2: "reference",
+                                        3: {"kind": "python"}})
     dynamics = wscc9.dynamic_data(path)
     files = generator_files(dynamics, None, fmu_cache)
     assert [f.kind for f in files] == ["surrogate", "reference", "python"]
@@ -142,12 +148,7 @@ def test_a_dynamic_data_file_mixes_fmu_kinds_per_generator(fmu_cache, tmp_path):
 
 
 def test_a_surrogate_for_another_machine_is_refused(fmu_cache, tmp_path):
-    data = json.loads(wscc9.DYNAMIC_DATA_FILE.read_text())
-    for name in ("wscc9_gen1.json", "wscc9_gen2.json", "wscc9_gen3.json"):
-        shutil.copy(wscc9.DATA_DIR / name, tmp_path / name)
-    data["generators"][1]["fmu"] = {"kind": "surrogate", "operator": "wscc9_gen3.onnx"}
-    path = tmp_path / "swapped.json"
-    path.write_text(json.dumps(data))
+    path = dynamic_data_with(tmp_path, {2: {"kind": "surrogate", "operator": "wscc9_gen3.onnx"}})
     with pytest.raises(CouplingError, match="bus 2.*trained for another machine"):
         generator_files(wscc9.dynamic_data(path), None, fmu_cache)
 

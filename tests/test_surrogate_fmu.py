@@ -19,7 +19,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from fmu_export.step_mirror import StepMirror, affine_step, equilibrium, fmu_settings, jacobian, slow_mode
-from fmu_slave import Slave
+from fmu_slave import Slave, on_the_fmus_kernel
+from hand_made import operator_without_trunk
 from reference_models.signals import Piecewise, Signal
 from reference_models.simulate import simulate
 from reference_models.sm4 import SM4, min_voltage_with_equilibrium
@@ -553,25 +554,6 @@ def fmu_states(unzipped, x0, steps, name="a", **parameters):
 MACHINES = {"undamped": ("undamped", "undamped_path"), "damped": ("unzipped", "operator_path")}  # FMU, operator
 
 
-def on_the_fmus_kernel(mirror: StepMirror, unzipped) -> StepMirror:
-    """The mirror with its network evaluated by the FMU's own compiled kernel (opfmu_operator, in
-    double) instead of onnxruntime (float32): what is left between it and the FMU is round-off."""
-    import ctypes
-
-    library = ctypes.CDLL(f"{unzipped[0]}/binaries/linux64/{unzipped[1].coSimulation.modelIdentifier}.so")
-    double_p = ctypes.POINTER(ctypes.c_double)
-    library.opfmu_operator.argtypes = [double_p, double_p, ctypes.c_double, double_p]
-
-    def network(x0_f, sensors_f, tau):
-        x0, u, out = np.array(x0_f, np.float64), np.ascontiguousarray(sensors_f, np.float64), np.zeros(len(x0_f))
-        library.opfmu_operator(x0.ctypes.data_as(double_p), u.ctypes.data_as(double_p), float(tau),
-                               out.ctypes.data_as(double_p))
-        return out
-
-    mirror.network = network
-    return mirror
-
-
 @pytest.mark.parametrize("machine, speed", [("undamped", 12.0), ("damped", 3.0)])
 def test_the_fmu_equals_the_mirror_with_a_drifting_network(machine, speed, request):
     """A machine turning at `speed` with its network (omega0 = speed, theta_vs = a + speed t held over
@@ -661,36 +643,8 @@ def without_trunk(operator_path, tmp_path_factory):
     but whose answer does not split into trunk and coefficients (t multiplies the branch's sum
     directly): the FMU's kernel then tracks the sensor layer's output alone (OPFMU_TRUNK_SIZE 0).
     x = x0 + t sum_i(b_i / 10) b, b = tanh(W [x0, u] + c); the tiny operator's metadata and frame."""
-    import onnx
-    from onnx import TensorProto, helper
-
-    from surrogate.frame_graph import wrap_in_frame
-
-    source = Operator.load(operator_path)
-    n_x, n_u, n_sensors = 4, 4, source.n_sensors
-    rng = np.random.default_rng(0)
-    width = n_x + n_u * n_sensors
-    init = [helper.make_tensor("W", TensorProto.FLOAT, [width, n_x], (0.01 * rng.normal(size=width * n_x)).tolist()),
-            helper.make_tensor("c", TensorProto.FLOAT, [n_x], (0.1 * rng.normal(size=n_x)).tolist()),
-            helper.make_tensor("tenth", TensorProto.FLOAT, [n_x, 1], [0.1] * n_x),
-            helper.make_tensor("ax1", TensorProto.INT64, [1], [1]), helper.make_tensor("ax2", TensorProto.INT64, [1], [2])]
-    nodes = [helper.make_node("Flatten", ["u"], ["uf"], axis=1), helper.make_node("Concat", ["x0", "uf"], ["xu"], axis=1),
-             helper.make_node("Gemm", ["xu", "W", "c"], ["g"]), helper.make_node("Tanh", ["g"], ["b"]),
-             helper.make_node("MatMul", ["b", "tenth"], ["s"]), helper.make_node("Mul", ["s", "t"], ["st"]),
-             helper.make_node("Unsqueeze", ["st", "ax2"], ["st3"]), helper.make_node("Unsqueeze", ["b", "ax1"], ["b3"]),
-             helper.make_node("Mul", ["st3", "b3"], ["p"]), helper.make_node("Unsqueeze", ["x0", "ax1"], ["x03"]),
-             helper.make_node("Add", ["p", "x03"], ["x"])]
-    graph = helper.make_graph(nodes, "without_trunk", [
-        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
-        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
-        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
-        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
-    proto = wrap_in_frame(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), source.frame,
-                          source.sensor_times)
-    for key, value in source.metadata.items():
-        proto.metadata_props.append(onnx.StringStringEntryProto(key=key, value=value))
     directory = tmp_path_factory.mktemp("without_trunk")
-    onnx.save(proto, str(directory / "op.onnx"))
+    operator_without_trunk(operator_path, directory / "op.onnx", "without_trunk")
     path = built(directory / "op.onnx", directory, "WithoutTrunk")
     assert "OPFMU_TRUNK_SIZE 0" in zipfile.ZipFile(path).read("sources/config.h").decode()
     return directory / "op.onnx", (extract(str(path)), read_model_description(str(path)))

@@ -7,7 +7,6 @@ The FMUs are those of two shipped operators: wscc9_gen2.onnx (D = 0, a frame tha
 window's start speed, 0.16 s windows of 201 sensors) and sm4_cosim.onnx (the paper's machine, 0.8 s
 windows of 1001 sensors); and, for the kernels that track no trunk or no sensor layer, hand-made
 operators with sm4_cosim's metadata and frame."""
-import ctypes
 import math
 import warnings
 import zipfile
@@ -20,7 +19,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from fmu_export.step_mirror import StepMirror, fmu_settings
-from fmu_slave import Slave
+from fmu_slave import Slave, on_the_fmus_kernel
+from hand_made import operator_without_trunk
 from reference_models.sm4 import SM4
 from surrogate.operator import Operator
 
@@ -47,19 +47,7 @@ class Built:
     def kernel_mirror(self) -> StepMirror:
         """The step mirror with its network evaluated by this FMU's compiled kernel (in double): what
         is left between it and the FMU is round-off."""
-        mirror = StepMirror(self.onnx)
-        library = ctypes.CDLL(f"{self.unzipped[0]}/binaries/linux64/{self.md.coSimulation.modelIdentifier}.so")
-        double_p = ctypes.POINTER(ctypes.c_double)
-        library.opfmu_operator.argtypes = [double_p, double_p, ctypes.c_double, double_p]
-
-        def network(x0_f, sensors_f, tau):
-            x0, u, out = np.array(x0_f, np.float64), np.ascontiguousarray(sensors_f, np.float64), np.zeros(len(x0_f))
-            library.opfmu_operator(x0.ctypes.data_as(double_p), u.ctypes.data_as(double_p), float(tau),
-                                   out.ctypes.data_as(double_p))
-            return out
-
-        mirror.network = network
-        return mirror
+        return on_the_fmus_kernel(StepMirror(self.onnx), self.unzipped)
 
 
 @pytest.fixture(scope="module")
@@ -426,44 +414,12 @@ def test_a_ramp_across_the_rollover_horizon_goes_on_in_the_new_window(gen2):
 # --- kernels that write the sensors themselves -----------------------------------------------------------
 
 def hand_made(directory, name, squash: bool) -> Built:
-    """An FMU of a hand-made operator with sm4_cosim's metadata and frame whose answer does not split
-    into trunk and coefficients: x = x0 + t sum_i(b_i / 10) b, b = tanh(W [x0, v] + c), v the sensors
-    (OPFMU_TRUNK_SIZE 0: the FMU tracks the sensor layer's output) or, with squash, tanh of them (not
-    affine: OPFMU_FIRST_LAYER 0, the FMU keeps the sensor buffer and evaluates the whole network)."""
-    import onnx
-    from onnx import TensorProto, helper
-
-    from surrogate.frame_graph import wrap_in_frame
-
-    source = Operator.load(COSIM)
-    n_x, n_u, n_sensors = 4, 4, source.n_sensors
-    rng = np.random.default_rng(0)
-    width = n_x + n_u * n_sensors
-    init = [helper.make_tensor("W", TensorProto.FLOAT, [width, n_x], (0.01 * rng.normal(size=width * n_x)).tolist()),
-            helper.make_tensor("c", TensorProto.FLOAT, [n_x], (0.1 * rng.normal(size=n_x)).tolist()),
-            helper.make_tensor("tenth", TensorProto.FLOAT, [n_x, 1], [0.1] * n_x),
-            helper.make_tensor("ax1", TensorProto.INT64, [1], [1]), helper.make_tensor("ax2", TensorProto.INT64, [1], [2])]
-    sensors = [helper.make_node("Flatten", ["u"], ["uf"], axis=1)]
-    if squash:
-        sensors += [helper.make_node("Tanh", ["uf"], ["us"])]
-    nodes = sensors + [
-        helper.make_node("Concat", ["x0", "us" if squash else "uf"], ["xu"], axis=1),
-        helper.make_node("Gemm", ["xu", "W", "c"], ["g"]), helper.make_node("Tanh", ["g"], ["b"]),
-        helper.make_node("MatMul", ["b", "tenth"], ["s"]), helper.make_node("Mul", ["s", "t"], ["st"]),
-        helper.make_node("Unsqueeze", ["st", "ax2"], ["st3"]), helper.make_node("Unsqueeze", ["b", "ax1"], ["b3"]),
-        helper.make_node("Mul", ["st3", "b3"], ["p"]), helper.make_node("Unsqueeze", ["x0", "ax1"], ["x03"]),
-        helper.make_node("Add", ["p", "x03"], ["x"])]
-    graph = helper.make_graph(nodes, name, [
-        helper.make_tensor_value_info("x0", TensorProto.FLOAT, ["N", n_x]),
-        helper.make_tensor_value_info("u", TensorProto.FLOAT, ["N", n_sensors, n_u]),
-        helper.make_tensor_value_info("t", TensorProto.FLOAT, ["M"])],
-        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["N", "M", n_x])], init)
-    proto = wrap_in_frame(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)]), source.frame,
-                          source.sensor_times)
-    for key, value in source.metadata.items():
-        proto.metadata_props.append(onnx.StringStringEntryProto(key=key, value=value))
-    onnx.save(proto, str(directory / f"{name}.onnx"))
-    return Built(directory / f"{name}.onnx", directory, name)
+    """An FMU of a hand-made operator (tests/hand_made.py) with sm4_cosim's metadata and frame: with
+    squash, one without a sensor layer (OPFMU_FIRST_LAYER 0), else one without a trunk
+    (OPFMU_TRUNK_SIZE 0)."""
+    path = directory / f"{name}.onnx"
+    operator_without_trunk(COSIM, path, name, squash)
+    return Built(path, directory, name)
 
 
 @pytest.fixture(scope="module")
