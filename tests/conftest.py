@@ -66,3 +66,9 @@ def reference_path(tmp_path_factory):
     path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"
     build_reference_fmu(path)
     return path
+
+
+@pytest.fixture(scope="session")
+def grid_fmu_cache(tmp_path_factory):
+    """The FMU cache of the grid tests (opfmu.grid.fmus): each generator's FMUs are built once."""
+    return tmp_path_factory.mktemp("grid_fmus")

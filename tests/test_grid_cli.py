@@ -12,8 +12,8 @@ from reference_models.grid import wscc9
 
 
 @pytest.fixture(autouse=True)
-def fmu_cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("OPFMU_FMU_CACHE", str(tmp_path_factory.getbasetemp() / "grid_cli_fmus"))
+def fmu_cache(grid_fmu_cache, monkeypatch):
+    monkeypatch.setenv("OPFMU_FMU_CACHE", str(grid_fmu_cache))
 
 
 def read_csv(path):

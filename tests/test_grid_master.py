@@ -21,8 +21,8 @@ from reference_models.grid.monolithic import WSCC9, simulate_contingency
 
 
 @pytest.fixture(scope="session")
-def fmu_cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("grid_fmus")
+def fmu_cache(grid_fmu_cache):
+    return grid_fmu_cache
 
 
 @pytest.fixture(scope="module")
