@@ -374,6 +374,8 @@ def _run(args) -> None:
         args.func(args)
     except (ValueError, CouplingError) as exc:
         raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+    except OSError as exc:  # an output folder that cannot be written, a file that cannot be read
+        raise UserError(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
 
 
 def _version() -> str:

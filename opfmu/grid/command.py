@@ -31,7 +31,7 @@ def _positive_time(text: str) -> float:
     return value
 
 
-def _common(p, kinds_default: str | None) -> None:
+def _common(p, kinds_default: str | None, trip: bool = True) -> None:
     from .runners import RUN_KINDS
 
     p.add_argument("--case", default="wscc9", help="the network (only wscc9: the WSCC 9-bus system, Anderson & Fouad)")
@@ -40,7 +40,8 @@ def _common(p, kinds_default: str | None) -> None:
     p.add_argument("--fmus", choices=RUN_KINDS, default=kinds_default,
                    help="the FMUs of every generator, or monolithic for the DAE reference "
                         "(default: each generator's kind in the dynamic data: surrogate for the shipped file)")
-    p.add_argument("--trip", default=None, metavar="FROM-TO", help="the branch opened at clearing, e.g. 5-7")
+    if trip:
+        p.add_argument("--trip", default=None, metavar="FROM-TO", help="the branch opened at clearing, e.g. 5-7")
     p.add_argument("--fault-start", type=_positive_time, default=0.0, help="fault start in s (default 0)")
     p.add_argument("--fault-impedance", type=float, default=None, metavar="PU",
                    help="fault reactance in pu (default 1e-6: bolted)")
@@ -95,7 +96,7 @@ def add_grid_parser(sub) -> None:
     scr.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing dask scheduler instead")
     scr.add_argument("--out", required=True, metavar="DIR", help="output folder")
     scr.add_argument("--quiet", action="store_true", help="no progress bar")
-    _common(scr, None)
+    _common(scr, None, trip=False)
     scr.set_defaults(func=cmd_screen)
 
 
@@ -103,8 +104,8 @@ class GridUserError(ValueError):
     """A grid request opfmu cannot run as asked (one line)."""
 
 
-def _setup(args):
-    """(grid, settings, contingency) from the common flags; GridUserError for what is wrong."""
+def _setup(args, with_contingency: bool = True):
+    """(grid, settings, contingency or None) from the common flags; GridUserError for what is wrong."""
     from reference_models.grid.contingency import Contingency
 
     from .master import MasterSettings
@@ -120,6 +121,8 @@ def _setup(args):
         raise GridUserError(f"cannot use the dynamic data {args.dynamic_data}: {type(exc).__name__}: "
                             f"{str(exc)[:200]}") from None
     settings = MasterSettings(step=args.step, coupling=args.coupling, passes=args.passes)
+    if not with_contingency:
+        return grid, settings, None
     z = _fault_impedance(args)
     clear = getattr(args, "clear", None)
     if clear is None:  # cct: a provisional clearing time, replaced by the bisection
@@ -221,8 +224,7 @@ def cmd_screen(args) -> None:
     from .screening import ScreeningTask, contingencies, screen
     from reference_models.grid.contingency import Contingency
 
-    args.fault = 4  # _setup's contingency is not used: the screening makes its own
-    grid, settings, _ = _setup(args)
+    grid, settings, _ = _setup(args, with_contingency=False)
     try:
         buses = [int(b) for b in args.faults.split(",") if b.strip()]
     except ValueError:
