@@ -295,14 +295,17 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         (src / "variables.h").write_text(vr_header(variables, component))
         first_layer = kernel.first_layer
         suffix = None
+        # the kernel (megabytes of weights) is compiled once, for the probe and for the binary
+        kernel_object = _compile(Path(tmp) / "operator_kernel.o", [src / "operator_kernel.c"], src, shared=False)
         if first_layer:
-            probe = _compile(Path(tmp) / "probe.so", [src / "operator_kernel.c"], src)
+            probe = _compile(Path(tmp) / "probe.so", [kernel_object], src)
             suffix = sensor_suffix_sums(probe, n_sensors, first_layer, component.n_states, component.n_inputs)
             first_layer = first_layer if suffix is not None else 0
         (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer, meta.get("frame"),
                                                               meta["horizon_s"]))
         (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel))
-        binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
+        binary = _compile(Path(tmp) / f"{model_name}.so",
+                          [src / f for f in C_FILES if f != "operator_kernel.c"] + [kernel_object], src)
         worst = check_kernel(binary, proto, meta, n_check)
         if not worst <= KERNEL_TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {KERNEL_TOLERANCE:g}); "
@@ -344,9 +347,12 @@ def _guid(onnx_path: Path, model_name: str, generated: str) -> str:
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
 
 
-def _compile(binary: Path, sources, include: Path) -> Path:
-    command = ["gcc", "-O3", "-shared", "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
-               *map(str, sources), "-o", str(binary), "-lm"]
+def _compile(binary: Path, sources, include: Path, shared: bool = True) -> Path:
+    """gcc -O3 of C sources (and object files) into the shared library `binary`, or with shared=False
+    one source into the object file `binary`; BuildError with gcc's first error otherwise."""
+    link = ["-shared"] if shared else ["-c"]
+    command = ["gcc", "-O3", *link, "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
+               *map(str, sources), "-o", str(binary), *(["-lm"] if shared else [])]
     try:
         result = subprocess.run(command, capture_output=True, text=True)
     except OSError as exc:
