@@ -18,6 +18,7 @@ import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from reference_models.grid import wscc9
 from reference_models.ieee1 import IEEE1
 from reference_models.sm4 import SM4
 
@@ -26,7 +27,6 @@ from .slave import CouplingError
 ROOT = Path(__file__).resolve().parents[2]
 SHIPPED_OPERATORS = ROOT / "surrogate" / "default"
 BUILD_SOURCES = (ROOT / "fmu_export", ROOT / "reference_models")
-KINDS = ("surrogate", "reference", "python", "file")
 
 
 def default_cache() -> Path:
@@ -135,8 +135,8 @@ def generator_files(dynamics, kind: str | None = None, cache=None, progress=None
     files = []
     for g in dynamics:
         fmu = g.fmu if kind is None else replace(g.fmu, kind=kind)
-        if fmu.kind not in KINDS:
-            raise CouplingError(f"FMU kind must be one of {', '.join(KINDS)}, got {fmu.kind!r}")
+        if fmu.kind not in wscc9.FMU_KINDS:
+            raise CouplingError(f"FMU kind must be one of {', '.join(wscc9.FMU_KINDS)}, got {fmu.kind!r}")
         if fmu.kind == "file":
             paths = [Path(fmu.machine_fmu), Path(fmu.exciter_fmu)]
             absent = [str(p) for p in paths if not p.is_file()]

@@ -183,7 +183,8 @@ class GridMaster:
 
     def _solve(self, network, V, Efd, theta_ref, timing: Timing):
         """The generator-bus voltages [3] (complex) at which the machines' currents I(V) and the
-        network agree, Newton from V; the machines are left at those inputs. Returns (V, I, theta)."""
+        network agree, Newton from V; the machines are left at those inputs. Returns (V, I, theta,
+        the machines' states [3, 4] as their outputs read them)."""
         started = time.perf_counter()
         s = self.settings
         n = len(self.machines)
@@ -192,6 +193,7 @@ class GridMaster:
         Y = network.Y_real
         i_vec = np.empty(2 * n)
         theta = np.empty(n)
+        states = np.empty((n, 4))
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
             for k, m in enumerate(self.machines):
@@ -199,6 +201,7 @@ class GridMaster:
                 theta[k] = theta_ref[k] + _wrap(math.atan2(im, re) - theta_ref[k])
                 m.set_inputs((math.hypot(re, im), theta[k], self._Pm[k], Efd[k]))
                 out = m.outputs()
+                states[k] = out[:4]
                 i_vec[2 * k], i_vec[2 * k + 1] = out[4], out[5]
             F = Y @ v - i_vec
             mismatch = max(map(abs, F.tolist()))
@@ -221,7 +224,7 @@ class GridMaster:
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")
         timing.network_s += time.perf_counter() - started
-        return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta.copy()
+        return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta, states
 
     def _terminal(self, V, I):
         return np.array([abs(V[k] + self._Z[k] * I[k]) for k in range(len(V))])
@@ -229,10 +232,10 @@ class GridMaster:
     def _step(self, t0, h, V0, theta0, Vt0, Efd0, V1, theta1, Vt1, timing):
         """One pass over [t0, t0 + h] with the inputs linear from (V0, Vt0, Efd0) to (V1, Vt1) and
         Efd to the exciters' new values (held at the start values with coupling "held"); returns
-        the exciters' Efd at t0 + h."""
+        the exciters' outputs (Efd, RF, VR) at t0 + h [3, 3]."""
         started = time.perf_counter()
         n = len(self.machines)
-        Efd1 = np.empty(n)
+        exciter = np.empty((n, len(EXCITER_OUTPUTS)))
         held = self.settings.coupling == "held"
         for k in range(n):
             e, m = self.exciters[k], self.machines[k]
@@ -247,7 +250,7 @@ class GridMaster:
             else:
                 e.set_inputs((0.5 * (Vt0[k] + Vt1[k]), Vref))
             e.step(t0, h)
-            Efd1[k] = e.outputs()[0]
+            exciter[k] = e.outputs()
             Vs0, Vs1 = abs(V0[k]), abs(V1[k])
             Pm = self.grid.Pm[k]
             if held:
@@ -256,12 +259,12 @@ class GridMaster:
                     m.set_input_derivatives((0.0, 0.0, 0.0, 0.0))
             elif m.interpolates:
                 m.set_inputs((Vs0, theta0[k], Pm, Efd0[k]))
-                m.set_input_derivatives(((Vs1 - Vs0) / h, (theta1[k] - theta0[k]) / h, 0.0, (Efd1[k] - Efd0[k]) / h))
+                m.set_input_derivatives(((Vs1 - Vs0) / h, (theta1[k] - theta0[k]) / h, 0.0, (exciter[k, 0] - Efd0[k]) / h))
             else:
-                m.set_inputs((0.5 * (Vs0 + Vs1), 0.5 * (theta0[k] + theta1[k]), Pm, 0.5 * (Efd0[k] + Efd1[k])))
+                m.set_inputs((0.5 * (Vs0 + Vs1), 0.5 * (theta0[k] + theta1[k]), Pm, 0.5 * (Efd0[k] + exciter[k, 0])))
             m.step(t0, h)
         timing.fmu_step_s += time.perf_counter() - started
-        return Efd1
+        return exciter
 
     def run(self, contingency: Contingency, stop: float = 5.0) -> CosimResult:
         """The system from its load-flow equilibrium through `contingency` until `stop` [s]."""
@@ -290,11 +293,12 @@ class GridMaster:
         theta_ref = np.array([float(x[0]) for x in state])  # continuous angles near the rotor angles
         V = self.grid.flow.V_complex[[wscc9.bus_index(b) for b in wscc9.GENERATOR_BUSES]].copy()
         Efd = np.array(self.grid.Efd0, dtype=float)
-        V, I, theta = self._solve(self.network(topology), V, Efd, theta_ref, timing)
+        V, I, theta, machine = self._solve(self.network(topology), V, Efd, theta_ref, timing)
+        exciter = np.array([e.outputs() for e in self.exciters])
         rows = []
         lost = None
         V_prev, h_prev = None, None
-        rows.append(self._row(0.0, V, I, theta))
+        rows.append(self._row(0.0, V, I, theta, machine, exciter))
         for j in range(1, len(points)):
             t0, t1 = points[j - 1], points[j]
             h = t1 - t0
@@ -319,9 +323,10 @@ class GridMaster:
                             slave.restore(snap)
                         timing.rollback_s += time.perf_counter() - t_save
                     Vt1 = self._terminal(V1, I1)
-                    Efd1 = self._step(t0, h, V, theta, Vt0, Efd, V1, theta1, Vt1, timing)
+                    exciter = self._step(t0, h, V, theta, Vt0, Efd, V1, theta1, Vt1, timing)
+                    Efd1 = exciter[:, 0].copy()
                     timing.passes += 1
-                    new_V, I1, new_theta = self._solve(self.network(topology), V1, Efd1, theta1, timing)
+                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, Efd1, theta1, timing)
                     change = float(np.max(np.abs(new_V - V1)))
                     V1, theta1 = new_V, new_theta
                     if change < s.tolerance:
@@ -335,9 +340,9 @@ class GridMaster:
             V, I, theta, Efd = V1, I1, theta1, Efd1
             if t1 in change_at:
                 topology = change_at[t1]
-                V, I, theta = self._solve(self.network(topology), V, Efd, theta, timing)
+                V, I, theta, machine = self._solve(self.network(topology), V, Efd, theta, timing)
                 V_prev = None  # no extrapolation across the jump
-            rows.append(self._row(t1, V, I, theta))
+            rows.append(self._row(t1, V, I, theta, machine, exciter))
             if lost is None:
                 lost = _loss_time(rows)
                 if lost is not None and s.stop_at_loss:
@@ -348,9 +353,8 @@ class GridMaster:
                     for f, m, e in zip(self.files, self.machines, self.exciters)}
         return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages, notes=self.notes)
 
-    def _row(self, t, V, I, theta) -> dict:
-        machine = np.array([m.outputs()[:4] for m in self.machines])
-        exciter = np.array([e.outputs() for e in self.exciters])
+    @staticmethod
+    def _row(t, V, I, theta, machine, exciter) -> dict:
         return {"time": t, "machine": machine, "exciter": exciter, "V": V.copy(), "I": I.copy(), "theta": theta.copy()}
 
     def _result(self, rows, topologies, lost) -> GridResult:

@@ -14,14 +14,12 @@ from reference_models.grid.monolithic import WSCC9, simulate_contingency
 from .fmus import generator_files
 from .master import GridMaster, MasterSettings
 
-RUN_KINDS = ("surrogate", "reference", "python", "monolithic")
+RUN_KINDS = tuple(k for k in wscc9.FMU_KINDS if k != "file") + ("monolithic",)  # what --fmus may name
 
 
 class MonolithicRunner:
     """The monolithic DAE (scipy DOP853 at `rtol`, restarted at events), rows every `step` s and at
     the events (the row after each)."""
-
-    kind = "monolithic"
 
     def __init__(self, grid: WSCC9, step: float = 0.01, rtol: float = 1e-10):
         self.grid, self.step, self.rtol = grid, step, rtol
@@ -45,7 +43,6 @@ class MasterRunner:
     """The co-simulation master over FMU files (fmus.GeneratorFiles per generator)."""
 
     def __init__(self, files, grid: WSCC9, settings: MasterSettings):
-        self.kind = "+".join(sorted({f.kind for f in files}))
         self.settings = settings
         self.master = GridMaster(files, grid, settings)
 

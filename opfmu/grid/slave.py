@@ -50,7 +50,6 @@ class Slave:
         if cs is None:
             raise CouplingError(f"{name}: {path} is not a co-simulation FMU")
         self.model_name = md.modelName
-        self.guid = md.guid
         variables = {v.name: v for v in md.modelVariables}
         vr = {n: v.valueReference for n, v in variables.items()}
         missing = [n for n in (*inputs, *outputs, *start) if n not in vr]

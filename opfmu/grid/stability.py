@@ -48,9 +48,9 @@ class CCTResult:
 
 
 def critical_clearing_time(stable, contingency: Contingency, resolution: float = 1e-3,
-                           max_duration: float = 1.0, first_duration: float = 0.05, progress=None) -> CCTResult:
+                           max_duration: float = 1.0, first_duration: float = 0.05) -> CCTResult:
     """The CCT of `contingency` (its clearing time is what varies) with `stable(contingency) ->
-    bool` deciding each run; `progress(clear_s, stable)` is told after each run."""
+    bool` deciding each run."""
     if contingency.fault_bus is None:
         raise ValueError("a critical clearing time needs a fault")
     if not (0 < resolution <= 0.1 and math.isfinite(resolution)):
@@ -62,8 +62,6 @@ def critical_clearing_time(stable, contingency: Contingency, resolution: float =
         clear = round(start + duration, 9)
         verdict = bool(stable(contingency.with_clearing(clear)))
         runs.append((clear, verdict))
-        if progress:
-            progress(clear, verdict)
         return verdict
 
     lo, hi = 0.0, None  # fault durations: lo stable (0: no fault at all), hi unstable

@@ -39,12 +39,7 @@ class Contingency:
 
     def __post_init__(self):
         if self.trip is not None:
-            br = wscc9.branch(self.trip)
-            if wscc9.disconnects_generator(br):
-                raise ValueError(f"opening branch {br.name} disconnects a generator (branches that may open at its "
-                                 f"buses: {', '.join(wscc9.trips_at(br.from_bus))}; "
-                                 f"{', '.join(wscc9.trips_at(br.to_bus))})")
-            object.__setattr__(self, "trip", br.name)
+            object.__setattr__(self, "trip", wscc9.openable(self.trip).name)
         if not (isinstance(self.fault_start, (int, float)) and math.isfinite(self.fault_start) and self.fault_start >= 0):
             raise ValueError(f"the fault start must be a time >= 0 s, got {self.fault_start!r}")
         if self.clear_s is not None and not (isinstance(self.clear_s, (int, float)) and math.isfinite(self.clear_s)):

@@ -166,12 +166,7 @@ class WSCC9:
                 out_of_service=()) -> Network:
         """The topology with the loads, a fault shunt at `fault_bus` (None: none) and the named
         branches open, reduced to the generator buses."""
-        opened = tuple(wscc9.branch(b) for b in out_of_service)
-        for br in opened:
-            if wscc9.disconnects_generator(br):
-                raise ValueError(f"opening branch {br.name} disconnects a generator (branches that may open at "
-                                 f"its buses: {', '.join(wscc9.trips_at(br.from_bus))}; "
-                                 f"{', '.join(wscc9.trips_at(br.to_bus))})")
+        opened = tuple(wscc9.openable(b) for b in out_of_service)
         Y = wscc9.assemble_ybus(opened) if opened else np.array(self.flow.Ybus)
         Y = Y + np.diag(self.load_admittances)
         parts = []

@@ -131,6 +131,16 @@ def disconnects_generator(trip) -> bool:
     return not set(GENERATOR_BUSES) <= connected_buses([trip])
 
 
+def openable(name) -> Branch:
+    """The branch named `name` (see `branch`), refused with a ValueError naming the branches that may
+    open instead when opening it would cut a generator off."""
+    br = branch(name)
+    if disconnects_generator(br):
+        raise ValueError(f"opening branch {br.name} disconnects a generator (branches that may open at its "
+                         f"buses: {', '.join(trips_at(br.from_bus))}; {', '.join(trips_at(br.to_bus))})")
+    return br
+
+
 def trips_at(bus: int) -> tuple:
     """The branches at `bus` whose opening keeps every generator connected (names "a-b")."""
     bus_index(bus)
