@@ -6,13 +6,15 @@ config.h (sizes, envelope, defaults, component tables, GUID), variables.h (the v
 the model description, fmu_export.variables), equations.c (the component's right-hand side and
 outputs, fmu_export.c_equations), derivatives.c (their exact partial derivatives,
 fmu_export.c_derivatives: the directional derivatives), operator_kernel.c (from the ONNX graph) and
-sensor_sums.c. With the static sources in c/ (fmi2_cs.c: FMI plumbing; model.h: its interface to a
-model; window.c: the window-and-sensor engine; corrections.c; variables.c: the component's variables;
-surrogate_variables.c and surrogate_state.h: the surrogate's own variables and state; linalg.c) they
-compile (gcc) into
-binaries/linux64/<model>.so, which needs libc and libm only. The compiled kernel is checked against
-onnxruntime before the FMU is written; the .onnx goes into resources/ and the C sources into
-sources/. Only numbers, generated identifiers and escaped component names reach the C sources.
+sensor_sums.c. With the static sources in c/ (fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 plumbing;
+model.h: its interface to a model; window.c: the window-and-sensor engine; corrections.c;
+variables.c: the component's variables; surrogate_variables.c and surrogate_state.h: the
+surrogate's own variables and state; linalg.c) they compile into one binary per platform
+(binaries.py), which needs the C runtime only. The host's compiled kernel is checked against
+onnxruntime, and the other platforms' binaries against the host's by running them where an emulator
+is installed (cross_check.py), before the FMU is written; the .onnx goes into resources/ and the C
+sources into sources/. Only numbers, generated identifiers and escaped component names reach the C
+sources.
 """
 from __future__ import annotations
 
@@ -21,21 +23,22 @@ import hashlib
 import math
 import re
 import shutil
-import subprocess
 import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from reference_models.files import atomic_path
 from surrogate.contract import ContractError, check_scale, drifted, operator_metadata, random_inputs
 from surrogate.frame_graph import network_graph
 
+from .binaries import PLUMBING, BuildError, check_fmi_version, compile_binaries, compile_c, targets
 from .c_derivatives import jacobians_c_source
 from .c_equations import equations_c_source
+from .cross_check import cross_check
+from .fmu_archive import write_fmu
 from .model_description import model_description
 from .onnx_to_c import generate_kernel
+from .platforms import host
 from .variables import SURROGATE_EXTRAS, fmu_variables, start_inputs, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
@@ -47,10 +50,10 @@ DEFAULT_RESTART_JUMP = 0.02
 DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (corrections.c: the rest correction)
 DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (corrections.c: the slow-mode correction)
 DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (corrections.c: the exact affine step)
-STATIC_SOURCES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c",
-                  "model.h", "surrogate_state.h", "engine.h", "linalg.h")
-C_FILES = ("fmi2_cs.c", "window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c",
-           "equations.c", "derivatives.c", "operator_kernel.c", "sensor_sums.c")
+MODEL_SOURCES = ("window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c", "model.h",
+                 "surrogate_state.h", "engine.h", "linalg.h")
+C_FILES = ("window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c", "equations.c",
+           "derivatives.c", "sensor_sums.c")  # beside the plumbing and the operator kernel (compiled once)
 MODEL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 C_KEYWORDS = frozenset("auto break case char const continue default do double else enum extern float for goto if "
                        "inline int long register restrict return short signed sizeof static struct switch typedef "
@@ -61,24 +64,6 @@ C_KEYWORDS = frozenset("auto break case char const continue default do double el
 # arithmetic), relative to contract.check_scale: onnxruntime's own rounding through three 128-wide
 # layers and 4 x 96 basis products reaches 1.1e-5 of the scale for the WSCC machines' operators
 KERNEL_TOLERANCE = 5e-5
-
-class BuildError(ValueError):
-    """The FMU cannot be built as asked (bad operator file, compiler failure, kernel mismatch); the
-    message is one line."""
-
-    def __init__(self, message: str):
-        super().__init__(" ".join(str(message).split()))
-
-
-def fmi_headers() -> Path:
-    """fmpy's copy of the FMI 2.0 headers."""
-    import fmpy
-
-    path = Path(fmpy.__file__).parent / "c-code"
-    if not (path / "fmi2Functions.h").exists():
-        raise BuildError(f"FMI 2.0 headers not found in {path} (is fmpy installed?)")
-    return path
-
 
 def _c_double(value) -> str:
     """A C double literal: shortest round-trip repr of a finite value, or -INFINITY."""
@@ -260,10 +245,17 @@ def default_state(meta: dict, onnx_path: Path) -> np.ndarray:
     return x
 
 
-def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_check: int = 32) -> dict:
-    """Write the FMU to `out`; returns {"guid", "max_abs_diff", "size_bytes"}."""
+def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_check: int = 32, platforms=None,
+                        fmi_version: int = 2) -> dict:
+    """Write the FMU to `out`. platforms: the binaries it carries (platforms.Platform objects or names;
+    None: the host's only); fmi_version: 2 or 3 (the same model code, another plumbing). Binaries of
+    other platforms are run here, and compared with the host's, where an emulator is installed.
+
+    Returns {"guid", "max_abs_diff", "size_bytes", "binaries", "checks"} (binaries: {platform:
+    {"path", "size_bytes"}}; checks: {platform: what running it found})."""
     onnx_path, out = Path(onnx_path), Path(out)
     check_model_name(model_name)
+    version, chosen = check_fmi_version(fmi_version), targets(platforms)
     proto, meta = load_operator(onnx_path)
     component, params = meta["component"], meta["params"]
     x_default = default_state(meta, onnx_path)
@@ -284,45 +276,43 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
     derivatives = derivatives_source(component, params)
 
     with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "sources"
+        tmp = Path(tmp)
+        src = tmp / "sources"
         src.mkdir()
-        for name in STATIC_SOURCES:
+        for name in (PLUMBING[version], *MODEL_SOURCES):
             shutil.copy(C_DIR / name, src / name)
-        guid = _guid(onnx_path, model_name, kernel.source + equations + derivatives)
+        guid = _guid(onnx_path, model_name, kernel.source + equations + derivatives, version)
         (src / "operator_kernel.c").write_text(kernel.source)
         (src / "equations.c").write_text(equations)
         (src / "derivatives.c").write_text(derivatives)
         (src / "variables.h").write_text(vr_header(variables, component))
         first_layer = kernel.first_layer
         suffix = None
-        # the kernel (megabytes of weights) is compiled once, for the probe and for the binary
-        kernel_object = _compile(Path(tmp) / "operator_kernel.o", [src / "operator_kernel.c"], src, shared=False)
+
+        def kernel_object(target):  # the kernel (megabytes of weights) is compiled once per platform
+            path = tmp / f"operator_kernel-{target.name}.o"
+            return [path if path.exists() else compile_c(path, [src / "operator_kernel.c"], src, "object", target)]
+
         if first_layer:
-            probe = _compile(Path(tmp) / "probe.so", [kernel_object], src)
+            probe = compile_c(tmp / "probe.so", kernel_object(host()), src)
             suffix = sensor_suffix_sums(probe, n_sensors, first_layer, component.n_states, component.n_inputs)
             first_layer = first_layer if suffix is not None else 0
         (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer, meta.get("frame"),
                                                               meta["horizon_s"]))
         (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel))
-        binary = _compile(Path(tmp) / f"{model_name}.so",
-                          [src / f for f in C_FILES if f != "operator_kernel.c"] + [kernel_object], src)
-        worst = check_kernel(binary, proto, meta, n_check)
+        binaries = compile_binaries(tmp, model_name, [src / f for f in C_FILES], src, chosen, version, kernel_object)
+        worst = check_kernel(binaries[host()], proto, meta, n_check)
         if not worst <= KERNEL_TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {KERNEL_TOLERANCE:g}); "
                              "FMU not written")
+        checks = cross_check(binaries, variables, guid, version, tmp / "check", interpolates=version == 2)
         xml = model_description(model_name, guid, variables,
                                 f"{component.description}; PI-DeepONet surrogate evaluated from buffered input sensors",
-                                directional_derivatives=True, interpolates_inputs=True)
-        try:
-            with atomic_path(out) as tmp_fmu, zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as fmu:
-                fmu.writestr("modelDescription.xml", xml)
-                fmu.write(binary, f"binaries/linux64/{model_name}.so")
-                fmu.write(onnx_path, "resources/model.onnx")
-                for path in sorted(src.iterdir()):
-                    fmu.write(path, f"sources/{path.name}")
-        except OSError as exc:
-            raise BuildError(f"cannot write {out}: {exc.strerror or exc}") from None
-    return {"guid": guid, "max_abs_diff": worst, "size_bytes": out.stat().st_size}
+                                directional_derivatives=True, interpolates_inputs=True, fmi_version=version)
+        written = write_fmu(out, tmp, xml, model_name, version, {p: binaries[p] for p in chosen},
+                            {"model.onnx": onnx_path}, src)
+    return {"guid": guid, "max_abs_diff": worst, "size_bytes": written["size_bytes"], "binaries": written["binaries"],
+            "checks": checks}
 
 
 def derivatives_source(component, params) -> str:
@@ -338,30 +328,15 @@ def derivatives_source(component, params) -> str:
             "{\n    model_outputs_jacobian(x, u, J);\n}\n")
 
 
-def _guid(onnx_path: Path, model_name: str, generated: str) -> str:
-    """A GUID that changes with everything compiled into the binary: operator, name and C sources."""
-    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode() + generated.encode())
-    for name in STATIC_SOURCES:
+def _guid(onnx_path: Path, model_name: str, generated: str, version: int = 2) -> str:
+    """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary:
+    operator, name, FMI version and C sources."""
+    digest = hashlib.sha256(onnx_path.read_bytes() + model_name.encode() + generated.encode()
+                            + (b"" if version == 2 else b"\0fmi3"))
+    for name in (PLUMBING[version], *MODEL_SOURCES):
         digest.update((C_DIR / name).read_bytes())
     h = digest.hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"
-
-
-def _compile(binary: Path, sources, include: Path, shared: bool = True) -> Path:
-    """gcc -O3 of C sources (and object files) into the shared library `binary`, or with shared=False
-    one source into the object file `binary`; BuildError with gcc's first error otherwise."""
-    link = ["-shared"] if shared else ["-c"]
-    command = ["gcc", "-O3", *link, "-fPIC", "-std=c99", "-Wall", "-I", str(fmi_headers()), "-I", str(include),
-               *map(str, sources), "-o", str(binary), *(["-lm"] if shared else [])]
-    try:
-        result = subprocess.run(command, capture_output=True, text=True)
-    except OSError as exc:
-        raise BuildError(f"cannot run gcc ({exc.strerror or exc}): a C compiler is needed to build the FMU") from None
-    if result.returncode != 0:
-        lines = result.stderr.strip().splitlines()
-        errors = [line for line in lines if "error" in line] or lines or [f"exit code {result.returncode}"]
-        raise BuildError(f"gcc failed: {errors[0][:300]}")
-    return binary
 
 
 def sensor_suffix_sums(library: Path, n_sensors: int, width: int, n_states: int, n_inputs: int):

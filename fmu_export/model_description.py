@@ -1,8 +1,9 @@
-"""modelDescription.xml of opfmu's FMUs (FMI 2.0 co-simulation), written with ElementTree.
+"""modelDescription.xml of opfmu's FMUs (FMI 2.0 or 3.0 co-simulation), written with ElementTree.
 
 Variables come from variables.py; ModelStructure gives every output's dependencies (the states
-depend on no input within a step, a derived output directly on the inputs its equation reads),
-with indices as 1-based positions in ModelVariables.
+depend on no input within a step, a derived output directly on the inputs its equation reads):
+in FMI 2.0 as 1-based positions in ModelVariables, in FMI 3.0 as value references (unique across
+types there: variables.fmi3_value_references), with the independent variable `time` FMI 3.0 requires.
 """
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import xml.etree.ElementTree as ET
 
 from reference_models.version import __version__
 
-from .variables import Variable
+from .variables import TIME, Variable, fmi3_value_references
 
 
 # SI base-unit exponents of the units components use; a unit not listed is declared without them
@@ -23,13 +24,22 @@ def unit_names(variables: list[Variable]) -> list[str]:
     return list(dict.fromkeys(v.unit for v in variables if v.unit))
 
 
+LOG_CATEGORIES = (("logStatusWarning", "warnings: inputs or states outside the trained envelope"),
+                  ("logStatusError", "errors: invalid calls and values"), ("logAll", "everything"))
+
+
 def model_description(model_name: str, guid: str, variables: list[Variable], description: str,
                       stop_time: float = 10.0, step: float = 0.01, directional_derivatives: bool = False,
-                      interpolates_inputs: bool = False) -> bytes:
-    """The XML document (UTF-8 bytes). directional_derivatives: the FMU provides
-    fmi2GetDirectionalDerivative (providesDirectionalDerivative); interpolates_inputs: it takes
-    first input derivatives with fmi2SetRealInputDerivatives, the inputs linear over a step
-    (canInterpolateInputs)."""
+                      interpolates_inputs: bool = False, fmi_version: int = 2) -> bytes:
+    """The XML document (UTF-8 bytes) of an FMI `fmi_version` (2 or 3) co-simulation FMU.
+    directional_derivatives: the FMU provides the outputs' derivatives with respect to the inputs
+    (FMI 2.0 fmi2GetDirectionalDerivative; FMI 3.0 also fmi3GetAdjointDerivative); interpolates_inputs:
+    it takes first input derivatives with fmi2SetRealInputDerivatives, the inputs linear over a step
+    (canInterpolateInputs; FMI 3.0 has no such call, its inputs are held over a step)."""
+    if fmi_version == 3:
+        return _fmi3_document(model_name, guid, variables, description, stop_time, step, directional_derivatives)
+    if fmi_version != 2:
+        raise ValueError(f"FMI version {fmi_version!r}: 2 or 3")
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_name, "guid": guid, "description": description,
         "generationTool": f"opfmu {__version__}", "variableNamingConvention": "flat",
@@ -42,44 +52,92 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
     if directional_derivatives:
         capabilities["providesDirectionalDerivative"] = "true"
     ET.SubElement(root, "CoSimulation", capabilities)
-    units = ET.SubElement(root, "UnitDefinitions")
-    for name in unit_names(variables):
-        unit = ET.SubElement(units, "Unit", {"name": name})
-        if name in BASE_UNITS:
-            ET.SubElement(unit, "BaseUnit", BASE_UNITS[name])
-    categories = ET.SubElement(root, "LogCategories")
-    for name, text in (("logStatusWarning", "warnings: inputs or states outside the trained envelope"),
-                       ("logStatusError", "errors: invalid calls and values"), ("logAll", "everything")):
-        ET.SubElement(categories, "Category", {"name": name, "description": text})
-    ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stopTime": repr(stop_time), "stepSize": repr(step)})
+    _units_categories_experiment(root, variables, stop_time, step)
     mv = ET.SubElement(root, "ModelVariables")
     for v in variables:
-        attrs = {"name": v.name, "valueReference": str(v.vr), "causality": v.causality, "description": v.description}
-        if v.causality == "parameter":
-            attrs.update(variability="fixed", initial="exact")
-        elif v.causality == "input":
-            attrs["variability"] = "continuous" if v.kind == "Real" else "discrete"
-        else:
-            attrs.update(variability="continuous" if v.kind == "Real" else "discrete", initial="calculated")
-        sv = ET.SubElement(mv, "ScalarVariable", attrs)
+        sv = ET.SubElement(mv, "ScalarVariable", {"name": v.name, "valueReference": str(v.vr),
+                                                 "causality": v.causality, "description": v.description,
+                                                 **_variability(v)})
         type_attrs = {"unit": v.unit} if v.unit and v.unit != "pu" else {}
         if v.start is not None:
             type_attrs["start"] = repr(float(v.start))
         ET.SubElement(sv, v.kind, type_attrs)
     structure = ET.SubElement(root, "ModelStructure")
     index = {v.name: i + 1 for i, v in enumerate(variables)}
-    outputs = [v for v in variables if v.causality == "output"]
-    out_el = ET.SubElement(structure, "Outputs")
-    for v in outputs:
-        ET.SubElement(out_el, "Unknown", {"index": str(index[v.name]),
-                                          "dependencies": " ".join(str(index[n]) for n in v.dependencies)})
-    init_el = ET.SubElement(structure, "InitialUnknowns")
-    parameters = [str(index[v.name]) for v in variables if v.causality == "parameter"]
-    for v in outputs:
-        deps = [str(index[n]) for n in v.dependencies] + parameters
-        ET.SubElement(init_el, "Unknown", {"index": str(index[v.name]), "dependencies": " ".join(deps)})
+    _structure(structure, variables, index, "Outputs", "InitialUnknowns", "Unknown", "index")
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _fmi3_document(model_name: str, guid: str, variables: list[Variable], description: str, stop_time: float,
+                   step: float, directional_derivatives: bool) -> bytes:
+    """modelDescription.xml of FMI 3.0 co-simulation: Float64 and Boolean variables, `time` as the
+    independent variable, no event mode, variable communication steps, FMU state, and (if
+    directional_derivatives) directional and adjoint derivatives."""
+    refs = fmi3_value_references(variables)
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": "3.0", "modelName": model_name, "instantiationToken": guid, "description": description,
+        "generationTool": f"opfmu {__version__}", "variableNamingConvention": "flat"})
+    flags = "true" if directional_derivatives else "false"
+    ET.SubElement(root, "CoSimulation", {
+        "modelIdentifier": model_name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
+        "providesDirectionalDerivatives": flags, "providesAdjointDerivatives": flags,
+        "canHandleVariableCommunicationStepSize": "true", "hasEventMode": "false"})
+    _units_categories_experiment(root, variables, stop_time, step)
+    mv = ET.SubElement(root, "ModelVariables")
+    ET.SubElement(mv, "Float64", {"name": TIME, "valueReference": str(refs[TIME]), "causality": "independent",
+                                  "variability": "continuous", "description": "simulation time", "unit": "s"})
+    for v in variables:
+        attrs = {"name": v.name, "valueReference": str(refs[v.name]), "causality": v.causality,
+                 "description": v.description, **_variability(v)}
+        if v.unit and v.unit != "pu":
+            attrs["unit"] = v.unit
+        if v.start is not None:
+            attrs["start"] = repr(float(v.start)) if v.kind == "Real" else ("true" if v.start else "false")
+        ET.SubElement(mv, "Float64" if v.kind == "Real" else v.kind, attrs)
+    structure = ET.SubElement(root, "ModelStructure")
+    _structure(structure, variables, refs, "Output", "InitialUnknown", None, "valueReference")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _variability(v: Variable) -> dict:
+    """variability and initial of a variable (the same in FMI 2.0 and 3.0)."""
+    if v.causality == "parameter":
+        return {"variability": "fixed", "initial": "exact"}
+    variability = "continuous" if v.kind == "Real" else "discrete"
+    if v.causality == "input":
+        return {"variability": variability}
+    return {"variability": variability, "initial": "calculated"}
+
+
+def _units_categories_experiment(root, variables: list[Variable], stop_time: float, step: float) -> None:
+    units = ET.SubElement(root, "UnitDefinitions")
+    for name in unit_names(variables) + (["s"] if root.get("fmiVersion") == "3.0" else []):
+        if units.find(f"Unit[@name='{name}']") is not None:
+            continue
+        unit = ET.SubElement(units, "Unit", {"name": name})
+        if name in BASE_UNITS:
+            ET.SubElement(unit, "BaseUnit", BASE_UNITS[name])
+    categories = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        ET.SubElement(categories, "Category", {"name": name, "description": text})
+    ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stopTime": repr(stop_time), "stepSize": repr(step)})
+
+
+def _structure(structure, variables: list[Variable], key: dict, outputs_tag: str, initial_tag: str, item_tag,
+               attribute: str) -> None:
+    """ModelStructure: each output with its direct dependencies on inputs, then each output as an
+    initial unknown (depending on those inputs and every parameter). FMI 2.0 groups the items
+    (<Outputs><Unknown index=...>), FMI 3.0 lists them (<Output valueReference=...>); `key` gives
+    the number an item and a dependency are named by."""
+    outputs = [v for v in variables if v.causality == "output"]
+    parameters = [str(key[v.name]) for v in variables if v.causality == "parameter"]
+    for tag, extra in ((outputs_tag, []), (initial_tag, parameters)):
+        parent = ET.SubElement(structure, tag) if item_tag else structure
+        for v in outputs:
+            deps = [str(key[n]) for n in v.dependencies] + extra
+            ET.SubElement(parent, item_tag or tag, {attribute: str(key[v.name]), "dependencies": " ".join(deps)})
 
 
 def validation_problems(fmu) -> list[str]:

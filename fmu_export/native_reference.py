@@ -6,9 +6,10 @@ solver's default tolerances, GUID), variables.h (the value references of the mod
 fmu_export.variables: the same table as the surrogate's, less its own variables, plus rtol and atol),
 equations.c (the component's right-hand side and derived outputs, fmu_export.c_equations: the same
 C the surrogate FMU runs) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
-With the static sources in c/ (fmi2_cs.c: the FMI plumbing both native FMUs share; variables.c: the
-component's variables; reference_model.c and reference_state.h: the step and the state; dopri5.c:
-the integrator) they compile (gcc) into binaries/linux64/<model>.so, which needs libc and libm only.
+With the static sources in c/ (fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 plumbing both native FMUs
+share; variables.c: the component's variables; reference_model.c and reference_state.h: the step and
+the state; dopri5.c: the integrator) they compile into one binary per platform (binaries.py: gcc for
+linux64, MinGW-w64 for win64, ...), which needs the C runtime only.
 The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;
 the binary has them compiled in).
 
@@ -29,25 +30,25 @@ import hashlib
 import json
 import shutil
 import tempfile
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from reference_models.component import Component, ParameterError
-from reference_models.files import atomic_path
 from reference_models.sm4 import SM4
 
-from .builder import BuildError, _c_double, _compile, check_model_name, component_config, derivatives_source
+from .binaries import PLUMBING, check_fmi_version, compile_binaries, targets
+from .builder import BuildError, _c_double, check_model_name, component_config, derivatives_source
 from .c_equations import equations_c_source
-from .model_description import model_description, validation_problems
+from .cross_check import cross_check
+from .fmu_archive import write_fmu
+from .model_description import model_description
 from .reference_fmu import machine_params
 from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
-STATIC_SOURCES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h",
-                  "dopri5.h")
-C_FILES = ("fmi2_cs.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
+MODEL_SOURCES = ("variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h", "dopri5.h")
+C_FILES = ("variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")  # beside the plumbing
 RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
 
@@ -64,19 +65,25 @@ def native_reference_variables(component: Component = SM4, params=None):
 
 
 def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
-                               params=None, operating_point: dict | None = None) -> dict:
+                               params=None, operating_point: dict | None = None, platforms=None,
+                               fmi_version: int = 2) -> dict:
     """Write the native reference FMU of `component` with parameters `params` (None: its defaults; a
     mapping of some of them; or a parameter object) to `out`, atomically; its inputs start at
     `operating_point` ({input: value}, the rest at the component's start values) and its initial
-    state at the equilibrium there.
+    state at the equilibrium there. platforms: the binaries it carries (platforms.Platform objects or
+    names; None: the host's only); fmi_version: the FMI version, 2 or 3 (the same model code, another
+    plumbing). Binaries of other platforms are run here, and compared with the host's, where an
+    emulator is installed (cross_check).
 
-    Returns {"path", "size_bytes", "guid", "params"} (params: every parameter of the machine built
-    in). Raises NativeReferenceError (a ValueError, subclass of builder.BuildError) with a one-line
-    message for anything that stops the build."""
+    Returns {"path", "size_bytes", "guid", "params", "binaries", "checks"} (params: every parameter
+    of the machine built in; binaries: {platform: {"path", "size_bytes"}}; checks: {platform: what
+    running it found}). Raises NativeReferenceError (a ValueError, subclass of builder.BuildError)
+    with a one-line message for anything that stops the build."""
     out = Path(out)
     try:
         check_model_name(model_name)
         params = machine_params(component, params)
+        version, chosen = check_fmi_version(fmi_version), targets(platforms)
     except (BuildError, ParameterError) as exc:
         raise NativeReferenceError(str(exc)) from None
     x_start = _start_state(component, params, operating_point)
@@ -86,38 +93,27 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL"),
         "derivatives.c": derivatives_source(component, params),
     }
-    guid = _guid(model_name, component, params, generated, operating_point)
+    guid = _guid(model_name, component, params, generated, operating_point, version)
     generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
-                            interpolates_inputs=True)
+                            interpolates_inputs=True, fmi_version=version)
     with tempfile.TemporaryDirectory(prefix="opfmu_native_reference_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        for name in STATIC_SOURCES:
+        for name in (PLUMBING[version], *MODEL_SOURCES):
             shutil.copy(C_DIR / name, src / name)
         for name, text in generated.items():
             (src / name).write_text(text)
         try:
-            binary = _compile(Path(tmp) / f"{model_name}.so", [src / f for f in C_FILES], src)
+            binaries = compile_binaries(Path(tmp), model_name, [src / f for f in C_FILES], src, chosen, version)
+            checks = cross_check(binaries, variables, guid, version, Path(tmp) / "check", interpolates=version == 2)
+            written = write_fmu(out, Path(tmp), xml, model_name, version, {p: binaries[p] for p in chosen},
+                                {"machine.json": (json.dumps(params.to_dict(), indent=2) + "\n").encode()}, src)
         except BuildError as exc:
             raise NativeReferenceError(str(exc)) from None
-        fmu_tmp = Path(tmp) / "fmu.fmu"
-        with zipfile.ZipFile(fmu_tmp, "w", zipfile.ZIP_DEFLATED) as fmu:
-            fmu.writestr("modelDescription.xml", xml)
-            fmu.write(binary, f"binaries/linux64/{model_name}.so")
-            fmu.writestr("resources/machine.json", json.dumps(params.to_dict(), indent=2) + "\n")
-            for path in sorted(src.iterdir()):
-                fmu.write(path, f"sources/{path.name}")
-        problems = validation_problems(fmu_tmp)
-        if problems:
-            raise NativeReferenceError("the native reference FMU does not validate: " + "; ".join(problems)[:500])
-        try:
-            with atomic_path(out) as target:
-                shutil.copy2(fmu_tmp, target)
-        except OSError as exc:
-            raise NativeReferenceError(f"cannot write {out}: {exc.strerror or exc}") from None
-    return {"path": str(out), "size_bytes": out.stat().st_size, "guid": guid, "params": params.to_dict()}
+    return {"path": str(out), "size_bytes": written["size_bytes"], "guid": guid, "params": params.to_dict(),
+            "binaries": written["binaries"], "checks": checks}
 
 
 def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None) -> str:
@@ -143,15 +139,17 @@ def _start_state(component: Component, params, operating_point=None) -> np.ndarr
         raise NativeReferenceError(str(exc)) from None
 
 
-def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None) -> str:
-    """A GUID that changes with everything compiled into the binary: name, machine, operating point
-    and C sources."""
+def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None,
+          version: int = 2) -> str:
+    """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary:
+    name, machine, operating point, FMI version and C sources."""
     digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
                             + json.dumps(params.to_dict(), sort_keys=True).encode() + b"\0"
-                            + json.dumps(operating_point or {}, sort_keys=True).encode())
+                            + json.dumps(operating_point or {}, sort_keys=True).encode()
+                            + (b"" if version == 2 else b"\0fmi3"))
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())
-    for name in STATIC_SOURCES:
+    for name in (PLUMBING[version], *MODEL_SOURCES):
         digest.update(name.encode() + b"\0" + (C_DIR / name).read_bytes())
     h = digest.hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"

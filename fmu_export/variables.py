@@ -121,6 +121,26 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
     return out
 
 
+TIME = "time"  # the independent variable FMI 3.0 requires
+
+
+def fmi3_first_boolean(variables: list[Variable]) -> int:
+    """The FMI 3.0 value reference of the first Boolean: one past the last Real."""
+    return sum(v.kind == "Real" for v in variables)
+
+
+def fmi3_value_references(variables: list[Variable]) -> dict[str, int]:
+    """FMI 3.0 value references by name (unique across types, as FMI 3.0 requires): every Real keeps
+    its FMI 2.0 one, Boolean b is fmi3_first_boolean + b, and the independent variable `time` comes
+    last."""
+    first_boolean = fmi3_first_boolean(variables)
+    refs = {v.name: v.vr + (first_boolean if v.kind == "Boolean" else 0) for v in variables}
+    if TIME in refs:
+        raise ValueError(f"a variable may not be named {TIME!r}: FMI 3.0 reserves it for the independent variable")
+    refs[TIME] = len(variables)
+    return refs
+
+
 C_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 KIND_TOKENS = {"input": "VAR_INPUT", "parameter": "VAR_PARAMETER", "output": "VAR_OUTPUT"}
 
@@ -147,7 +167,11 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     if [v.vr for v in reals] != list(range(len(reals))):
         raise ValueError("Real value references must be 0, 1, ... without gaps")
     booleans = [v for v in variables if v.kind == "Boolean"]
+    fmi3 = fmi3_value_references(variables)
     lines += [f"#define VR_REAL_COUNT {len(reals)}u", f"#define VR_BOOLEAN_COUNT {len(booleans)}u",
+              f"#define FMI3_VR_FIRST_BOOLEAN {fmi3_first_boolean(variables)}u /* FMI 3.0: Boolean b is "
+              "FMI3_VR_FIRST_BOOLEAN + b */",
+              f"#define FMI3_VR_TIME {fmi3[TIME]}u /* FMI 3.0: the independent variable */",
               "#define VR_REAL_KINDS {" + ", ".join(KIND_TOKENS[v.causality] for v in reals) + "}"]
     if component is not None:
         by_name = {v.name: v.vr for v in reals}

@@ -131,12 +131,15 @@ def cmd_build_fmu(args) -> None:
     onnx_path = Path(args.model) if args.model else DEFAULT_OPERATOR
     if not onnx_path.exists():
         raise UserError(f"no operator file at {onnx_path}")
+    platforms = _platforms(args.platforms)
     try:
-        info = build_surrogate_fmu(onnx_path, args.output, model_name=args.name)
+        info = build_surrogate_fmu(onnx_path, args.output, model_name=args.name, platforms=platforms,
+                                   fmi_version=args.fmi_version)
     except BuildError as exc:
         raise UserError(str(exc)) from None
-    print(f"wrote {args.output} ({info['size_bytes'] / 1e6:.2f} MB, model {args.name}, guid {info['guid']}); "
-          f"compiled kernel matches onnxruntime to {info['max_abs_diff']:.1e}")
+    print(f"wrote {args.output} (FMI {args.fmi_version}, {info['size_bytes'] / 1e6:.2f} MB, model {args.name}, "
+          f"guid {info['guid']}); compiled kernel matches onnxruntime to {info['max_abs_diff']:.1e}")
+    print(_binaries_report(info))
 
 
 def cmd_build_reference_fmu(args) -> None:
@@ -144,16 +147,56 @@ def cmd_build_reference_fmu(args) -> None:
     from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu
     from opfmu.compare import operator_machine
 
+    if args.python and (args.fmi_version != 2 or args.platforms is not None):
+        raise UserError("--python builds an FMI 2.0 FMU for the Python it runs in; --fmi-version 3 and --platforms "
+                        "are for the native FMU")
+    options = {} if args.python else {"platforms": _platforms(args.platforms), "fmi_version": args.fmi_version}
     build = build_reference_fmu if args.python else build_native_reference_fmu
     try:
         params = operator_machine(args.operator) if args.operator else _machine(args.machine)
         point = _operating_point(args.operator) if args.operator and not args.python else None
-        info = build(args.output, model_name=args.name, params=params, **({"operating_point": point} if point else {}))
+        info = build(args.output, model_name=args.name, params=params, **({"operating_point": point} if point else {}),
+                     **options)
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
     kind = "pythonfmu (scipy RK45)" if args.python else "native (Dormand-Prince 5(4) in C)"
-    print(f"wrote {args.output} ({info['size_bytes'] / 1e3:.0f} kB, {kind}, model {args.name}, guid {info['guid']}); "
-          "fmpy validates it")
+    print(f"wrote {args.output} (FMI {args.fmi_version}, {info['size_bytes'] / 1e3:.0f} kB, {kind}, model {args.name}, "
+          f"guid {info['guid']}); fmpy validates it")
+    if not args.python:
+        print(_binaries_report(info))
+
+
+def _platforms(spec):
+    """The platforms to build (--platforms; default every one whose compiler is found, a note on
+    stderr for each skipped)."""
+    from fmu_export.platforms import PlatformError, select
+
+    try:
+        chosen, notes = select(spec)
+    except PlatformError as exc:
+        raise UserError(str(exc)) from None
+    for note in notes:
+        print(note, file=sys.stderr)
+    return chosen
+
+
+def _binaries_report(info: dict) -> str:
+    """One line per binary: platform, size, and how it was checked."""
+    lines = []
+    for name, binary in info["binaries"].items():
+        check = info["checks"].get(name, "built for this machine and loaded here")
+        lines.append(f"  {binary['path']} ({binary['size_bytes'] / 1e3:.0f} kB): {check}")
+    return "\n".join(lines)
+
+
+def _build_options(parser) -> None:
+    """--platforms and --fmi-version of the native FMU builders."""
+    parser.add_argument("--platforms", default=None, metavar="LIST",
+                        help="comma-separated platforms to carry binaries for: linux64, win64 (MinGW-w64), "
+                             "aarch64-linux (default: every one whose compiler is found; a note for the others). "
+                             "Binaries are run and compared with the host's where wine or qemu-user is installed")
+    parser.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
+                        help="FMI version of the FMU: 2 (default) or 3 (the same model code)")
 
 
 def _operating_point(onnx_path):
@@ -294,16 +337,17 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--data", default=None, help="dataset for envelope and test metrics (default: the first run's)")
     ex.set_defaults(func=cmd_export)
 
-    fmu = sub.add_parser("build-fmu", help="build the native FMI 2.0 co-simulation FMU of an operator",
+    fmu = sub.add_parser("build-fmu", help="build the native FMI 2.0 or 3.0 co-simulation FMU of an operator",
                          description="Generate C from the ONNX graph and the SM4 equations, compile it, check it "
                                      "against onnxruntime and write the FMU (no Python needed to run it).")
     fmu.add_argument("model", nargs="?", default=None, help="operator .onnx (default: the shipped operator)")
     fmu.add_argument("-o", "--output", default="SM4Surrogate.fmu", help="FMU file (default SM4Surrogate.fmu)")
     fmu.add_argument("--name", default="SM4Surrogate", help="model name and identifier (default SM4Surrogate)")
+    _build_options(fmu)
     fmu.set_defaults(func=cmd_build_fmu)
 
     ref = sub.add_parser("build-reference-fmu", help="build the reference FMU (native Dormand-Prince 5(4))",
-                         description="An FMI 2.0 co-simulation FMU of SM4 that integrates the ODE over each step "
+                         description="An FMI 2.0 (or 3.0) co-simulation FMU of SM4 that integrates the ODE over each step "
                                      "with an adaptive Dormand-Prince 5(4) (RK45) compiled from the component's "
                                      "equations (--python: scipy's RK45 under pythonfmu instead); same variables as "
                                      "the surrogate FMU. The machine: --machine FILE, or that of an operator file "
@@ -316,6 +360,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="take the machine an exported operator was trained for")
     ref.add_argument("-o", "--output", default="SM4Reference.fmu", help="FMU file (default SM4Reference.fmu)")
     ref.add_argument("--name", default="SM4Reference", help="model name and identifier (default SM4Reference)")
+    _build_options(ref)
     ref.set_defaults(func=cmd_build_reference_fmu)
 
     from reference_models.scenarios import SCENARIOS

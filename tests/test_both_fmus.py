@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 
-from fmu_export.builder import fmi_headers
+from fmu_export.binaries import fmi_headers
 from fmu_slave import Slave
 from reference_models.sm4 import SM4
 

@@ -12,7 +12,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
-from fmu_export.builder import fmi_headers
+from fmu_export.binaries import fmi_headers
 from fmu_export.native_reference import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
                                          native_reference_variables)
 from fmu_export.reference_fmu import reference_variables

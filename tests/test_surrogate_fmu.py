@@ -497,7 +497,7 @@ def test_the_default_residual_limit_stays_quiet_on_a_quiet_run_and_zero_turns_th
 
 @pytest.mark.skipif(not __import__("shutil").which("valgrind"), reason="valgrind is not installed")
 def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp_path):
-    from fmu_export.builder import fmi_headers
+    from fmu_export.binaries import fmi_headers
 
     harness = tmp_path / "harness"
     source = __file__.rsplit("/", 1)[0] + "/c/lifecycle_harness.c"

@@ -14,9 +14,10 @@
 #define OPFMU_DOPRI5_H
 
 /* not exported from a shared library unless compiled with -DDOPRI5_EXPORT (an FMU's binary exports
-   its FMI functions only; a program that links dopri5.c in needs nothing) */
+   its FMI functions only; a program that links dopri5.c in needs nothing; on Windows only what is
+   declared dllexport is exported) */
 #ifndef DOPRI5_API
-#if defined(__GNUC__) && !defined(DOPRI5_EXPORT)
+#if defined(__GNUC__) && !defined(_WIN32) && !defined(DOPRI5_EXPORT)
 #define DOPRI5_API __attribute__((visibility("hidden")))
 #else
 #define DOPRI5_API

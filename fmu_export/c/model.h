@@ -21,8 +21,9 @@
 
 #include "config.h"
 
-/* functions shared between the FMU's source files but not exported from its binary */
-#if defined(__GNUC__)
+/* functions shared between the FMU's source files but not exported from its binary (on Windows
+   only the FMI functions, declared dllexport by the FMI headers, are exported) */
+#if defined(__GNUC__) && !defined(_WIN32)
 #define OPFMU_INTERNAL __attribute__((visibility("hidden")))
 #else
 #define OPFMU_INTERNAL
