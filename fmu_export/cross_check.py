@@ -30,7 +30,11 @@ from .platforms import Platform, host
 from .variables import Variable, fmi3_value_references
 
 HARNESS = Path(__file__).parent / "c" / "fmu_harness.c"
-TOLERANCE = 1e-12  # largest difference accepted between platforms, relative to max(1, |value|)
+# differences between platforms, relative to max(1, |value|): what the FMUs are held to (the libm
+# functions and the kernel's vector loops differ in the last bits between C runtimes and CPUs), and
+# what stops a build (a binary that computes something else, not a rounding)
+TOLERANCE = 1e-12
+BUILD_TOLERANCE = 1e-9
 RUN_TIMEOUT_S = 300  # a harness run (wine makes its prefix on the first one: seconds)
 
 
@@ -252,8 +256,8 @@ def scenario_script(variables: list[Variable], guid: str, version: int = 2, inte
 def cross_check(binaries: dict[Platform, Path], variables: list[Variable], guid: str, version: int, workdir: Path,
                 interpolates: bool = False, seed: int = 0) -> dict[str, str]:
     """Runs the standard scenarios on the host binary and on every other binary this machine can run;
-    {platform name: what was found}. BuildError when a binary's results differ from the host's by more
-    than TOLERANCE, or in anything but rounding."""
+    {platform name: what was found}. BuildError when a binary's results differ from the host's in
+    anything but their doubles (a status, a line), or by more than BUILD_TOLERANCE."""
     found, runnable = {}, []
     for target in binaries:
         if target == host():
@@ -270,9 +274,9 @@ def cross_check(binaries: dict[Platform, Path], variables: list[Variable], guid:
         binary = binaries[target]
         result = compare(base, run_script(target, binary, script, workdir, version))
         how = f"under {target.emulator[0]}"
-        if not result.within():
+        if not result.within(BUILD_TOLERANCE):
             raise BuildError(f"the {target.name} binary, run {how}, differs from the {host().name} one: "
-                             f"{result.mismatch or f'by {result.max_difference:.1e} (> {TOLERANCE:g})'}")
+                             f"{result.mismatch or f'by {result.max_difference:.1e} (> {BUILD_TOLERANCE:g})'}")
         found[target.name] = (f"ran {how}: {result.numbers} numbers, {result.differing} not bit-identical, "
                               f"largest difference {result.max_difference:.1e}")
     return found

@@ -30,9 +30,14 @@ PANEL = 32
 
 
 # The kernel functions are compiled twice on x86-64 with gcc, for AVX2/FMA machines and for any other,
-# and the loader picks one at run time (the FMU stays portable).
+# and the loader picks one at run time (the FMU stays portable). Windows has no such loader (ifunc):
+# there they are compiled once, for any x86-64.
 VECTOR = """#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#if defined(_WIN32)
+#define OPFMU_VECTOR
+#else
 #define OPFMU_VECTOR __attribute__((target_clones("arch=x86-64-v3", "default")))
+#endif
 #ifndef OPFMU_X86 /* -DOPFMU_X86=0 builds the portable loops alone */
 #define OPFMU_X86 1
 #endif

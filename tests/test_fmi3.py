@@ -1,0 +1,229 @@
+"""FMI 3.0 co-simulation of both native FMUs: the same model code behind another plumbing, so under fmpy
+its outputs, FMU states and directional derivatives equal the FMI 2.0 FMU's on the same inputs."""
+import shutil
+import zipfile
+from xml.etree import ElementTree
+
+import numpy as np
+import pytest
+from fmpy import extract, read_model_description, simulate_fmu
+from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
+from fmpy.validation import validate_fmu
+
+from fmu_export.builder import build_surrogate_fmu
+from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.platforms import PLATFORMS
+from surrogate.operator import DEFAULT_OPERATOR
+from tests.test_platforms import random_machine
+
+DERIVED = ("Id", "Iq", "I_re", "I_im", "P", "Q")
+INPUTS = ("Vs", "theta_vs", "Pm", "Efd")
+STATES = ("delta", "omega", "Ed_p", "Eq_p")
+
+
+class Instance:
+    """One FMI 2.0 or 3.0 instance under fmpy, with values by name and what it logs."""
+
+    def __init__(self, path, tmp_path, name="a"):
+        md = read_model_description(str(path))
+        self.version = 3 if md.fmiVersion.startswith("3") else 2
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.starts = {v.name: float(v.start) for v in md.modelVariables if v.causality == "input"}
+        self.messages = []
+        unzipped = extract(str(path), str(tmp_path / f"{name}-{self.version}"))
+        if self.version == 3:
+            self.fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=unzipped,
+                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+            self.fmu.instantiate(logMessage=lambda env, status, category, message: self.messages.append(
+                (status, message.decode())))
+            self.fmu.enterInitializationMode(startTime=0.0)
+        else:
+            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                                 instanceName=name)
+            self.fmu.instantiate()
+            self.fmu.setupExperiment(startTime=0.0)
+            self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+        self.t = 0.0
+
+    def set(self, values: dict):
+        refs, x = [self.vr[n] for n in values], [float(v) for v in values.values()]
+        (self.fmu.setFloat64 if self.version == 3 else self.fmu.setReal)(refs, x)
+
+    def get(self, *names):
+        refs = [self.vr[n] for n in names]
+        return np.array((self.fmu.getFloat64 if self.version == 3 else self.fmu.getReal)(refs))
+
+    def step(self, h):
+        self.fmu.doStep(self.t, h)
+        self.t += h
+
+    def derivatives(self, unknowns, knowns, seed):
+        u, k = [self.vr[n] for n in unknowns], [self.vr[n] for n in knowns]
+        return np.array(self.fmu.getDirectionalDerivative(u, k, list(seed)))
+
+    def free(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def drive(instance, rng, n=120):
+    """Random held input levels at random step sizes (1-25 ms); returns the outputs after each step."""
+    rows = []
+    for k in range(n):
+        if k % 9 == 0:
+            instance.set({name: start * (1 + rng.uniform(-0.04, 0.04)) if start else rng.uniform(-0.05, 0.05)
+                          for name, start in instance.starts.items()})
+        instance.step(float(rng.choice([0.001, 0.004, 0.01, 0.025])))
+        rows.append(instance.get(*STATES, *DERIVED))
+    return np.array(rows)
+
+
+@pytest.fixture(scope="module")
+def reference_pair(tmp_path_factory):
+    """FMI 2.0 and FMI 3.0 native reference FMUs of one random machine."""
+    tmp = tmp_path_factory.mktemp("fmi3_reference")
+    params = random_machine(303)
+    two, three = tmp / "R2.fmu", tmp / "R3.fmu"
+    build_native_reference_fmu(two, model_name="Machine", params=params)
+    info = build_native_reference_fmu(three, model_name="Machine", params=params, fmi_version=3)
+    return two, three, info
+
+
+@pytest.fixture(scope="module")
+def surrogate_fmi3(tmp_path_factory):
+    """The FMI 3.0 surrogate FMU of the shipped operator, with a win64 binary where MinGW-w64 is here
+    (then run under wine at build time where wine is)."""
+    chosen = ["linux64"] + (["win64"] if PLATFORMS["win64"].compiler_found() else [])
+    path = tmp_path_factory.mktemp("fmi3_surrogate") / "SM4Surrogate.fmu"
+    info = build_surrogate_fmu(DEFAULT_OPERATOR, path, platforms=chosen, fmi_version=3)
+    return path, info
+
+
+def test_the_fmi3_reference_validates_and_declares_what_it_does(reference_pair):
+    _, three, info = reference_pair
+    assert validate_fmu(str(three)) == []
+    md = read_model_description(str(three))
+    assert md.fmiVersion == "3.0" and md.instantiationToken == info["guid"]
+    cs = ElementTree.fromstring(zipfile.ZipFile(three).read("modelDescription.xml")).find("CoSimulation").attrib
+    for flag in ("canHandleVariableCommunicationStepSize", "canGetAndSetFMUState", "canSerializeFMUState",
+                 "providesDirectionalDerivatives", "providesAdjointDerivatives"):
+        assert cs[flag] == "true", flag
+    assert cs["hasEventMode"] == "false" and cs["modelIdentifier"] == "Machine"
+    kinds = {v.name: (v.type, v.causality) for v in md.modelVariables}
+    assert kinds["time"] == ("Float64", "independent") and kinds["Vs"] == ("Float64", "input")
+    assert zipfile.ZipFile(three).namelist().count("binaries/x86_64-linux/Machine.so") == 1
+    refs = [v.valueReference for v in md.modelVariables]
+    assert len(set(refs)) == len(refs)
+
+
+def test_the_fmi3_reference_equals_the_fmi2_one_at_variable_steps(reference_pair, tmp_path):
+    two, three, _ = reference_pair
+    a, b = Instance(two, tmp_path), Instance(three, tmp_path)
+    ya, yb = drive(a, np.random.default_rng(5)), drive(b, np.random.default_rng(5))
+    np.testing.assert_allclose(yb, ya, rtol=0, atol=1e-12)
+    assert np.ptp(ya[:, 1]) > 1e-3  # the machine moved
+    assert b.get("time")[0] == pytest.approx(a.t)
+    a.free(), b.free()
+
+
+def test_fmi3_directional_and_adjoint_derivatives_equal_the_fmi2_ones(reference_pair, tmp_path):
+    two, three, _ = reference_pair
+    a, b = Instance(two, tmp_path), Instance(three, tmp_path)
+    rng = np.random.default_rng(8)
+    drive(a, np.random.default_rng(9), 30), drive(b, np.random.default_rng(9), 30)
+    for _ in range(4):
+        seed = rng.normal(size=len(INPUTS))
+        np.testing.assert_allclose(b.derivatives(DERIVED, INPUTS, seed), a.derivatives(DERIVED, INPUTS, seed),
+                                   rtol=0, atol=1e-12)
+    # adjoint: seed over the unknowns, sensitivity over the knowns, = J^T seed
+    jacobian = np.array([a.derivatives(DERIVED, INPUTS, np.eye(len(INPUTS))[k]) for k in range(len(INPUTS))]).T
+    weights = rng.normal(size=len(DERIVED))
+    adjoint = b.fmu.getAdjointDerivative([b.vr[n] for n in DERIVED], [b.vr[n] for n in INPUTS], list(weights),
+                                         nSensitivity=len(INPUTS))  # one per known (fmpy's default: per unknown)
+    np.testing.assert_allclose(adjoint, jacobian.T @ weights, rtol=1e-14, atol=1e-14)
+    assert not np.any(b.derivatives(STATES, INPUTS, np.ones(len(INPUTS))))  # states: no direct dependence
+
+
+def test_an_fmi3_state_restored_from_bytes_in_another_instance_repeats_the_run(reference_pair, tmp_path):
+    _, three, _ = reference_pair
+    a = Instance(three, tmp_path, "a")
+    drive(a, np.random.default_rng(1), 40)
+    state = a.fmu.getFMUState()
+    saved = a.fmu.serializeFMUState(state)
+    t_saved = a.t
+    first = drive(a, np.random.default_rng(2), 30)
+    a.fmu.setFMUState(state)
+    a.t = t_saved
+    np.testing.assert_array_equal(drive(a, np.random.default_rng(2), 30), first)
+    a.fmu.freeFMUState(state)
+    b = Instance(three, tmp_path, "b")
+    b.fmu.setFMUState(b.fmu.deserializeFMUState(saved))
+    b.t = t_saved
+    np.testing.assert_array_equal(drive(b, np.random.default_rng(2), 30), first)
+    a.free(), b.free()
+
+
+def test_bad_fmi3_values_and_calls_are_errors_with_a_logged_reason(reference_pair, tmp_path):
+    _, three, _ = reference_pair
+    a = Instance(three, tmp_path)
+    with pytest.raises(Exception, match="fmi3SetFloat64"):
+        a.set({"Vs": float("nan")})
+    with pytest.raises(Exception, match="fmi3DoStep"):
+        a.fmu.doStep(0.0, 0.0)
+    with pytest.raises(Exception, match="fmi3DoStep"):
+        a.fmu.doStep(1.0, 0.01)  # not the FMU's time
+    with pytest.raises(Exception, match="fmi3SetFloat64"):
+        a.fmu.setFloat64([a.vr["time"]], [1.0])
+    assert len(a.messages) >= 4 and all(status == 3 for status, _ in a.messages)
+    assert any("not finite" in m or "finite" in m for _, m in a.messages)
+    a.step(0.01)  # the FMU still works
+    a.free()
+
+
+def test_fmpy_simulates_the_fmi3_reference_like_the_fmi2_one(reference_pair):
+    two, three, _ = reference_pair
+    signal = np.array([(0.0, 1.0), (0.3, 0.8), (0.6, 1.0), (1.0, 1.0)], dtype=[("time", float), ("Vs", float)])
+    runs = [simulate_fmu(str(p), stop_time=1.0, output_interval=0.01, input=signal, output=list(STATES))
+            for p in (two, three)]
+    for name in STATES:
+        np.testing.assert_allclose(runs[1][name], runs[0][name], rtol=0, atol=1e-12)
+    assert np.ptp(runs[0]["omega"]) > 1e-3
+
+
+def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi3, fmu_path, tmp_path):
+    path, info = surrogate_fmi3
+    assert validate_fmu(str(path)) == []
+    if "win64" in info["checks"]:
+        assert info["checks"]["win64"].startswith(("ran under wine", "not run here"))
+    a, b = Instance(fmu_path, tmp_path), Instance(path, tmp_path)
+    ya, yb = drive(a, np.random.default_rng(21), 150), drive(b, np.random.default_rng(21), 150)
+    np.testing.assert_allclose(yb, ya, rtol=0, atol=1e-12)
+    md = read_model_description(str(path))
+    flag = next(v for v in md.modelVariables if v.name == "in_envelope")
+    assert flag.type == "Boolean" and b.fmu.getBoolean([flag.valueReference]) == [True]
+    seed = np.random.default_rng(3).normal(size=len(INPUTS))
+    np.testing.assert_allclose(b.derivatives(DERIVED, INPUTS, seed), a.derivatives(DERIVED, INPUTS, seed),
+                               rtol=0, atol=1e-12)
+    a.free(), b.free()
+
+
+def test_build_fmu_fmi3_writes_the_fmi3_folders(surrogate_fmi3):
+    path, info = surrogate_fmi3
+    names = zipfile.ZipFile(path).namelist()
+    assert "binaries/x86_64-linux/SM4Surrogate.so" in names and "sources/fmi3_cs.c" in names
+    assert "sources/fmi2_cs.c" not in names
+    if "win64" in info["binaries"]:
+        assert "binaries/x86_64-windows/SM4Surrogate.dll" in names
+
+
+def test_the_pythonfmu_reference_is_fmi2_only(tmp_path):
+    import subprocess
+    import sys
+
+    if shutil.which("gcc") is None:
+        pytest.skip("no gcc")
+    result = subprocess.run([sys.executable, "-m", "opfmu", "build-reference-fmu", "--python", "--fmi-version", "3",
+                             "-o", str(tmp_path / "P.fmu")], capture_output=True, text=True)
+    assert result.returncode == 2 and result.stderr.count("\n") == 1 and "--python builds an FMI 2.0" in result.stderr
