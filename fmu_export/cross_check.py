@@ -124,6 +124,21 @@ def compare(reference: list[str], other: list[str]) -> Comparison:
     return Comparison(numbers, worst, worst_abs, differing, mismatch)
 
 
+def column_differences(reference: list[str], other: list[str], command: str = "get") -> np.ndarray:
+    """The largest |a - b| / max(1, |a|) of each value of a command's lines (`get`: each output in
+    the order read) over two harness outputs of one script; lines that failed are left out."""
+    worst = None
+    for a, b in zip(reference, other):
+        ta, tb = a.split(" "), b.split(" ")
+        if ta[0] != command or ta[1] not in ("0", "1") or len(ta) != len(tb):
+            continue
+        x = np.array([double_of(t) for t in ta[2:]])
+        y = np.array([double_of(t) for t in tb[2:]])
+        gap = np.abs(x - y) / np.maximum(1.0, np.abs(x))
+        worst = gap if worst is None else np.maximum(worst, gap)
+    return np.zeros(0) if worst is None else worst
+
+
 @dataclass(frozen=True)
 class Refs:
     """The value references a script uses, in the FMI version's numbering."""

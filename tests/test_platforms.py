@@ -155,3 +155,42 @@ def test_build_fmu_refuses_an_unknown_platform_in_one_line(tmp_path):
                              "--platforms", "linux64,solaris"], capture_output=True, text=True)
     assert result.returncode == 2
     assert result.stderr.strip() == "error: unknown platform 'solaris' (known: linux64, win64, aarch64-linux)"
+
+
+SMALL_STACK = """
+import sys, threading
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave
+path = sys.argv[1]
+md = read_model_description(path)
+unzipped = extract(path)
+errors = []
+def run():
+    try:
+        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                        instanceName="a")
+        fmu.instantiate()
+        fmu.setupExperiment(startTime=0.0)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(0.0, 0.01)
+        state = fmu.getFMUstate()
+        fmu.setFMUstate(fmu.deSerializeFMUstate(fmu.serializeFMUstate(state)))
+        fmu.doStep(0.01, 0.01)
+        fmu.terminate()
+        fmu.freeInstance()
+    except Exception as exc:
+        errors.append(exc)
+threading.stack_size(256 * 1024)
+thread = threading.Thread(target=run)
+thread.start()
+thread.join()
+print("ok" if not errors else errors[0])
+"""
+
+
+def test_a_surrogate_instance_and_its_state_fit_a_thread_with_a_small_stack(fmu_path):
+    """The surrogate's ModelState (its sensor buffers) is most of a megabyte, and Windows threads get
+    1 MB of stack: instantiating and restoring a serialized state must not put one on the stack."""
+    result = subprocess.run([sys.executable, "-c", SMALL_STACK, str(fmu_path)], capture_output=True, text=True)
+    assert result.returncode == 0 and result.stdout.strip() == "ok", (result.returncode, result.stderr[-300:])

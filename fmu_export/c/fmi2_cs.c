@@ -96,43 +96,42 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     return fmi2OK;
 }
 
+/* The instance is allocated first, so that refusals are logged through it: a ModelState (with the
+   surrogate's sensor buffers, most of a megabyte) never lives on the importer's stack. */
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
-    Instance probe;
     (void)fmuResourceLocation;
     (void)visible;
     if (!functions || !functions->logger) return NULL;
-    memset(&probe, 0, sizeof probe);
-    probe.callbacks = *functions;
-    probe.name = (char *)(instanceName ? instanceName : "?");
-    probe.log_errors = probe.log_warnings = 1;
-    if (!instanceName || !*instanceName) {
-        log_message(&probe, fmi2Error, "logStatusError", "fmi2Instantiate: missing instance name");
-        return NULL;
-    }
-    if (fmuType != fmi2CoSimulation) {
-        log_message(&probe, fmi2Error, "logStatusError", "fmi2Instantiate: %s supports co-simulation only", OPFMU_MODEL_IDENTIFIER);
-        return NULL;
-    }
-    if (!fmuGUID || strcmp(fmuGUID, OPFMU_GUID)) {
-        log_message(&probe, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s does not match this binary (%s)",
-                    fmuGUID ? fmuGUID : "(null)", OPFMU_GUID);
-        return NULL;
-    }
     Instance *inst = (Instance *)calloc(1, sizeof(Instance));
-    char *name = (char *)malloc(strlen(instanceName) + 1);
-    if (!inst || !name) {
+    if (!inst) {
+        functions->logger(functions->componentEnvironment, instanceName ? instanceName : "?", fmi2Error,
+                          "logStatusError", "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    inst->callbacks = *functions;
+    inst->name = (char *)(instanceName ? instanceName : "?");
+    inst->log_errors = inst->log_warnings = 1;
+    const char *refusal = NULL;
+    if (!instanceName || !*instanceName) refusal = "fmi2Instantiate: missing instance name";
+    else if (fmuType != fmi2CoSimulation) refusal = "fmi2Instantiate: " OPFMU_MODEL_IDENTIFIER " supports co-simulation only";
+    else if (!fmuGUID || strcmp(fmuGUID, OPFMU_GUID)) {
+        log_message(inst, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s does not match this binary (%s)",
+                    fmuGUID ? fmuGUID : "(null)", OPFMU_GUID);
         free(inst);
-        free(name);
-        log_message(&probe, fmi2Error, "logStatusError", "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    char *name = refusal ? NULL : (char *)malloc(strlen(instanceName) + 1);
+    if (!refusal && !name) refusal = "fmi2Instantiate: out of memory";
+    if (refusal) {
+        log_message(inst, fmi2Error, "logStatusError", "%s", refusal);
+        free(inst);
         return NULL;
     }
     strcpy(name, instanceName);
-    inst->callbacks = *functions;
     inst->name = name;
-    inst->log_errors = inst->log_warnings = 1;
     inst->log_all = loggingOn;
     inst->state = ST_INSTANTIATED;
     model_defaults(&inst->model);
@@ -473,15 +472,21 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *FMUstate)
 {
     Instance *inst = (Instance *)c;
-    Snapshot probe;
     if (not_allowed(inst, "fmi2DeSerializeFMUstate", ST_ANY)) return fmi2Error;
     if (!serializedState || !FMUstate || size != sizeof(Snapshot))
         return fail(inst, fmi2Error, "%s", "fmi2DeSerializeFMUstate: NULL argument or wrong size");
-    memcpy(&probe, serializedState, sizeof probe);
-    if (!valid_snapshot(&probe)) return fail(inst, fmi2Error, "%s", "fmi2DeSerializeFMUstate: corrupt or foreign state");
-    Snapshot *snap = (Snapshot *)(*FMUstate ? *FMUstate : malloc(sizeof(Snapshot)));
-    if (!snap) return fail(inst, fmi2Error, "%s", "fmi2DeSerializeFMUstate: out of memory");
-    *snap = probe;
-    *FMUstate = snap;
+    Snapshot *probe = (Snapshot *)malloc(sizeof(Snapshot)); /* on the heap: a Snapshot holds a ModelState */
+    if (!probe) return fail(inst, fmi2Error, "%s", "fmi2DeSerializeFMUstate: out of memory");
+    memcpy(probe, serializedState, sizeof(Snapshot));
+    if (!valid_snapshot(probe)) {
+        free(probe);
+        return fail(inst, fmi2Error, "%s", "fmi2DeSerializeFMUstate: corrupt or foreign state");
+    }
+    if (*FMUstate) { /* into the state the importer gave */
+        memcpy(*FMUstate, probe, sizeof(Snapshot));
+        free(probe);
+    } else {
+        *FMUstate = probe;
+    }
     return fmi2OK;
 }

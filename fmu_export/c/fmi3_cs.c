@@ -30,31 +30,54 @@ typedef struct {
     ModelState model;
 } Instance;
 
-/* what an FMU state holds: the machine state and the model state */
+/* what an FMU state holds: a header (what it is, the machine state) and the model state. The
+   model state can be large (the surrogate's window caches): no copy of it lives on the stack. */
 typedef struct {
     unsigned int magic;
     unsigned int size;
     char guid[48];
     MachineState state;
+} SnapshotHeader;
+
+typedef struct {
+    SnapshotHeader header;
     ModelState model;
 } Snapshot;
 
 #define SNAPSHOT_MAGIC 0x0F3F5A13u /* not fmi2_cs.c's: an FMI 2.0 state is refused */
 
-static void log_message(const Instance *inst, fmi3Status status, const char *category, const char *format, ...)
+/* formats the message and passes it to the importer's logger, with no '%' in it (as fmi2_cs.c) */
+static void emit(fmi3InstanceEnvironment environment, fmi3LogMessageCallback logger, fmi3Status status,
+                 const char *category, const char *format, va_list args)
 {
     char message[1024];
+    vsnprintf(message, sizeof message, format, args);
+    for (char *c = message; *c; ++c)
+        if (*c == '%') *c = '#';
+    logger(environment, status, category, message);
+}
+
+static void log_message(const Instance *inst, fmi3Status status, const char *category, const char *format, ...)
+{
     va_list args;
     if (!inst || !inst->logger) return;
     if (status == fmi3Error && !(inst->log_errors || inst->log_all)) return;
     if (status == fmi3Warning && !(inst->log_warnings || inst->log_all)) return;
     if (status == fmi3OK && !inst->log_all) return;
     va_start(args, format);
-    vsnprintf(message, sizeof message, format, args);
+    emit(inst->environment, inst->logger, status, category, format, args);
     va_end(args);
-    for (char *c = message; *c; ++c)
-        if (*c == '%') *c = '#'; /* no conversions reach the importer, as with fmi2_cs.c */
-    inst->logger(inst->environment, status, category, message);
+}
+
+/* a refused instantiation: logs why (where the importer gave a logger) and returns no instance */
+static fmi3Instance refuse(fmi3InstanceEnvironment environment, fmi3LogMessageCallback logger, const char *format, ...)
+{
+    va_list args;
+    if (!logger) return NULL;
+    va_start(args, format);
+    emit(environment, logger, fmi3Error, "logStatusError", format, args);
+    va_end(args);
+    return NULL;
 }
 
 static fmi3Status fail(Instance *inst, fmi3Status status, const char *format, const char *detail)
@@ -95,16 +118,6 @@ static fmi3Status none_of(fmi3Instance instance, size_t nvr, const char *functio
     return fmi3Error;
 }
 
-/* the logging settings of a new instance (or of the probe that logs a refused instantiation) */
-static void start_logging(Instance *inst, fmi3InstanceEnvironment environment, fmi3LogMessageCallback logMessage,
-                          fmi3Boolean loggingOn)
-{
-    inst->environment = environment;
-    inst->logger = logMessage;
-    inst->log_errors = inst->log_warnings = 1;
-    inst->log_all = loggingOn;
-}
-
 const char *fmi3GetVersion(void) { return fmi3Version; }
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
@@ -126,25 +139,14 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
     return fmi3OK;
 }
 
-/* logs (where a logger is given) that the FMU is co-simulation only; no instance */
-static fmi3Instance co_simulation_only(const char *function, fmi3InstanceEnvironment environment,
-                                       fmi3LogMessageCallback logMessage)
-{
-    Instance probe;
-    memset(&probe, 0, sizeof probe);
-    start_logging(&probe, environment, logMessage, fmi3False);
-    log_message(&probe, fmi3Error, "logStatusError", "%s: %s supports co-simulation only", function,
-                OPFMU_MODEL_IDENTIFIER);
-    return NULL;
-}
-
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
     (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-    return co_simulation_only("fmi3InstantiateModelExchange", instanceEnvironment, logMessage);
+    return refuse(instanceEnvironment, logMessage, "fmi3InstantiateModelExchange: %s supports co-simulation only",
+                  OPFMU_MODEL_IDENTIFIER);
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -156,7 +158,8 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
 {
     (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
     (void)clockUpdate; (void)lockPreemption; (void)unlockPreemption;
-    return co_simulation_only("fmi3InstantiateScheduledExecution", instanceEnvironment, logMessage);
+    return refuse(instanceEnvironment, logMessage, "fmi3InstantiateScheduledExecution: %s supports co-simulation "
+                  "only", OPFMU_MODEL_IDENTIFIER);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -168,40 +171,28 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3LogMessageCallback logMessage,
                                          fmi3IntermediateUpdateCallback intermediateUpdate)
 {
-    Instance probe;
     (void)resourcePath;
     (void)visible;
     (void)earlyReturnAllowed; /* steps always run to their end */
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate; /* never called: there are no intermediate variables */
-    memset(&probe, 0, sizeof probe);
-    start_logging(&probe, instanceEnvironment, logMessage, loggingOn);
-    if (!instanceName || !*instanceName) {
-        log_message(&probe, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: missing instance name");
-        return NULL;
-    }
-    if (!instantiationToken || strcmp(instantiationToken, OPFMU_GUID)) {
-        log_message(&probe, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: instantiation token %s does "
-                    "not match this binary (%s)", instantiationToken ? instantiationToken : "(null)", OPFMU_GUID);
-        return NULL;
-    }
-    if (eventModeUsed) {
-        log_message(&probe, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: %s has no event mode "
-                    "(hasEventMode=\"false\"); instantiate it with eventModeUsed = false", OPFMU_MODEL_IDENTIFIER);
-        return NULL;
-    }
-    if (nRequiredIntermediateVariables > 0) {
-        log_message(&probe, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: %s has no intermediate "
-                    "variables (no intermediate update); requiredIntermediateVariables must be empty",
-                    OPFMU_MODEL_IDENTIFIER);
-        return NULL;
-    }
+    if (!instanceName || !*instanceName)
+        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: missing instance name");
+    if (!instantiationToken || strcmp(instantiationToken, OPFMU_GUID))
+        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: instantiation token %s does not "
+                      "match this binary (%s)", instantiationToken ? instantiationToken : "(null)", OPFMU_GUID);
+    if (eventModeUsed)
+        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %s has no event mode "
+                      "(hasEventMode=\"false\"); instantiate it with eventModeUsed = false", OPFMU_MODEL_IDENTIFIER);
+    if (nRequiredIntermediateVariables > 0)
+        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %s has no intermediate variables "
+                      "(no intermediate update); requiredIntermediateVariables must be empty", OPFMU_MODEL_IDENTIFIER);
     Instance *inst = (Instance *)calloc(1, sizeof(Instance));
-    if (!inst) {
-        log_message(&probe, fmi3Error, "logStatusError", "fmi3InstantiateCoSimulation: out of memory");
-        return NULL;
-    }
-    start_logging(inst, instanceEnvironment, logMessage, loggingOn);
+    if (!inst) return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: out of memory");
+    inst->environment = instanceEnvironment;
+    inst->logger = logMessage;
+    inst->log_errors = inst->log_warnings = 1;
+    inst->log_all = loggingOn;
     inst->state = ST_INSTANTIATED;
     model_defaults(&inst->model);
     return inst;
@@ -263,11 +254,9 @@ fmi3Status fmi3Reset(fmi3Instance instance)
 static int bad_arrays(Instance *inst, const char *function, const fmi3ValueReference vr[], size_t nvr,
                       const void *values, size_t nValues)
 {
-    char message[256];
     if (nValues != nvr) {
-        snprintf(message, sizeof message, "%s: %lu values for %lu value references (all variables are scalars)",
-                 function, (unsigned long)nValues, (unsigned long)nvr);
-        fail(inst, fmi3Error, "%s", message);
+        log_message(inst, fmi3Error, "logStatusError", "%s: %lu values for %lu value references (all variables are "
+                    "scalars)", function, (unsigned long)nValues, (unsigned long)nvr);
         return 1;
     }
     if (nvr > 0 && (!vr || !values)) {
@@ -589,19 +578,19 @@ fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
     Snapshot *snap = (Snapshot *)(*FMUState ? *FMUState : malloc(sizeof(Snapshot)));
     if (!snap) return fail(inst, fmi3Error, "%s", "fmi3GetFMUState: out of memory");
     memset(snap, 0, sizeof *snap);
-    snap->magic = SNAPSHOT_MAGIC;
-    snap->size = sizeof(Snapshot);
-    strncpy(snap->guid, OPFMU_GUID, sizeof snap->guid - 1);
-    snap->state = inst->state;
+    snap->header.magic = SNAPSHOT_MAGIC;
+    snap->header.size = sizeof(Snapshot);
+    strncpy(snap->header.guid, OPFMU_GUID, sizeof snap->header.guid - 1);
+    snap->header.state = inst->state;
     snap->model = inst->model;
     *FMUState = snap;
     return fmi3OK;
 }
 
-static int valid_snapshot(const Snapshot *snap)
+static int valid_snapshot(const SnapshotHeader *header)
 {
-    return snap->magic == SNAPSHOT_MAGIC && snap->size == sizeof(Snapshot) &&
-           !strncmp(snap->guid, OPFMU_GUID, sizeof snap->guid) && (snap->state & ST_ANY);
+    return header->magic == SNAPSHOT_MAGIC && header->size == sizeof(Snapshot) &&
+           !strncmp(header->guid, OPFMU_GUID, sizeof header->guid) && (header->state & ST_ANY);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
@@ -609,8 +598,9 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
     Instance *inst = (Instance *)instance;
     const Snapshot *snap = (const Snapshot *)FMUState;
     if (not_allowed(inst, "fmi3SetFMUState", ST_ANY)) return fmi3Error;
-    if (!snap || !valid_snapshot(snap)) return fail(inst, fmi3Error, "%s", "fmi3SetFMUState: not an FMU state of this FMU");
-    inst->state = snap->state;
+    if (!snap || !valid_snapshot(&snap->header))
+        return fail(inst, fmi3Error, "%s", "fmi3SetFMUState: not an FMU state of this FMU");
+    inst->state = snap->header.state;
     inst->model = snap->model;
     return fmi3OK;
 }
@@ -649,15 +639,16 @@ fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte seriali
                                    fmi3FMUState *FMUState)
 {
     Instance *inst = (Instance *)instance;
-    Snapshot probe;
+    SnapshotHeader header;
     if (not_allowed(inst, "fmi3DeserializeFMUState", ST_ANY)) return fmi3Error;
     if (!serializedState || !FMUState || size != sizeof(Snapshot))
         return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: NULL argument or wrong size");
-    memcpy(&probe, serializedState, sizeof probe);
-    if (!valid_snapshot(&probe)) return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: corrupt or foreign state");
+    memcpy(&header, serializedState, sizeof header); /* the bytes need not be aligned for a Snapshot */
+    if (!valid_snapshot(&header))
+        return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: corrupt or foreign state");
     Snapshot *snap = (Snapshot *)(*FMUState ? *FMUState : malloc(sizeof(Snapshot)));
     if (!snap) return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: out of memory");
-    *snap = probe;
+    memcpy(snap, serializedState, sizeof(Snapshot));
     *FMUState = snap;
     return fmi3OK;
 }
