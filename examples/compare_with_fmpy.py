@@ -1,4 +1,4 @@
-"""Check a surrogate FMU against the reference FMU with fmpy alone (no opfmu needed).
+"""Check a surrogate FMU against the reference FMU with fmpy alone (no opfmu needed); FMI 2.0 or 3.0.
 
     python examples/compare_with_fmpy.py SM4Surrogate.fmu SM4Reference.fmu [--plot compare.png]
 
@@ -23,7 +23,7 @@ def shared_outputs(*fmus) -> tuple[list, list]:
     """(outputs, states): the Real outputs every FMU has, in the first one's order, and those of them
     that are states (an initial-state parameter <name>0 exists)."""
     descriptions = [read_model_description(f).modelVariables for f in fmus]
-    names = [{v.name for v in d if v.causality == "output" and v.type == "Real"} for d in descriptions]
+    names = [{v.name for v in d if v.causality == "output" and v.type in ("Real", "Float64")} for d in descriptions]
     outputs = [v.name for v in descriptions[0] if all(v.name in n for n in names)]
     parameters = {v.name for v in descriptions[0] if v.causality == "parameter"}
     return outputs, [n for n in outputs if f"{n}0" in parameters]

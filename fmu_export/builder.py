@@ -37,7 +37,7 @@ from .c_equations import equations_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
-from .onnx_to_c import generate_kernel
+from .onnx_to_c import generate_kernel, hex_literals
 from .platforms import host
 from .variables import SURROGATE_EXTRAS, fmu_variables, start_inputs, start_state, vr_header
 
@@ -398,7 +398,8 @@ def time_suffix_sums(suffix, horizon: float) -> np.ndarray:
 def _c_table(name: str, values: np.ndarray) -> str:
     if not np.all(np.isfinite(values)):
         raise BuildError("the operator's sensor layer has non-finite weights")
-    body = ",\n".join(",".join(repr(float(v)) for v in values[i:i + 8]) for i in range(0, values.size, 8))
+    literals = hex_literals(values)
+    body = ",\n".join(",".join(literals[i:i + 8]) for i in range(0, len(literals), 8))
     return f"OPFMU_INTERNAL const double {name}[{values.size}] = {{\n{body}}};\n"
 
 

@@ -30,11 +30,15 @@ from .platforms import Platform, host
 from .variables import Variable, fmi3_value_references
 
 HARNESS = Path(__file__).parent / "c" / "fmu_harness.c"
-# differences between platforms, relative to max(1, |value|): what the FMUs are held to (the libm
-# functions and the kernel's vector loops differ in the last bits between C runtimes and CPUs), and
-# what stops a build (a binary that computes something else, not a rounding)
+# differences between platforms, relative to max(1, |value|): what the shipped FMUs are held to (the
+# libm functions and the kernel's vector loops differ in the last bits between C runtimes and CPUs),
+# and what stops a build: a binary that computes something else, not a rounding. A barely trained
+# operator can amplify a last-bit difference a billionfold over a few hundred steps (3e-9 measured
+# after 60 steps of 3 epochs' training), so the build runs short scenarios (BUILD_STEPS each) and
+# stops above 1e-6
 TOLERANCE = 1e-12
-BUILD_TOLERANCE = 1e-9
+BUILD_TOLERANCE = 1e-6
+BUILD_STEPS = 20
 RUN_TIMEOUT_S = 300  # a harness run (wine makes its prefix on the first one: seconds)
 
 
@@ -270,9 +274,10 @@ def scenario_script(variables: list[Variable], guid: str, version: int = 2, inte
 
 def cross_check(binaries: dict[Platform, Path], variables: list[Variable], guid: str, version: int, workdir: Path,
                 interpolates: bool = False, seed: int = 0) -> dict[str, str]:
-    """Runs the standard scenarios on the host binary and on every other binary this machine can run;
-    {platform name: what was found}. BuildError when a binary's results differ from the host's in
-    anything but their doubles (a status, a line), or by more than BUILD_TOLERANCE."""
+    """Runs the standard scenarios (BUILD_STEPS steps each) on the host binary and on every other
+    binary this machine can run; returns {platform name: what was found}. BuildError when a
+    binary's results differ from the host's in anything but their doubles (a status, a line), or by
+    more than BUILD_TOLERANCE."""
     found, runnable = {}, []
     for target in binaries:
         if target == host():
@@ -283,7 +288,7 @@ def cross_check(binaries: dict[Platform, Path], variables: list[Variable], guid:
             found[target.name] = f"not run here (no {target.emulator[0]}: Debian package {target.emulator_package})"
     if not runnable:
         return found
-    script = scenario_script(variables, guid, version, interpolates, seed)
+    script = scenario_script(variables, guid, version, interpolates, seed, BUILD_STEPS)
     base = run_script(host(), binaries[host()], script, workdir, version)
     for target in runnable:
         binary = binaries[target]

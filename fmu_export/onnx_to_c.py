@@ -275,9 +275,19 @@ def _offset(index: str, out_shape, in_shape) -> str:
     return " + ".join(terms) or "0"
 
 
+TRAILING_ZEROS = re.compile(r"\.?0*p")
+
+
+def hex_literals(values) -> list[str]:
+    """C99 hexadecimal floating literals of finite doubles, exact, with no trailing zeros: the
+    compiler reads them without decimal conversion (the weights and tables are megabytes of them)."""
+    text = " ".join(map(float.hex, np.asarray(values, dtype=np.float64).ravel().tolist()))
+    return TRAILING_ZEROS.sub("p", text).split(" ") if text else []
+
+
 def _float_array(name: str, values: np.ndarray) -> str:
     flat = np.asarray(values, dtype=np.float32).ravel()
-    body = ",".join(repr(float(v)) + "f" if math.isfinite(v) else "0.0f" for v in flat)
+    body = ",".join(x + "f" for x in hex_literals(np.where(np.isfinite(flat), flat, 0.0)))
     return f"static const float {name}[{max(flat.size, 1)}] = {{{body or '0.0f'}}};"
 
 

@@ -521,8 +521,8 @@ def test_build_fmu_command_refuses_a_file_that_is_not_an_operator(tmp_path):
 
 def test_build_fmu_command_builds_the_shipped_operator_by_default(shipped, tmp_path):
     out = tmp_path / "Machine.fmu"
-    result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", "-o", str(out), "--name", "Machine"],
-                            capture_output=True, text=True)
+    result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", "-o", str(out), "--name", "Machine",
+                             "--platforms", "linux64"], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "matches onnxruntime" in result.stdout
     assert read_model_description(str(out)).coSimulation.modelIdentifier == "Machine"
@@ -532,7 +532,7 @@ def test_build_fmu_command_builds_the_shipped_operator_by_default(shipped, tmp_p
 def test_build_fmu_command_builds_a_given_operator(operator_path, tmp_path):
     out = tmp_path / "Machine.fmu"
     result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", str(operator_path), "-o", str(out),
-                             "--name", "Machine"], capture_output=True, text=True)
+                             "--name", "Machine", "--platforms", "linux64"], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "matches onnxruntime" in result.stdout
     assert read_model_description(str(out)).coSimulation.modelIdentifier == "Machine"
