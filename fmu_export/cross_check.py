@@ -190,6 +190,8 @@ class _Script:
 
     def derivatives(self) -> None:
         knowns = [vr for vr, _ in self.refs.inputs]
+        if not self.refs.derived:  # no output depends directly on an input
+            return
         for k in range(len(knowns)):
             seed = " ".join(hex_double(1.0 if j == k else 0.0) for j in range(len(knowns)))
             self.lines.append(f"dd {len(self.refs.derived)} {' '.join(map(str, self.refs.derived))} "

@@ -194,3 +194,22 @@ def test_a_surrogate_instance_and_its_state_fit_a_thread_with_a_small_stack(fmu_
     1 MB of stack: instantiating and restoring a serialized state must not put one on the stack."""
     result = subprocess.run([sys.executable, "-c", SMALL_STACK, str(fmu_path)], capture_output=True, text=True)
     assert result.returncode == 0 and result.stdout.strip() == "ok", (result.returncode, result.stderr[-300:])
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_the_exciter_fmu_without_feedthrough_runs_on_every_platform_here(tmp_path, version):
+    """The second component (IEEE Type I exciter: no output depends directly on an input, so the
+    scenarios read no directional derivatives) on every platform whose compiler is here."""
+    from fmpy.validation import validate_fmu
+
+    from reference_models.ieee1 import IEEE1
+
+    chosen, _ = platforms.select(None)
+    out = tmp_path / "Exciter.fmu"
+    info = build_native_reference_fmu(out, model_name="Exciter", component=IEEE1, platforms=chosen,
+                                      fmi_version=version)
+    assert validate_fmu(str(out)) == []
+    assert set(info["binaries"]) == {p.name for p in chosen}
+    for p in chosen:
+        if p != platforms.host() and p.runs_here():
+            assert info["checks"][p.name].startswith("ran under"), info["checks"]
