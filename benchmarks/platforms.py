@@ -13,7 +13,6 @@ Writes DIR/platforms.json, DIR/platforms.md and DIR/platforms.png (the differenc
 bus outputs from linux64 along the dip scenario, per platform and FMU) and prints the tables.
 """
 import argparse
-import json
 import sys
 import tempfile
 import zipfile
