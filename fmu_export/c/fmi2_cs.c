@@ -114,19 +114,17 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->callbacks = *functions;
     inst->name = (char *)(instanceName ? instanceName : "?");
     inst->log_errors = inst->log_warnings = 1;
-    const char *refusal = NULL;
-    if (!instanceName || !*instanceName) refusal = "fmi2Instantiate: missing instance name";
-    else if (fmuType != fmi2CoSimulation) refusal = "fmi2Instantiate: " OPFMU_MODEL_IDENTIFIER " supports co-simulation only";
-    else if (!fmuGUID || strcmp(fmuGUID, OPFMU_GUID)) {
-        log_message(inst, fmi2Error, "logStatusError", "fmi2Instantiate: GUID %s does not match this binary (%s)",
-                    fmuGUID ? fmuGUID : "(null)", OPFMU_GUID);
-        free(inst);
-        return NULL;
-    }
-    char *name = refusal ? NULL : (char *)malloc(strlen(instanceName) + 1);
-    if (!refusal && !name) refusal = "fmi2Instantiate: out of memory";
-    if (refusal) {
-        log_message(inst, fmi2Error, "logStatusError", "%s", refusal);
+    char refusal[256] = "";
+    if (!instanceName || !*instanceName) snprintf(refusal, sizeof refusal, "missing instance name");
+    else if (fmuType != fmi2CoSimulation)
+        snprintf(refusal, sizeof refusal, "%s supports co-simulation only", OPFMU_MODEL_IDENTIFIER);
+    else if (!fmuGUID || strcmp(fmuGUID, OPFMU_GUID))
+        snprintf(refusal, sizeof refusal, "GUID %.60s does not match this binary (%s)", fmuGUID ? fmuGUID : "(null)",
+                 OPFMU_GUID);
+    char *name = *refusal ? NULL : (char *)malloc(strlen(instanceName) + 1);
+    if (!*refusal && !name) snprintf(refusal, sizeof refusal, "out of memory");
+    if (*refusal) {
+        log_message(inst, fmi2Error, "logStatusError", "fmi2Instantiate: %s", refusal);
         free(inst);
         return NULL;
     }
