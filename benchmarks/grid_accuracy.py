@@ -23,11 +23,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from opfmu.grid.fmus import generator_files  # noqa: E402
-from opfmu.grid.master import GridMaster, MasterSettings  # noqa: E402
-from opfmu.grid.outputs import errors  # noqa: E402
-from opfmu.grid.runners import MonolithicRunner  # noqa: E402
-from opfmu.grid.stability import critical_clearing_time  # noqa: E402
+from cosim.fmus import generator_files  # noqa: E402
+from cosim.master import GridMaster, MasterSettings  # noqa: E402
+from cosim.outputs import errors  # noqa: E402
+from cosim.runners import MonolithicRunner  # noqa: E402
+from cosim.stability import critical_clearing_time  # noqa: E402
 from reference_models.grid import wscc9  # noqa: E402
 from reference_models.grid.contingency import Contingency  # noqa: E402
 from reference_models.grid.monolithic import system  # noqa: E402

@@ -4,7 +4,7 @@ monolithic DAE.
 
     python benchmarks/grid_coupling.py [--stop 5] [--out DIR]
 
-Couplings (opfmu.grid.master.MasterSettings.coupling): held (the start voltages held over the step,
+Couplings (cosim.master.MasterSettings.coupling): held (the start voltages held over the step,
 what a plain master does), extrapolated (inputs linear to the voltages extrapolated from the last
 two communication points, one pass), iterated (inputs linear to a consistent end, the step redone
 from a saved FMU state: at most 3 passes, and converged to 1e-9 pu with up to 20). Prints the
@@ -18,9 +18,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from opfmu.grid.fmus import generator_files  # noqa: E402
-from opfmu.grid.master import GridMaster, MasterSettings  # noqa: E402
-from opfmu.grid.outputs import errors  # noqa: E402
+from cosim.fmus import generator_files  # noqa: E402
+from cosim.master import GridMaster, MasterSettings  # noqa: E402
+from cosim.outputs import errors  # noqa: E402
 from reference_models.grid.contingency import Contingency  # noqa: E402
 from reference_models.grid.monolithic import simulate_contingency, system  # noqa: E402
 

@@ -17,10 +17,10 @@ simulation of the same system, and a critical clearing time.
 import argparse
 from pathlib import Path
 
-from opfmu.grid.fmus import generator_files
-from opfmu.grid.master import GridMaster, MasterSettings
-from opfmu.grid.outputs import errors, plot
-from opfmu.grid.stability import critical_clearing_time
+from cosim.fmus import generator_files
+from cosim.master import GridMaster, MasterSettings
+from cosim.outputs import errors, plot
+from cosim.stability import critical_clearing_time
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.monolithic import simulate_contingency, system
 

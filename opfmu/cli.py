@@ -397,7 +397,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--step", type=float, default=0.01, help="communication step in seconds (default 0.01)")
     demo.set_defaults(func=cmd_demo)
 
-    from opfmu.grid.command import add_grid_parser
+    from opfmu.grid_command import add_grid_parser
     from opfmu.init_command import add_init_parser
     from opfmu.operator_command import add_operator_parser
 
@@ -413,7 +413,7 @@ def _run(args) -> None:
     if getattr(args, "command", None) != "grid":
         args.func(args)
         return
-    from opfmu.grid.slave import CouplingError
+    from cosim.fmu import CouplingError
 
     try:
         args.func(args)

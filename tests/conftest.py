@@ -70,5 +70,5 @@ def reference_path(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def grid_fmu_cache(tmp_path_factory):
-    """The FMU cache of the grid tests (opfmu.grid.fmus): each generator's FMUs are built once."""
+    """The FMU cache of the grid tests (cosim.fmus): each generator's FMUs are built once."""
     return tmp_path_factory.mktemp("grid_fmus")

@@ -11,10 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from opfmu.grid.fmus import generator_files
-from opfmu.grid.master import GridMaster, MasterSettings
-from opfmu.grid.outputs import errors
-from opfmu.grid.slave import CouplingError, Slave
+from cosim.fmus import generator_files
+from cosim.master import GridMaster, MasterSettings
+from cosim.outputs import errors
+from cosim.fmu import CouplingError, Slave
 from reference_models.grid import wscc9
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.monolithic import WSCC9, simulate_contingency

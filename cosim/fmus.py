@@ -22,9 +22,9 @@ from reference_models.grid import wscc9
 from reference_models.ieee1 import IEEE1
 from reference_models.sm4 import SM4
 
-from .slave import CouplingError
+from .fmu import CouplingError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_OPERATORS = ROOT / "surrogate" / "default"
 BUILD_SOURCES = (ROOT / "fmu_export", ROOT / "reference_models")
 

@@ -32,7 +32,7 @@ def _positive_time(text: str) -> float:
 
 
 def _common(p, kinds_default: str | None, trip: bool = True) -> None:
-    from .runners import RUN_KINDS
+    from cosim.runners import RUN_KINDS
 
     p.add_argument("--case", default="wscc9", help="the network (only wscc9: the WSCC 9-bus system, Anderson & Fouad)")
     p.add_argument("--dynamic-data", default=None, metavar="FILE",
@@ -108,8 +108,8 @@ def _setup(args, with_contingency: bool = True):
     """(grid, settings, contingency or None) from the common flags; GridUserError for what is wrong."""
     from reference_models.grid.contingency import Contingency
 
-    from .master import MasterSettings
-    from .runners import load_grid
+    from cosim.master import MasterSettings
+    from cosim.runners import load_grid
 
     if args.case not in CASES:
         raise GridUserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
@@ -136,8 +136,8 @@ def _progress(text: str) -> None:
 
 
 def cmd_run(args) -> None:
-    from . import outputs
-    from .runners import RUN_KINDS, open_runner
+    from cosim import outputs
+    from cosim.runners import RUN_KINDS, open_runner
 
     grid, settings, contingency = _setup(args)
     compare = [] if args.compare.strip() in ("", "none") else [k.strip() for k in args.compare.split(",")]
@@ -186,14 +186,14 @@ def cmd_run(args) -> None:
 
 
 def _label(kind) -> str:
-    from .outputs import LABELS
+    from cosim.outputs import LABELS
 
     return LABELS.get(kind, kind)
 
 
 def cmd_cct(args) -> None:
-    from .runners import open_runner
-    from .stability import critical_clearing_time
+    from cosim.runners import open_runner
+    from cosim.stability import critical_clearing_time
 
     grid, settings, contingency = _setup(args)
     runner = open_runner(args.fmus, grid, settings, args.fmu_cache, None if args.json else _progress,
@@ -219,9 +219,9 @@ def cmd_cct(args) -> None:
 
 
 def cmd_screen(args) -> None:
-    from . import outputs
-    from .fmus import generator_files
-    from .screening import ScreeningTask, contingencies, screen
+    from cosim import outputs
+    from cosim.fmus import generator_files
+    from cosim.screening import ScreeningTask, contingencies, screen
     from reference_models.grid.contingency import Contingency
 
     grid, settings, _ = _setup(args, with_contingency=False)

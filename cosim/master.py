@@ -44,7 +44,7 @@ from reference_models.grid.monolithic import GridResult, WSCC9, system
 from reference_models.ieee1 import IEEE1
 from reference_models.sm4 import SM4
 
-from .slave import CouplingError, Slave
+from .fmu import CouplingError, Slave
 
 MACHINE_INPUTS = ("Vs", "theta_vs", "Pm", "Efd")
 MACHINE_OUTPUTS = ("delta", "omega", "Ed_p", "Eq_p", "I_re", "I_im")
@@ -128,7 +128,7 @@ def _wrap(angle: float) -> float:
 
 class GridMaster:
     """The master over the FMUs of every generator of `grid` (monolithic.WSCC9: network, load flow,
-    start values); files: opfmu.grid.fmus.GeneratorFiles per generator, in GENERATOR_BUSES order.
+    start values); files: cosim.fmus.GeneratorFiles per generator, in GENERATOR_BUSES order.
     Use as a context manager, or call close()."""
 
     def __init__(self, files, grid: WSCC9 | None = None, settings: MasterSettings = MasterSettings()):
