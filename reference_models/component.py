@@ -18,6 +18,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .drift import Drift
+from .ports import Ports
 
 MAX_PARAMETER_FILE_BYTES = 64 * 1024
 
@@ -80,6 +81,7 @@ class Component:
     drift: the component's angles and speed, when its equations are invariant under a common
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
+    ports: how it connects (reference_models.ports): its bus port and its control links.
     """
 
     name: str
@@ -95,6 +97,7 @@ class Component:
     affine_states: tuple = ()
     rest: Callable | None = None
     drift: Drift | None = None
+    ports: Ports = Ports()
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -108,6 +111,7 @@ class Component:
             raise ValueError(f"component {self.name!r}: affine_states must index its states")
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
+        self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")
 
     @property
     def state_names(self) -> tuple:

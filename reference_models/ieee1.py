@@ -26,6 +26,7 @@ import numpy as np
 
 from .component import Component, Parameters, Quantity
 from .piecewise import where
+from .ports import Link, Ports
 
 NO_LIMIT = 1e6  # pu: a regulator limit this large (or larger) in magnitude is no limit
 
@@ -130,4 +131,6 @@ IEEE1 = Component(
     # dRF/dt = (KF/TF Efd - RF)/TF: affine in RF. dVR/dt = (... - VR)/TA is affine in VR only
     # without regulator limits (the limit holds VR), so VR is not declared affine
     affine_states=(1,),
+    ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref")),
+                outputs=(Link("field_voltage", "Efd"),)),
 )

@@ -21,6 +21,7 @@ import numpy as np
 
 from .component import Component, Parameters, Quantity
 from .drift import Drift
+from .ports import BusPort, Link, Ports
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,9 @@ SM4 = Component(
     rest=rest,
     # delta and theta_vs enter as delta - theta_vs; omega as d delta/dt and the damping torque D omega
     drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=2.0),
+    ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im")),
+                inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
+                outputs=(Link("speed", "omega"), Link("electrical_power", "P"))),
 )
 
 STATE_NAMES = SM4.state_names

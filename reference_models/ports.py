@@ -1,0 +1,149 @@
+"""How a component connects to a network and to the other components of its unit: its ports.
+
+A component declares
+* a **bus port** (`BusPort`) when it sits on a network bus: the two inputs that take the bus voltage
+  phasor in polar form (magnitude [pu], angle [rad], network frame) and the two outputs that give
+  the current phasor it injects into the bus (real and imaginary part [pu], network frame);
+* **control links** (`Link`): the signals it takes (`inputs`) and gives (`outputs`), each a signal
+  name from `SIGNALS` bound to one of its variables (an input for `inputs`; a state or derived output
+  for `outputs`).
+
+Whatever wires components together (the grid master, `compare`, `init`, the input families, the
+scenarios) reads these declarations, never a component's name. Within a unit (the devices at one
+generator), an input link takes the output link of the same signal; the bus gives
+`terminal_voltage` (the magnitude of the bus voltage) to a unit that has no component giving it;
+an input link that nothing gives is a set point, held at the start value the unit's initialisation
+gives it.
+
+The ports travel in the model description of every FMU the project builds, so an importer (and the
+grid master, for an FMU the project did not build) finds them without knowing the component:
+
+    FMI 2.0: <VendorAnnotations><Tool name="opfmu"><Ports>...</Ports></Tool></VendorAnnotations>
+    FMI 3.0: <Annotations><Annotation type="org.opfmu.ports"><Ports>...</Ports></Annotation></Annotations>
+
+    <Ports>
+      <Bus voltageMagnitude="Vs" voltageAngle="theta_vs" currentReal="I_re" currentImaginary="I_im"/>
+      <Input signal="field_voltage" variable="Efd"/>
+      <Output signal="speed" variable="omega"/>
+    </Ports>
+"""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+#: The control signals components exchange: name -> (symbol, unit, meaning).
+SIGNALS = {
+    "field_voltage": ("Efd", "pu", "field voltage: an exciter's output, a machine's input"),
+    "mechanical_power": ("Pm", "pu", "mechanical power: a governor's output, a machine's input"),
+    "terminal_voltage": ("Vt", "pu", "terminal voltage magnitude: an exciter's input"),
+    "speed": ("omega", "rad/s", "rotor speed deviation: a machine's output, a governor's or stabiliser's input"),
+    "electrical_power": ("Pe", "pu", "electrical power: a machine's output, a stabiliser's input"),
+    "stabiliser_signal": ("Vss", "pu", "stabiliser output: a power system stabiliser's output, an exciter's input"),
+    "voltage_reference": ("Vref", "pu", "voltage set point of an exciter"),
+    "power_reference": ("Pref", "pu", "power set point of a governor"),
+}
+
+TOOL_NAME = "opfmu"
+FMI3_ANNOTATION_TYPE = "org.opfmu.ports"
+
+
+class PortError(ValueError):
+    """A port declaration that names an unknown signal or variable, or a malformed <Ports> element."""
+
+
+@dataclass(frozen=True)
+class BusPort:
+    """The connection to a bus: `voltage` = (magnitude input [pu], angle input [rad]), `current` =
+    (real part output [pu], imaginary part output [pu]) of the current injected into the bus, both
+    phasors in the network frame."""
+
+    voltage: tuple = ("Vs", "theta_vs")
+    current: tuple = ("I_re", "I_im")
+
+
+@dataclass(frozen=True)
+class Link:
+    """One control signal (a key of SIGNALS) bound to the component variable that carries it."""
+
+    signal: str
+    variable: str
+
+
+@dataclass(frozen=True)
+class Ports:
+    """A component's bus port (None: not on a bus) and its control links in and out."""
+
+    bus: BusPort | None = None
+    inputs: tuple = ()
+    outputs: tuple = ()
+
+    def input(self, signal: str) -> str | None:
+        """The variable taking `signal`, or None."""
+        return next((link.variable for link in self.inputs if link.signal == signal), None)
+
+    def output(self, signal: str) -> str | None:
+        """The variable giving `signal`, or None."""
+        return next((link.variable for link in self.outputs if link.signal == signal), None)
+
+    def check(self, inputs, outputs, owner: str) -> None:
+        """Raise PortError unless every port names a known signal and a variable of the right kind:
+        `inputs` are the input names, `outputs` the names that may be read (states and outputs)."""
+        def need(name, pool, what):
+            if name not in pool:
+                raise PortError(f"{owner}: port {what} names {name!r}, which is not one of {', '.join(pool)}")
+
+        if self.bus is not None:
+            if len(self.bus.voltage) != 2 or len(self.bus.current) != 2:
+                raise PortError(f"{owner}: a bus port has two voltage inputs and two current outputs")
+            for name in self.bus.voltage:
+                need(name, inputs, "bus voltage")
+            for name in self.bus.current:
+                need(name, outputs, "bus current")
+        for links, pool, what in ((self.inputs, inputs, "input"), (self.outputs, outputs, "output")):
+            signals = [link.signal for link in links]
+            if len(set(signals)) != len(signals):
+                raise PortError(f"{owner}: a signal appears twice among the {what} links")
+            for link in links:
+                if link.signal not in SIGNALS:
+                    raise PortError(f"{owner}: unknown signal {link.signal!r} (known: {', '.join(SIGNALS)})")
+                need(link.variable, pool, f"{what} {link.signal}")
+
+    def element(self) -> ET.Element:
+        """The <Ports> element of a model description."""
+        root = ET.Element("Ports")
+        if self.bus is not None:
+            (vm, va), (ir, ii) = self.bus.voltage, self.bus.current
+            ET.SubElement(root, "Bus", voltageMagnitude=vm, voltageAngle=va, currentReal=ir, currentImaginary=ii)
+        for tag, links in (("Input", self.inputs), ("Output", self.outputs)):
+            for link in links:
+                ET.SubElement(root, tag, signal=link.signal, variable=link.variable)
+        return root
+
+    @classmethod
+    def from_element(cls, root: ET.Element) -> "Ports":
+        """Ports from a <Ports> element; PortError for a malformed one (unknown signal, missing attribute)."""
+        bus, inputs, outputs = None, [], []
+        try:
+            for child in root:
+                if child.tag == "Bus":
+                    if bus is not None:
+                        raise PortError("a <Ports> element has more than one <Bus>")
+                    a = child.attrib
+                    bus = BusPort((a["voltageMagnitude"], a["voltageAngle"]), (a["currentReal"], a["currentImaginary"]))
+                elif child.tag in ("Input", "Output"):
+                    link = Link(child.attrib["signal"], child.attrib["variable"])
+                    if link.signal not in SIGNALS:
+                        raise PortError(f"unknown signal {link.signal[:40]!r} in <Ports>")
+                    (inputs if child.tag == "Input" else outputs).append(link)
+        except KeyError as exc:
+            raise PortError(f"a <{child.tag}> element of <Ports> has no attribute {exc.args[0]}") from None
+        return cls(bus, tuple(inputs), tuple(outputs))
+
+
+def ports_of_model_description(root: ET.Element) -> Ports | None:
+    """The ports declared in a parsed model description (FMI 2.0 or 3.0), or None where it declares none."""
+    found = root.find(f"VendorAnnotations/Tool[@name='{TOOL_NAME}']/Ports")
+    if found is None:
+        found = root.find(f"Annotations/Annotation[@type='{FMI3_ANNOTATION_TYPE}']/Ports")
+    return None if found is None else Ports.from_element(found)
