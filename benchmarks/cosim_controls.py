@@ -56,8 +56,8 @@ def maxae(a: np.ndarray, b: np.ndarray) -> list[float]:
 def build(operator: Path, machine_file, exciter_file, tmp: Path) -> tuple[Unit, Unit, Unit]:
     """(surrogate, reference machine, exciter) units: the surrogate FMU of `operator`, the native
     reference of its machine (checked against --machine), the native reference of IEEE1."""
-    from fmu_export.builder import build_surrogate_fmu
-    from fmu_export.native_reference import build_native_reference_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
 
     machine = operator_machine(operator)
     if machine_file is not None:

@@ -11,14 +11,14 @@ def extracted_pair(surrogate, reference, tmp: Path, operator=None) -> tuple[str,
     (default: the shipped one), a missing reference FMU is the native one built for the surrogate's
     machine (the parameters its operator records)."""
     if surrogate is None:
-        from fmu_export.builder import build_surrogate_fmu
+        from fmu_export.surrogate_fmu import build_surrogate_fmu
         from surrogate.operator import DEFAULT_OPERATOR
 
         surrogate = tmp / "SM4Surrogate.fmu"
         build_surrogate_fmu(operator or DEFAULT_OPERATOR, surrogate)
     surrogate_dir = extract(str(surrogate), unzipdir=str(tmp / "s"))
     if reference is None:
-        from fmu_export.native_reference import build_native_reference_fmu
+        from fmu_export.native_reference_fmu import build_native_reference_fmu
         from opfmu.compare import fmu_machine
 
         reference = tmp / "SM4Reference.fmu"

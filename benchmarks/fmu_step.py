@@ -23,9 +23,9 @@ import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-from fmu_export.builder import build_surrogate_fmu
-from fmu_export.native_reference import build_native_reference_fmu
-from fmu_export.reference_fmu import build_reference_fmu
+from fmu_export.surrogate_fmu import build_surrogate_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
+from fmu_export.python_reference_fmu import build_reference_fmu
 from opfmu.compare import fmu_machine
 from surrogate.operator import DEFAULT_OPERATOR
 

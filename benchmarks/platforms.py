@@ -23,8 +23,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fmu_export import cross_check, platforms  # noqa: E402
-from fmu_export.builder import build_surrogate_fmu, default_state, load_operator, surrogate_starts  # noqa: E402
-from fmu_export.native_reference import build_native_reference_fmu, native_reference_variables  # noqa: E402
+from fmu_export.surrogate_fmu import build_surrogate_fmu, default_state, load_operator, surrogate_starts  # noqa: E402
+from fmu_export.native_reference_fmu import build_native_reference_fmu, native_reference_variables  # noqa: E402
 from fmu_export.variables import SURROGATE_EXTRAS, fmu_variables  # noqa: E402
 from reference_models.files import write_json  # noqa: E402
 from surrogate.operator import DEFAULT_OPERATOR  # noqa: E402

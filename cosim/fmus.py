@@ -12,12 +12,10 @@ a build would give the same FMU; builds write atomically, so a cache can be shar
 """
 from __future__ import annotations
 
-import hashlib
-import json
-import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from fmu_export.build_cache import cached_fmu, default_cache
 from reference_models.grid import wscc9
 from reference_models.ieee1 import IEEE1
 from reference_models.sm4 import SM4
@@ -26,12 +24,6 @@ from .fmu import CouplingError
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_OPERATORS = ROOT / "surrogate" / "default"
-BUILD_SOURCES = (ROOT / "fmu_export", ROOT / "reference_models")
-
-
-def default_cache() -> Path:
-    """$OPFMU_FMU_CACHE, else ~/.cache/opfmu/fmus."""
-    return Path(os.environ.get("OPFMU_FMU_CACHE") or Path.home() / ".cache" / "opfmu" / "fmus")
 
 
 @dataclass(frozen=True)
@@ -42,30 +34,6 @@ class GeneratorFiles:
     kind: str
     machine: Path
     exciter: Path
-
-
-_SOURCE_HASH = None
-
-
-def _source_hash() -> str:
-    """A hash of the builders' sources (fmu_export, reference_models: .py, .c, .h)."""
-    global _SOURCE_HASH
-    if _SOURCE_HASH is None:
-        h = hashlib.sha256()
-        for folder in BUILD_SOURCES:
-            for path in sorted(folder.rglob("*")):
-                if path.suffix in (".py", ".c", ".h") and "__pycache__" not in path.parts:
-                    h.update(str(path.relative_to(ROOT)).encode())
-                    h.update(path.read_bytes())
-        _SOURCE_HASH = h.hexdigest()
-    return _SOURCE_HASH
-
-
-def _key(*parts) -> str:
-    h = hashlib.sha256(_source_hash().encode())
-    for part in parts:
-        h.update(part if isinstance(part, bytes) else json.dumps(part, sort_keys=True, default=str).encode())
-    return h.hexdigest()[:16]
 
 
 def operator_path(name) -> Path:
@@ -105,33 +73,31 @@ def _check_operator(path: Path, machine, bus: int) -> None:
 def _build(kind: str, component, params, cache: Path, model_name: str, operator: Path | None = None,
            progress=None) -> Path:
     """The FMU of `component` with `params` of that kind, from the cache or built into it."""
-    from fmu_export.builder import BuildError, build_surrogate_fmu
-    from fmu_export.native_reference import build_native_reference_fmu
-    from fmu_export.reference_fmu import build_reference_fmu
+    from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
+    from fmu_export.python_reference_fmu import build_reference_fmu
 
     payload = operator.read_bytes() if operator is not None else b""
-    out = cache / f"{model_name}-{_key(kind, component.name, params.to_dict(), model_name, payload)}.fmu"
-    if out.is_file():
-        return out
-    if progress:
-        progress(f"{model_name} ({kind})")
-    try:
-        if kind == "surrogate":
-            build_surrogate_fmu(operator, out, model_name=model_name)
-        elif kind == "reference":
-            build_native_reference_fmu(out, model_name=model_name, component=component, params=params)
-        else:
-            build_reference_fmu(out, model_name=model_name, component=component, params=params)
-    except (BuildError, ValueError, RuntimeError) as exc:
-        raise CouplingError(f"cannot build {model_name}: {str(exc)[:300]}") from None
-    return out
+
+    def build(out: Path) -> None:
+        try:
+            if kind == "surrogate":
+                build_surrogate_fmu(operator, out, model_name=model_name)
+            elif kind == "reference":
+                build_native_reference_fmu(out, model_name=model_name, component=component, params=params)
+            else:
+                build_reference_fmu(out, model_name=model_name, component=component, params=params)
+        except (BuildError, ValueError, RuntimeError) as exc:
+            raise CouplingError(f"cannot build {model_name}: {str(exc)[:300]}") from None
+
+    return cached_fmu(model_name, (kind, component.name, params.to_dict(), payload), build, cache,
+                      progress and (lambda name: progress(f"{name} ({kind})")))
 
 
 def generator_files(dynamics, kind: str | None = None, cache=None, progress=None) -> list:
     """GeneratorFiles for every generator of `dynamics` (wscc9.GeneratorDynamics), each of its own
     FMU kind or all of `kind`; `progress(text)` is told before each FMU that is not cached is built."""
     cache = Path(cache) if cache is not None else default_cache()
-    cache.mkdir(parents=True, exist_ok=True)
     files = []
     for g in dynamics:
         fmu = g.fmu if kind is None else replace(g.fmu, kind=kind)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from fmpy import extract, instantiate_fmu, read_model_description
 
-from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
 from reference_models.ieee1 import IEEE1
 from reference_models.initialisation import exciter_start, machine_start
 from reference_models.sm4 import SM4
@@ -81,7 +81,7 @@ def main() -> None:
     build_native_reference_fmu(fmus["reference"])
     build_native_reference_fmu(args.out / "IEEE1Reference.fmu", "IEEE1Reference", IEEE1)
     if args.surrogate:
-        from fmu_export.builder import BuildError, build_surrogate_fmu
+        from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
         from surrogate.operator import DEFAULT_OPERATOR
 
         try:

@@ -125,7 +125,7 @@ def cmd_export(args) -> None:
 
 
 def cmd_build_fmu(args) -> None:
-    from fmu_export.builder import BuildError, build_surrogate_fmu
+    from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
     from surrogate.operator import DEFAULT_OPERATOR
 
     onnx_path = Path(args.model) if args.model else DEFAULT_OPERATOR
@@ -143,8 +143,8 @@ def cmd_build_fmu(args) -> None:
 
 
 def cmd_build_reference_fmu(args) -> None:
-    from fmu_export.native_reference import build_native_reference_fmu
-    from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
+    from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu
     from opfmu.compare import operator_machine
 
     if args.python and (args.fmi_version != 2 or args.platforms is not None):
@@ -272,8 +272,8 @@ def cmd_demo(args) -> None:
             load_preset(args.preset)
     except (CompareError, ValueError) as exc:
         raise UserError(str(exc)) from None
-    from fmu_export.builder import BuildError
-    from fmu_export.reference_fmu import ReferenceBuildError
+    from fmu_export.surrogate_fmu import BuildError
+    from fmu_export.python_reference_fmu import ReferenceBuildError
 
     try:
         report = run_demo(DemoConfig(Path(args.out), train=args.train, preset=args.preset, epochs=args.epochs,

@@ -39,8 +39,8 @@ class DemoConfig:
 
 def run_demo(config: DemoConfig, say=print) -> Path:
     """Runs the demo; returns the report's path. `say` gets one line per stage."""
-    from fmu_export.builder import build_surrogate_fmu
-    from fmu_export.native_reference import build_native_reference_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
     from opfmu.compare import operator_machine
     from surrogate.operator import DEFAULT_OPERATOR
 

@@ -158,8 +158,8 @@ def _run(args) -> None:
     timings["training"] = time.perf_counter() - t
     say(f"trained: {result.epochs} epochs, best at {result.best_epoch}")
 
-    from fmu_export.builder import build_surrogate_fmu
-    from fmu_export.native_reference import build_native_reference_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
     from surrogate.onnx_export import export_onnx
 
     operating = tuple(args.operating_point) if args.operating_point else tuple(

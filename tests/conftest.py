@@ -40,7 +40,7 @@ def cosim_tiny(tmp_path_factory):
 @pytest.fixture(scope="session")
 def fmu_path(tmp_path_factory):
     """The surrogate FMU of the shipped operator, built once."""
-    from fmu_export.builder import build_surrogate_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.operator import DEFAULT_OPERATOR
 
     path = tmp_path_factory.mktemp("fmu") / "SM4Surrogate.fmu"
@@ -51,7 +51,7 @@ def fmu_path(tmp_path_factory):
 @pytest.fixture(scope="session")
 def native_reference_path(tmp_path_factory):
     """The native reference FMU (Dormand-Prince 5(4) in C) of the default machine, built once."""
-    from fmu_export.native_reference import build_native_reference_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
 
     path = tmp_path_factory.mktemp("native_reference") / "SM4Reference.fmu"
     build_native_reference_fmu(path)
@@ -61,7 +61,7 @@ def native_reference_path(tmp_path_factory):
 @pytest.fixture(scope="session")
 def reference_path(tmp_path_factory):
     """The pythonfmu reference FMU (scipy RK45) of the default machine, built once."""
-    from fmu_export.reference_fmu import build_reference_fmu
+    from fmu_export.python_reference_fmu import build_reference_fmu
 
     path = tmp_path_factory.mktemp("reference") / "SM4Reference.fmu"
     build_reference_fmu(path)

@@ -146,7 +146,7 @@ class NoTorch(importlib.abc.MetaPathFinder):
         if name == "torch" or name.startswith("torch."):
             raise ImportError("torch is blocked in this test")
 sys.meta_path.insert(0, NoTorch())
-from fmu_export.builder import build_surrogate_fmu
+from fmu_export.surrogate_fmu import build_surrogate_fmu
 from surrogate.operator import DEFAULT_OPERATOR
 build_surrogate_fmu(DEFAULT_OPERATOR, {str(tmp_path / 'x.fmu')!r}, n_check=4)
 assert "torch" not in sys.modules
@@ -160,7 +160,7 @@ assert "torch" not in sys.modules
 def undamped_fmu(shipped, tmp_path_factory):
     """The FMU of the shipped operator relabelled for an undamped machine (D = 0, other reactances):
     its network wrapped in that machine's frame (no damping torque), as an export for it would."""
-    from fmu_export.builder import build_surrogate_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.frame_graph import network_graph, wrap_in_frame
 
     directory = tmp_path_factory.mktemp("undamped")

@@ -93,7 +93,7 @@ def test_a_load_flow_file_starts_every_generator_with_its_own_machine_and_excite
 
 
 def test_the_fmus_started_with_these_values_stay_at_rest(tmp_path, native_reference_path):
-    from fmu_export.native_reference import build_native_reference_fmu
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
 
     exciter_path = tmp_path / "IEEE1Reference.fmu"
     build_native_reference_fmu(exciter_path, "IEEE1Reference", IEEE1)

@@ -11,8 +11,8 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from fmu_export.builder import build_surrogate_fmu
-from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.surrogate_fmu import build_surrogate_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_export.platforms import PLATFORMS
 from surrogate.operator import DEFAULT_OPERATOR
 from tests.test_platforms import random_machine
@@ -231,7 +231,7 @@ def test_the_pythonfmu_reference_is_fmi2_only(tmp_path):
 
 def test_the_fmi3_surrogate_dll_under_wine_gives_the_linux64_outputs(surrogate_fmi3, tmp_path):
     from fmu_export import cross_check, platforms
-    from fmu_export.builder import default_state, load_operator, surrogate_starts
+    from fmu_export.surrogate_fmu import default_state, load_operator, surrogate_starts
     from fmu_export.variables import SURROGATE_EXTRAS, fmu_variables
     from tests.test_platforms import extract_binary, needs
 

@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 
 from fmu_export.c_derivatives import jacobians_c_source
 from fmu_export.c_equations import equations_c_source
-from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_slave import Slave
 from reference_models.component import ParameterError
 from reference_models.components import component

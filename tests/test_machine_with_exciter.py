@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from fmpy import extract
 
-from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
 from reference_models.ieee1 import IEEE1
 from reference_models.initialisation import machine_start
 from reference_models.sm4 import SM4

@@ -13,9 +13,9 @@ from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
 from fmu_export.binaries import fmi_headers
-from fmu_export.native_reference import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
+from fmu_export.native_reference_fmu import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
                                          native_reference_variables)
-from fmu_export.reference_fmu import reference_variables
+from fmu_export.python_reference_fmu import reference_variables
 from fmu_slave import Slave
 from reference_models.scenarios import scenario
 from reference_models.sm4 import SM4

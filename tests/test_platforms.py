@@ -10,7 +10,7 @@ import pytest
 
 from fmu_export import cross_check, platforms
 from fmu_export.binaries import BuildError, fmi_headers
-from fmu_export.native_reference import build_native_reference_fmu, native_reference_variables
+from fmu_export.native_reference_fmu import build_native_reference_fmu, native_reference_variables
 from reference_models.sm4 import SM4
 
 WIN64, ARM = platforms.PLATFORMS["win64"], platforms.PLATFORMS["aarch64-linux"]

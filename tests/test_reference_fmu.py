@@ -11,7 +11,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
-from fmu_export.reference_fmu import ReferenceBuildError, build_reference_fmu, reference_variables
+from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu, reference_variables
 from fmu_export.variables import REFERENCE_EXTRAS, fmu_variables
 from fmu_slave import Slave
 from reference_models.component import ParameterError

@@ -8,7 +8,7 @@ import pytest
 from fmpy import extract, read_model_description
 
 from fmu_export.c_derivatives import jacobians_c_source
-from fmu_export.native_reference import build_native_reference_fmu
+from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_export.variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables
 from fmu_slave import Slave
 from reference_models.component import Component, Parameters, ParameterError, Quantity

@@ -44,7 +44,7 @@ def train_tiny(data, run, out):
 
 
 def built(onnx_path, directory, name):
-    from fmu_export.builder import build_surrogate_fmu
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
 
     path = directory / f"{name}.fmu"
     build_surrogate_fmu(onnx_path, path, model_name=name, n_check=4)

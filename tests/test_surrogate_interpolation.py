@@ -34,7 +34,7 @@ class Built:
     """An FMU built from an operator file: its path, extracted directory and model description."""
 
     def __init__(self, onnx_path, directory, name):
-        from fmu_export.builder import build_surrogate_fmu
+        from fmu_export.surrogate_fmu import build_surrogate_fmu
 
         self.onnx = Path(onnx_path)
         self.path = Path(directory) / f"{name}.fmu"

@@ -3,7 +3,7 @@
 The FMU's resources hold the package `<component>_reference_<digest of its code>` (`sm4_reference_...`
 for SM4), so the FMU runs wherever it is copied to:
 
-* `slave.py`: the slave class (reference_slave.py);
+* `slave.py`: the slave class (python_reference_slave.py);
 * copies of the component definition modules it runs: the module that defines the component
   (reference_models/sm4.py) and every sibling module it imports relatively (component.py, ...), so
   `from .component import ...` works inside the FMU;
@@ -44,9 +44,9 @@ from reference_models.version import __version__
 from .model_description import model_description, validation_problems
 from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, Variable, fmu_variables, start_state
 
-SLAVE = Path(__file__).with_name("reference_slave.py")
+SLAVE = Path(__file__).with_name("python_reference_slave.py")
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
-MACHINE_FILE, LAYOUT_FILE = "machine.json", "fmu.json"  # names the slave reads (reference_slave.py)
+MACHINE_FILE, LAYOUT_FILE = "machine.json", "fmu.json"  # names the slave reads (python_reference_slave.py)
 REPOSITORY_PACKAGES = ("reference_models", "surrogate", "fmu_export", "opfmu")
 
 

@@ -22,7 +22,7 @@ tolerance is refused with fmi2Error and a logged reason. fmi2GetDirectionalDeriv
 outputs' exact derivatives with respect to the inputs. The default initial state is the machine's
 equilibrium at the inputs' start values.
 
-The pythonfmu reference FMU (reference_fmu.py) has the same variables and value references.
+The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
 """
 from __future__ import annotations
 
@@ -38,12 +38,12 @@ from reference_models.component import Component, ParameterError
 from reference_models.sm4 import SM4
 
 from .binaries import PLUMBING, check_fmi_version, compile_binaries, targets
-from .builder import BuildError, _c_double, check_model_name, component_config, derivatives_source
+from .surrogate_fmu import BuildError, _c_double, check_model_name, component_config, derivatives_source
 from .c_equations import equations_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
-from .reference_fmu import machine_params
+from .python_reference_fmu import machine_params
 from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"

@@ -1,7 +1,7 @@
 """The reference FMU's model: a pythonfmu slave that integrates a component's ODE with scipy's RK45.
 
 This file runs inside the FMU, not in the repository (it is never imported here: its relative
-imports resolve only in the FMU). The builder (reference_fmu.py) copies it into the FMU's resources
+imports resolve only in the FMU). The builder (python_reference_fmu.py) copies it into the FMU's resources
 as `<package>/slave.py`, next to copies of the component definition modules (component.py, sm4.py,
 ...) and two JSON resources, so the FMU carries every line of model code it runs (it needs numpy,
 scipy and pythonfmu in the Python that loads it, and nothing from opfmu):
