@@ -7,9 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-
-class UserError(Exception):
-    """A mistake in what the user asked for: reported as one line, exit code 2."""
+from opfmu.errors import UserError
 
 
 class _Parser(argparse.ArgumentParser):

@@ -215,7 +215,7 @@ def add_init_parser(sub) -> None:
 
 
 def run_init(args) -> None:
-    from opfmu.cli import UserError
+    from opfmu.errors import UserError
 
     point = {"--V": args.V, "--P": args.P, "--Q": args.Q,
              "--theta-deg/--theta": args.theta if args.theta is not None else args.theta_deg}

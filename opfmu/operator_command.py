@@ -105,7 +105,7 @@ def _levels(args) -> dict:
 
 
 def cmd_operator(args) -> None:
-    from opfmu.cli import UserError
+    from opfmu.errors import UserError
     from reference_models.component import ParameterError
 
     try:
