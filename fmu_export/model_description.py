@@ -4,14 +4,19 @@ Variables come from variables.py; ModelStructure gives every output's dependenci
 depend on no input within a step, a derived output directly on the inputs its equation reads):
 in FMI 2.0 as 1-based positions in ModelVariables, in FMI 3.0 as value references (unique across
 types there: variables.fmi3_value_references), with the independent variable `time` FMI 3.0 requires.
+The component's ports (reference_models.ports), which the variable table carries, are declared as a
+<Ports> element: in FMI 2.0 under <VendorAnnotations><Tool name="opfmu">, between DefaultExperiment
+and ModelVariables as the schema orders them; in FMI 3.0 under <Annotations><Annotation
+type="org.opfmu.ports">, the last element of the document.
 """
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
+from reference_models.ports import FMI3_ANNOTATION_TYPE, TOOL_NAME
 from reference_models.version import __version__
 
-from .variables import TIME, Variable, fmi3_value_references
+from .variables import TIME, Variable, VariableTable, fmi3_value_references
 
 
 # SI base-unit exponents of the units components use; a unit not listed is declared without them
@@ -31,7 +36,8 @@ LOG_CATEGORIES = (("logStatusWarning", "warnings: inputs or states outside the t
 def model_description(model_name: str, guid: str, variables: list[Variable], description: str,
                       stop_time: float = 10.0, step: float = 0.01, directional_derivatives: bool = False,
                       interpolates_inputs: bool = False, fmi_version: int = 2) -> bytes:
-    """The XML document (UTF-8 bytes) of an FMI `fmi_version` (2 or 3) co-simulation FMU.
+    """The XML document (UTF-8 bytes) of an FMI `fmi_version` (2 or 3) co-simulation FMU with
+    `variables` (a VariableTable declares its component's ports; a plain list declares none).
     directional_derivatives: the FMU provides the outputs' derivatives with respect to the inputs
     (FMI 2.0 fmi2GetDirectionalDerivative; FMI 3.0 also fmi3GetAdjointDerivative); interpolates_inputs:
     it takes first input derivatives with fmi2SetRealInputDerivatives, the inputs linear over a step
@@ -53,6 +59,9 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         capabilities["providesDirectionalDerivative"] = "true"
     ET.SubElement(root, "CoSimulation", capabilities)
     _units_categories_experiment(root, variables, stop_time, step)
+    if isinstance(variables, VariableTable):
+        ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", {"name": TOOL_NAME}).append(
+            variables.ports.element())
     mv = ET.SubElement(root, "ModelVariables")
     for v in variables:
         sv = ET.SubElement(mv, "ScalarVariable", {"name": v.name, "valueReference": str(v.vr),
@@ -97,6 +106,9 @@ def _fmi3_document(model_name: str, guid: str, variables: list[Variable], descri
         ET.SubElement(mv, "Float64" if v.kind == "Real" else v.kind, attrs)
     structure = ET.SubElement(root, "ModelStructure")
     _structure(structure, variables, refs, "Output", "InitialUnknown", None, "valueReference")
+    if isinstance(variables, VariableTable):
+        ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", {"type": FMI3_ANNOTATION_TYPE}).append(
+            variables.ports.element())
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 

@@ -13,6 +13,7 @@ import re
 from dataclasses import dataclass
 
 from reference_models.component import Component
+from reference_models.ports import Ports
 
 from .c_equations import output_input_dependencies
 
@@ -27,6 +28,15 @@ class Variable:
     start: float | None = None
     kind: str = "Real"        # Real | Boolean
     dependencies: tuple = ()  # an output's direct dependencies on inputs within a step (input names)
+
+
+class VariableTable(list):
+    """The variables of one FMU (`Variable`, in value-reference order) with the ports of its
+    component (reference_models.ports.Ports), which the model description declares."""
+
+    def __init__(self, variables, ports: Ports):
+        super().__init__(variables)
+        self.ports = ports
 
 
 @dataclass(frozen=True)
@@ -95,10 +105,11 @@ def start_state(component: Component, params, operating_point: dict | None = Non
 
 
 def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
-                  operating_point: dict | None = None) -> list[Variable]:
-    """The variable list of an FMU of `component` with parameters `params`: x_start [n_x] are the
+                  operating_point: dict | None = None) -> VariableTable:
+    """The variable table of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
-    their start values by name (parameters need one); the inputs start at start_inputs."""
+    their start values by name (parameters need one); the inputs start at start_inputs. The table
+    carries the component's ports for the model description."""
     starts = starts or {}
     dependencies = output_input_dependencies(component, params)
     u_start = start_inputs(component, operating_point)
@@ -118,7 +129,7 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         out.append(Variable(extra.name, next_vr[extra.kind], extra.causality, extra.description, extra.unit, start,
                             extra.kind, deps))
         next_vr[extra.kind] += 1
-    return out
+    return VariableTable(out, component.ports)
 
 
 TIME = "time"  # the independent variable FMI 3.0 requires

@@ -30,7 +30,9 @@ grid master, for an FMU the project did not build) finds them without knowing th
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+import zipfile
 from dataclasses import dataclass
+from pathlib import Path
 
 #: The control signals components exchange: name -> (symbol, unit, meaning).
 SIGNALS = {
@@ -147,3 +149,33 @@ def ports_of_model_description(root: ET.Element) -> Ports | None:
     if found is None:
         found = root.find(f"Annotations/Annotation[@type='{FMI3_ANNOTATION_TYPE}']/Ports")
     return None if found is None else Ports.from_element(found)
+
+
+MAX_MODEL_DESCRIPTION_BYTES = 16 * 1024 * 1024
+
+
+def ports_of_fmu(path) -> Ports | None:
+    """The ports an FMU declares (an .fmu file or its extracted directory), or None where it declares
+    none. PortError (one line) for an FMU without a readable modelDescription.xml or with a malformed
+    <Ports> element."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            source = path / "modelDescription.xml"
+            if source.stat().st_size > MAX_MODEL_DESCRIPTION_BYTES:
+                raise PortError(f"{path}: modelDescription.xml is larger than {MAX_MODEL_DESCRIPTION_BYTES} bytes")
+            text = source.read_bytes()
+        else:
+            with zipfile.ZipFile(path) as archive:
+                if archive.getinfo("modelDescription.xml").file_size > MAX_MODEL_DESCRIPTION_BYTES:
+                    raise PortError(f"{path}: modelDescription.xml is larger than {MAX_MODEL_DESCRIPTION_BYTES} bytes")
+                text = archive.read("modelDescription.xml")
+        root = ET.fromstring(text)
+    except PortError:
+        raise
+    except KeyError:
+        raise PortError(f"{path} has no modelDescription.xml") from None
+    except (OSError, zipfile.BadZipFile, ET.ParseError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        raise PortError(f"cannot read the model description of {path}: {reason}") from None
+    return ports_of_model_description(root)

@@ -1,0 +1,39 @@
+"""Ports on the component definition: declared in every FMU's model description, read back as declared."""
+import zipfile
+
+import pytest
+
+from fmu_export.model_description import validation_problems
+from fmu_export.native_reference_fmu import build_native_reference_fmu
+from reference_models.ieee1 import IEEE1
+from reference_models.ports import PortError, ports_of_fmu
+from reference_models.sm4 import SM4
+
+
+@pytest.mark.parametrize("fmi_version", [2, 3])
+@pytest.mark.parametrize("component", [SM4, IEEE1], ids=lambda c: c.name)
+def test_a_native_reference_fmu_declares_its_components_ports_and_still_validates(component, fmi_version, tmp_path):
+    path = tmp_path / f"{component.name}.fmu"
+    build_native_reference_fmu(path, f"{component.name.upper()}Reference", component, fmi_version=fmi_version)
+    assert ports_of_fmu(path) == component.ports
+    assert validation_problems(path) == []
+
+
+def test_the_surrogate_fmu_declares_the_machines_ports(fmu_path, tmp_path):
+    assert ports_of_fmu(fmu_path) == SM4.ports
+    with zipfile.ZipFile(fmu_path) as archive:
+        archive.extractall(tmp_path)
+    assert ports_of_fmu(tmp_path) == SM4.ports  # an extracted FMU reads the same
+
+
+def test_the_pythonfmu_reference_fmu_declares_the_machines_ports(reference_path):
+    assert ports_of_fmu(reference_path) == SM4.ports
+
+
+def test_an_fmu_without_a_readable_model_description_is_refused_in_one_line(tmp_path):
+    for path, reason in ((tmp_path / "none.fmu", "No such file"), (tmp_path / "text.fmu", "not a zip file")):
+        if path.name == "text.fmu":
+            path.write_text("not an FMU")
+        with pytest.raises(PortError, match=reason) as caught:
+            ports_of_fmu(path)
+        assert "\n" not in str(caught.value)
