@@ -31,6 +31,15 @@ from .ports import Link, Ports
 NO_LIMIT = 1e6  # pu: a regulator limit this large (or larger) in magnitude is no limit
 
 
+# The physical range of each gain and time constant (low, high, unit): outside it an exciter is a
+# typing error or a mode no integrator follows in a co-simulation's time (KA / TA up to 2e5 1/s).
+# The regulator limits are any numbers (beyond NO_LIMIT: none).
+PARAMETER_RANGES = {
+    "KA": (0.0, 1000.0, "pu"), "TA": (0.005, 10.0, "s"), "KE": (0.0, 10.0, "pu"), "TE": (0.01, 10.0, "s"),
+    "KF": (0.0, 10.0, "pu"), "TF": (0.01, 100.0, "s"), "Ax": (0.0, 1.0, "pu"), "Bx": (0.0, 5.0, "1/pu"),
+}
+
+
 @dataclass(frozen=True)
 class IEEE1Params(Parameters):
     """Gains (pu/pu), time constants [s] and the saturation coefficients Ax [pu], Bx [1/pu]."""
@@ -52,6 +61,8 @@ class IEEE1Params(Parameters):
         for name in ("KF", "Ax", "Bx"):
             self.require(name, getattr(self, name) >= 0, "be >= 0")
         self.require("KE", self.KE > 0, "be > 0 (a separately excited exciter; self-excited ones are not modelled)")
+        for name, (low, high, unit) in PARAMETER_RANGES.items():
+            self.require(name, low <= getattr(self, name) <= high, f"lie in [{low:g}, {high:g}] {unit}")
         self.require("VRmax", self.VRmax > self.VRmin, f"exceed VRmin = {self.VRmin!r}")
 
 

@@ -24,6 +24,19 @@ from .drift import Drift
 from .ports import BusPort, Link, Ports
 
 
+# The physical range of each parameter (low, high, unit): a machine outside it is a typing error or
+# one no integrator follows in a co-simulation's time (H = 1e-9 s puts the swing mode near 1e6 rad/s).
+# Wide enough for machine data on a system base (H of a large area's equivalent machine up to
+# hundreds of seconds) and for 16.7-400 Hz networks (Wb).
+PARAMETER_RANGES = {
+    "H": (0.1, 1000.0, "s"), "D": (0.0, 1000.0, "pu"),
+    "Td0_p": (0.01, 100.0, "s"), "Tq0_p": (0.01, 100.0, "s"),
+    "Xd": (0.01, 10.0, "pu"), "Xd_p": (0.01, 10.0, "pu"), "Xq": (0.01, 10.0, "pu"), "Xq_p": (0.01, 10.0, "pu"),
+    "Rs": (0.0, 1.0, "pu"), "Re": (0.0, 1.0, "pu"), "Xep": (0.0, 10.0, "pu"),
+    "Wb": (50.0, 3000.0, "rad/s"),
+}
+
+
 @dataclass(frozen=True)
 class SM4Params(Parameters):
     """Machine and network parameters (paper Table I); reactances in pu on the machine base, times
@@ -47,6 +60,8 @@ class SM4Params(Parameters):
             self.require(name, getattr(self, name) > 0, "be > 0")
         for name in ("D", "Rs", "Re", "Xep"):
             self.require(name, getattr(self, name) >= 0, "be >= 0")
+        for name, (low, high, unit) in PARAMETER_RANGES.items():
+            self.require(name, low <= getattr(self, name) <= high, f"lie in [{low:g}, {high:g}] {unit}")
         self.require("Xd_p", self.Xd_p <= self.Xd, f"not exceed Xd = {self.Xd!r}")
         self.require("Xq_p", self.Xq_p <= self.Xq, f"not exceed Xq = {self.Xq!r}")
 

@@ -103,3 +103,29 @@ def test_resistance_makes_bus_power_smaller_than_air_gap_power():
     x = steady_state(1.0, 0.0, p)
     Id, Iq, _, _, P, _ = outputs(x, np.array([1.0, 0.0, PM, EFD]), p)
     assert P == pytest.approx(PM - 0.05 * (Id**2 + Iq**2), abs=1e-10)
+
+
+@pytest.mark.parametrize("values, says", [
+    ({"H": 1e-9}, "parameter H = 1e-09 must lie in [0.1, 1000] s"),
+    ({"H": 1e308, "D": 1e308}, "parameter H = 1e+308 must lie in [0.1, 1000] s"),
+    ({"D": 1e308}, "parameter D = 1e+308 must lie in [0, 1000] pu"),
+    ({"Td0_p": 1e-6}, "parameter Td0_p = 1e-06 must lie in [0.01, 100] s"),
+    ({"Xd": 1e5}, "parameter Xd = 100000.0 must lie in [0.01, 10] pu"),
+    ({"Wb": 1.0}, "parameter Wb = 1.0 must lie in [50, 3000] rad/s"),
+])
+def test_parameters_outside_their_physical_range_are_refused_naming_the_field_and_the_range(values, says):
+    from reference_models.component import ParameterError
+
+    with pytest.raises(ParameterError) as caught:
+        SM4.params(values)
+    assert str(caught.value) == says
+
+
+def test_the_shipped_machines_lie_within_the_physical_ranges():
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[1] / "reference_models" / "grid" / "data"
+    machines = sorted(data.glob("wscc9_gen*.json"))
+    assert len(machines) == 3
+    for path in machines:
+        SM4.load_params(path)  # raises ParameterError outside a range

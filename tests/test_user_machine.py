@@ -127,6 +127,8 @@ def test_compare_refuses_fmus_of_two_different_machines(user_run, tmp_path):
     ('{"H": 1e400}', "parameter H"),
     ('{"H": 1' + '0' * 400 + '}', "parameter H"),
     ('{"Xd_p": 2.0}', "not exceed Xd"),
+    ('{"H": 1e-9}', "parameter H = 1e-09 must lie in [0.1, 1000] s"),
+    ('{"H": 1e308, "D": 1e308}', "parameter H = 1e+308 must lie in [0.1, 1000] s"),
     ('{"Pm": 0.7}', "unknown sm4 parameter(s) 'Pm'"),  # an input, not a parameter
     ("not json", "cannot read machine file"),
 ])
@@ -136,3 +138,12 @@ def test_a_bad_machine_file_is_one_line_and_exit_code_2(tmp_path, content, says)
     assert done.returncode == 2 and says in done.stderr, done.stderr
     assert len(done.stderr.strip().splitlines()) == 1 and "Traceback" not in done.stderr
     assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize("content", ['{"H": 1e-9}', '{"H": 1e308, "D": 1e308}'])
+def test_operator_refuses_a_machine_outside_the_physical_ranges_before_any_work(tmp_path, content):
+    (tmp_path / "m.json").write_text(content)
+    done = opfmu("operator", "--machine", tmp_path / "m.json", "--out", tmp_path / "run")
+    assert done.returncode == 2 and "parameter H = " in done.stderr and "must lie in [0.1, 1000] s" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and done.stdout == ""
+    assert not (tmp_path / "run").exists()
