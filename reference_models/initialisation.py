@@ -33,6 +33,16 @@ import numpy as np
 from .ieee1 import IEEE1Params, regulator_limits
 from .sm4 import SM4Params
 
+# The physical ranges of a load-flow point and of the start values it gives (pu on the machine
+# base): a number outside them is a typing error or a point no machine is held at (P = 100 pu asks
+# the default machine for a field voltage of 70 pu and its exciter for VR = 1e90 pu).
+VOLTAGE_RANGE = (0.5, 1.5)  # pu: the bus voltage V
+ANGLE_LIMIT = 2 * math.pi  # rad: |theta|
+POWER_LIMIT = 10.0  # pu: |P| and |Q|, ten times the machine's rating (its base)
+FIELD_LIMIT = 10.0  # pu: |Efd|, the field voltage the machine needs there
+REGULATOR_LIMIT = 100.0  # pu: |VR|, the exciter's regulator output
+REFERENCE_RANGE = (0.0, 10.0)  # pu: the exciter's voltage set point Vref
+
 
 @dataclass(frozen=True)
 class MachineStart:
@@ -71,6 +81,14 @@ def _number(name: str, value) -> float:
     return number
 
 
+def _within(what: str, value: float, low: float, high: float, unit: str, context: str = "") -> None:
+    """ValueError "WHAT = VALUE UNIT CONTEXT lies outside its physical range [LOW, HIGH] UNIT" unless
+    low <= value <= high."""
+    if not low <= value <= high:
+        raise ValueError(f"{what} = {value:.6g} {unit}{context} lies outside its physical range "
+                         f"[{low:.6g}, {high:.6g}] {unit}")
+
+
 def _frozen(values) -> np.ndarray:
     array = np.array(values, dtype=float)
     array.flags.writeable = False
@@ -81,13 +99,17 @@ def machine_start(V: float, theta: float, P: float, Q: float, p: SM4Params) -> M
     """SM4 in equilibrium at bus voltage V [pu] at angle theta [rad], injecting P + jQ [pu] into the
     bus (P + jQ = V e^{j theta} conj(I)); the machine's parameters p.
 
-    Raises ValueError for a non-finite number, V <= 0, or a point no machine of these parameters can
-    be in (no internal voltage to give the rotor angle)."""
+    Raises ValueError for a non-finite number, a number outside its physical range (V in
+    VOLTAGE_RANGE, |theta| <= ANGLE_LIMIT, |P|, |Q| <= POWER_LIMIT), a point no machine of these
+    parameters can be in (no internal voltage to give the rotor angle) or one that needs a field
+    voltage beyond FIELD_LIMIT."""
     if not isinstance(p, SM4Params):
         raise TypeError(f"machine parameters must be SM4Params, got {type(p).__name__}")
     V, theta, P, Q = (_number(n, v) for n, v in (("V", V), ("theta", theta), ("P", P), ("Q", Q)))
-    if V <= 0:
-        raise ValueError(f"the bus voltage V must be > 0 pu, got {V!r}")
+    _within("the bus voltage V", V, *VOLTAGE_RANGE, "pu")
+    _within("the bus voltage angle theta", theta, -ANGLE_LIMIT, ANGLE_LIMIT, "rad")
+    _within("the active power P", P, -POWER_LIMIT, POWER_LIMIT, "pu")
+    _within("the reactive power Q", Q, -POWER_LIMIT, POWER_LIMIT, "pu")
     bus = cmath.rect(V, theta)
     current = ((P + 1j * Q) / bus).conjugate()
     ra = p.Rs + p.Re
@@ -107,6 +129,7 @@ def machine_start(V: float, theta: float, P: float, Q: float, p: SM4Params) -> M
     values = (delta, Ed_p, Eq_p, Efd, Pm, Vt, Id, Iq)
     if not all(math.isfinite(v) for v in values):
         raise ValueError(f"no finite start of the machine at V={V} pu, theta={theta} rad, P={P} pu, Q={Q} pu")
+    _within("the field voltage Efd", Efd, -FIELD_LIMIT, FIELD_LIMIT, "pu", " the machine needs there")
     return MachineStart(x0=_frozen([delta, 0.0, Ed_p, Eq_p]), Pm=Pm, Efd=Efd, Vt=Vt, I_re=current.real,
                         I_im=current.imag, Id=Id, Iq=Iq)
 
@@ -114,14 +137,16 @@ def machine_start(V: float, theta: float, P: float, Q: float, p: SM4Params) -> M
 def exciter_start(Efd: float, Vt: float, p: IEEE1Params) -> ExciterStart:
     """IEEE1 in equilibrium holding field voltage Efd [pu] at terminal voltage Vt [pu]; parameters p.
 
-    Raises ValueError for a non-finite number, Vt <= 0, an Efd below -1/Bx (off the branch where
-    IEEE1's steady state is unique: (KE + SE(Efd)) Efd increasing), or a regulator output VR the
-    limits VRmin, VRmax do not allow."""
+    Raises ValueError for a non-finite number, Vt <= 0, |Efd| beyond FIELD_LIMIT, an Efd below -1/Bx
+    (off the branch where IEEE1's steady state is unique: (KE + SE(Efd)) Efd increasing), a
+    regulator output VR the limits VRmin, VRmax do not allow or beyond REGULATOR_LIMIT, or a set
+    point Vref outside REFERENCE_RANGE."""
     if not isinstance(p, IEEE1Params):
         raise TypeError(f"exciter parameters must be IEEE1Params, got {type(p).__name__}")
     Efd, Vt = _number("Efd", Efd), _number("Vt", Vt)
     if Vt <= 0:
         raise ValueError(f"the terminal voltage Vt must be > 0 pu, got {Vt!r}")
+    _within("the field voltage Efd", Efd, -FIELD_LIMIT, FIELD_LIMIT, "pu")
     if p.Bx > 0 and Efd < -1.0 / p.Bx:
         raise ValueError(f"the exciter has no unique steady state at Efd = {Efd!r} pu (below -1/Bx = {-1.0 / p.Bx!r})")
     VR = (p.KE + p.Ax * math.exp(p.Bx * Efd)) * Efd
@@ -130,8 +155,9 @@ def exciter_start(Efd: float, Vt: float, p: IEEE1Params) -> ExciterStart:
         bound = "VRmax" if VR > high else "VRmin"
         raise ValueError(f"the exciter cannot hold Efd = {Efd:.6g} pu: it needs VR = {VR:.6g} pu, beyond the "
                          f"regulator limit {bound} = {getattr(p, bound)!r}")
+    _within("the regulator output VR", VR, -REGULATOR_LIMIT, REGULATOR_LIMIT, "pu",
+            f" the exciter needs to hold Efd = {Efd:.6g} pu")
     RF = p.KF / p.TF * Efd
     Vref = Vt + VR / p.KA
-    if not all(math.isfinite(v) for v in (VR, RF, Vref)):
-        raise ValueError(f"no finite start of the exciter at Efd = {Efd!r} pu, Vt = {Vt!r} pu")
+    _within("the voltage set point Vref", Vref, *REFERENCE_RANGE, "pu", " the exciter needs")
     return ExciterStart(x0=_frozen([Efd, RF, VR]), Vref=Vref)

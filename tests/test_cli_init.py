@@ -111,7 +111,15 @@ def test_the_fmus_started_with_these_values_stay_at_rest(tmp_path, native_refere
     (["--V", "1", "--theta", "0", "--P", "1"], "needs --Q"),
     (["--V", "1", "--theta", "0", "--P", "1", "--Q", "zero"], "argument --Q: invalid float value: 'zero'"),
     (["--V", "nan", "--theta", "0", "--P", "1", "--Q", "0"], "V must be a finite number"),
-    (["--V", "-1", "--theta", "0", "--P", "1", "--Q", "0"], "bus voltage V must be > 0 pu"),
+    (["--V", "-1", "--theta", "0", "--P", "1", "--Q", "0"], "bus voltage V = -1 pu lies outside its physical range"),
+    (["--V", "1e-300", "--theta", "0", "--P", "1", "--Q", "0"], "V = 1e-300 pu lies outside its physical range "
+                                                                  "[0.5, 1.5] pu"),
+    (["--V", "1", "--theta", "0", "--P", "1e300", "--Q", "0"], "P = 1e+300 pu lies outside its physical range "
+                                                                 "[-10, 10] pu"),
+    (["--V", "1", "--theta", "0", "--P", "100", "--Q", "0"], "P = 100 pu lies outside its physical range [-10, 10] pu"),
+    # within the ranges, but the WSCC exciter's saturation would need VR = 4748 pu for this field
+    (["--V", "1", "--theta", "0", "--P", "5", "--Q", "2"], "regulator output VR = 4747.71 pu the exciter needs to hold "
+                                                            "Efd = 7.69754 pu lies outside its physical range"),
     (["--V", "1", "--theta", "0", "--theta-deg", "0", "--P", "1", "--Q", "0"], "not allowed with argument"),
     (["--V", "1", "--theta", "0", "--P", "1", "--Q", "0", "--load-flow", "f.json"], "drop --V, --P, --Q"),
     (["--V", "1", "--theta", "0", "--P", "1", "--Q", "0", "--exciter", "e.json", "--no-exciter"], "not allowed"),
@@ -141,7 +149,7 @@ HOSTILE = {
     "string number": ('{"V": "1", "theta": 0, "P": 1, "Q": 0}', "V must be a finite number"),
     "huge": ('{"V": 1e999, "theta": 0, "P": 1, "Q": 0}', "V must be a finite number"),
     "huge int": ('{"V": 1' + "0" * 400 + ', "theta": 0, "P": 1, "Q": 0}', "V must be a finite number"),
-    "zero voltage": ('{"name": "G9", "V": 0, "theta": 0, "P": 1, "Q": 0}', "G9: the bus voltage V must be > 0"),
+    "zero voltage": ('{"name": "G9", "V": 0, "theta": 0, "P": 1, "Q": 0}', "G9: the bus voltage V = 0 pu lies outside"),
     "machine list": ('{"V": 1, "theta": 0, "P": 1, "Q": 0, "machine": [1]}', "machine: must be a file name or"),
     "machine missing": ('{"V": 1, "theta": 0, "P": 1, "Q": 0, "machine": "none.json"}', "cannot read machine file"),
     "bad parameter": ('{"V": 1, "theta": 0, "P": 1, "Q": 0, "machine": {"params": {"H": -1}}}', "parameter H = -1.0"),

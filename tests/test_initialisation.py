@@ -102,8 +102,16 @@ def test_an_exciter_start_within_its_regulator_limits_is_one_of_the_limited_equa
     ((1.0, 0.0, "lots", 0.0), "P must be a number"),
     ((1.0, 0.0, 1.0, True), "Q must be a number"),
     ((1.0, 0.0, 1.0, None), "Q must be a number"),
-    ((0.0, 0.0, 1.0, 0.0), "bus voltage V must be > 0"),
-    ((-1.0, 0.0, 1.0, 0.0), "bus voltage V must be > 0"),
+    ((0.0, 0.0, 1.0, 0.0), r"bus voltage V = 0 pu lies outside its physical range \[0.5, 1.5\] pu"),
+    ((-1.0, 0.0, 1.0, 0.0), r"bus voltage V = -1 pu lies outside"),
+    ((1e-300, 0.0, 1.0, 0.0), r"bus voltage V = 1e-300 pu lies outside its physical range \[0.5, 1.5\] pu"),
+    ((1.0, 7.0, 1.0, 0.0), r"angle theta = 7 rad lies outside its physical range \[-6.28319, 6.28319\] rad"),
+    ((1.0, 0.0, 1e300, 0.0), r"active power P = 1e\+300 pu lies outside its physical range \[-10, 10\] pu"),
+    ((1.0, 0.0, 100.0, 0.0), r"active power P = 100 pu lies outside"),
+    ((1.0, 0.0, 1.0, -11.0), r"reactive power Q = -11 pu lies outside its physical range \[-10, 10\] pu"),
+    # within the ranges, but the machine would need a field voltage of 38.5 pu
+    ((0.5, 0.0, 10.0, 10.0), r"field voltage Efd = 38.5389 pu the machine needs there lies outside its physical "
+                             r"range \[-10, 10\] pu"),
 ])
 def test_impossible_load_flow_numbers_are_refused_naming_them(args, says):
     with pytest.raises(ValueError, match=says):
@@ -124,6 +132,12 @@ def test_a_machine_absorbing_exactly_the_reactive_power_that_cancels_its_interna
     (-1.0, 1.0, EXCITER, "no unique steady state"),
     (1.7893, 1.025, IEEE1.params({"VRmax": 1.5}), "needs VR = 1.90205 pu, beyond the regulator limit VRmax = 1.5"),
     (-0.2, 1.025, IEEE1.params({"VRmin": 0.0}), "beyond the regulator limit VRmin = 0.0"),
+    (1e300, 1.0, EXCITER, r"field voltage Efd = 1e\+300 pu lies outside its physical range \[-10, 10\] pu"),
+    # the WSCC exciter's saturation asks for VR = 4748 pu to hold 7.7 pu
+    (7.69754, 1.0, EXCITER, r"regulator output VR = 4747.\d+ pu the exciter needs to hold Efd = 7.69754 pu lies "
+                            r"outside its physical range \[-100, 100\] pu"),
+    (1.5833, 1.0, IEEE1.params({"KA": 0.01}), r"voltage set point Vref = 166.\d+ pu the exciter needs lies outside "
+                                               r"its physical range \[0, 10\] pu"),
 ])
 def test_an_exciter_start_that_cannot_be_is_refused(Efd, Vt, params, says):
     with pytest.raises(ValueError, match=says):
