@@ -12,6 +12,8 @@ costs an importer.
 from __future__ import annotations
 
 import csv
+import os
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -150,9 +152,11 @@ class Run:
     messages: list = field(default_factory=list)
 
 
-def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, parameters=None) -> Run:
+def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, parameters=None,
+             role: str = "the") -> Run:
     """Simulate an extracted FMU (directory) under fmpy; records `names` at every communication point.
-    parameters: further start values by name (e.g. the surrogate's rollover_horizon)."""
+    parameters: further start values by name (e.g. the surrogate's rollover_horizon); role: which
+    FMU it is, for messages ("the surrogate")."""
     from fmpy import instantiate_fmu, read_model_description, simulate_fmu
 
     md = read_model_description(str(fmu_dir))
@@ -169,7 +173,10 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
         messages.append(f"{category.decode(errors='replace')}: {message.decode(errors='replace')}")
 
     started = time.perf_counter()
-    fmu = instantiate_fmu(str(fmu_dir), md, "CoSimulation", debug_logging=True, logger=logger)
+    try:
+        fmu = instantiate_fmu(str(fmu_dir), md, "CoSimulation", debug_logging=True, logger=logger)
+    except Exception as exc:  # fmpy raises plain Exceptions for a missing or unloadable binary
+        raise CompareError(f"{role} FMU {md.modelName} cannot be loaded: {_load_failure(exc, fmu_dir)}") from None
     do_step = fmu.doStep
 
     def timed_step(*args, **kwargs):
@@ -195,12 +202,23 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     return Run({n: np.asarray(result[n], dtype=float) for n in ["time", *names]}, wall, in_step[0], messages)
 
 
+def _load_failure(exc: Exception, fmu_dir) -> str:
+    """Why fmpy could not load an extracted FMU's binary, with the binary's path inside the FMU."""
+    text = " ".join(str(exc).replace(f"{Path(fmu_dir)}{os.sep}", "").split())
+    binary = re.search(r"binaries/\S+?(?=\.?(?:\s|$))", text)
+    where = binary.group(0) if binary else "its binary"
+    if text.startswith("Cannot find"):
+        return f"{where} is missing"
+    return f"{where}: {text.rsplit(': ', 1)[-1][:200] if ': ' in text else text[:200]}"
+
+
 def compare(surrogate_dir, reference_dir, inputs: Inputs, stop_time: float, step: float,
             surrogate_parameters=None) -> dict:
     """Both FMUs on `inputs`; returns the comparison (metrics, timings, trajectories).
     surrogate_parameters: start values of the surrogate's own parameters (rollover_horizon)."""
-    reference = simulate(reference_dir, inputs, stop_time, step, OUTPUTS)
-    surrogate = simulate(surrogate_dir, inputs, stop_time, step, OUTPUTS + DIAGNOSTICS, surrogate_parameters)
+    reference = simulate(reference_dir, inputs, stop_time, step, OUTPUTS, role="the reference")
+    surrogate = simulate(surrogate_dir, inputs, stop_time, step, OUTPUTS + DIAGNOSTICS, surrogate_parameters,
+                         role="the surrogate")
     if len(reference.outputs["time"]) != len(surrogate.outputs["time"]):
         raise CompareError("the two FMUs recorded different numbers of communication points")
     return {

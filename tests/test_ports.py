@@ -1,5 +1,7 @@
 """Ports on the component definition: declared in every FMU's model description, read back as declared."""
+import re
 import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -37,3 +39,26 @@ def test_an_fmu_without_a_readable_model_description_is_refused_in_one_line(tmp_
         with pytest.raises(PortError, match=reason) as caught:
             ports_of_fmu(path)
         assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("damage, says", [("corrupt", r"binaries/linux64/SM4Reference.so: invalid ELF header"),
+                                          ("missing", r"binaries/linux64/SM4Reference.so is missing")])
+def test_compare_refuses_an_fmu_whose_binary_is_corrupt_or_missing_in_one_line(tmp_path, damage, says):
+    from fmpy import extract
+
+    from opfmu.compare import OUTPUTS, CompareError, scenario_inputs, simulate
+
+    path = tmp_path / "SM4Reference.fmu"
+    build_native_reference_fmu(path, platforms=None)
+    directory = Path(extract(str(path), unzipdir=str(tmp_path / "x")))
+    binary = directory / "binaries" / "linux64" / "SM4Reference.so"
+    if damage == "corrupt":
+        binary.write_bytes(b"\x7fELX" + bytes(range(256)) * 4)
+    else:
+        binary.unlink()
+    inputs = scenario_inputs("step", 0, 0.1, 0.01)
+    with pytest.raises(CompareError) as caught:
+        simulate(directory, inputs, 0.1, 0.01, OUTPUTS, role="the reference")
+    message = str(caught.value)
+    assert re.fullmatch(f"the reference FMU SM4Reference cannot be loaded: {says}", message), message
+    assert str(tmp_path) not in message  # no temporary path
