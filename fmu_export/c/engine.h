@@ -1,6 +1,7 @@
 /* What the surrogate model's source files share: the generated operator kernel, the sensor grid,
-   and the functions window.c and corrections.c provide each other (the component's equations are
-   declared in model.h). */
+   and the functions frame.c, window.c and corrections.c provide (the component's equations are
+   declared in model.h). They call each other one way: window.c uses corrections.c and frame.c,
+   corrections.c uses frame.c, frame.c only the kernel. */
 #ifndef OPFMU_ENGINE_H
 #define OPFMU_ENGINE_H
 
@@ -15,7 +16,7 @@ static const double TIME_EPS = 1e-9;
 
 /* the operator kernel (operator_kernel.c, generated from the ONNX graph) */
 void opfmu_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X]);
-/* the operator on physical values with the window frame done as the engine does it (window.c) */
+/* the operator on physical values with the window frame done as the engine does it (frame.c) */
 void opfmu_framed_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X]);
 #if OPFMU_FIRST_LAYER > 0
 void opfmu_first_layer(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double z[OPFMU_FIRST_LAYER]);
@@ -38,21 +39,30 @@ void opfmu_coefficients(const double x0[N_X], const double z[OPFMU_FIRST_LAYER],
 void opfmu_head(const double c[OPFMU_COEF_SIZE], const double tau[OPFMU_TRUNK_SIZE], double x[N_X]);
 #endif
 
-/* window.c */
+/* frame.c */
 /* the input u at window time tau in the window frame */
 OPFMU_INTERNAL void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, double u_f[N_U]);
+/* the state x (raw, at window time tau) in the window frame, and back */
+OPFMU_INTERNAL void state_in_frame(const WindowFrame *f, const double x[N_X], double tau, double x_f[N_X]);
+OPFMU_INTERNAL void state_from_frame(const WindowFrame *f, const double x_f[N_X], double tau, double x[N_X]);
+/* the frame of a window starting at state x under input u: (a, shift, c) of drift.window_frame */
+OPFMU_INTERNAL WindowFrame window_frame(const double x[N_X], const double u[N_U]);
+#if OPFMU_FIRST_LAYER > 0
+/* the sensor layer's output from x0 with every sensor slot at zero */
+OPFMU_INTERNAL void first_layer_base(const double x0[N_X], double base[OPFMU_FIRST_LAYER]);
+#endif
+#if OPFMU_TRUNK_SIZE > 0
+/* the operator's coefficients from x0 with every sensor slot holding u, given first_layer_base(x0) */
+OPFMU_INTERNAL void held_coefficients(const double x0[N_X], const double base[OPFMU_FIRST_LAYER],
+                                      const double u[N_U], double coef[OPFMU_COEF_SIZE]);
+#endif
+
+/* window.c */
 /* the inputs dt after they were u0, along their derivatives m->du (u0 itself, bit for bit, where a
    derivative is 0) */
 OPFMU_INTERNAL void input_after(const ModelState *m, const double u0[N_U], double dt, double u[N_U]);
 /* the operator's physics residual at the current time (RMS over the states, per state scaled) */
 OPFMU_INTERNAL double window_residual(const ModelState *m);
-#if OPFMU_TRUNK_SIZE > 0
-/* the sensor layer's output from x0 with every sensor slot at zero */
-OPFMU_INTERNAL void first_layer_base(const double x0[N_X], double base[OPFMU_FIRST_LAYER]);
-/* the operator's coefficients from x0 with every sensor slot holding u, given first_layer_base(x0) */
-OPFMU_INTERNAL void held_coefficients(const double x0[N_X], const double base[OPFMU_FIRST_LAYER],
-                                      const double u[N_U], double coef[OPFMU_COEF_SIZE]);
-#endif
 
 /* corrections.c */
 /* the rest and slow-mode corrections of a window just started, for the current input; unless

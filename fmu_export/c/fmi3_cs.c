@@ -1,111 +1,43 @@
-/* FMI 3.0 co-simulation plumbing of both native FMUs, the counterpart of fmi2_cs.c over the same
-   model interface (model.h): instances, the FMI state machine (no event mode: initialization goes
-   straight to step mode), logging, variable access, directional and adjoint derivatives of the
-   outputs with respect to the inputs, and FMU state (get/set/serialize). Model Exchange, Scheduled
-   Execution, clocks, event mode and the variable types the FMU does not have are refused. FMI 3.0
-   value references are unique across types: a Real keeps its model value reference (Float64),
-   Boolean b of the model is FMI3_VR_FIRST_BOOLEAN + b, and FMI3_VR_TIME is the independent
-   variable `time`. Every misuse returns fmi3Error with a reason through the importer's logger;
-   nothing aborts. */
-#include <math.h>
+/* The FMI 3.0 API of both native FMUs over the shared plumbing (cosimulation.c), the counterpart of
+   fmi2_cs.c: its types, how its arguments map onto the shared functions (FMI 3.0 value references
+   are unique across types: a Real keeps its model value reference (Float64), Boolean b of the model
+   is FMI3_VR_FIRST_BOOLEAN + b, and FMI3_VR_TIME is the independent variable `time`), and what FMI
+   3.0 refuses on its own: Model Exchange, Scheduled Execution, clocks, event mode (initialization
+   goes straight to step mode) and the variable types the FMU does not have. Every misuse returns
+   fmi3Error with a reason through the importer's logger; nothing aborts. */
 #include <stdarg.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
+#include "cosimulation.h"
 #include "fmi3Functions.h"
-#include "model.h"
 #include "variables.h"
-
-typedef enum { ST_INSTANTIATED = 1, ST_INIT = 2, ST_STEP = 4, ST_TERMINATED = 8, ST_ERROR = 16 } MachineState;
-#define ST_ANY (ST_INSTANTIATED | ST_INIT | ST_STEP | ST_TERMINATED | ST_ERROR)
-#define ST_INITIALIZED (ST_STEP | ST_TERMINATED | ST_ERROR)
-
-typedef struct {
-    fmi3InstanceEnvironment environment;
-    fmi3LogMessageCallback logger; /* NULL: the importer takes no messages */
-    int log_warnings, log_errors, log_all;
-    MachineState state;
-    double start_time;
-    ModelState model;
-} Instance;
-
-/* what an FMU state holds: a header (what it is, the machine state) and the model state. The
-   model state can be large (the surrogate's window caches): no copy of it lives on the stack. */
-typedef struct {
-    unsigned int magic;
-    unsigned int size;
-    char guid[48];
-    MachineState state;
-} SnapshotHeader;
-
-typedef struct {
-    SnapshotHeader header;
-    ModelState model;
-} Snapshot;
 
 #define SNAPSHOT_MAGIC 0x0F3F5A13u /* not fmi2_cs.c's: an FMI 2.0 state is refused */
 
-/* formats the message and passes it to the importer's logger, with no '%' in it (as fmi2_cs.c) */
-static void emit(fmi3InstanceEnvironment environment, fmi3LogMessageCallback logger, fmi3Status status,
-                 const char *category, const char *format, va_list args)
+static void emit(const Instance *inst, Status status, const char *category, const char *message)
 {
-    char message[1024];
-    vsnprintf(message, sizeof message, format, args);
-    for (char *c = message; *c; ++c)
-        if (*c == '%') *c = '#';
-    logger(environment, status, category, message);
-}
-
-static void log_message(const Instance *inst, fmi3Status status, const char *category, const char *format, ...)
-{
-    va_list args;
-    if (!inst || !inst->logger) return;
-    if (status == fmi3Error && !(inst->log_errors || inst->log_all)) return;
-    if (status == fmi3Warning && !(inst->log_warnings || inst->log_all)) return;
-    if (status == fmi3OK && !inst->log_all) return;
-    va_start(args, format);
-    emit(inst->environment, inst->logger, status, category, format, args);
-    va_end(args);
+    fmi3LogMessageCallback logger = (fmi3LogMessageCallback)inst->logger;
+    logger((fmi3InstanceEnvironment)inst->environment, (fmi3Status)status, category, message);
 }
 
 /* a refused instantiation: logs why (where the importer gave a logger) and returns no instance */
 static fmi3Instance refuse(fmi3InstanceEnvironment environment, fmi3LogMessageCallback logger, const char *format, ...)
 {
+    char message[1024];
     va_list args;
     if (!logger) return NULL;
     va_start(args, format);
-    emit(environment, logger, fmi3Error, "logStatusError", format, args);
+    format_message(message, sizeof message, format, args);
     va_end(args);
+    logger(environment, fmi3Error, "logStatusError", message);
     return NULL;
-}
-
-static fmi3Status fail(Instance *inst, fmi3Status status, const char *format, const char *detail)
-{
-    log_message(inst, status, status == fmi3Error ? "logStatusError" : "logStatusWarning", format, detail);
-    return status;
-}
-
-/* returns nonzero if the call is not allowed now (and logs why) */
-static int not_allowed(Instance *inst, const char *function, int allowed)
-{
-    if (!inst) return 1;
-    if (inst->state & allowed) return 0;
-    log_message(inst, fmi3Error, "logStatusError", "%s is not allowed in the current state of the FMU", function);
-    return 1;
-}
-
-static fmi3Status model_status(Instance *inst, ModelStatus status, const char *message)
-{
-    if (status == MODEL_ERROR) return fail(inst, fmi3Error, "%s", message);
-    if (status == MODEL_WARNING) log_message(inst, fmi3Warning, "logStatusWarning", "%s", message);
-    return fmi3OK;
 }
 
 /* a function of an interface or feature the FMU does not provide: fmi3Error with the reason */
 static fmi3Status unsupported(fmi3Instance instance, const char *reason)
 {
-    return fail((Instance *)instance, fmi3Error, "%s", reason);
+    return (fmi3Status)fail((Instance *)instance, STATUS_ERROR, "%s", reason);
 }
 
 /* access to a variable type the FMU does not have: fine for an empty list, an error otherwise */
@@ -113,7 +45,7 @@ static fmi3Status none_of(fmi3Instance instance, size_t nvr, const char *functio
 {
     if (!instance) return fmi3Error;
     if (nvr == 0) return fmi3OK;
-    log_message((Instance *)instance, fmi3Error, "logStatusError", "%s: the FMU has no %s variable to access",
+    log_message((Instance *)instance, STATUS_ERROR, "logStatusError", "%s: the FMU has no %s variable to access",
                 function, type);
     return fmi3Error;
 }
@@ -123,20 +55,8 @@ const char *fmi3GetVersion(void) { return fmi3Version; }
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[])
 {
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3SetDebugLogging", ST_ANY)) return fmi3Error;
-    if (nCategories == 0) {
-        inst->log_warnings = inst->log_errors = inst->log_all = loggingOn;
-        return fmi3OK;
-    }
-    for (size_t i = 0; i < nCategories; ++i) {
-        if (!categories || !categories[i]) return fail(inst, fmi3Error, "%s", "fmi3SetDebugLogging: category is NULL");
-        if (!strcmp(categories[i], "logStatusWarning")) inst->log_warnings = loggingOn;
-        else if (!strcmp(categories[i], "logStatusError")) inst->log_errors = loggingOn;
-        else if (!strcmp(categories[i], "logAll")) inst->log_all = loggingOn;
-        else return fail(inst, fmi3Error, "fmi3SetDebugLogging: unknown log category %s", categories[i]);
-    }
-    return fmi3OK;
+    return (fmi3Status)cs_set_debug_logging((Instance *)instance, "fmi3SetDebugLogging", loggingOn, nCategories,
+                                            categories);
 }
 
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
@@ -187,80 +107,46 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     if (nRequiredIntermediateVariables > 0)
         return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %s has no intermediate variables "
                       "(no intermediate update); requiredIntermediateVariables must be empty", OPFMU_MODEL_IDENTIFIER);
-    Instance *inst = (Instance *)calloc(1, sizeof(Instance));
+    Instance *inst = instance_new(instanceName, SNAPSHOT_MAGIC, emit, instanceEnvironment, (void (*)(void))logMessage,
+                                  loggingOn);
     if (!inst) return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: out of memory");
-    inst->environment = instanceEnvironment;
-    inst->logger = logMessage;
-    inst->log_errors = inst->log_warnings = 1;
-    inst->log_all = loggingOn;
-    inst->state = ST_INSTANTIATED;
-    model_defaults(&inst->model);
     return inst;
 }
 
-void fmi3FreeInstance(fmi3Instance instance)
-{
-    free(instance);
-}
+void fmi3FreeInstance(fmi3Instance instance) { instance_free((Instance *)instance); }
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     Instance *inst = (Instance *)instance;
-    (void)toleranceDefined;
-    (void)tolerance;
-    if (not_allowed(inst, "fmi3EnterInitializationMode", ST_INSTANTIATED)) return fmi3Error;
-    if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime)))
-        return fail(inst, fmi3Error, "%s",
-                    "fmi3EnterInitializationMode: start time must be finite and not after the stop time");
-    inst->start_time = startTime;
-    inst->state = ST_INIT;
-    return fmi3OK;
+    Status status = cs_setup_experiment(inst, "fmi3EnterInitializationMode", toleranceDefined, tolerance, startTime,
+                                        stopTimeDefined, stopTime);
+    if (status != STATUS_OK) return (fmi3Status)status;
+    return (fmi3Status)cs_enter_initialization(inst, "fmi3EnterInitializationMode");
 }
 
 /* initializes the model at the start time; then in step mode (there is no event mode) */
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
-{
-    char message[512] = "";
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3ExitInitializationMode", ST_INIT)) return fmi3Error;
-    fmi3Status status = model_status(inst, model_initialize(&inst->model, inst->start_time, message, sizeof message), message);
-    inst->state = status == fmi3Error ? ST_ERROR : ST_STEP;
-    return status;
-}
+{ return (fmi3Status)cs_exit_initialization((Instance *)instance, "fmi3ExitInitializationMode"); }
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 { return unsupported(instance, "fmi3EnterEventMode: the FMU has no event mode"); }
 
-fmi3Status fmi3Terminate(fmi3Instance instance)
-{
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3Terminate", ST_STEP | ST_ERROR)) return fmi3Error;
-    inst->state = ST_TERMINATED;
-    return fmi3OK;
-}
+fmi3Status fmi3Terminate(fmi3Instance instance) { return (fmi3Status)cs_terminate((Instance *)instance, "fmi3Terminate"); }
 
-fmi3Status fmi3Reset(fmi3Instance instance)
-{
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3Reset", ST_ANY)) return fmi3Error;
-    inst->state = ST_INSTANTIATED;
-    inst->start_time = 0.0;
-    model_defaults(&inst->model);
-    return fmi3OK;
-}
+fmi3Status fmi3Reset(fmi3Instance instance) { return (fmi3Status)cs_reset((Instance *)instance, "fmi3Reset"); }
 
 /* all variables are scalars: one value per value reference; nonzero: refused (logged) */
 static int bad_arrays(Instance *inst, const char *function, const fmi3ValueReference vr[], size_t nvr,
                       const void *values, size_t nValues)
 {
     if (nValues != nvr) {
-        log_message(inst, fmi3Error, "logStatusError", "%s: %lu values for %lu value references (all variables are "
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: %lu values for %lu value references (all variables are "
                     "scalars)", function, (unsigned long)nValues, (unsigned long)nvr);
         return 1;
     }
     if (nvr > 0 && (!vr || !values)) {
-        log_message(inst, fmi3Error, "logStatusError", "%s: NULL array", function);
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: NULL array", function);
         return 1;
     }
     return 0;
@@ -276,9 +162,12 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     for (size_t i = 0; i < nvr; ++i) {
         if (vr[i] == FMI3_VR_TIME) {
             values[i] = inst->model.time;
-        } else if (vr[i] >= VR_REAL_COUNT || model_get_real(&inst->model, vr[i], &values[i]) != MODEL_OK) {
+        } else if (vr[i] >= VR_REAL_COUNT) { /* a Boolean's or no variable's */
             snprintf(detail, sizeof detail, "%u", vr[i]);
-            return fail(inst, fmi3Error, "fmi3GetFloat64: no Float64 variable with value reference %s", detail);
+            return (fmi3Status)fail(inst, STATUS_ERROR, "fmi3GetFloat64: no Float64 variable with value reference %s",
+                                    detail);
+        } else if (cs_get_real(inst, "fmi3GetFloat64", vr[i], &values[i]) != STATUS_OK) {
+            return fmi3Error;
         }
     }
     return fmi3OK;
@@ -287,24 +176,14 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
 fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                           const fmi3Float64 values[], size_t nValues)
 {
-    char message[512];
     Instance *inst = (Instance *)instance;
     if (not_allowed(inst, "fmi3SetFloat64", ST_INSTANTIATED | ST_INIT | ST_STEP)) return fmi3Error;
     if (bad_arrays(inst, "fmi3SetFloat64", vr, nvr, values, nValues)) return fmi3Error;
     for (size_t i = 0; i < nvr; ++i) {
         if (vr[i] == FMI3_VR_TIME)
-            return fail(inst, fmi3Error, "%s", "fmi3SetFloat64: time is the independent variable and cannot be set");
-        int kind = model_real_kind(vr[i]);
-        if (kind == VAR_OUTPUT || kind < 0) {
-            snprintf(message, sizeof message, "fmi3SetFloat64: value reference %u is not an input or parameter", vr[i]);
-            return fail(inst, fmi3Error, "%s", message);
-        }
-        if (kind == VAR_PARAMETER && inst->state == ST_STEP) {
-            snprintf(message, sizeof message, "fmi3SetFloat64: parameter %u is fixed after initialization", vr[i]);
-            return fail(inst, fmi3Error, "%s", message);
-        }
-        if (model_set_real(&inst->model, vr[i], values[i], message, sizeof message) != MODEL_OK)
-            return fail(inst, fmi3Error, "fmi3SetFloat64: %s", message);
+            return (fmi3Status)fail(inst, STATUS_ERROR, "%s",
+                                    "fmi3SetFloat64: time is the independent variable and cannot be set");
+        if (cs_set_real(inst, "fmi3SetFloat64", vr[i], values[i]) != STATUS_OK) return fmi3Error;
     }
     return fmi3OK;
 }
@@ -319,7 +198,7 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
     for (size_t i = 0; i < nvr; ++i) {
         if (vr[i] < FMI3_VR_FIRST_BOOLEAN || !model_boolean_exists(vr[i] - FMI3_VR_FIRST_BOOLEAN)) {
             snprintf(detail, sizeof detail, "%u", vr[i]);
-            return fail(inst, fmi3Error, "fmi3GetBoolean: no Boolean variable with value reference %s", detail);
+            return (fmi3Status)fail(inst, STATUS_ERROR, "fmi3GetBoolean: no Boolean variable with value reference %s", detail);
         }
         values[i] = model_get_boolean(&inst->model, vr[i] - FMI3_VR_FIRST_BOOLEAN) ? fmi3True : fmi3False;
     }
@@ -425,29 +304,15 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                       fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn,
                       fmi3Float64 *lastSuccessfulTime)
 {
-    char message[512] = "";
     Instance *inst = (Instance *)instance;
     (void)noSetFMUStatePriorToCurrentPoint;
     if (not_allowed(inst, "fmi3DoStep", ST_STEP)) return fmi3Error;
     if (!eventHandlingNeeded || !terminateSimulation || !earlyReturn || !lastSuccessfulTime)
-        return fail(inst, fmi3Error, "%s", "fmi3DoStep: NULL output argument");
+        return (fmi3Status)fail(inst, STATUS_ERROR, "%s", "fmi3DoStep: NULL output argument");
     *eventHandlingNeeded = *terminateSimulation = *earlyReturn = fmi3False; /* no events, no early return */
-    *lastSuccessfulTime = inst->model.time;
-    if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-        snprintf(message, sizeof message, "fmi3DoStep: communication step size %g must be positive and finite",
-                 communicationStepSize);
-        return fail(inst, fmi3Error, "%s", message);
-    }
-    if (!isfinite(currentCommunicationPoint) ||
-        fabs(currentCommunicationPoint - inst->model.time) > 1e-9 * fmax(1.0, fabs(inst->model.time))) {
-        snprintf(message, sizeof message, "fmi3DoStep: communication point %.12g s is not the FMU's time %.12g s",
-                 currentCommunicationPoint, inst->model.time);
-        return fail(inst, fmi3Error, "%s", message);
-    }
-    fmi3Status status = model_status(inst, model_do_step(&inst->model, communicationStepSize, message, sizeof message), message);
-    if (status == fmi3Error) inst->state = ST_ERROR;
+    Status status = cs_do_step(inst, "fmi3DoStep", currentCommunicationPoint, communicationStepSize);
     *lastSuccessfulTime = inst->model.time; /* the end of the step, or where a refused step left the model */
-    return status;
+    return (fmi3Status)status;
 }
 
 fmi3Status fmi3EnterStepMode(fmi3Instance instance)
@@ -463,11 +328,10 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance instance, const fmi3ValueRefere
     return unsupported(instance, "fmi3GetOutputDerivatives: not supported (maxOutputDerivativeOrder = 0)");
 }
 
-/* The checks both derivative functions share, and the Jacobian of the derived outputs into J where
-   an unknown is one. Knowns must be inputs, unknowns outputs (a model's diagnostic output is refused
-   with its reason); the seed runs over the knowns (over the unknowns for the adjoint), the
-   sensitivity over the other list, each as long as its list, and the seed must be finite. Nonzero:
-   refused (logged), nothing written. */
+/* The checks of both derivative functions: FMI 3.0's list lengths (the seed runs over the knowns,
+   over the unknowns for the adjoint, the sensitivity over the other list) and NULL arrays, then the
+   shared ones (cs_derivatives_refused), with the Jacobian of the derived outputs into J where an
+   unknown is one. Nonzero: refused (logged), nothing written. */
 static int derivatives_refused(Instance *inst, const char *function, int adjoint,
                                const fmi3ValueReference unknowns[], size_t nUnknowns,
                                const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
@@ -482,58 +346,15 @@ static int derivatives_refused(Instance *inst, const char *function, int adjoint
                  "seed needs one value per %s, the sensitivity one per %s)", function, (unsigned long)nSeed,
                  (unsigned long)nSensitivity, (unsigned long)nUnknowns, (unsigned long)nKnowns,
                  adjoint ? "unknown" : "known", adjoint ? "known" : "unknown");
-        fail(inst, fmi3Error, "%s", message);
+        fail(inst, STATUS_ERROR, "%s", message);
         return 1;
     }
     if ((nUnknowns > 0 && !unknowns) || (nKnowns > 0 && !knowns) || (nSeed > 0 && !seed) ||
         (nSensitivity > 0 && !sensitivity)) {
-        log_message(inst, fmi3Error, "logStatusError", "%s: NULL array", function);
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: NULL array", function);
         return 1;
     }
-    for (size_t k = 0; k < nKnowns; ++k) {
-        if (model_real_kind(knowns[k]) != VAR_INPUT || !IN_GROUP(knowns[k], VR_FIRST_INPUT, OPFMU_N_INPUTS)) {
-            snprintf(message, sizeof message, "%s: known value reference %u is not an input (derivatives are of "
-                     "outputs with respect to inputs)", function, knowns[k]);
-            fail(inst, fmi3Error, "%s", message);
-            return 1;
-        }
-    }
-    for (size_t j = 0; j < nSeed; ++j) {
-        if (!isfinite(seed[j])) {
-            snprintf(message, sizeof message, "%s: seed %g of value reference %u is not a finite number", function,
-                     seed[j], seeded[j]);
-            fail(inst, fmi3Error, "%s", message);
-            return 1;
-        }
-    }
-    int derived = 0;
-    for (size_t i = 0; i < nUnknowns; ++i) {
-        const fmi3ValueReference vr = unknowns[i];
-        if (model_real_kind(vr) != VAR_OUTPUT) {
-            snprintf(message, sizeof message, "%s: unknown value reference %u is not an output", function, vr);
-            fail(inst, fmi3Error, "%s", message);
-            return 1;
-        }
-        if (IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) {
-            derived = 1;
-        } else if (!IN_GROUP(vr, VR_FIRST_STATE, OPFMU_N_STATES)) {
-            const char *reason = model_no_derivative(vr);
-            snprintf(message, sizeof message, "%s: output %u: %s", function, vr,
-                     reason ? reason : "has no directional derivative");
-            fail(inst, fmi3Error, "%s", message);
-            return 1;
-        }
-    }
-    if (derived) model_output_jacobian(&inst->model, J);
-    return 0;
-}
-
-/* d unknown / d known (checked by derivatives_refused): a state at the communication point does not
-   depend on the inputs directly (zero); a derived output has the component's exact partial derivative */
-static double partial(const double J[], fmi3ValueReference unknown, fmi3ValueReference known)
-{
-    if (!IN_GROUP(unknown, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) return 0.0;
-    return J[(unknown - VR_FIRST_OUTPUT) * OPFMU_N_COLUMNS + OPFMU_N_STATES + (known - VR_FIRST_INPUT)];
+    return cs_derivatives_refused(inst, function, unknowns, nUnknowns, knowns, nKnowns, seeded, seed, nSeed, J);
 }
 
 /* sensitivity[i] = sum over k of d unknown_i / d known_k * seed[k] */
@@ -547,7 +368,7 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
         return fmi3Error;
     for (size_t i = 0; i < nUnknowns; ++i) {
         double sum = 0.0;
-        for (size_t k = 0; k < nKnowns; ++k) sum += partial(J, unknowns[i], knowns[k]) * seed[k];
+        for (size_t k = 0; k < nKnowns; ++k) sum += cs_partial(J, unknowns[i], knowns[k]) * seed[k];
         sensitivity[i] = sum;
     }
     return fmi3OK;
@@ -564,93 +385,36 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
         return fmi3Error;
     for (size_t k = 0; k < nKnowns; ++k) {
         double sum = 0.0;
-        for (size_t i = 0; i < nUnknowns; ++i) sum += seed[i] * partial(J, unknowns[i], knowns[k]);
+        for (size_t i = 0; i < nUnknowns; ++i) sum += seed[i] * cs_partial(J, unknowns[i], knowns[k]);
         sensitivity[k] = sum;
     }
     return fmi3OK;
 }
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
-{
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3GetFMUState", ST_ANY)) return fmi3Error;
-    if (!FMUState) return fail(inst, fmi3Error, "%s", "fmi3GetFMUState: NULL state pointer");
-    Snapshot *snap = (Snapshot *)(*FMUState ? *FMUState : malloc(sizeof(Snapshot)));
-    if (!snap) return fail(inst, fmi3Error, "%s", "fmi3GetFMUState: out of memory");
-    memset(snap, 0, sizeof *snap);
-    snap->header.magic = SNAPSHOT_MAGIC;
-    snap->header.size = sizeof(Snapshot);
-    strncpy(snap->header.guid, OPFMU_GUID, sizeof snap->header.guid - 1);
-    snap->header.state = inst->state;
-    snap->model = inst->model;
-    *FMUState = snap;
-    return fmi3OK;
-}
-
-static int valid_snapshot(const SnapshotHeader *header)
-{
-    return header->magic == SNAPSHOT_MAGIC && header->size == sizeof(Snapshot) &&
-           !strncmp(header->guid, OPFMU_GUID, sizeof header->guid) && (header->state & ST_ANY);
-}
+{ return (fmi3Status)cs_get_state((Instance *)instance, "fmi3GetFMUState", FMUState); }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState)
-{
-    Instance *inst = (Instance *)instance;
-    const Snapshot *snap = (const Snapshot *)FMUState;
-    if (not_allowed(inst, "fmi3SetFMUState", ST_ANY)) return fmi3Error;
-    if (!snap || !valid_snapshot(&snap->header))
-        return fail(inst, fmi3Error, "%s", "fmi3SetFMUState: not an FMU state of this FMU");
-    inst->state = snap->header.state;
-    inst->model = snap->model;
-    return fmi3OK;
-}
+{ return (fmi3Status)cs_set_state((Instance *)instance, "fmi3SetFMUState", FMUState); }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState)
-{
-    if (not_allowed((Instance *)instance, "fmi3FreeFMUState", ST_ANY)) return fmi3Error;
-    if (FMUState && *FMUState) {
-        free(*FMUState);
-        *FMUState = NULL;
-    }
-    return fmi3OK;
-}
+{ return (fmi3Status)cs_free_state((Instance *)instance, "fmi3FreeFMUState", FMUState); }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size)
-{
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3SerializedFMUStateSize", ST_ANY)) return fmi3Error;
-    if (!FMUState || !size) return fail(inst, fmi3Error, "%s", "fmi3SerializedFMUStateSize: NULL argument");
-    *size = sizeof(Snapshot);
-    return fmi3OK;
-}
+{ return (fmi3Status)cs_serialized_state_size((Instance *)instance, "fmi3SerializedFMUStateSize", FMUState, size); }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
                                  size_t size)
 {
-    Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3SerializeFMUState", ST_ANY)) return fmi3Error;
-    if (!FMUState || !serializedState || size < sizeof(Snapshot))
-        return fail(inst, fmi3Error, "%s", "fmi3SerializeFMUState: NULL state or buffer too small");
-    memcpy(serializedState, FMUState, sizeof(Snapshot));
-    return fmi3OK;
+    return (fmi3Status)cs_serialize_state((Instance *)instance, "fmi3SerializeFMUState", FMUState, serializedState,
+                                          size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState *FMUState)
 {
-    Instance *inst = (Instance *)instance;
-    SnapshotHeader header;
-    if (not_allowed(inst, "fmi3DeserializeFMUState", ST_ANY)) return fmi3Error;
-    if (!serializedState || !FMUState || size != sizeof(Snapshot))
-        return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: NULL argument or wrong size");
-    memcpy(&header, serializedState, sizeof header); /* the bytes need not be aligned for a Snapshot */
-    if (!valid_snapshot(&header))
-        return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: corrupt or foreign state");
-    Snapshot *snap = (Snapshot *)(*FMUState ? *FMUState : malloc(sizeof(Snapshot)));
-    if (!snap) return fail(inst, fmi3Error, "%s", "fmi3DeserializeFMUState: out of memory");
-    memcpy(snap, serializedState, sizeof(Snapshot));
-    *FMUState = snap;
-    return fmi3OK;
+    return (fmi3Status)cs_deserialize_state((Instance *)instance, "fmi3DeserializeFMUState", serializedState, size,
+                                            FMUState);
 }
 
 /* --- configuration mode, clocks and discrete states: the FMU has no structural parameters, no clocks

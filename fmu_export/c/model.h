@@ -1,16 +1,19 @@
-/* The interface between the FMI 2.0 co-simulation plumbing (fmi2_cs.c) and one model.
+/* The interface between the FMI plumbing (cosimulation.c, under fmi2_cs.c or fmi3_cs.c) and one model.
 
-   Both native FMUs (the surrogate and the reference) compile fmi2_cs.c and variables.c unchanged
-   against this interface; a model never touches an FMI call. Per FMU, generated at build time:
-   config.h (sizes, defaults, component tables, OPFMU_STATE_HEADER: the header that defines the
-   model's ModelState), variables.h (the value references of the model description, groups
-   VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT, VR_FIRST_START), equations.c (the component's
-   right-hand side and derived outputs) and derivatives.c (their exact partial derivatives).
+   Both native FMUs (the surrogate and the reference) compile the plumbing and variables.c unchanged
+   against this interface, for FMI 2.0 and 3.0 alike; a model never touches an FMI call. Per FMU,
+   generated at build time: config.h (sizes, defaults, component tables, OPFMU_STATE_HEADER: the
+   header that defines the model's ModelState), variables.h (the value references of the model
+   description, groups VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT, VR_FIRST_START), equations.c
+   (the component's right-hand side and derived outputs) and derivatives.c (their exact partial
+   derivatives).
 
    A model's whole dynamic state is the plain struct ModelState, so the plumbing copies and
-   serialises it byte for byte. Every ModelState has at least the fields
+   serialises it byte for byte, and asks the model (model_check_state) whether a state it did not
+   make itself is one the model can run from. Every ModelState has at least the fields
        double time;                  current communication point [s]
        double u[OPFMU_N_INPUTS];     inputs (the component's, in its order)
+       double du[OPFMU_N_INPUTS];    their first time derivatives over the next steps [unit/s] (0: held)
        double x[OPFMU_N_STATES];     state at `time`
        double x_start[OPFMU_N_STATES]; initial-state parameters
    which variables.c reads and writes for the component's own variables. */
@@ -61,6 +64,12 @@ OPFMU_INTERNAL ModelStatus model_get_real(const ModelState *m, unsigned int vr, 
 OPFMU_INTERNAL ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size);
 /* the derived outputs' Jacobian at the current state and inputs, J[i * OPFMU_N_COLUMNS + j] */
 OPFMU_INTERNAL void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+/* sets the first time derivative of input c (0-based) for the next steps [unit/s] */
+OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
+                                                      size_t size);
+/* MODEL_ERROR (why written) unless the component's fields of m (time, u, du, x, x_start) are finite
+   and the inputs at or above their lower bounds, as the setters and steps keep them */
+OPFMU_INTERNAL ModelStatus check_component_state(const ModelState *m, char *why, size_t size);
 
 /* --- each model provides --- */
 OPFMU_INTERNAL void model_defaults(ModelState *m);
@@ -74,10 +83,9 @@ OPFMU_INTERNAL int model_boolean_exists(unsigned int vr);
 OPFMU_INTERNAL int model_get_boolean(const ModelState *m, unsigned int vr);
 /* why the model's own output vr has no directional derivative (a diagnostic), or NULL */
 OPFMU_INTERNAL const char *model_no_derivative(unsigned int vr);
-#if OPFMU_CAN_INTERPOLATE_INPUTS
-/* sets the first time derivative of input c (0-based) for the next steps */
-OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
-                                                      size_t size);
-#endif
+/* MODEL_ERROR (why written) unless every field of m lies in the range the model's setters and steps
+   keep it in (check_component_state for the component's fields): a state from the importer's bytes
+   is run only if it passes, so none can make a step hang or run with values the setters refuse */
+OPFMU_INTERNAL ModelStatus model_check_state(const ModelState *m, char *why, size_t size);
 
 #endif

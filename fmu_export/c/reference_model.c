@@ -120,12 +120,20 @@ int model_get_boolean(const ModelState *m, unsigned int vr) { (void)m; (void)vr;
 
 const char *model_no_derivative(unsigned int vr) { (void)vr; return NULL; }
 
-ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
+ModelStatus model_check_state(const ModelState *m, char *why, size_t size)
 {
-    if (!isfinite(value)) {
-        snprintf(message, size, "the derivative of %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], value);
+    if (check_component_state(m, why, size) != MODEL_OK) return MODEL_ERROR;
+    if (!(m->rtol >= OPFMU_RTOL_MIN && m->rtol < 1.0)) {
+        snprintf(why, size, "rtol = %g does not lie in [%g, 1)", m->rtol, OPFMU_RTOL_MIN);
         return MODEL_ERROR;
     }
-    m->du[c] = value;
+    if (!(m->atol > 0.0 && isfinite(m->atol))) {
+        snprintf(why, size, "atol = %g is not positive and finite", m->atol);
+        return MODEL_ERROR;
+    }
+    if (!(m->h_guess >= 0.0 && isfinite(m->h_guess))) {
+        snprintf(why, size, "the solver's next step size %g s is not finite and >= 0 (0: none yet)", m->h_guess);
+        return MODEL_ERROR;
+    }
     return MODEL_OK;
 }

@@ -1,7 +1,8 @@
 /* The component's variables of either native FMU, by value reference: its inputs, states, derived
    outputs and initial-state parameters (contiguous groups, from the generated variables.h, the model
-   description's table), the kind of every Real, and the checks of what may be written. The model's
-   own variables (those after the groups) are the model's: model_get_extra, model_set_extra. */
+   description's table), the kind of every Real, the checks of what may be written, the inputs'
+   derivatives, and the check of the component's fields of a state. The model's own variables (those
+   after the groups) are the model's: model_get_extra, model_set_extra. */
 #include <math.h>
 #include <stdio.h>
 
@@ -64,4 +65,51 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
 void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS])
 {
     component_output_jacobian(m->x, m->u, J);
+}
+
+ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
+{
+    if (!isfinite(value)) {
+        snprintf(message, size, "the derivative of %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], value);
+        return MODEL_ERROR;
+    }
+    m->du[c] = value;
+    return MODEL_OK;
+}
+
+/* index of the first non-finite value of v[n], or -1 */
+static int non_finite(const double *v, int n)
+{
+    for (int i = 0; i < n; ++i)
+        if (!isfinite(v[i])) return i;
+    return -1;
+}
+
+ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
+{
+    int i;
+    if (!isfinite(m->time)) {
+        snprintf(why, size, "time %g is not a finite number", m->time);
+        return MODEL_ERROR;
+    }
+    for (int c = 0; c < OPFMU_N_INPUTS; ++c) {
+        if (!isfinite(m->u[c]) || m->u[c] < OPFMU_INPUT_MIN[c]) {
+            snprintf(why, size, "input %s = %g %s is not a finite number at or above its lower bound %g %s",
+                     OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c], OPFMU_INPUT_UNITS[c]);
+            return MODEL_ERROR;
+        }
+        if (!isfinite(m->du[c])) {
+            snprintf(why, size, "the derivative of input %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], m->du[c]);
+            return MODEL_ERROR;
+        }
+    }
+    if ((i = non_finite(m->x, OPFMU_N_STATES)) >= 0) {
+        snprintf(why, size, "state %d: %g is not a finite number", i, m->x[i]);
+        return MODEL_ERROR;
+    }
+    if ((i = non_finite(m->x_start, OPFMU_N_STATES)) >= 0) {
+        snprintf(why, size, "initial state %d: %g is not a finite number", i, m->x_start[i]);
+        return MODEL_ERROR;
+    }
+    return MODEL_OK;
 }

@@ -1,5 +1,5 @@
 /* The surrogate's window-and-sensor engine: the operator evaluated from a buffer of input sensors
-   (DESIGN section 5), for any component with the sizes of config.h.
+   (docs/fmu.md, "The surrogate FMU"), for any component with the sizes of config.h.
 
    A window starts at (window_start, x_window). The input over a step is written into every sensor
    slot from the current time on: held, or, where the master set its derivative du
@@ -27,10 +27,6 @@
 
 #include "engine.h"
 
-#if OPFMU_FIRST_LAYER > 0
-static const double ZERO_SENSORS[N_U * OPFMU_N_SENSORS];
-#endif
-
 void model_defaults(ModelState *m)
 {
     memset(m, 0, sizeof *m);
@@ -47,13 +43,6 @@ void model_defaults(ModelState *m)
     m->in_envelope = 1;
 }
 
-void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, double u_f[N_U])
-{
-    for (int c = 0; c < N_U; ++c)
-        u_f[c] = u[c] - f->a * OPFMU_FRAME_INPUT_RATES[c]
-                 - f->c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
-}
-
 void input_after(const ModelState *m, const double u0[N_U], double dt, double u[N_U])
 {
     for (int c = 0; c < N_U; ++c) u[c] = m->du[c] != 0.0 ? u0[c] + m->du[c] * dt : u0[c];
@@ -64,51 +53,6 @@ static int any_nonzero(const double v[N_U])
     for (int c = 0; c < N_U; ++c)
         if (v[c] != 0.0) return 1;
     return 0;
-}
-
-/* x (raw, at window time tau) in the window frame, and back */
-static void state_in_frame(const WindowFrame *f, const double x[N_X], double tau, double x_f[N_X])
-{
-    for (int i = 0; i < N_X; ++i)
-        x_f[i] = x[i] - (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] - f->c * OPFMU_FRAME_SPEED[i];
-}
-
-static void state_from_frame(const WindowFrame *f, const double x_f[N_X], double tau, double x[N_X])
-{
-    for (int i = 0; i < N_X; ++i)
-        x[i] = x_f[i] + (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] + f->c * OPFMU_FRAME_SPEED[i];
-}
-
-/* the frame of a window starting at state x under input u: (a, shift, c) of drift.window_frame */
-static WindowFrame window_frame(const double x[N_X], const double u[N_U])
-{
-    WindowFrame f = {0.0, 0.0, 0.0};
-#if OPFMU_FRAME
-    f.a = u[OPFMU_FRAME_ANGLE_INPUT];
-    f.c = x[OPFMU_FRAME_SPEED_STATE];
-    if (OPFMU_FRAME_SPEED_STEP > 0.0) f.c = OPFMU_FRAME_SPEED_STEP * floor(f.c / OPFMU_FRAME_SPEED_STEP + 0.5);
-#if OPFMU_FRAME_ANGLE_STATE >= 0
-    f.shift = f.a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - f.a) / OPFMU_FRAME_PERIOD + 0.5);
-#else
-    f.shift = f.a;
-#endif
-#else
-    (void)x;
-    (void)u;
-#endif
-    return f;
-}
-
-/* The operator on physical values, the frame done here as the engine does it: what the ONNX file's
-   whole graph computes (the builder checks the two against each other). */
-void opfmu_framed_operator(const double x0[N_X], const double u[N_U * OPFMU_N_SENSORS], double t, double x[N_X])
-{
-    const WindowFrame frame = window_frame(x0, u);
-    double x0_f[N_X], x_f[N_X], u_f[N_U * OPFMU_N_SENSORS];
-    state_in_frame(&frame, x0, 0.0, x0_f);
-    for (int k = 0; k < OPFMU_N_SENSORS; ++k) input_in_frame(&frame, u + k * N_U, (double)k * SENSOR_DT, u_f + k * N_U);
-    opfmu_operator(x0_f, u_f, t, x_f);
-    state_from_frame(&frame, x_f, t, x);
 }
 
 #if OPFMU_FIRST_LAYER > 0
@@ -197,22 +141,6 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
         rest_correct_rate(m, basis_lo, basis_hi, hi - lo, rate);
 }
 
-void first_layer_base(const double x0[N_X], double base[OPFMU_FIRST_LAYER])
-{
-    opfmu_first_layer(x0, ZERO_SENSORS, base);
-}
-
-void held_coefficients(const double x0[N_X], const double base[OPFMU_FIRST_LAYER], const double u[N_U],
-                       double coef[OPFMU_COEF_SIZE])
-{
-    double z[OPFMU_FIRST_LAYER];
-    for (int h = 0; h < OPFMU_FIRST_LAYER; ++h) {
-        double sum = base[h];
-        for (int c = 0; c < N_U; ++c) sum += SUFFIX(0, c, h) * u[c];
-        z[h] = sum;
-    }
-    opfmu_coefficients(x0, z, coef);
-}
 #else
 /* d x/dt of the operator at window time tau, by a central difference (one-sided at the ends) */
 static void operator_rate(const ModelState *m, double tau, double rate[N_X])
@@ -322,7 +250,7 @@ static void start_window(ModelState *m)
     memcpy(m->last_u, m->u, sizeof m->u);
     memset(m->last_du, 0, sizeof m->last_du); /* every slot holds the level */
 #if OPFMU_FIRST_LAYER > 0
-    opfmu_first_layer(m->x_window_f, ZERO_SENSORS, m->z_base);
+    first_layer_base(m->x_window_f, m->z_base);
     memset(m->z_past, 0, sizeof m->z_past);
 #endif
 #if OPFMU_TRUNK_SIZE > 0
@@ -464,6 +392,11 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
     while (m->time < stop - TIME_EPS) {
         double window_end = m->window_start + m->rollover_horizon;
         double end = fmin(stop, window_end);
+        if (!(end > m->time)) { /* at this time a double cannot resolve the rollover horizon: no progress */
+            snprintf(message, size, "t = %.9g s: the window's end %.9g s is not after the current time (a double does "
+                     "not resolve the rollover horizon %g s at this time)", m->time, window_end, m->rollover_horizon);
+            return MODEL_ERROR;
+        }
         /* the input from the current time on (m->u: its value now): the first slot at or after m->time */
         int first = (int)ceil((m->time - m->window_start) / SENSOR_DT - 1e-6);
         if (m->time < m->window_start + TIME_EPS)
