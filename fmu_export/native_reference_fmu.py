@@ -47,8 +47,10 @@ from .python_reference_fmu import machine_params
 from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
-MODEL_SOURCES = ("variables.c", "reference_model.c", "dopri5.c", "model.h", "reference_state.h", "dopri5.h")
-C_FILES = ("variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")  # beside the plumbing
+MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "cosimulation.h", "model.h",
+                 "reference_state.h", "dopri5.h")
+# beside the version's plumbing (binaries.PLUMBING)
+C_FILES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
 RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
 

@@ -50,10 +50,11 @@ DEFAULT_RESTART_JUMP = 0.02
 DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (corrections.c: the rest correction)
 DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (corrections.c: the slow-mode correction)
 DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (corrections.c: the exact affine step)
-MODEL_SOURCES = ("window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c", "model.h",
-                 "surrogate_state.h", "engine.h", "linalg.h")
-C_FILES = ("window.c", "corrections.c", "variables.c", "surrogate_variables.c", "linalg.c", "equations.c",
-           "derivatives.c", "sensor_sums.c")  # beside the plumbing and the operator kernel (compiled once)
+MODEL_SOURCES = ("cosimulation.c", "window.c", "corrections.c", "frame.c", "variables.c", "surrogate_variables.c",
+                 "linalg.c", "cosimulation.h", "model.h", "surrogate_state.h", "engine.h", "linalg.h")
+# beside the version's plumbing (binaries.PLUMBING) and the operator kernel (compiled once)
+C_FILES = ("cosimulation.c", "window.c", "corrections.c", "frame.c", "variables.c", "surrogate_variables.c", "linalg.c",
+           "equations.c", "derivatives.c", "sensor_sums.c")
 MODEL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 C_KEYWORDS = frozenset("auto break case char const continue default do double else enum extern float for goto if "
                        "inline int long register restrict return short signed sizeof static struct switch typedef "
