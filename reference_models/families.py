@@ -1,4 +1,9 @@
-"""Input-signal families of SM4: named, seeded samplers of its input signals (Vs, theta_vs, Pm, Efd).
+"""Input-signal families of a machine on a bus: named, seeded samplers of its input signals.
+
+The families drive a component that declares (reference_models.ports) a bus port and the input
+links `mechanical_power` and `field_voltage`: the four channels are its bus voltage magnitude and
+angle, its mechanical power and its field voltage, whatever its variables are called (SM4: Vs,
+theta_vs, Pm, Efd; ports.MachineInputs). Any further input of the component holds its start value.
 
 Each family maps points of the unit hypercube (from Latin hypercube sampling) to signals, one
 parameter per dimension, each uniform in its range. A range is either numbers (low, high) or the
@@ -26,14 +31,18 @@ from typing import Callable
 import numpy as np
 
 from . import smib
+from .ports import machine_inputs
 from .signals import Dip, FirstOrder, Forcing, Piecewise, Ramp, Sawtooth, SecondOrder, Signal, held
 from .sm4 import SM4
 
 Ranges = dict  # parameter name -> (low, high), or the name of the input whose level range it takes
-
 COMPONENT = SM4  # the component whose inputs these families drive
-VS_RANGE = SM4.inputs[0].operating_range  # pu, bus voltage levels a window may start from
-THETA_RANGE = SM4.inputs[1].operating_range  # rad
+WIRING = machine_inputs(COMPONENT)
+VS, THETA, PM, EFD = WIRING.magnitude, WIRING.angle, WIRING.power, WIRING.field  # its input names
+_INPUT = {q.name: q for q in COMPONENT.inputs}
+VS_RANGE = _INPUT[VS].operating_range  # pu, bus voltage levels a window may start from
+THETA_RANGE = _INPUT[THETA].operating_range  # rad
+PM_START, EFD_START = _INPUT[PM].start, _INPUT[EFD].start  # pu: the operating point the inputs start at
 
 
 def default_levels(component=COMPONENT) -> dict:
@@ -80,19 +89,23 @@ class Family:
 
 
 def machine(Vs, theta_vs, Pm, Efd, hold: float = 0.0) -> Signal:
-    """A signal of SM4's inputs from its four channels (a number: held constant)."""
+    """A signal of the machine's inputs from its four channels: bus voltage magnitude and angle,
+    mechanical power, field voltage (a number: held constant); channels in the component's input
+    order, any other input held at its start value."""
     def channel(c):
         return Piecewise((float(c),), ()) if isinstance(c, (int, float)) else c
 
-    return Signal({"Vs": channel(Vs), "theta_vs": channel(theta_vs), "Pm": channel(Pm), "Efd": channel(Efd)}, hold)
+    given = {VS: Vs, THETA: theta_vs, PM: Pm, EFD: Efd}
+    return Signal({q.name: channel(given.get(q.name, q.start)) for q in COMPONENT.inputs}, hold)
 
 
-def bus(Vs, theta_vs, Pm: float = SM4.inputs[2].start, Efd: float = SM4.inputs[3].start, hold: float = 0.0) -> Signal:
-    """A signal of SM4's inputs from its bus-voltage channels, Pm and Efd held (default: their start values)."""
+def bus(Vs, theta_vs, Pm: float = PM_START, Efd: float = EFD_START, hold: float = 0.0) -> Signal:
+    """A signal of the machine's inputs from its bus-voltage channels, mechanical power and field
+    voltage held (default: their start values)."""
     return machine(Vs, theta_vs, Pm, Efd, hold)
 
 
-CONTROL_LEVELS = {"Pm": "Pm", "Efd": "Efd"}  # the held Pm and Efd levels of the bus families
+CONTROL_LEVELS = {"Pm": PM, "Efd": EFD}  # the held mechanical power and field levels of the bus families
 
 
 def _slow(p, horizon):
@@ -139,19 +152,19 @@ def _ramp(p, horizon):
 
 SLOW = Family(
     "slow",
-    {"k_v": (1.0, 2.0), "A_v": (0.0, 0.03), "w_v": (0.5, 1.5), "Vs0": "Vs",
+    {"k_v": (1.0, 2.0), "A_v": (0.0, 0.03), "w_v": (0.5, 1.5), "Vs0": VS,
      "k_th": (1.0, 3.0), "A_th": (0.0, 0.05), "w_th": (0.1, 0.5), "theta0": THETA_RANGE, **CONTROL_LEVELS},
     _slow,
 )
 FAST = Family(
     "fast",
-    {"zeta_v": (0.6, 0.8), "wn_v": (8.0, 12.0), "Vs0": "Vs", "dVs0": (-0.2, 0.2),
+    {"zeta_v": (0.6, 0.8), "wn_v": (8.0, 12.0), "Vs0": VS, "dVs0": (-0.2, 0.2),
      "zeta_th": (0.2, 0.4), "wn_th": (10.0, 18.0), "theta0": THETA_RANGE, "dtheta0": (-0.8, 0.8), **CONTROL_LEVELS},
     _fast,
 )
 STEP = Family(
     "step",
-    {"Vs0": "Vs", "Vs1": "Vs", "t_v": (0.0, 1.0),
+    {"Vs0": VS, "Vs1": VS, "t_v": (0.0, 1.0),
      "theta0": THETA_RANGE, "jump": (-0.3, 0.3), "t_th": (0.0, 1.0), **CONTROL_LEVELS},
     _step,
 )
@@ -164,14 +177,14 @@ DIP = Family(
 )
 RAMP = Family(
     "ramp",
-    {"Vs0": "Vs", "Vs1": "Vs", "t_v": (0.0, 0.5), "len_v": (0.05, 1.0),
+    {"Vs0": VS, "Vs1": VS, "t_v": (0.0, 0.5), "len_v": (0.05, 1.0),
      "theta0": THETA_RANGE, "theta1": THETA_RANGE, "t_th": (0.0, 0.5), "len_th": (0.05, 1.0), **CONTROL_LEVELS},
     _ramp,
 )
 
 def held_levels(rng: np.random.Generator, stop_time: float, dwell=(0.2, 0.8), fault_share: float = 0.2,
-                vs_levels=(0.9, 1.1), change_at_start: bool = False, Pm: float = SM4.inputs[2].start,
-                Efd: float = SM4.inputs[3].start) -> Signal:
+                vs_levels=(0.9, 1.1), change_at_start: bool = False, Pm: float = PM_START,
+                Efd: float = EFD_START) -> Signal:
     """Piecewise-constant bus voltage over [0, stop_time] s: levels held for `dwell` seconds (Vs in
     vs_levels pu; theta_vs moving by up to 0.3 rad within [-0.5, 0.5] rad, at half the changes); a
     `fault_share` of the changes are faults (Vs at 0.2-0.9 pu for 20-200 ms, then a new level).
@@ -252,30 +265,30 @@ def _drift(p, horizon):
                    _field(p, horizon))
 
 
-FAULT = {"Vs0": "Vs", "Vs_fault": (0.0, 0.9), "t_fault": (0.0, 0.7), "duration": (0.02, 0.25),
+FAULT = {"Vs0": VS, "Vs_fault": (0.0, 0.9), "t_fault": (0.0, 0.7), "duration": (0.02, 0.25),
          "post_shift": (-0.05, 0.05), "tau": (0.0, 0.2)}
-FIELD = {"E0": "Efd", "rise": (0.0, 4.0), "tau_rise": (0.05, 0.5), "E_post": "Efd", "tau_return": (0.2, 2.0)}
+FIELD = {"E0": EFD, "rise": (0.0, 4.0), "tau_rise": (0.05, 0.5), "E_post": EFD, "tau_return": (0.2, 2.0)}
 GOVERNOR = Family(
     "governor",
-    {"Vs0": "Vs", "theta0": THETA_RANGE, "jump": (-0.2, 0.2), "t_th": (0.0, 1.0),
-     "P0": "Pm", "P1": "Pm", "t_p": (0.0, 0.8), "len_p": (0.001, 1.0), "Efd": "Efd"},
+    {"Vs0": VS, "theta0": THETA_RANGE, "jump": (-0.2, 0.2), "t_th": (0.0, 1.0),
+     "P0": PM, "P1": PM, "t_p": (0.0, 0.8), "len_p": (0.001, 1.0), "Efd": EFD},
     _governor,
 )
 EXCITER = Family(
     "exciter",
-    {**FAULT, "theta0": THETA_RANGE, "jump": (-0.5, 0.5), "jump_post": (-0.2, 0.2), "Pm": "Pm", **FIELD},
+    {**FAULT, "theta0": THETA_RANGE, "jump": (-0.5, 0.5), "jump_post": (-0.2, 0.2), "Pm": PM, **FIELD},
     _exciter,
 )
 AVR = Family(
     "avr",
-    {"Vs0": "Vs", "theta0": THETA_RANGE, "Pm": "Pm", "E0": "Efd", "E1": "Efd", "t_e": (0.0, 0.8),
+    {"Vs0": VS, "theta0": THETA_RANGE, "Pm": PM, "E0": EFD, "E1": EFD, "t_e": (0.0, 0.8),
      "tau_e": (0.05, 1.0)},
     _avr,
 )
 DRIFT = Family(
     "drift",
     {**FAULT, "theta0": THETA_RANGE, "rate": (-13.0, 13.0), "log_period": (math.log(0.002), math.log(0.02)),
-     "Pm": "Pm", **FIELD},
+     "Pm": PM, **FIELD},
     _drift,
 )
 
@@ -295,7 +308,7 @@ def _network(p, horizon, machine):
 
 NETWORK = Family(
     "network",
-    {"E": (0.95, 1.2), "Vt0": (0.98, 1.15), "Xe": (0.05, 0.6), "P0": "Pm", "t_fault": (0.0, 1.0),
+    {"E": (0.95, 1.2), "Vt0": (0.98, 1.15), "Xe": (0.05, 0.6), "P0": PM, "t_fault": (0.0, 1.0),
      "duration": (0.03, 0.25), "Xf": (0.0, 0.3), "trip": (0.0, 0.8), "accel": (0.0, 30.0), "t0": (0.0, 2.0),
      **NETWORK_JITTER},
     _network,

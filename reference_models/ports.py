@@ -143,6 +143,28 @@ class Ports:
         return cls(bus, tuple(inputs), tuple(outputs))
 
 
+@dataclass(frozen=True)
+class MachineInputs:
+    """The inputs of a machine on a bus, by the names its ports give them: the bus voltage
+    magnitude [pu] and angle [rad] (its bus port), the mechanical power and the field voltage [pu]
+    (its `mechanical_power` and `field_voltage` input links)."""
+
+    magnitude: str
+    angle: str
+    power: str
+    field: str
+
+
+def machine_inputs(component) -> MachineInputs:
+    """The machine inputs of `component` from its ports; PortError where it does not declare them."""
+    ports = component.ports
+    power, field = ports.input("mechanical_power"), ports.input("field_voltage")
+    if ports.bus is None or power is None or field is None:
+        raise PortError(f"component {component.name!r} is no machine on a bus: it needs a bus port and the input "
+                        "links mechanical_power and field_voltage")
+    return MachineInputs(*ports.bus.voltage, power, field)
+
+
 def ports_of_model_description(root: ET.Element) -> Ports | None:
     """The ports declared in a parsed model description (FMI 2.0 or 3.0), or None where it declares none."""
     found = root.find(f"VendorAnnotations/Tool[@name='{TOOL_NAME}']/Ports")

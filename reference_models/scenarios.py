@@ -1,4 +1,8 @@
-"""Built-in co-simulation scenarios: one signal of SM4's inputs over a whole run, drawn with a seed.
+"""Built-in co-simulation scenarios: one signal of a machine's inputs over a whole run, drawn with a seed.
+
+The machine is the component the input families drive (families.COMPONENT), its inputs found by its
+ports (families.MachineInputs): the bus voltage magnitude and angle of its bus port (Vs, theta_vs
+for SM4), its mechanical power and field voltage links (Pm, Efd). Below they go by SM4's names.
 
 Bus scenarios move the bus voltage and hold Pm and Efd at their start values (the operating point
 of Table I). A bus scenario is a signal of one input family (families.py) sampled over the run's
@@ -15,10 +19,10 @@ Scenarios that move the other inputs:
   the mix's lower voltages have no equilibrium and the machine slips poles).
 * `drift`: the mix scenario of the same seed seen by a machine whose network turns at a constant
   speed c (|c| in [1, 12] rad/s, drawn after the mix): theta_vs(t) = theta_mix(t) + c t, and the
-  machine starts at the mix's rest state turning with it, omega0 = c (Scenario.speed). SM4 sees its
-  angles only through delta - theta_vs and its speed through the damping torque D omega
-  (reference_models.drift), so Pm carries that torque, Pm = Pm_start + D c (for D = 0, the grid's
-  machines, Pm is its start value): then the run is exactly the mix run turned by c t,
+  machine starts at the mix's rest state turning with it, omega0 = c (Scenario.speed). The machine
+  sees its angles only through their differences and its speed through a damping torque (its
+  `drift`, reference_models.drift; SM4: delta - theta_vs and D omega), so its torque input carries
+  that torque, Pm = Pm_start + D c (for D = 0, the grid's machines, Pm is its start value): then the run is exactly the mix run turned by c t,
   delta_drift(t) = delta_mix(t) + c t and omega_drift(t) = omega_mix(t) + c, and an operator that
   works in its window's frame must give the same errors on both.
 
@@ -35,17 +39,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from .drift import frame_of
-from .families import CONTROL_LEVELS, family, held_levels, machine
+from .families import COMPONENT, CONTROL_LEVELS, EFD, EFD_START, PM, PM_START, THETA, VS, family, held_levels, machine
 from .signals import Signal, Table
 from .simulate import simulate
-from .sm4 import DEFAULT_PARAMS, SM4, SM4Params, has_equilibrium
+
+DEFAULT_PARAMS = COMPONENT.params()
+_INDEX = {name: i for i, name in enumerate(COMPONENT.input_names)}
 
 BUS_SCENARIOS = ("slow", "fast", "dip", "step", "ramp", "mix")
 SCENARIOS = BUS_SCENARIOS + ("governor", "drift")
 # a scenario is redrawn (from the same seed's stream) until its bus voltage ends at or above this [pu]:
 # below 0.8809 pu the default machine has no equilibrium at its start Pm, Efd and slowly loses synchronism
 SETTLED_VS = 0.9
-PM_START, EFD_START = SM4.inputs[2].start, SM4.inputs[3].start  # pu
 GOVERNOR_LEVELS = (0.8, 1.1)  # Pm levels of `governor`, as shares of its start value
 GOVERNOR_CHANGE = (0.1, 0.2)  # size of one change of Pm, as a share of its start value
 DRIFT_SPEEDS = (1.0, 12.0)  # rad/s, |c| of `drift`
@@ -61,31 +66,36 @@ class Scenario:
     seed: int
     stop_time: float
     signal: Signal
-    params: SM4Params = DEFAULT_PARAMS
+    params: object = DEFAULT_PARAMS
     speed: float = 0.0
 
     def inputs(self, times: np.ndarray) -> np.ndarray:
-        """(Vs [pu], theta_vs [rad], Pm [pu], Efd [pu]) [T, 4] at times [T] (s)."""
+        """The machine's inputs [T, n_u] at times [T] (s), in its input order (SM4: Vs [pu],
+        theta_vs [rad], Pm [pu], Efd [pu])."""
         return np.asarray(self.signal(np.asarray(times, dtype=float)), dtype=float)
 
     def initial_state(self) -> np.ndarray:
-        """The machine at rest [4] under the first input value, in the frame turning at `speed`:
-        the equilibrium there with Pm less the damping torque D speed, and omega = speed."""
-        frame = frame_of(SM4.drift, self.params)
-        u0 = self.inputs(np.array([0.0]))[0] - self.speed * frame.input_torques(SM4.n_inputs)
-        x0 = rest_state(u0[0], u0[1], self.params, u0[2], u0[3])
+        """The machine at rest [n_x] under the first input value, in the frame turning at `speed`:
+        the state at rest there with its torque input less the damping torque (SM4: Pm - D speed),
+        and its speed state raised by `speed`."""
+        frame = frame_of(COMPONENT.drift, self.params)
+        u0 = self.inputs(np.array([0.0]))[0] - self.speed * frame.input_torques(COMPONENT.n_inputs)
+        x0 = COMPONENT.rest_state(u0, self.params)
         x0[frame.speed_state] += self.speed
         return x0
 
 
-def rest_state(Vs: float, theta_vs: float, p: SM4Params = DEFAULT_PARAMS, Pm: float = PM_START,
+def rest_state(Vs: float, theta_vs: float, p=DEFAULT_PARAMS, Pm: float = PM_START,
                Efd: float = EFD_START) -> np.ndarray:
-    """Equilibrium [4] of machine p at constant (Vs, theta_vs, Pm, Efd), Vs raised to the lowest voltage
-    that has one at that Pm and Efd."""
-    return SM4.rest_state((Vs, theta_vs, Pm, Efd), p)
+    """The machine p at rest [n_x] at constant bus voltage Vs [pu] at angle theta_vs [rad],
+    mechanical power Pm and field voltage Efd [pu] (its other inputs at their start values): the
+    equilibrium, or where there is none the state at rest it declares (SM4: Vs raised to the lowest
+    voltage that has one)."""
+    given = {VS: Vs, THETA: theta_vs, PM: Pm, EFD: Efd}
+    return COMPONENT.rest_state(tuple(given.get(q.name, q.start) for q in COMPONENT.inputs), p)
 
 
-def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params: SM4Params = DEFAULT_PARAMS,
+def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params=DEFAULT_PARAMS,
              operating: tuple | None = None) -> Scenario:
     """The built-in scenario `name` (one of SCENARIOS) drawn with `seed` over stop_time seconds for
     the machine `params` at the operating point `operating` = (Pm, Efd) [pu] (default: their start
@@ -121,7 +131,7 @@ def _bus(name: str, rng: np.random.Generator, stop_time: float, pm: float, efd: 
     free = [i for i in range(fam.dim) if i not in held]
     unit = np.zeros((1, fam.dim))
     unit[0, free] = rng.uniform(size=len(free))
-    levels = {"Pm": (pm, pm), "Efd": (efd, efd)}
+    levels = {PM: (pm, pm), EFD: (efd, efd)}
     return fam.sample(unit, stop_time, levels)[0]
 
 
@@ -140,15 +150,15 @@ def _governor(rng: np.random.Generator, stop_time: float, pm: float, efd: float)
         times += [t, t + length]
         values += [values[-1], float(np.clip(level, low, high))]
         t += length + float(rng.uniform(2.0, 4.0))
-    return machine(bus.channels["Vs"], bus.channels["theta_vs"], Table(tuple(times), tuple(values)), efd)
+    return machine(bus.channels[VS], bus.channels[THETA], Table(tuple(times), tuple(values)), efd)
 
 
-def _drift(seed: int, stop_time: float, params: SM4Params, pm: float, efd: float) -> Scenario:
+def _drift(seed: int, stop_time: float, params, pm: float, efd: float) -> Scenario:
     """The mix of `seed` in a network turning at c (see the module docstring)."""
     rng = np.random.default_rng(seed)
     mix = held_levels(rng, stop_time)
     c = float(rng.uniform(*DRIFT_SPEEDS)) * (1.0 if rng.uniform() < 0.5 else -1.0)
-    theta = mix.channels["theta_vs"]  # Piecewise: values[k] before times[k], values[k + 1] from it on
+    theta = mix.channels[THETA]  # Piecewise: values[k] before times[k], values[k + 1] from it on
     times, values = [0.0], [theta.values[0]]
     for k, jump in enumerate(theta.times):
         if 0.0 < jump < stop_time:
@@ -156,21 +166,35 @@ def _drift(seed: int, stop_time: float, params: SM4Params, pm: float, efd: float
             values += [theta.values[k] + c * jump, theta.values[k + 1] + c * jump]
     times.append(stop_time)
     values.append(theta(stop_time) + c * stop_time)
-    torque = params.D * c  # the damping torque of the extra speed, which the turbine supplies
-    signal = machine(mix.channels["Vs"], Table(tuple(times), tuple(values)), pm + torque, efd)
+    torque = c * _torque(params)  # the damping torque of the extra speed, which the turbine supplies
+    signal = machine(mix.channels[VS], Table(tuple(times), tuple(values)), pm + torque, efd)
     return Scenario("drift", seed, stop_time, signal, params, speed=c)
+
+
+def _torque(params) -> float:
+    """The damping torque coefficient [pu / (rad/s)] the mechanical power input carries in a frame
+    turning at 1 rad/s (SM4: D), from the machine's drift."""
+    return float(frame_of(COMPONENT.drift, params).input_torques(COMPONENT.n_inputs)[_INDEX[PM]])
 
 
 def ends_settled(s: Scenario) -> bool:
     """True if the run ends at a bus voltage of at least SETTLED_VS where the machine has an
     equilibrium at the final inputs (Pm less the damping torque of the scenario's speed)."""
-    Vs, _, Pm, Efd = s.inputs(np.array([s.stop_time]))[0]
-    return Vs >= SETTLED_VS and has_equilibrium(Vs, Pm - s.params.D * s.speed, Efd, s.params)
+    u = s.inputs(np.array([s.stop_time]))[0]
+    if not u[_INDEX[VS]] >= SETTLED_VS:
+        return False
+    u[_INDEX[PM]] = u[_INDEX[PM]] - _torque(s.params) * s.speed
+    try:
+        COMPONENT.steady_state(u, s.params)
+    except ValueError:
+        return False
+    return True
 
 
 def keeps_synchronism(s: Scenario, every: float = 0.05) -> bool:
-    """True if the rotor angle stays within pi of the bus angle over the whole run (RK45, checked
-    every `every` seconds): the machine slips no pole."""
+    """True if the rotor angle (the machine's drift's first angle state) stays within pi of the bus
+    angle over the whole run (RK45, checked every `every` seconds): the machine slips no pole."""
     t = np.linspace(0.0, s.stop_time, int(round(s.stop_time / every)) + 1)
-    angle = simulate(s.initial_state(), s.signal, t, s.params)[:, 0] - s.inputs(t)[:, 1]
+    x = simulate(s.initial_state(), s.signal, t, s.params, component=COMPONENT)
+    angle = x[:, COMPONENT.drift.angle_states[0]] - s.inputs(t)[:, _INDEX[THETA]]
     return bool(np.all(np.abs(angle) < np.pi))

@@ -15,6 +15,12 @@ exciter's Efd from t0 on, tabulated every 5 ms (with both sides of each jump). W
 slips a pole, the window is moved to end just after the slip begins (a window of a lost machine
 teaches nothing a grid study uses beyond its first swing).
 
+The loop is wired by the components' ports (reference_models.ports): the machine's bus port takes
+the bus voltage and gives the current into the bus, its `mechanical_power` link holds P0, its
+`field_voltage` link takes the exciter's `field_voltage` output, the exciter's `terminal_voltage`
+link takes the bus voltage magnitude and its `voltage_reference` link holds the set point; the
+recorded channels are the machine's inputs by those names (SM4: Vs, theta_vs, Pm, Efd).
+
 All quantities in pu on the machine's base, angles in rad, times in s.
 """
 from __future__ import annotations
@@ -27,19 +33,41 @@ from scipy.integrate import solve_ivp
 
 from .ieee1 import IEEE1, IEEE1Params
 from .initialisation import exciter_start, machine_start
+from .ports import machine_inputs
 from .signals import Signal, Table
 from .sm4 import SM4, SM4Params
 
+MACHINE, EXCITER = SM4, IEEE1  # the loop's machine and exciter (machine_start, exciter_start give their starts)
+MACHINE_INPUTS = machine_inputs(MACHINE)
 SAMPLE_S = 0.005  # s: the tabulation step of the recorded inputs
 BOLTED = 1e-4  # pu: the smallest fault reactance (a bolted fault)
+# the machine's bus current outputs, the exciter's field state and its inputs, by the ports
+_CURRENT = tuple(MACHINE.output_names.index(name) for name in MACHINE.ports.bus.current)
+_FIELD = EXCITER.state_names.index(EXCITER.ports.output("field_voltage"))
+_EXCITER_INPUTS = tuple(dict((link.variable, link.signal) for link in EXCITER.ports.inputs)[name]
+                        for name in EXCITER.input_names)
+
+
+def _machine_u(Vs: float, theta: float, Pm: float, Efd: float) -> tuple:
+    """The machine's inputs in its order from bus voltage, mechanical power and field voltage (a
+    further input at its start value)."""
+    given = {MACHINE_INPUTS.magnitude: Vs, MACHINE_INPUTS.angle: theta, MACHINE_INPUTS.power: Pm,
+             MACHINE_INPUTS.field: Efd}
+    return tuple(given.get(q.name, q.start) for q in MACHINE.inputs)
+
+
+def _exciter_u(Vt: float, Vref: float) -> tuple:
+    """The exciter's inputs in its order: terminal voltage and voltage reference by their links."""
+    given = {"terminal_voltage": Vt, "voltage_reference": Vref}
+    return tuple(given[signal] for signal in _EXCITER_INPUTS)
 
 
 def _current_map(x, p: SM4Params):
-    """(c [2], A [2, 2]): the machine's bus current (I_re, I_im) = c + A (V_re, V_im), read off SM4's
+    """(c [2], A [2, 2]): the machine's bus current (I_re, I_im) = c + A (V_re, V_im), read off its
     output equations at three voltages (it is affine in the bus voltage)."""
     def current(Vs, theta):
-        y = SM4.output_equations(x, (Vs, theta, 0.0, 0.0), p, math)
-        return np.array([y[2], y[3]])
+        y = MACHINE.output_equations(x, _machine_u(Vs, theta, 0.0, 0.0), p, math)
+        return np.array([y[_CURRENT[0]], y[_CURRENT[1]]])
 
     c = current(0.0, 0.0)
     return c, np.column_stack([current(1.0, 0.0) - c, current(1.0, 0.5 * math.pi) - c])
@@ -82,15 +110,17 @@ def record(p: SM4Params, E: float, Vt0: float, Xe: float, P0: float, t_fault: fl
         return 0.5 * accel * during**2 + accel * duration * max(t - t_clear, 0.0)
 
     def network(t, y, faulted):
-        x = y[:4]
+        x = y[:MACHINE.n_states]
         return bus_voltage(x, cmath.rect(E, phase(t)), Xe * (1.0 + trip) if t >= t_clear else Xe,
                            max(Xf, BOLTED) if faulted else None, p)
 
+    n = MACHINE.n_states
+
     def rhs(t, y, faulted):
-        x, z = y[:4], y[4:]
+        x, z = y[:n], y[n:]
         V = network(t, y, faulted)
-        dx = SM4.derivatives(x, (abs(V), cmath.phase(V), start.Pm, z[0]), p, math)
-        dz = IEEE1.derivatives(z, (abs(V), field.Vref), exciter, math)
+        dx = MACHINE.derivatives(x, _machine_u(abs(V), cmath.phase(V), start.Pm, z[_FIELD]), p, math)
+        dz = EXCITER.derivatives(z, _exciter_u(abs(V), field.Vref), exciter, math)
         return [*dx, *dz]
 
     y = np.concatenate([start.x0, field.x0])
@@ -115,15 +145,17 @@ def record(p: SM4Params, E: float, Vt0: float, Xe: float, P0: float, t_fault: fl
     volts = np.array([network(ti, yi, f) for ti, yi, f in zip(t, Y, faults)])
     theta = np.unwrap(np.angle(volts))  # continuous over the whole run, as the rotor angle is
     # slipping a pole against the network: the rotor angle more than pi from the infinite bus angle
-    slipped = np.nonzero(np.abs(Y[:, 0] - np.array([phase(ti) for ti in t])) > math.pi)[0]
+    slipped = np.nonzero(np.abs(Y[:, MACHINE.drift.angle_states[0]] - np.array([phase(ti) for ti in t])) > math.pi)[0]
     if slipped.size:  # the machine slips a pole: the window ends with the start of the slip
         t0 = min(t0, max(float(t[slipped[0]]) - 0.6 * horizon, 0.0))
     keep = (t >= t0 - 1e-12) & (t <= t0 + horizon + 1e-12)
     t, Y, volts, theta = t[keep], Y[keep], volts[keep], theta[keep]
     rel = tuple(float(v) for v in t - t0)
-    x0 = Y[0, :4]
-    signal = Signal({"Vs": Table(rel, tuple(float(abs(v)) for v in volts)),
-                     "theta_vs": Table(rel, tuple(float(a) for a in theta)),
-                     "Pm": Table((0.0,), (float(start.Pm),)),
-                     "Efd": Table(rel, tuple(float(e) for e in Y[:, 4]))}, x0=tuple(float(v) for v in x0))
+    x0 = Y[0, :n]
+    recorded = {MACHINE_INPUTS.magnitude: Table(rel, tuple(float(abs(v)) for v in volts)),
+                MACHINE_INPUTS.angle: Table(rel, tuple(float(a) for a in theta)),
+                MACHINE_INPUTS.power: Table((0.0,), (float(start.Pm),)),
+                MACHINE_INPUTS.field: Table(rel, tuple(float(e) for e in Y[:, n + _FIELD]))}
+    signal = Signal({q.name: recorded.get(q.name, Table((0.0,), (q.start,))) for q in MACHINE.inputs},
+                    x0=tuple(float(v) for v in x0))
     return x0, signal
