@@ -1,13 +1,16 @@
 """The surrogate FMU against the reference FMU: fmpy runs both on the same inputs.
 
-Both FMUs are simulated by `fmpy.simulate_fmu` from the same input table (time, Vs, theta_vs, Pm, Efd)
-with communication step h: at each communication point fmpy sets the table's value there and the FMU holds
-it over the step. Both start from the same state (the parameters delta0..Eq_p0: the equilibrium of the
-first input value). Outputs are recorded at every communication point; the errors are the surrogate
-minus the reference over all of them. Two times are taken per FMU (extracted beforehand; in this
-process, one after the other): the whole `simulate_fmu` call, what an fmpy user waits for with
-fmpy's own work per step included, and the time spent inside fmi2DoStep alone, what the FMU itself
-costs an importer.
+The FMUs are of the machine the scenarios drive (reference_models.scenarios.COMPONENT), whose
+inputs are found by its ports: the bus voltage of its bus port, its mechanical power and field
+voltage links (SM4: Vs, theta_vs, Pm, Efd; the examples below use SM4's names). Both FMUs are
+simulated by `fmpy.simulate_fmu` from the same input table (time and every input) with
+communication step h: at each communication point fmpy sets the table's value there and the FMU
+holds it over the step. Both start from the same state (the initial-state parameters <state>0,
+SM4: delta0..Eq_p0: the machine at rest under the first input value). Outputs are recorded at
+every communication point; the errors are the surrogate minus the reference over all of them. Two
+times are taken per FMU (extracted beforehand; in this process, one after the other): the whole
+`simulate_fmu` call, what an fmpy user waits for with fmpy's own work per step included, and the
+time spent inside fmi2DoStep alone, what the FMU itself costs an importer.
 """
 from __future__ import annotations
 
@@ -20,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_models.scenarios import rest_state, scenario
-from reference_models.sm4 import (DEFAULT_PARAMS, INPUT_NAMES, INPUT_UNITS, OUTPUT_NAMES, SM4, STATE_NAMES, STATE_UNITS,
-                                  SM4Params)
+from reference_models.scenarios import COMPONENT, DEFAULT_PARAMS, scenario
 
+STATE_NAMES, INPUT_NAMES, OUTPUT_NAMES = COMPONENT.state_names, COMPONENT.input_names, COMPONENT.output_names
+INPUT_UNITS = tuple(q.unit for q in COMPONENT.inputs)
 OUTPUTS = STATE_NAMES + OUTPUT_NAMES
-UNITS = dict(zip(STATE_NAMES, STATE_UNITS)) | {name: "pu" for name in OUTPUT_NAMES}
+UNITS = {q.name: q.unit for q in COMPONENT.states + COMPONENT.outputs}
 DIAGNOSTICS = ("residual", "in_envelope")  # surrogate only
 
 
@@ -35,8 +38,8 @@ class CompareError(ValueError):
 
 @dataclass(frozen=True)
 class Inputs:
-    """What both FMUs are driven with: times [T] (s), values [T, 4] (Vs [pu], theta_vs [rad], Pm [pu],
-    Efd [pu]) and the start state x0 [4]."""
+    """What both FMUs are driven with: times [T] (s), values [T, n_u] (the machine's inputs in its
+    order; SM4: Vs [pu], theta_vs [rad], Pm [pu], Efd [pu]) and the start state x0 [n_x]."""
 
     label: str
     times: np.ndarray
@@ -52,7 +55,7 @@ class Inputs:
         return rows
 
 
-def scenario_inputs(name: str, seed: int, stop_time: float, step: float, params: SM4Params = DEFAULT_PARAMS,
+def scenario_inputs(name: str, seed: int, stop_time: float, step: float, params=DEFAULT_PARAMS,
                     operating: tuple | None = None) -> Inputs:
     """A built-in scenario sampled at the communication points k h, k = 0..stop_time/h, for machine
     params at the operating point (Pm, Efd) (default: their start values)."""
@@ -70,14 +73,16 @@ def communication_points(stop_time: float, step: float) -> np.ndarray:
     return np.arange(n + 1) * step
 
 
-REQUIRED_COLUMNS = ("time", "Vs", "theta_vs")  # Pm and Efd may be left out: held at their start values
+# time and the bus voltage of the bus port (SM4: Vs, theta_vs); the other inputs may be left out
+REQUIRED_COLUMNS = ("time", *COMPONENT.ports.bus.voltage)
 
 
-def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
-    """Inputs from a CSV file with the columns time, Vs, theta_vs and optionally Pm, Efd (seconds, pu,
-    rad, pu, pu; a header row; times non-decreasing from 0; a repeated time is a jump, as fmpy reads
-    it); a column left out holds its input's start value (Pm 0.7048, Efd 1.08: Table I's operating
-    point). The machine params starts at rest under the first row."""
+def csv_inputs(path, params=DEFAULT_PARAMS) -> Inputs:
+    """Inputs from a CSV file with the columns REQUIRED_COLUMNS (time [s] and the bus voltage's
+    magnitude [pu] and angle [rad]; SM4: time, Vs, theta_vs) and optionally the machine's other
+    inputs (SM4: Pm, Efd [pu]); a header row; times non-decreasing from 0; a repeated time is a jump,
+    as fmpy reads it. A column left out holds its input's start value (SM4: Pm 0.7048, Efd 1.08,
+    Table I's operating point). The machine params starts at rest under the first row."""
     path = Path(path)
     try:
         with path.open(newline="") as f:
@@ -88,7 +93,7 @@ def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
         optional = [n for n in INPUT_NAMES if n not in REQUIRED_COLUMNS]
         raise CompareError(f"inputs {path} need a header with the columns {', '.join(REQUIRED_COLUMNS)} (and "
                            f"optionally {', '.join(optional)}) and at least one row")
-    starts = {"time": None} | {q.name: q.start for q in SM4.inputs}
+    starts = {"time": None} | {q.name: q.start for q in COMPONENT.inputs}
     try:
         data = np.array([[float(r[c]) if c in r else starts[c] for c in starts] for r in rows])
     except (TypeError, ValueError) as exc:
@@ -98,18 +103,18 @@ def csv_inputs(path, params: SM4Params = DEFAULT_PARAMS) -> Inputs:
     times = data[:, 0]
     if times[0] != 0 or np.any(np.diff(times) < 0):
         raise CompareError(f"inputs {path}: times must start at 0 and never decrease")
-    Vs, theta_vs, Pm, Efd = data[0, 1:]
-    return Inputs(path.name, times, data[:, 1:], rest_state(Vs, theta_vs, params, Pm, Efd))
+    return Inputs(path.name, times, data[:, 1:], COMPONENT.rest_state(data[0, 1:], params))
 
 
-def fmu_machine(fmu_dir) -> SM4Params:
+def fmu_machine(fmu_dir):
     """The machine an extracted surrogate FMU models: that of its operator (resources/model.onnx)."""
     return operator_machine(Path(fmu_dir) / "resources" / "model.onnx")
 
 
-def operator_machine(path) -> SM4Params:
-    """The machine an operator file was trained for (its validated metadata); CompareError, one
-    line, when the file is unreadable, not an SM4 operator or its metadata is not valid."""
+def operator_machine(path):
+    """The machine (parameters) an operator file was trained for (its validated metadata);
+    CompareError, one line, when the file is unreadable, not an operator of the scenarios' machine
+    or its metadata is not valid."""
     import onnx
 
     from surrogate.contract import ContractError, operator_metadata
@@ -120,8 +125,8 @@ def operator_machine(path) -> SM4Params:
         raise CompareError(f"{path}: {exc}") from None
     except Exception as exc:  # onnx raises several types for unreadable files
         raise CompareError(f"{path} is not a readable operator file: {' '.join(str(exc).split())[:200]}") from None
-    if meta["component"] is not SM4:
-        raise CompareError(f"the operator {path} is not of {SM4.name} (component {meta['component'].name!r})")
+    if meta["component"] is not COMPONENT:
+        raise CompareError(f"the operator {path} is not of {COMPONENT.name} (component {meta['component'].name!r})")
     return meta["params"]
 
 
@@ -163,7 +168,7 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     known = {v.name for v in md.modelVariables}
     missing = [n for n in list(names) + [f"{s}0" for s in STATE_NAMES] + list(INPUT_NAMES) if n not in known]
     if missing:
-        raise CompareError(f"{md.modelName} lacks the variables {', '.join(missing)}: not an SM4 FMU")
+        raise CompareError(f"{md.modelName} lacks the variables {', '.join(missing)}: not an FMU of {COMPONENT.name}")
     unknown = sorted(set(parameters or {}) - known)
     if unknown:
         raise CompareError(f"{md.modelName} has no parameter {', '.join(unknown)}")
@@ -272,8 +277,8 @@ def _ratio(speedup: float) -> str:
 
 
 def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
-    """Two PNGs: the inputs and the four states, and the six currents and powers; each output with
-    both curves (left) and the surrogate's error (right)."""
+    """Two PNGs: the inputs and the states, and the derived outputs (SM4: currents and powers);
+    each output with both curves (left) and the surrogate's error (right)."""
     import matplotlib
 
     matplotlib.use("Agg")
