@@ -1,12 +1,14 @@
 """A content-keyed cache of built FMUs, shared by the grid, the demo and the tests.
 
-An FMU is named by a hash of everything it is made from: the builders' sources (fmu_export and
-reference_models: .py, .c, .h), and the parts its caller names (kind, component, parameters, the
+An FMU is named by a hash of everything it is made from: the builders' sources (fmu_export,
+reference_models and surrogate: .py, .c, .h), and the parts its caller names (kind, component, parameters, the
 operator file's bytes, the FMI version, ...). An entry is reused exactly when a build would give
 the same FMU. Builds write atomically, so a cache can be shared by processes; an entry that is not a
 readable FMU archive (a truncated or foreign file) is built again.
 
-The folder is $OPFMU_FMU_CACHE, else ~/.cache/opfmu/fmus.
+The folder is $OPFMU_FMU_CACHE, else ~/.cache/opfmu/fmus. `cached_surrogate_fmu` and
+`cached_native_reference_fmu` are the two native builders through the cache (the demo and the tests
+use them; the grid names its own parts, cosim.fmus).
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from pathlib import Path
 from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = (ROOT / "fmu_export", ROOT / "reference_models")
+SOURCES = (ROOT / "fmu_export", ROOT / "reference_models", ROOT / "surrogate")
 
 _SOURCE_HASH: str | None = None
 
@@ -29,7 +31,8 @@ def default_cache() -> Path:
 
 
 def source_hash() -> str:
-    """A hash of the builders' sources (fmu_export, reference_models: .py, .c, .h), once per process."""
+    """A hash of the builders' sources (fmu_export, reference_models, surrogate: .py, .c, .h), once per
+    process."""
     global _SOURCE_HASH
     if _SOURCE_HASH is None:
         h = hashlib.sha256()
@@ -62,9 +65,16 @@ def is_fmu_archive(path: Path) -> bool:
 def cached_fmu(model_name: str, parts: tuple, build: Callable[[Path], object], cache=None,
                progress: Callable[[str], None] | None = None) -> Path:
     """The FMU `<cache>/<model_name>-<key of parts>.fmu`: reused when present and readable, else built
-    by `build(path)` (which must write `path` atomically); `progress(model_name)` before a build."""
+    by `build(path)` (which must write `path` atomically); `progress(model_name)` before a build.
+    BuildError (one line) when the cache folder cannot be made."""
+    from .binaries import BuildError
+
     cache = Path(cache) if cache is not None else default_cache()
-    cache.mkdir(parents=True, exist_ok=True)
+    try:
+        cache.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BuildError(f"cannot use {cache} as the FMU build cache ({exc.strerror or exc}); set OPFMU_FMU_CACHE "
+                         "to a writable folder") from None
     out = cache / f"{model_name}-{cache_key(model_name, *parts)}.fmu"
     if out.is_file() and is_fmu_archive(out):
         return out
@@ -72,3 +82,49 @@ def cached_fmu(model_name: str, parts: tuple, build: Callable[[Path], object], c
         progress(model_name)
     build(out)
     return out
+
+
+def _platform_names(platforms) -> list[str]:
+    """The names of the platforms a build carries (None: the host's only), as the builders choose them."""
+    from .binaries import targets
+
+    return [p.name for p in targets(platforms)]
+
+
+def cached_surrogate_fmu(onnx_path, model_name: str = "SM4Surrogate", platforms=None, fmi_version: int = 2,
+                         n_check: int = 32, cache=None, progress: Callable[[str], None] | None = None) -> Path:
+    """The surrogate FMU of an operator file (fmu_export.surrogate_fmu.build_surrogate_fmu, same
+    arguments), from the cache or built into it. Keyed by the file's bytes, the model name, the
+    platforms and the FMI version; n_check (the kernel checks against onnxruntime at build time)
+    does not change the FMU, so it is no part of the key."""
+    from .surrogate_fmu import build_surrogate_fmu
+
+    onnx_path, names = Path(onnx_path), _platform_names(platforms)
+    return cached_fmu(model_name, ("surrogate", onnx_path.read_bytes(), names, fmi_version),
+                      lambda out: build_surrogate_fmu(onnx_path, out, model_name=model_name, n_check=n_check,
+                                                      platforms=names, fmi_version=fmi_version), cache, progress)
+
+
+def cached_native_reference_fmu(model_name: str = "SM4Reference", component=None, params=None,
+                                operating_point: dict | None = None, platforms=None, fmi_version: int = 2,
+                                cache=None, progress: Callable[[str], None] | None = None) -> Path:
+    """The native reference FMU (fmu_export.native_reference_fmu.build_native_reference_fmu, same
+    arguments; component None: SM4), from the cache or built into it. Keyed by the component, its
+    parameters in full (defaults filled in), the operating point, the platforms and the FMI version."""
+    from reference_models.component import ParameterError
+    from reference_models.sm4 import SM4
+
+    from .native_reference_fmu import NativeReferenceError, build_native_reference_fmu
+    from .python_reference_fmu import machine_params
+
+    component = component or SM4
+    try:
+        full = machine_params(component, params)
+    except ParameterError as exc:
+        raise NativeReferenceError(str(exc)) from None
+    names = _platform_names(platforms)
+    return cached_fmu(model_name, ("reference", component.name, full.to_dict(), operating_point, names, fmi_version),
+                      lambda out: build_native_reference_fmu(out, model_name=model_name, component=component,
+                                                             params=full, operating_point=operating_point,
+                                                             platforms=names, fmi_version=fmi_version),
+                      cache, progress)

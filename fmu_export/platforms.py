@@ -116,6 +116,18 @@ def host() -> Platform:
                         f"{host_info.machine()}")
 
 
+def optional_tools() -> dict[str, str]:
+    """{program: Debian package} of what the platforms other than this machine's need: their cross
+    compilers and the emulators that run their binaries here."""
+    tools = {}
+    for p in PLATFORMS.values():
+        if p != host():
+            tools[p.compiler] = p.package
+            if p.emulator:
+                tools[p.emulator[0]] = p.emulator_package
+    return tools
+
+
 def by_name(name: str) -> Platform:
     """The platform of a name (an FMI 2.0 folder or FMI 3.0 tuple); PlatformError for an unknown one."""
     key = ALIASES.get(name.strip(), name.strip())

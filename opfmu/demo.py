@@ -3,7 +3,8 @@
 1. the operator: the shipped default, or with `train` a fresh one (quick dataset, PI-DeepONet
    training, ONNX export, a check on the dataset's test split);
 2. both FMUs: the native surrogate FMU of that operator and the native reference FMU (the same
-   machine's equations, Dormand-Prince 5(4) in C);
+   machine's equations, Dormand-Prince 5(4) in C), from the FMU build cache (fmu_export.build_cache:
+   built once per content, $OPFMU_FMU_CACHE or ~/.cache/opfmu/fmus) and copied into the run directory;
 3. `compare` on every built-in scenario (fmpy runs both FMUs on the same inputs);
 4. report.md: the operator, one table over all scenarios, each scenario's full table and plots.
 """
@@ -39,23 +40,36 @@ class DemoConfig:
 
 def run_demo(config: DemoConfig, say=print) -> Path:
     """Runs the demo; returns the report's path. `say` gets one line per stage."""
-    from fmu_export.surrogate_fmu import build_surrogate_fmu
-    from fmu_export.native_reference_fmu import build_native_reference_fmu
+    from fmu_export.build_cache import cached_native_reference_fmu, cached_surrogate_fmu, default_cache
     from opfmu.compare import operator_machine
     from surrogate.operator import DEFAULT_OPERATOR
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
     operator = train_operator(config, say) if config.train else DEFAULT_OPERATOR
-    surrogate_fmu, reference_fmu = out / "SM4Surrogate.fmu", out / "SM4Reference.fmu"
-    info = build_surrogate_fmu(operator, surrogate_fmu)
-    say(f"built {surrogate_fmu} ({info['size_bytes'] / 1e6:.2f} MB; kernel matches onnxruntime to "
-        f"{info['max_abs_diff']:.1e})")
-    build_native_reference_fmu(reference_fmu, params=operator_machine(operator))
-    say(f"built {reference_fmu}")
+    say(f"FMU build cache: {default_cache()} (set OPFMU_FMU_CACHE to use another folder)")
+
+    def building(name: str) -> None:
+        say(f"building {name} (not in the cache)")
+
+    surrogate_fmu = copied(cached_surrogate_fmu(operator, "SM4Surrogate", progress=building), out / "SM4Surrogate.fmu")
+    say(f"{surrogate_fmu}: {surrogate_fmu.stat().st_size / 1e6:.2f} MB (its compiled kernel was checked against "
+        "onnxruntime when it was built)")
+    reference_fmu = copied(cached_native_reference_fmu("SM4Reference", params=operator_machine(operator),
+                                                       progress=building), out / "SM4Reference.fmu")
+    say(f"{reference_fmu}: the native reference FMU of the operator's machine")
     results = compare_scenarios(surrogate_fmu, reference_fmu, config, say)
     report = write_report(out, operator, config, results)
     return report
+
+
+def copied(source: Path, target: Path) -> Path:
+    """`source` copied onto `target` atomically; returns target."""
+    import shutil
+
+    with atomic_path(target) as tmp:
+        shutil.copyfile(source, tmp)
+    return target
 
 
 def train_operator(config: DemoConfig, say) -> Path:

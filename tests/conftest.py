@@ -1,6 +1,15 @@
-"""Small dataset recipes and the SM4 FMUs (surrogate, native and pythonfmu reference), shared by the tests."""
+"""Small dataset recipes, the SM4 FMUs (surrogate, native and pythonfmu reference) and the FMU build
+cache, shared by the tests; the `platform_tools` marker's skips.
+
+Every native FMU the tests build goes through the content-keyed build cache (fmu_export.build_cache)
+of the run, so each distinct FMU is built once per run: the fixtures here, the tests' own builds, the
+grid tests and the commands the tests run (`opfmu demo`, `opfmu grid`), which find the cache through
+$OPFMU_FMU_CACHE."""
 import json
+import os
+import shutil
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
@@ -37,25 +46,34 @@ def cosim_tiny(tmp_path_factory):
     return recipe, out
 
 
+@pytest.fixture(scope="session", autouse=True)
+def fmu_cache(tmp_path_factory):
+    """The FMU build cache of this run: $OPFMU_FMU_CACHE where it is set (CI shares one folder between
+    its two runs), else a folder in the run's temporary directory. Set as $OPFMU_FMU_CACHE for the
+    whole run, so the commands the tests start use it too. Tests read its FMUs and never write them."""
+    given = os.environ.get("OPFMU_FMU_CACHE")
+    path = Path(given) if given else tmp_path_factory.mktemp("fmu_cache")
+    environment = pytest.MonkeyPatch()
+    environment.setenv("OPFMU_FMU_CACHE", str(path))
+    yield path
+    environment.undo()
+
+
 @pytest.fixture(scope="session")
-def fmu_path(tmp_path_factory):
-    """The surrogate FMU of the shipped operator, built once."""
-    from fmu_export.surrogate_fmu import build_surrogate_fmu
+def fmu_path(fmu_cache):
+    """The surrogate FMU (FMI 2.0, linux64) of the shipped operator, from the run's build cache."""
+    from fmu_export.build_cache import cached_surrogate_fmu
     from surrogate.operator import DEFAULT_OPERATOR
 
-    path = tmp_path_factory.mktemp("fmu") / "SM4Surrogate.fmu"
-    build_surrogate_fmu(DEFAULT_OPERATOR, path)
-    return path
+    return cached_surrogate_fmu(DEFAULT_OPERATOR, "SM4Surrogate", cache=fmu_cache)
 
 
 @pytest.fixture(scope="session")
-def native_reference_path(tmp_path_factory):
-    """The native reference FMU (Dormand-Prince 5(4) in C) of the default machine, built once."""
-    from fmu_export.native_reference_fmu import build_native_reference_fmu
+def native_reference_path(fmu_cache):
+    """The native reference FMU (Dormand-Prince 5(4) in C) of the default machine, from the run's build cache."""
+    from fmu_export.build_cache import cached_native_reference_fmu
 
-    path = tmp_path_factory.mktemp("native_reference") / "SM4Reference.fmu"
-    build_native_reference_fmu(path)
-    return path
+    return cached_native_reference_fmu("SM4Reference", cache=fmu_cache)
 
 
 @pytest.fixture(scope="session")
@@ -69,6 +87,26 @@ def reference_path(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def grid_fmu_cache(tmp_path_factory):
-    """The FMU cache of the grid tests (cosim.fmus): each generator's FMUs are built once."""
-    return tmp_path_factory.mktemp("grid_fmus")
+def grid_fmu_cache(fmu_cache):
+    """The FMU cache of the grid tests (cosim.fmus): the run's build cache."""
+    return fmu_cache
+
+
+def optional_tools() -> dict:
+    """{program: Debian package} of the optional tools: the cross compilers and emulators of the
+    other platforms (fmu_export.platforms), and valgrind."""
+    from fmu_export.platforms import optional_tools as platform_tools
+
+    return {**platform_tools(), "valgrind": "valgrind"}
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item):
+    """A test marked platform_tools("prog", ...) is skipped, before its fixtures are built, unless
+    every program named is on PATH; the reason names the Debian packages to install."""
+    marker = item.get_closest_marker("platform_tools")
+    missing = [tool for tool in (marker.args if marker else ()) if shutil.which(tool) is None]
+    if missing:
+        packages = optional_tools()
+        pytest.skip(f"no {', '.join(missing)}: install Debian's "
+                    f"{', '.join(dict.fromkeys(packages.get(tool, tool) for tool in missing))}")

@@ -124,6 +124,7 @@ def test_random_fmi_call_sequences_from_a_c_importer_never_crash(native, fuzz_ha
     assert counts["steps"] > 1000 and counts["error"] > 500  # it stepped, and it was refused often
 
 
+@pytest.mark.platform_tools("valgrind")
 @pytest.mark.skipif(not shutil.which("valgrind"), reason="valgrind is not installed")
 def test_random_fmi_call_sequences_under_valgrind_are_clean(native, fuzz_harness):
     calls = 600 if any(v.name == "residual" for v in native[1].modelVariables) else 3000  # the surrogate is slower

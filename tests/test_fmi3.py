@@ -192,6 +192,7 @@ def test_fmpy_simulates_the_fmi3_reference_like_the_fmi2_one(reference_pair):
     assert np.ptp(runs[0]["omega"]) > 1e-3
 
 
+@pytest.mark.platform_tools  # with a win64 binary where MinGW-w64 is here
 def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi3, fmu_path, tmp_path):
     path, info = surrogate_fmi3
     assert validate_fmu(str(path)) == []
@@ -209,6 +210,7 @@ def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi
     a.free(), b.free()
 
 
+@pytest.mark.platform_tools
 def test_build_fmu_fmi3_writes_the_fmi3_folders(surrogate_fmi3):
     path, info = surrogate_fmi3
     names = zipfile.ZipFile(path).namelist()
@@ -229,14 +231,14 @@ def test_the_pythonfmu_reference_is_fmi2_only(tmp_path):
     assert result.returncode == 2 and result.stderr.count("\n") == 1 and "--python builds an FMI 2.0" in result.stderr
 
 
+@pytest.mark.platform_tools(PLATFORMS["win64"].compiler, PLATFORMS["win64"].emulator[0])
 def test_the_fmi3_surrogate_dll_under_wine_gives_the_linux64_outputs(surrogate_fmi3, tmp_path):
     from fmu_export import cross_check, platforms
     from fmu_export.surrogate_fmu import default_state, load_operator, surrogate_starts
     from fmu_export.variables import SURROGATE_EXTRAS, fmu_variables
-    from tests.test_platforms import extract_binary, needs
+    from tests.test_platforms import extract_binary
 
     win64 = platforms.PLATFORMS["win64"]
-    needs(win64)
     path, info = surrogate_fmi3
     _, meta = load_operator(DEFAULT_OPERATOR)
     variables = fmu_variables(meta["component"], meta["params"], default_state(meta, DEFAULT_OPERATOR),

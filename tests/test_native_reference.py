@@ -280,6 +280,7 @@ def compile_harness(name, tmp_path):
     return out
 
 
+@pytest.mark.platform_tools("valgrind")
 @pytest.mark.skipif(not shutil.which("valgrind"), reason="valgrind is not installed")
 def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp_path):
     harness = compile_harness("lifecycle_harness", tmp_path)

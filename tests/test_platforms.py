@@ -68,6 +68,7 @@ def test_default_selection_skips_a_platform_without_its_compiler_with_a_note(mon
         platforms.select("linux64,win64")
 
 
+@pytest.mark.platform_tools  # every platform whose compiler is here
 def test_every_binary_sits_in_its_fmi2_folder_and_links_only_the_c_runtime(portable_reference, tmp_path):
     path, info, _ = portable_reference
     names = zipfile.ZipFile(path).namelist()
@@ -79,10 +80,9 @@ def test_every_binary_sits_in_its_fmi2_folder_and_links_only_the_c_runtime(porta
         assert imports <= set(p.allowed_imports)
 
 
+@pytest.mark.platform_tools(WIN64.compiler)
 def test_the_win64_dll_exports_every_fmi2_function_and_imports_only_kernel32_and_msvcrt(portable_reference,
                                                                                        tmp_path):
-    if not WIN64.compiler_found():
-        pytest.skip(f"no {WIN64.compiler}: install Debian's {WIN64.package}")
     path, _, _ = portable_reference
     exports, imports = platforms.linkage(extract_binary(path, WIN64, 2, "Machine", tmp_path), WIN64)
     assert set(platforms.fmi_functions(fmi_headers(), 2)) <= exports
@@ -99,6 +99,7 @@ def test_a_binary_missing_an_fmi_function_is_refused(tmp_path):
         platforms.check_linkage(binary, platforms.host(), fmi_headers(), 2)
 
 
+@pytest.mark.platform_tools  # skipped per target by needs()
 @pytest.mark.parametrize("target", [WIN64, ARM], ids=["win64-under-wine", "aarch64-under-qemu"])
 @pytest.mark.parametrize("seed", [101, 202])
 def test_the_reference_binary_gives_the_linux64_numbers_on_another_platform(portable_reference, tmp_path, target,
@@ -138,8 +139,8 @@ def test_the_harness_refuses_a_malformed_script_with_one_line(tmp_path, portable
                                "instantiate a {x} -\nstep 1.0 2.0\n", tmp_path)
 
 
+@pytest.mark.platform_tools(WIN64.compiler, WIN64.emulator[0])
 def test_build_reference_fmu_carries_the_platforms_asked_and_says_how_each_was_checked(tmp_path):
-    needs(WIN64)
     out = tmp_path / "R.fmu"
     result = subprocess.run([sys.executable, "-m", "opfmu", "build-reference-fmu", "-o", str(out),
                              "--platforms", "linux64,win64"], capture_output=True, text=True)
@@ -150,6 +151,7 @@ def test_build_reference_fmu_carries_the_platforms_asked_and_says_how_each_was_c
     assert not any(n.startswith("binaries/aarch64") for n in names)
 
 
+@pytest.mark.platform_tools  # one line whichever platforms' compilers are installed
 def test_build_fmu_refuses_an_unknown_platform_in_one_line(tmp_path):
     result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", "-o", str(tmp_path / "S.fmu"),
                              "--platforms", "linux64,solaris"], capture_output=True, text=True)
@@ -196,6 +198,7 @@ def test_a_surrogate_instance_and_its_state_fit_a_thread_with_a_small_stack(fmu_
     assert result.returncode == 0 and result.stdout.strip() == "ok", (result.returncode, result.stderr[-300:])
 
 
+@pytest.mark.platform_tools  # every platform whose compiler is here
 @pytest.mark.parametrize("version", [2, 3])
 def test_the_exciter_fmu_without_feedthrough_runs_on_every_platform_here(tmp_path, version):
     """The second component (IEEE Type I exciter: no output depends directly on an input, so the

@@ -43,12 +43,11 @@ def train_tiny(data, run, out):
     return out
 
 
-def built(onnx_path, directory, name):
-    from fmu_export.surrogate_fmu import build_surrogate_fmu
+def built(onnx_path, name):
+    """The surrogate FMU (linux64, FMI 2.0) of an operator file, from the run's build cache."""
+    from fmu_export.build_cache import cached_surrogate_fmu
 
-    path = directory / f"{name}.fmu"
-    build_surrogate_fmu(onnx_path, path, model_name=name, n_check=4)
-    return path
+    return cached_surrogate_fmu(onnx_path, name, n_check=4)
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +58,9 @@ def operator_path(cosim_tiny, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def fmu_path(operator_path, tmp_path_factory):
+def fmu_path(operator_path):
     """The surrogate FMU of the tiny damped operator (this module's, not conftest's shipped one)."""
-    return built(operator_path, tmp_path_factory.mktemp("fmu"), "SM4Surrogate")
+    return built(operator_path, "SM4Surrogate")
 
 
 @pytest.fixture(scope="module")
@@ -77,8 +76,8 @@ def undamped_path(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def undamped(undamped_path, tmp_path_factory):
-    path = built(undamped_path, tmp_path_factory.mktemp("undamped_fmu"), "Undamped")
+def undamped(undamped_path):
+    path = built(undamped_path, "Undamped")
     return extract(str(path)), read_model_description(str(path))
 
 
@@ -109,14 +108,14 @@ def operator_reference(mirror, settings):
 
 
 @pytest.fixture(scope="module")
-def shipped(tmp_path_factory):
+def shipped():
     """The extracted FMU of the shipped operator, for the tests of accuracy; skipped while that
     operator does not load (made for two inputs, before the window frame: it needs retraining)."""
     try:
         Operator.load(DEFAULT_OPERATOR)
     except OperatorInputError as exc:
         pytest.skip(f"the shipped operator does not load under the current contract ({str(exc).split(': ', 1)[-1]})")
-    path = built(DEFAULT_OPERATOR, tmp_path_factory.mktemp("shipped"), "SM4Surrogate")
+    path = built(DEFAULT_OPERATOR, "SM4Surrogate")
     return extract(str(path)), read_model_description(str(path))
 
 
@@ -495,7 +494,7 @@ def test_the_default_residual_limit_stays_quiet_on_a_quiet_run_and_zero_turns_th
     off.close()
 
 
-@pytest.mark.skipif(not __import__("shutil").which("valgrind"), reason="valgrind is not installed")
+@pytest.mark.platform_tools("valgrind")
 def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp_path):
     from fmu_export.binaries import fmi_headers
 
@@ -510,6 +509,7 @@ def test_thousand_instantiate_free_cycles_and_reloads_leak_nothing(unzipped, tmp
     assert "ERROR SUMMARY: 0 errors" in result.stderr
 
 
+@pytest.mark.platform_tools  # one line whichever platforms' compilers are installed
 def test_build_fmu_command_refuses_a_file_that_is_not_an_operator(tmp_path):
     bogus = tmp_path / "bogus.onnx"
     bogus.write_bytes(b"not onnx at all")
@@ -645,7 +645,7 @@ def without_trunk(operator_path, tmp_path_factory):
     x = x0 + t sum_i(b_i / 10) b, b = tanh(W [x0, u] + c); the tiny operator's metadata and frame."""
     directory = tmp_path_factory.mktemp("without_trunk")
     operator_without_trunk(operator_path, directory / "op.onnx", "without_trunk")
-    path = built(directory / "op.onnx", directory, "WithoutTrunk")
+    path = built(directory / "op.onnx", "WithoutTrunk")
     assert "OPFMU_TRUNK_SIZE 0" in zipfile.ZipFile(path).read("sources/config.h").decode()
     return directory / "op.onnx", (extract(str(path)), read_model_description(str(path)))
 

@@ -31,14 +31,14 @@ OFF = {"rest_radius": 0.0, "slow_weight": 0.0, "swing_weight": 0.0}  # the bare 
 
 
 class Built:
-    """An FMU built from an operator file: its path, extracted directory and model description."""
+    """An FMU built from an operator file (linux64, FMI 2.0, from the run's build cache): its path,
+    extracted directory and model description."""
 
-    def __init__(self, onnx_path, directory, name):
-        from fmu_export.surrogate_fmu import build_surrogate_fmu
+    def __init__(self, onnx_path, name):
+        from fmu_export.build_cache import cached_surrogate_fmu
 
         self.onnx = Path(onnx_path)
-        self.path = Path(directory) / f"{name}.fmu"
-        build_surrogate_fmu(self.onnx, self.path, model_name=name, n_check=4)
+        self.path = cached_surrogate_fmu(self.onnx, name, n_check=4)
         self.unzipped = extract(str(self.path)), read_model_description(str(self.path))
         self.md = self.unzipped[1]
         self.starts = {v.name: float(v.start) for v in self.md.modelVariables if v.type == "Real" and v.start is not None}
@@ -51,13 +51,13 @@ class Built:
 
 
 @pytest.fixture(scope="module")
-def gen2(tmp_path_factory):
-    return Built(GEN2, tmp_path_factory.mktemp("gen2"), "Gen2Surrogate")
+def gen2():
+    return Built(GEN2, "Gen2Surrogate")
 
 
 @pytest.fixture(scope="module")
-def cosim(tmp_path_factory):
-    return Built(COSIM, tmp_path_factory.mktemp("cosim"), "SM4Surrogate")
+def cosim():
+    return Built(COSIM, "SM4Surrogate")
 
 
 class Master(Slave):
@@ -419,7 +419,7 @@ def hand_made(directory, name, squash: bool) -> Built:
     (OPFMU_TRUNK_SIZE 0)."""
     path = directory / f"{name}.onnx"
     operator_without_trunk(COSIM, path, name, squash)
-    return Built(path, directory, name)
+    return Built(path, name)
 
 
 @pytest.fixture(scope="module")
