@@ -1,4 +1,10 @@
-"""`opfmu init`: start values of a machine (SM4) and its exciter (IEEE1) from a load-flow result.
+"""`opfmu init`: start values of a machine and its exciter from a load-flow result.
+
+The machine and the exciter are the components reference_models/initialisation.py gives start
+values for (MACHINE, EXCITER: SM4 and IEEE1; the examples below use their names), wired by their
+ports: the bus voltage goes to the machine's bus port, the mechanical power and field voltage that
+hold it to its `mechanical_power` and `field_voltage` links, the terminal voltage and set point to
+the exciter's `terminal_voltage` and `voltage_reference` links.
 
 The values are keyed by the FMU variable names, so they go straight into an importer, e.g. fmpy's
 `simulate_fmu(..., start_values=result["machine"])`:
@@ -19,13 +25,12 @@ from numbers import Real
 from pathlib import Path
 
 from reference_models.component import ParameterError
-from reference_models.ieee1 import IEEE1
-from reference_models.initialisation import exciter_start, machine_start
-from reference_models.sm4 import SM4
+from reference_models.initialisation import EXCITER, MACHINE, exciter_start, machine_start
+from reference_models.ports import machine_inputs
 
 MAX_LOAD_FLOW_BYTES = 1024 * 1024
 MAX_GENERATORS = 1000
-DEFAULT_EXCITER = IEEE1.params()  # the WSCC exciter
+DEFAULT_EXCITER = EXCITER.params()  # the WSCC exciter
 POINT_KEYS = ("V", "theta", "theta_deg", "P", "Q")
 GENERATOR_KEYS = POINT_KEYS + ("name", "bus", "machine", "exciter")
 
@@ -44,15 +49,16 @@ def start_parameter_names(component, params, x0) -> list:
 def start_values(V: float, theta: float, P: float, Q: float, machine, exciter=None) -> dict:
     """{"machine": {FMU variable: value}, "exciter": {...} (absent when exciter is None),
     "operating_point": {...}} for the generator at bus voltage V [pu] at angle theta [rad] that
-    injects P + jQ [pu]; machine: SM4Params, exciter: IEEE1Params or None. ValueError (one line)
-    where there is no such start."""
+    injects P + jQ [pu]; machine, exciter: the parameters of MACHINE, EXCITER (exciter None: none).
+    ValueError (one line) where there is no such start."""
     ms = machine_start(V, theta, P, Q, machine)
-    out = {"machine": {**dict(zip(start_parameter_names(SM4, machine, ms.x0), map(float, ms.x0))),
-                       **dict(zip(SM4.input_names, (float(V), float(theta), ms.Pm, ms.Efd)))}}
+    out = {"machine": {**dict(zip(start_parameter_names(MACHINE, machine, ms.x0), map(float, ms.x0))),
+                       **_machine_inputs(V, theta, ms.Pm, ms.Efd)}}
     if exciter is not None:
         es = exciter_start(ms.Efd, ms.Vt, exciter)
-        out["exciter"] = {**dict(zip(start_parameter_names(IEEE1, exciter, es.x0), map(float, es.x0))),
-                          **dict(zip(IEEE1.input_names, (ms.Vt, es.Vref)))}
+        links = {EXCITER.ports.input("terminal_voltage"): ms.Vt, EXCITER.ports.input("voltage_reference"): es.Vref}
+        out["exciter"] = {**dict(zip(start_parameter_names(EXCITER, exciter, es.x0), map(float, es.x0))),
+                          **{name: links[name] for name in EXCITER.input_names}}
     out["operating_point"] = {"V": float(V), "theta": float(theta), "theta_deg": math.degrees(theta),
                               "P": float(P), "Q": float(Q), "Vt": ms.Vt, "Id": ms.Id, "Iq": ms.Iq,
                               "I_re": ms.I_re, "I_im": ms.I_im, "delta_deg": math.degrees(ms.x0[0]),
@@ -60,15 +66,24 @@ def start_values(V: float, theta: float, P: float, Q: float, machine, exciter=No
     return out
 
 
+def _machine_inputs(V: float, theta: float, Pm: float, Efd: float) -> dict:
+    """{input name: value} of the machine, in its input order, by its ports: the bus voltage V [pu]
+    at angle theta [rad] to its bus port, Pm and Efd [pu] to its mechanical_power and field_voltage links."""
+    wiring = machine_inputs(MACHINE)
+    given = {wiring.magnitude: float(V), wiring.angle: float(theta), wiring.power: Pm, wiring.field: Efd}
+    return {name: given[name] for name in MACHINE.input_names}
+
+
 def _on_stable_branch(ms, V, theta, machine) -> bool:
-    """Whether the start is SM4's own stable equilibrium at its inputs: on the rising side of the
-    steady-state power-angle curve at constant field voltage (false past its peak, where only a
-    voltage regulator holds the machine)."""
+    """Whether the start is the machine's own stable equilibrium at its inputs (SM4: on the rising
+    side of the steady-state power-angle curve at constant field voltage; false past its peak,
+    where only a voltage regulator holds the machine)."""
     try:
-        x = SM4.steady_state((V, theta, ms.Pm, ms.Efd), machine)
+        x = MACHINE.steady_state(tuple(_machine_inputs(V, theta, ms.Pm, ms.Efd).values()), machine)
     except ValueError:
         return False
-    return bool(abs(math.remainder(x[0] - ms.x0[0], 2 * math.pi)) < 1e-6)
+    rotor = MACHINE.drift.angle_states[0]
+    return bool(abs(math.remainder(x[rotor] - ms.x0[rotor], 2 * math.pi)) < 1e-6)
 
 
 # --- the load-flow file -------------------------------------------------------------------------
@@ -137,7 +152,7 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
     name or bus (a label), machine and exciter: a parameter file name (relative to the load-flow
     file), {"file": NAME} or {"params": {...}} (with an optional "component": "sm4" / "ieee1", as in
     reference_models/grid/data/wscc9.json); exciter null: no exciter. Without them, `machine` and
-    `exciter` (SM4Params / IEEE1Params or None) apply. InitError (one line) for anything else."""
+    `exciter` (parameters of MACHINE / EXCITER, or None) apply. InitError (one line) for anything else."""
     path = Path(path)
     data = _read_json(path, "load-flow file", MAX_LOAD_FLOW_BYTES)
     if isinstance(data, dict) and "generators" in data:
@@ -152,7 +167,7 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
         raise InitError(f"{path}: needs a generator (an object) or a non-empty list of them")
     if len(entries) > MAX_GENERATORS:
         raise InitError(f"{path}: more than {MAX_GENERATORS} generators")
-    machine = SM4.params() if machine is None else machine
+    machine = MACHINE.params() if machine is None else machine
     points = []
     for k, entry in enumerate(entries):
         where = f"{path}: generator {k + 1}"
@@ -172,13 +187,13 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
         V, P, Q = (_point_number(entry, key, where) for key in ("V", "P", "Q"))
         theta = (_point_number(entry, "theta", where) if "theta" in entry
                  else math.radians(_point_number(entry, "theta_deg", where)))
-        m = _parameters(entry["machine"], SM4, path.parent, f"{where}: machine") if "machine" in entry else machine
+        m = _parameters(entry["machine"], MACHINE, path.parent, f"{where}: machine") if "machine" in entry else machine
         if "exciter" not in entry:
             e = exciter
         elif entry["exciter"] is None:
             e = None
         else:
-            e = _parameters(entry["exciter"], IEEE1, path.parent, f"{where}: exciter")
+            e = _parameters(entry["exciter"], EXCITER, path.parent, f"{where}: exciter")
         points.append((name, V, theta, P, Q, m, e))
     return points
 
@@ -220,8 +235,9 @@ def run_init(args) -> None:
     point = {"--V": args.V, "--P": args.P, "--Q": args.Q,
              "--theta-deg/--theta": args.theta if args.theta is not None else args.theta_deg}
     try:
-        machine = SM4.params() if args.machine is None else SM4.load_params(args.machine)
-        exciter = None if args.no_exciter else DEFAULT_EXCITER if args.exciter is None else IEEE1.load_params(args.exciter)
+        machine = MACHINE.params() if args.machine is None else MACHINE.load_params(args.machine)
+        exciter = None if args.no_exciter else DEFAULT_EXCITER if args.exciter is None \
+            else EXCITER.load_params(args.exciter)
         if args.load_flow is not None:
             given = [flag for flag, value in point.items() if value is not None]
             if given:
@@ -256,12 +272,12 @@ def format_table(result: dict, name: str | None = None) -> str:
     title = f"{name}: " if name else ""
     lines = [(f"{title}bus V = {op['V']:.6g} pu at {op['theta_deg']:.6g} deg, P = {op['P']:.6g} pu, "
               f"Q = {op['Q']:.6g} pu (injected)")]
-    for key, component, label in (("machine", SM4, "machine FMU (sm4)"), ("exciter", IEEE1, "exciter FMU (ieee1)")):
+    for key, component in (("machine", MACHINE), ("exciter", EXCITER)):
         if key not in result:
             continue
         units = {f"{q.name}0": (q.unit, "initial state") for q in component.states}
         units.update({q.name: (q.unit, "input") for q in component.inputs})
-        lines.append(f"  {label}")
+        lines.append(f"  {key} FMU ({component.name})")
         for variable, value in result[key].items():
             unit, kind = units.get(variable, ("", ""))
             extra = f" ({math.degrees(value):.6g} deg)" if unit == "rad" else ""

@@ -30,8 +30,10 @@ from numbers import Real
 
 import numpy as np
 
-from .ieee1 import IEEE1Params, regulator_limits
-from .sm4 import SM4Params
+from .ieee1 import IEEE1, IEEE1Params, regulator_limits
+from .sm4 import SM4, SM4Params
+
+MACHINE, EXCITER = SM4, IEEE1  # the components whose start values these equations give
 
 # The physical ranges of a load-flow point and of the start values it gives (pu on the machine
 # base): a number outside them is a typing error or a point no machine is held at (P = 100 pu asks
