@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 from pathlib import Path
 
+from opfmu.checks import MAX_COUNT, check_fields, json_object_file, output_file, output_folder
 from opfmu.errors import UserError
 
 
@@ -27,11 +29,14 @@ def cmd_data(args) -> None:
 
     if args.workers < 0:
         raise UserError("--workers must be >= 0")
+    if not 0 <= args.seed <= MAX_COUNT:
+        raise UserError(f"--seed must lie in [0, {MAX_COUNT}]")
     try:
         recipe = load_preset(args.preset)
         params = _machine(args.machine, recipe.component)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    output_folder(args.out)
     meta = generate(recipe, args.out, seed=args.seed, runner=SolveRunner(args.workers, args.scheduler),
                     progress=not args.quiet, params=params)
     preview = plot_preview(args.out)
@@ -63,19 +68,12 @@ def summary_table(meta: dict) -> str:
 
 
 def cmd_train(args) -> None:
-    import torch
-
     from surrogate.models import OperatorConfig
     from surrogate.training import TrainConfig, TrainError, train
 
-    if args.threads is not None:
-        torch.set_num_threads(args.threads)
-    base = {}
-    if args.config:
-        try:
-            base = json.loads(Path(args.config).read_text())
-        except (OSError, ValueError) as exc:
-            raise UserError(f"cannot read training config {args.config}: {exc}") from None
+    if args.threads is not None and args.threads < 1:
+        raise UserError("--threads must be >= 1")
+    base = training_config_file(args.config) if args.config else {}
     flags = {k: v for k, v in (("seed", args.seed), ("epochs", args.epochs), ("optimizer", args.optimizer),
                                 ("lr", args.lr), ("time_points", args.time_points)) if v is not None}
     if flags.get("time_points") == 0:
@@ -83,12 +81,42 @@ def cmd_train(args) -> None:
     try:
         config = TrainConfig.from_dict({**base, **flags, "physics": args.physics or base.get("physics", False)})
         config = _with_arch(config, args.arch, OperatorConfig)
+    except (ValueError, TypeError) as exc:
+        raise UserError(f"{args.config + ': ' if args.config else ''}{exc}") from None
+    if not (0 <= config.seed <= MAX_COUNT and 1 <= config.epochs <= MAX_COUNT):
+        raise UserError(f"the seed must lie in [0, {MAX_COUNT}] and the epochs in [1, {MAX_COUNT}]")
+    if not (math.isfinite(config.lr) and config.lr > 0):
+        raise UserError(f"the learning rate must be a finite number > 0, got {config.lr:g}")
+    output_folder(args.out)
+    import torch
+
+    if args.threads is not None:
+        torch.set_num_threads(args.threads)
+    try:
         result = train(args.data, config, args.out, progress=not args.quiet)
-    except (TrainError, ValueError, TypeError) as exc:
+    except TrainError as exc:
         raise UserError(str(exc)) from None
     print(f"trained {config.model.arch}{' (physics-informed)' if config.physics else ''}: {result.epochs} epochs "
           f"in {result.wall_s:.1f} s, best validation MSE {result.best_val_mse:.3e} (standardised) at epoch "
           f"{result.best_epoch}{', stopped early' if result.stopped_early else ''}; run: {args.out}")
+
+
+def training_config_file(path) -> dict:
+    """The fields of a --config file: a JSON object of TrainConfig fields (`model` an object of
+    OperatorConfig fields, `weights` one of LossWeights fields), each of its default's JSON type;
+    UserError naming the file and the field otherwise."""
+    from surrogate.losses import LossWeights
+    from surrogate.models import OperatorConfig
+    from surrogate.training import TrainConfig
+
+    data = json_object_file(path, "training config")
+    check_fields(data, TrainConfig, f"training config {path}")
+    for name, cls in (("model", OperatorConfig), ("weights", LossWeights)):
+        if name in data:
+            if not isinstance(data[name], dict):
+                raise UserError(f"training config {path}: {name} must be a JSON object of {cls.__name__} fields")
+            check_fields(data[name], cls, f"training config {path}: {name}")
+    return data
 
 
 def _with_arch(config, arch, operator_config):
@@ -100,6 +128,8 @@ def _with_arch(config, arch, operator_config):
 def cmd_evaluate(args) -> None:
     from surrogate.report import evaluate_runs
 
+    if args.out is not None:
+        output_folder(args.out)
     try:
         report = evaluate_runs(args.runs, args.data, args.split, args.out)
     except (ValueError, FileNotFoundError) as exc:
@@ -112,6 +142,7 @@ def cmd_export(args) -> None:
     from surrogate.onnx_export import ExportError, export_onnx
     from surrogate.training import TrainError
 
+    output_file(args.output)
     try:
         meta = export_onnx(args.runs, args.output, data_dir=args.data)
     except (ExportError, TrainError, FileNotFoundError) as exc:
@@ -123,40 +154,65 @@ def cmd_export(args) -> None:
 
 
 def cmd_build_fmu(args) -> None:
-    from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
+    from fmu_export.binaries import check_fmi_version
+    from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu, check_model_name, default_state, load_operator
     from surrogate.operator import DEFAULT_OPERATOR
 
     onnx_path = Path(args.model) if args.model else DEFAULT_OPERATOR
-    if not onnx_path.exists():
+    if not onnx_path.is_file():
         raise UserError(f"no operator file at {onnx_path}")
-    platforms = _platforms(args.platforms)
+    try:
+        check_model_name(args.name)
+        check_fmi_version(args.fmi_version)
+        default_state(load_operator(onnx_path)[1], onnx_path)
+    except BuildError as exc:
+        raise UserError(str(exc)) from None
+    output_file(args.output)
+    platforms, notes = _platforms(args.platforms)
     try:
         info = build_surrogate_fmu(onnx_path, args.output, model_name=args.name, platforms=platforms,
                                    fmi_version=args.fmi_version)
     except BuildError as exc:
         raise UserError(str(exc)) from None
+    _print_notes(notes)
     print(f"wrote {args.output} (FMI {args.fmi_version}, {info['size_bytes'] / 1e6:.2f} MB, model {args.name}, "
           f"guid {info['guid']}); compiled kernel matches onnxruntime to {info['max_abs_diff']:.1e}")
     print(_binaries_report(info))
 
 
 def cmd_build_reference_fmu(args) -> None:
+    from fmu_export.binaries import BuildError, check_fmi_version
     from fmu_export.native_reference_fmu import build_native_reference_fmu
     from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu
+    from fmu_export.surrogate_fmu import check_model_name
     from opfmu.compare import operator_machine
 
     if args.python and (args.fmi_version != 2 or args.platforms is not None):
         raise UserError("--python builds an FMI 2.0 FMU for the Python it runs in; --fmi-version 3 and --platforms "
                         "are for the native FMU")
-    options = {} if args.python else {"platforms": _platforms(args.platforms), "fmi_version": args.fmi_version}
-    build = build_reference_fmu if args.python else build_native_reference_fmu
+    if args.operator and not Path(args.operator).is_file():
+        raise UserError(f"no operator file at {args.operator}")
     try:
+        if args.python:
+            if not args.name.isidentifier():
+                raise ValueError(f"model name {args.name[:80]!r} must be a Python identifier (it names the slave class)")
+        else:
+            check_model_name(args.name)
+            check_fmi_version(args.fmi_version)
         params = operator_machine(args.operator) if args.operator else _machine(args.machine)
         point = _operating_point(args.operator) if args.operator and not args.python else None
+    except (ValueError, BuildError) as exc:
+        raise UserError(str(exc)) from None
+    output_file(args.output)
+    platforms, notes = (None, []) if args.python else _platforms(args.platforms)
+    options = {} if args.python else {"platforms": platforms, "fmi_version": args.fmi_version}
+    build = build_reference_fmu if args.python else build_native_reference_fmu
+    try:
         info = build(args.output, model_name=args.name, params=params, **({"operating_point": point} if point else {}),
                      **options)
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
+    _print_notes(notes)
     kind = "pythonfmu (scipy RK45)" if args.python else "native (Dormand-Prince 5(4) in C)"
     print(f"wrote {args.output} (FMI {args.fmi_version}, {info['size_bytes'] / 1e3:.0f} kB, {kind}, model {args.name}, "
           f"guid {info['guid']}); fmpy validates it")
@@ -165,17 +221,19 @@ def cmd_build_reference_fmu(args) -> None:
 
 
 def _platforms(spec):
-    """The platforms to build (--platforms; default every one whose compiler is found, a note on
-    stderr for each skipped)."""
+    """(the platforms to build, the notes on those skipped) for --platforms (default every one whose
+    compiler is found). The notes are printed after the build, so a refusal stays one line."""
     from fmu_export.platforms import PlatformError, select
 
     try:
-        chosen, notes = select(spec)
+        return select(spec)
     except PlatformError as exc:
         raise UserError(str(exc)) from None
+
+
+def _print_notes(notes) -> None:
     for note in notes:
         print(note, file=sys.stderr)
-    return chosen
 
 
 def _binaries_report(info: dict) -> str:
@@ -260,8 +318,9 @@ def cmd_demo(args) -> None:
 
     from opfmu.compare import CompareError, communication_points
 
-    if args.epochs < 1 or args.workers < 0:
-        raise UserError("--epochs must be >= 1 and --workers >= 0")
+    if not 1 <= args.epochs <= MAX_COUNT or args.workers < 0 or not 0 <= args.seed <= MAX_COUNT:
+        raise UserError(f"--epochs must lie in [1, {MAX_COUNT}], --workers be >= 0 and --seed in [0, {MAX_COUNT}]")
+    output_folder(args.out)
     try:
         communication_points(args.stop_time, args.step)
         if args.train:
@@ -427,9 +486,19 @@ def _version() -> str:
     return f"opfmu {__version__}"
 
 
+def interrupted_message(args) -> str:
+    """The one line a Ctrl-C ends a command with: "rerun to resume" only where a rerun does (the
+    finished chunks of a dataset and the last checkpoint of a training are kept)."""
+    command = getattr(args, "command", None)
+    if command in ("data", "train", "operator") or (command == "demo" and args.train):
+        return "interrupted: rerun the same command to resume"
+    return "interrupted"
+
+
 def main(argv=None) -> int:
     from surrogate.data import DatasetError
 
+    args = None
     try:
         args = build_parser().parse_args(argv)
         _run(args)
@@ -440,7 +509,7 @@ def main(argv=None) -> int:
         print(f"failed: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("interrupted: rerun the same command to resume", file=sys.stderr)
+        print(interrupted_message(args), file=sys.stderr)
         return 130
     return 0
 

@@ -18,6 +18,7 @@ Stages, each resumed where an interrupted run left it (rerun the same command):
 from __future__ import annotations
 
 import json
+import math
 import re
 import time
 from dataclasses import replace
@@ -37,6 +38,7 @@ RECIPE_TRAINING = {"physics": True, "epochs": 1500, "time_points": 200, "causal"
                    "model": {"anchored": True, "width": 128, "latent": 96}}
 REPORT_SCENARIOS = ("mix", "dip", "governor", "drift")
 REPORT_STOP_S, REPORT_STEP_S = 60.0, 0.01
+MAX_WINDOWS = 10**6  # training windows: 10^6 windows of 1001 sensor times already need 32 GB of float64 states
 
 
 def add_operator_parser(sub) -> None:
@@ -93,15 +95,43 @@ def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"], 
                    families=families, horizon=float(horizon), n_points=n_points, levels=levels)
 
 
-def _levels(args) -> dict:
+def _levels(args, model) -> dict:
+    """{input: (low, high)} of --pm, --efd and --vs: finite, low <= high, not below the input's minimum."""
     levels = {}
     for name, pair in (("Pm", args.pm), ("Efd", args.efd), ("Vs", args.vs)):
         if pair is not None:
             low, high = pair
-            if not low <= high:
-                raise OperatorError(f"--{name.lower()} LOW HIGH needs LOW <= HIGH, got {low:g} {high:g}")
+            if not (math.isfinite(low) and math.isfinite(high) and low <= high):
+                raise OperatorError(f"--{name.lower()} LOW HIGH needs finite numbers with LOW <= HIGH, "
+                                    f"got {low:g} {high:g}")
+            minimum = model.inputs[model.input_names.index(name)].minimum
+            if minimum is not None and low < minimum:
+                raise OperatorError(f"--{name.lower()} LOW must be >= {minimum:g}, got {low:g}")
             levels[name] = (low, high)
     return levels
+
+
+def _operating_point(args, model, params, levels) -> tuple:
+    """(Pm, Efd) [pu] the report's scenarios start from: --operating-point, or the middle of the
+    levels; OperatorError unless the machine has a stable equilibrium there (at the start bus voltage)."""
+    import numpy as np
+
+    if args.operating_point:
+        operating = tuple(args.operating_point)
+    else:
+        operating = tuple(0.5 * sum(levels.get(n) or model.inputs[model.input_names.index(n)].operating_range)
+                          for n in ("Pm", "Efd"))
+    if not all(math.isfinite(v) for v in operating):
+        raise OperatorError(f"--operating-point PM EFD must be finite numbers, got {operating[0]:g} {operating[1]:g}")
+    u = np.array(model.start_inputs, dtype=float)
+    u[[model.input_names.index("Pm"), model.input_names.index("Efd")]] = operating
+    try:
+        x = model.steady_state(u, params)
+    except ValueError as exc:
+        raise OperatorError(f"no operating point at Pm = {operating[0]:g} pu, Efd = {operating[1]:g} pu: {exc}") from None
+    if not np.all(np.isfinite(x)):
+        raise OperatorError(f"the machine has no equilibrium at Pm = {operating[0]:g} pu, Efd = {operating[1]:g} pu")
+    return operating
 
 
 def cmd_operator(args) -> None:
@@ -115,22 +145,28 @@ def cmd_operator(args) -> None:
 
 
 def _run(args) -> None:
+    from opfmu.checks import MAX_COUNT, output_folder
     from reference_models.components import component
 
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,40}", args.name):
         raise OperatorError(f"--name {args.name[:60]!r} must be a C identifier of at most 41 characters")
-    if not (0.05 <= args.horizon <= 10.0) or args.epochs < 1 or args.workers < 0 or args.windows < 4:
-        raise OperatorError("--horizon must lie in [0.05, 10] s, --epochs be >= 1, --workers >= 0 and --windows >= 4")
+    if not (0.05 <= args.horizon <= 10.0) or not 1 <= args.epochs <= MAX_COUNT or args.workers < 0 \
+            or not 4 <= args.windows <= MAX_WINDOWS:
+        raise OperatorError(f"--horizon must lie in [0.05, 10] s, --epochs in [1, {MAX_COUNT}], --workers be >= 0 "
+                            f"and --windows in [4, {MAX_WINDOWS}]")
     if not 0 < args.report_stop <= 3600:
         raise OperatorError("--report-stop must lie in (0, 3600] s")
+    if not 0 <= args.seed <= MAX_COUNT or (args.threads is not None and args.threads < 1):
+        raise OperatorError(f"--seed must lie in [0, {MAX_COUNT}] and --threads be >= 1")
     model = component("sm4")
     params = model.load_params(args.machine)
-    levels = _levels(args)
+    levels = _levels(args, model)
+    operating = _operating_point(args, model, params, levels)
     try:
         preset = recipe(levels, args.horizon, args.windows, args.recipe)
     except ValueError as exc:
         raise OperatorError(str(exc)) from None
-    out = Path(args.out)
+    out = output_folder(args.out)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     timings = {}
@@ -147,7 +183,7 @@ def _run(args) -> None:
 
     from surrogate.training import TrainConfig, train
 
-    if args.threads:
+    if args.threads is not None:
         import torch
 
         torch.set_num_threads(args.threads)
@@ -162,8 +198,6 @@ def _run(args) -> None:
     from fmu_export.native_reference_fmu import build_native_reference_fmu
     from surrogate.onnx_export import export_onnx
 
-    operating = tuple(args.operating_point) if args.operating_point else tuple(
-        0.5 * sum((levels.get(n) or model.inputs[model.input_names.index(n)].operating_range)) for n in ("Pm", "Efd"))
     point = {"Pm": operating[0], "Efd": operating[1]}
     t = time.perf_counter()
     onnx_path = out / "operator.onnx"

@@ -72,13 +72,13 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
     key = fingerprint(preset, seed, params)
     meta_path = out / "metadata.json"
     if meta_path.exists():
-        meta = json.loads(meta_path.read_text())
+        meta = load_metadata(out)
         if meta.get("fingerprint") != key:
             raise DatasetError(f"{out} holds a different dataset (preset {meta.get('preset', {}).get('name')!r}, "
                                f"seed {meta.get('seed')}); choose another --out")
         return meta
     plan_path = partial / "plan.json"
-    if plan_path.exists() and json.loads(plan_path.read_text()).get("fingerprint") != key:
+    if plan_path.exists() and _json_object(plan_path).get("fingerprint") != key:
         raise DatasetError(f"{out} holds an unfinished different dataset; remove {partial} or choose another --out")
     write_json(plan_path, {"fingerprint": key, "preset": preset.to_dict(), "seed": seed})
 
@@ -211,10 +211,23 @@ def load_split(directory: str | Path, split: str, frame: bool = True) -> dict:
 
 
 def load_metadata(directory: str | Path) -> dict:
+    """The metadata.json of a dataset directory (a JSON object); DatasetError naming the file otherwise."""
     path = Path(directory) / "metadata.json"
-    if not path.exists():
+    if not path.is_file():
         raise DatasetError(f"{directory} is not a complete dataset (no metadata.json)")
-    return json.loads(path.read_text())
+    return _json_object(path)
+
+
+def _json_object(path: Path) -> dict:
+    """The JSON object in `path`; DatasetError naming the file when it is unreadable or not an object."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        raise DatasetError(f"{path} is not readable JSON ({reason}): remove the dataset and regenerate it") from None
+    if not isinstance(data, dict):
+        raise DatasetError(f"{path} must be a JSON object: remove the dataset and regenerate it")
+    return data
 
 
 def machine_of(meta: dict):

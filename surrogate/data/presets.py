@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 from reference_models.simulate import SolverConfig
@@ -141,6 +141,15 @@ def load_preset(name_or_path: str) -> Preset:
         raise ValueError(f"preset file {path} does not exist")
     try:
         fields_ = json.loads(path.read_text())
+        if not isinstance(fields_, dict):
+            raise ValueError("it must be a JSON object of Preset fields")
+        unknown = sorted(set(fields_) - {f.name for f in fields(Preset)})
+        missing = [f.name for f in fields(Preset) if f.default is MISSING and f.default_factory is MISSING
+                   and f.name not in fields_]
+        if unknown or missing:
+            raise ValueError(f"unknown field {unknown[0][:60]!r}" if unknown else f"it lacks the field {missing[0]!r}")
+        if not isinstance(fields_.get("solver", {}), dict):
+            raise ValueError("solver must be a JSON object of SolverConfig fields")
         solver = SolverConfig(**fields_.pop("solver", {}))
         fields_["families"] = tuple(tuple(f) for f in fields_["families"])
         fields_["levels"] = {k: tuple(v) for k, v in fields_.get("levels", {}).items()}

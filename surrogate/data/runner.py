@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import logging
+import signal
+import threading
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -26,6 +29,38 @@ def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict
     return np.stack(states)
 
 
+@contextmanager
+def _interrupts_left_to_this_process():
+    """SIGINT ignored while the block starts worker processes, which inherit that: a Ctrl-C, sent to
+    the whole process group, then reaches only this process, whose KeyboardInterrupt closes the
+    cluster (SolveRunner.__exit__), instead of each worker printing its own traceback. A Ctrl-C
+    within the block itself is lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+
+
+@contextmanager
+def _distributed_logs_silenced():
+    """No dask log line while the block closes the client and cluster: after an interrupt the
+    scheduler logs, at CRITICAL and with a traceback, the results it can no longer send to the
+    closed client; what went wrong is the caller's to report, in one line."""
+    handlers = logging.getLogger("distributed").handlers
+    levels = [h.level for h in handlers]
+    for h in handlers:
+        h.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for h, level in zip(handlers, levels):
+            h.setLevel(level)
+
+
 class SolveRunner:
     """Context manager that solves chunks and hands each result to a callback as it finishes.
 
@@ -48,20 +83,22 @@ class SolveRunner:
         elif self.workers > 0:
             from dask.distributed import Client, LocalCluster
 
-            self._cluster = LocalCluster(
-                n_workers=self.workers, threads_per_worker=1, processes=True,
-                # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as an
-                # error with a traceback; a failing solve still raises through its future
-                dashboard_address=None, silence_logs=logging.CRITICAL,
-            )
+            with _interrupts_left_to_this_process():
+                self._cluster = LocalCluster(
+                    n_workers=self.workers, threads_per_worker=1, processes=True,
+                    # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as an
+                    # error with a traceback; a failing solve still raises through its future
+                    dashboard_address=None, silence_logs=logging.CRITICAL,
+                )
             self._client = Client(self._cluster)
         return self
 
     def __exit__(self, *exc):
-        if self._client is not None:
-            self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
+        with _distributed_logs_silenced():
+            if self._client is not None:
+                self._client.close()
+            if self._cluster is not None:
+                self._cluster.close()
 
     def run(self, chunks: dict, t: np.ndarray, solver: SolverConfig, on_done, model, params) -> None:
         """Solve chunks {key: (x0s [n, n_x], signal dicts [n])} of component `model` with `params`;
