@@ -277,7 +277,16 @@ def cmd_compare(args) -> None:
     for path in (args.surrogate, args.reference):
         if not zipfile.is_zipfile(path):
             raise UserError(f"{path} is not an FMU (no such file, or not a zip archive)")
+    try:
+        with zipfile.ZipFile(args.surrogate) as archive:
+            names = archive.namelist()
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise UserError(f"{args.surrogate} is not a readable FMU ({exc})") from None
+    if "resources/model.onnx" not in names:
+        raise UserError(f"{args.surrogate} is not a surrogate FMU of opfmu (it has no resources/model.onnx)")
     parameters = _parameters(args.param)
+    out = output_folder(args.out)
+    tmp = None
     try:
         with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
             surrogate_dir = extract(args.surrogate, unzipdir=f"{tmp}/surrogate")
@@ -291,9 +300,10 @@ def cmd_compare(args) -> None:
                 inputs = csv_inputs(args.inputs, machine)
                 stop_time = args.stop_time or float(inputs.times[-1])
             result = compare(surrogate_dir, reference_dir, inputs, stop_time, args.step, parameters)
-    except (CompareError, ValueError) as exc:
-        raise UserError(str(exc)) from None
-    out = Path(args.out)
+    except (CompareError, ValueError) as exc:  # paths inside the FMUs named by the FMU, not the temporary folder
+        message = str(exc) if tmp is None else str(exc).replace(f"{tmp}/surrogate", f"{args.surrogate}:").replace(
+            f"{tmp}/reference", f"{args.reference}:")
+        raise UserError(message) from None
     stem = args.scenario or Path(args.inputs).stem
     plots = plot_comparison(result, out, stem)
     write_json(out / f"{stem}.json", summary(result))
