@@ -62,3 +62,26 @@ def test_compare_refuses_an_fmu_whose_binary_is_corrupt_or_missing_in_one_line(t
     message = str(caught.value)
     assert re.fullmatch(f"the reference FMU SM4Reference cannot be loaded: {says}", message), message
     assert str(tmp_path) not in message  # no temporary path
+
+
+@pytest.mark.parametrize("damage", ["corrupt", "missing"])
+def test_the_compare_command_says_in_one_line_which_fmu_cannot_be_loaded(fmu_path, tmp_path, damage):
+    from test_cli import assert_one_line_error, opfmu
+
+    built = tmp_path / "built.fmu"
+    build_native_reference_fmu(built, platforms=None)
+    damaged = tmp_path / "Damaged.fmu"
+    with zipfile.ZipFile(built) as source, zipfile.ZipFile(damaged, "w") as target:
+        for info in source.infolist():
+            if info.filename == "binaries/linux64/SM4Reference.so":
+                if damage == "missing":
+                    continue
+                target.writestr(info, b"\x7fELX" + bytes(range(256)) * 4)
+            else:
+                target.writestr(info, source.read(info))
+    done = opfmu("compare", "--surrogate", str(fmu_path), "--reference", str(damaged), "--scenario", "step",
+                 "--stop-time", "1", "--out", str(tmp_path / "out"))
+    reason = "invalid ELF header" if damage == "corrupt" else "is missing"
+    assert_one_line_error(done, "the reference FMU SM4Reference cannot be loaded: binaries/linux64/SM4Reference.so",
+                          reason)
+    assert done.stdout == "" and not (tmp_path / "out").exists()
