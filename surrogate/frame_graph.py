@@ -1,7 +1,7 @@
 """The window frame inside an operator's ONNX graph (reference_models.drift), and out of it again.
 
 An operator of a component with a drift symmetry learns its windows in their own frame. Its file
-still takes and gives physical values (DESIGN section 4): the export wraps the network's graph in
+still takes and gives physical values (docs/design.md, "The ONNX operator"): the export wraps the network's graph in
 nodes, all named `frame/...`, that move x0 and u into the window's frame and the states back
 (`wrap_in_frame`), and the file's `frame` metadata holds the numbers. Code that does the frame
 itself (Operator.predict with numpy, the FMU in C, so the network's graph keeps its branch-trunk

@@ -1,4 +1,4 @@
-"""Export a trained operator to one ONNX file (DESIGN section 4), checked against torch.
+"""Export a trained operator to one ONNX file (docs/design.md, "The ONNX operator"), checked against torch.
 
 Graph: inputs x0 [N, n_x], u [N, S, n_u], t [M] (physical units, float32); output x [N, M, n_x];
 normalisation inside, folded into the first and last linear layers (folding.py); opset 17; N and M

@@ -1,4 +1,4 @@
-"""ONNX export and onnxruntime inference: the contract of DESIGN section 4."""
+"""ONNX export and onnxruntime inference: the contract of docs/design.md, "The ONNX operator"."""
 import json
 import subprocess
 import sys
