@@ -1,24 +1,36 @@
-"""One FMU instance under the grid master, over fmpy's FMU2Slave, with the few calls the master
-makes every step kept cheap (ctypes arrays built once).
+"""One FMU instance over fmpy, FMI 2.0 (FMU2Slave) or 3.0 (FMU3Slave) co-simulation, with its ports.
 
-A Slave is opened on an FMU file with the names of the inputs it gets and the outputs it is read
-for; it records what the FMU logs (status, message) and raises CouplingError (one line) when the FMU
-lacks a variable its role needs or a call fails. Its capabilities come from the model description:
-`interpolates` (canInterpolateInputs: fmi2SetRealInputDerivatives), `rolls_back`
-(canGetAndSetFMUstate), `directional` (providesDirectionalDerivative).
+`FMU(source, name, ...)` opens an FMU: `source` is an .fmu file (extracted into a temporary folder
+that is removed on close, on a failed open and when the object is collected or the interpreter
+exits), an extracted folder, or a pair (extracted folder, fmpy model description). It is
+instantiated, and (unless `init=False`) initialised with the start values given by variable name.
+
+Two ways to drive it:
+* by name, for scripts and tests: `set(**values)`, `get(*names)`, `get_boolean(name)`,
+  `step(h, *inputs, **named)` (inputs positional in `inputs` order, the others at their start
+  values; returns the states), `state()`;
+* bound, for a master's every-step calls (ctypes arrays built once): `bind(inputs, outputs)`, then
+  `set_inputs(values)`, `set_input_derivatives(rates)`, `outputs()`, `output_jacobian(rows,
+  columns)`, `do_step(t, h)`, `save()` / `restore(state)` / `free(state)`, `rewind()`.
+
+Its capabilities come from the model description: `interpolates` (FMI 2.0 canInterpolateInputs:
+fmi2SetRealInputDerivatives; FMI 3.0 co-simulation has no input derivatives, so never),
+`rolls_back` (can get and set its FMU state), `directional` (provides directional derivatives).
+Its `ports` (reference_models.ports.Ports) are the <Ports> element of the model description;
+for an FMU opfmu built without one, those of the component its model description names; None
+otherwise. A failed call raises CouplingError (one line, with the FMU's last logged message);
+what the FMU logs is kept in `messages` as (status, text).
 """
 from __future__ import annotations
 
 import ctypes
 import shutil
 import tempfile
+import weakref
+import xml.etree.ElementTree as ET
+from pathlib import Path
 
-import numpy as np
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import (FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, fmi2FMUstate, fmi2Integer,
-                       fmi2Real, fmi2ValueReference)
-
-LOG_KEPT = 200  # log messages kept per instance
+LOG_KEPT = 10_000  # log messages kept per instance (the latest)
 FD_STEP = 1e-6  # relative step of the finite-difference Jacobian for FMUs without directional derivatives
 
 
@@ -30,113 +42,295 @@ def _array(kind, values):
     return (kind * len(values))(*values)
 
 
-class Slave:
-    """An initialised FMU2Slave of the FMU at `path` (instance `name`).
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:200]
 
-    inputs, outputs: the variable names set and read every step, in the master's order; start:
-    values set in initialisation mode by name (parameters, initial states, the inputs' start values)."""
 
-    def __init__(self, path, name: str, inputs, outputs, start: dict):
+def _true(value) -> bool:
+    return str(value).lower() in ("true", "1")
+
+
+def ports_of_fmu(root: ET.Element):
+    """The Ports of a parsed model description: its <Ports> element, else (an FMU opfmu generated)
+    those of the registered component whose description begins its description, else None.
+    CouplingError for a malformed <Ports> element."""
+    from reference_models.ports import PortError, ports_of_model_description
+
+    try:
+        ports = ports_of_model_description(root)
+    except PortError as exc:
+        raise CouplingError(f"the model {root.get('modelName')!r} declares malformed ports: {exc}") from None
+    if ports is not None:
+        return ports
+    if not str(root.get("generationTool") or "").startswith("opfmu"):
+        return None
+    from reference_models.components import COMPONENTS
+
+    description = str(root.get("description") or "")
+    for component in COMPONENTS.values():
+        if component.description and description.startswith(component.description):
+            return component.ports
+    return None
+
+
+class FMU:
+    """An FMU instance (see the module docstring). name: the instance name (also in messages);
+    logging_on: the FMU's debug logging; component: a reference_models Component whose input and
+    state names `inputs` and `states` take (default: the model description's inputs in order, and
+    the outputs that have an initial-state parameter `<name>0`); start and further keywords: start
+    values set in initialisation mode by variable name."""
+
+    def __init__(self, source, name: str = "a", init: bool = True, logging_on: bool = False, component=None,
+                 start: dict | None = None, scratch=None, **values):
+        from fmpy import extract, read_model_description
+
         self.name = name
         self.messages = []
-        self._directory = tempfile.mkdtemp(prefix="opfmu_grid_")
+        self.fmu = None
+        self._initial = None
+        self._directory = None
+        if isinstance(source, tuple):
+            directory, md = source
+            directory = Path(directory)
+        else:
+            path = Path(source)
+            try:
+                if path.is_dir():
+                    directory = path
+                else:
+                    directory = Path(tempfile.mkdtemp(prefix="opfmu_fmu_", dir=scratch))
+                    self._directory = directory
+                    self._cleanup = weakref.finalize(self, shutil.rmtree, str(directory), True)
+                    extract(str(path), unzipdir=str(directory))
+                md = read_model_description(str(directory))
+            except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
+                self.close()
+                raise CouplingError(f"{name}: {path.name} is not a readable FMU ({_one_line(exc)})") from None
+        self.directory, self.md = directory, md
         try:
-            extract(str(path), unzipdir=self._directory)
-            md = read_model_description(self._directory)
-        except Exception as exc:
-            shutil.rmtree(self._directory, ignore_errors=True)
-            raise CouplingError(f"{name}: cannot read the FMU {path}: {str(exc)[:200]}") from None
+            self._open(md, component, init, logging_on, {**(start or {}), **values})
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, md, component, init, logging_on, start) -> None:
         cs = md.coSimulation
         if cs is None:
-            raise CouplingError(f"{name}: {path} is not a co-simulation FMU")
+            raise CouplingError(f"{self.name}: the model {md.modelName} has no co-simulation interface")
+        try:
+            root = ET.parse(self.directory / "modelDescription.xml").getroot()
+        except (OSError, ET.ParseError) as exc:
+            raise CouplingError(f"{self.name}: cannot read the model description ({_one_line(exc)})") from None
+        self.version = 3 if str(md.fmiVersion).startswith("3") else 2
         self.model_name = md.modelName
-        variables = {v.name: v for v in md.modelVariables}
-        vr = {n: v.valueReference for n, v in variables.items()}
-        missing = [n for n in (*inputs, *outputs, *start) if n not in vr]
-        if missing:
-            raise CouplingError(f"{name}: the FMU {md.modelName} has no variable {', '.join(missing)}")
-        not_inputs = [n for n in inputs if variables[n].causality != "input"]
-        if not_inputs:
-            raise CouplingError(f"{name}: {', '.join(not_inputs)} of {md.modelName} are not inputs")
-        self.vr = vr
-        self.interpolates = bool(cs.canInterpolateInputs)
-        self.rolls_back = bool(cs.canGetAndSetFMUstate)
-        self.directional = bool(cs.providesDirectionalDerivative)
-        self.input_names, self.output_names = tuple(inputs), tuple(outputs)
-        self._in_vr = _array(fmi2ValueReference, [vr[n] for n in inputs])
-        self._in = (fmi2Real * len(inputs))()
-        self._order = _array(fmi2Integer, [1] * len(inputs))
-        self._du = (fmi2Real * len(inputs))()
-        self._out_vr = _array(fmi2ValueReference, [vr[n] for n in outputs])
-        self._out = (fmi2Real * len(outputs))()
-        self._seed = _array(fmi2Real, [1.0])
-        self._dd = (fmi2Real * len(outputs))()
-        self._known = [_array(fmi2ValueReference, [vr[n]]) for n in inputs]
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
-        try:
-            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._directory, modelIdentifier=cs.modelIdentifier,
-                                 instanceName=name)
-            self.fmu.instantiate(callbacks=self._callbacks, loggingOn=False)
-        except Exception as exc:
-            shutil.rmtree(self._directory, ignore_errors=True)
-            raise CouplingError(f"{name}: cannot instantiate {md.modelName}: {str(exc)[:200]}") from None
+        self.ports = ports_of_fmu(root)
+        cs_element = root.find("CoSimulation")
+        attrs = cs_element.attrib if cs_element is not None else {}
+        if self.version == 2:
+            self.interpolates = _true(attrs.get("canInterpolateInputs"))
+            self.rolls_back = _true(attrs.get("canGetAndSetFMUstate"))
+            self.directional = _true(attrs.get("providesDirectionalDerivative"))
+        else:
+            self.interpolates = False
+            self.rolls_back = _true(attrs.get("canGetAndSetFMUState"))
+            self.directional = _true(attrs.get("providesDirectionalDerivatives"))
+        self.variables = {v.name: v for v in md.modelVariables}
+        self.vr = {n: v.valueReference for n, v in self.variables.items()}
+        self.starts = {v.name: float(v.start) for v in md.modelVariables
+                       if v.type in ("Real", "Float64") and v.start is not None}
+        if component is not None:
+            self.inputs, self.states = tuple(component.input_names), tuple(component.state_names)
+        else:
+            self.inputs = tuple(v.name for v in md.modelVariables if v.causality == "input")
+            self.states = tuple(v.name for v in md.modelVariables
+                                if v.causality == "output" and getattr(self.variables.get(f"{v.name}0"), "causality", None) == "parameter")
+        self.t = 0.0
+        if self.version == 2:
+            from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+            self._callbacks = fmi2CallbackFunctions()  # kept: ctypes must not free the logger
+            self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+            try:
+                self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(self.directory),
+                                     modelIdentifier=cs.modelIdentifier, instanceName=self.name)
+                self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+            except Exception as exc:
+                self.fmu = None
+                raise CouplingError(f"{self.name}: cannot instantiate {md.modelName}: {self._said(exc)}") from None
+        else:
+            from fmpy.fmi3 import FMU3Slave
+
+            try:
+                self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=str(self.directory),
+                                     modelIdentifier=cs.modelIdentifier, instanceName=self.name)
+                self.fmu.instantiate(loggingOn=logging_on, logMessage=self._log)
+            except Exception as exc:
+                self.fmu = None
+                raise CouplingError(f"{self.name}: cannot instantiate {md.modelName}: {self._said(exc)}") from None
         self._c = self.fmu.component
-        self._initial = None
+        self._dll = self.fmu.dll
+        if init:
+            self.initialise(start)
+
+    def initialise(self, start: dict | None = None, keep: bool = False) -> None:
+        """Initialisation (start time 0) with the start values `start` set by variable name; `keep`:
+        the state after it is kept for rewind() (where the FMU can restore states)."""
+        start = dict(start or {})
+        unknown = [n for n in start if n not in self.vr]
+        if unknown:
+            raise CouplingError(f"{self.name}: the model {self.model_name} has no variable {', '.join(unknown[:6])}")
         try:
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-            self.fmu.setReal([vr[n] for n in start], [float(v) for v in start.values()])
+            if self.version == 2:
+                self.fmu.setupExperiment(startTime=0.0)
+                self.fmu.enterInitializationMode()
+            else:
+                self.fmu.enterInitializationMode(startTime=0.0)
+            self.set(**start)
             self.fmu.exitInitializationMode()
         except Exception:
-            self.close()
-            raise CouplingError(f"{name}: {md.modelName} refused its start values: {self.last_message()}") from None
-        if self.rolls_back:
+            raise CouplingError(f"{self.name}: {self.model_name} refused its start values: {self.last_message()}") from None
+        if keep and self.rolls_back:
             self._initial = self.save()
 
-    def _log(self, env, instance, status, category, message):
-        entry = (int(status), message.decode(errors="replace"))
-        if entry not in self.messages[-4:]:  # a step redone from a saved state logs its message again
-            self.messages.append(entry)
+    # what the FMU logs
+
+    def _log(self, env, instance, status, category, message) -> None:
+        self.messages.append((int(status), message.decode(errors="replace") if message else ""))
+        if len(self.messages) > LOG_KEPT:
             del self.messages[:-LOG_KEPT]
 
     def last_message(self) -> str:
         return self.messages[-1][1] if self.messages else "(no message logged)"
 
+    def _said(self, exc) -> str:
+        return _one_line(exc) + (f" ({self.messages[-1][1]})" if self.messages else "")
+
     def _check(self, status: int, what: str) -> None:
-        if status > 1:  # fmi2Discard, fmi2Error, fmi2Fatal
+        if status > 1:  # Discard, Error, Fatal
             raise CouplingError(f"{self.name} ({self.model_name}): {what} failed: {self.last_message()}")
 
+    # by name
+
+    def set(self, **values) -> None:
+        """Sets the named Real (Float64) variables."""
+        if not values:
+            return
+        vrs, numbers = [self.vr[n] for n in values], [float(v) for v in values.values()]
+        if self.version == 2:
+            self.fmu.setReal(vrs, numbers)
+        else:
+            self.fmu.setFloat64(vrs, numbers)
+
+    def get(self, *names):
+        """The named Real (Float64) variables now, as a numpy array."""
+        import numpy as np
+
+        vrs = [self.vr[n] for n in names]
+        return np.array(self.fmu.getReal(vrs) if self.version == 2 else self.fmu.getFloat64(vrs))
+
+    def get_boolean(self, name: str) -> bool:
+        return bool(self.fmu.getBoolean([self.vr[name]])[0])
+
+    def state(self):
+        """The states [n_x] now."""
+        return self.get(*self.states)
+
+    def step(self, h: float, *values, **named):
+        """Sets the inputs, positional in `inputs` order or by name (an input not given: its start
+        value), steps by h from the FMU's own clock `t` and returns the states at the end."""
+        if len(values) > len(self.inputs):
+            raise TypeError(f"at most {len(self.inputs)} input values ({', '.join(self.inputs)})")
+        unknown = set(named) - set(self.inputs)
+        if unknown:
+            raise TypeError(f"not an input: {', '.join(sorted(unknown))}")
+        inputs = {n: self.starts[n] for n in self.inputs if n in self.starts}
+        inputs.update(zip(self.inputs, values))
+        inputs.update(named)
+        self.set(**inputs)
+        if self.version == 2:
+            self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h)
+        else:
+            self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=h,
+                            noSetFMUStatePriorToCurrentPoint=False)
+        self.t += h
+        return self.state()
+
+    # bound, for a master
+
+    def bind(self, inputs, outputs) -> None:
+        """Fixes the inputs set and the outputs read every step (names, in the master's order).
+        CouplingError for a name the model lacks or an input that is not an input."""
+        missing = [n for n in (*inputs, *outputs) if n not in self.vr]
+        if missing:
+            raise CouplingError(f"{self.name}: the model {self.model_name} has no variable {', '.join(missing)}")
+        not_inputs = [n for n in inputs if self.variables[n].causality != "input"]
+        if not_inputs:
+            raise CouplingError(f"{self.name}: {', '.join(not_inputs)} of {self.model_name} are not inputs")
+        if self.version == 2:
+            from fmpy.fmi2 import fmi2Integer as Int, fmi2Real as Real, fmi2ValueReference as VR
+        else:
+            from fmpy.fmi3 import fmi3Float64 as Real, fmi3Int32 as Int, fmi3ValueReference as VR
+        self._Real = Real
+        self.input_names, self.output_names = tuple(inputs), tuple(outputs)
+        self._in_vr = _array(VR, [self.vr[n] for n in inputs])
+        self._in = (Real * len(inputs))()
+        self._order = _array(Int, [1] * len(inputs))
+        self._du = (Real * len(inputs))()
+        self._out_vr = _array(VR, [self.vr[n] for n in outputs])
+        self._out = (Real * len(outputs))()
+        self._seed = _array(Real, [1.0])
+        self._dd = (Real * len(outputs))()
+        self._known = [_array(VR, [self.vr[n]]) for n in inputs]
+        if self.version == 3:
+            from fmpy.fmi3 import fmi3Boolean
+
+            self._flags = [fmi3Boolean() for _ in range(3)]
+            self._last = Real()
+            self._flag_refs = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._last)]
+
     def set_inputs(self, values) -> None:
-        """fmi2SetReal of the inputs (master's order)."""
+        """Sets the bound inputs (bind order)."""
         self._in[:] = values
-        self._check(self.fmu.dll.fmi2SetReal(self._c, self._in_vr, len(self._in), self._in), "fmi2SetReal")
+        n = len(self._in)
+        if self.version == 2:
+            self._check(self._dll.fmi2SetReal(self._c, self._in_vr, n, self._in), "fmi2SetReal")
+        else:
+            self._check(self._dll.fmi3SetFloat64(self._c, self._in_vr, n, self._in, n), "fmi3SetFloat64")
 
     def set_input_derivatives(self, rates) -> None:
-        """fmi2SetRealInputDerivatives (first order) of the inputs: their rates over the next step."""
+        """fmi2SetRealInputDerivatives (first order) of the bound inputs: their rates over the next step
+        (only where `interpolates`)."""
         self._du[:] = rates
-        self._check(self.fmu.dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, len(self._du), self._order,
-                                                             self._du), "fmi2SetRealInputDerivatives")
+        self._check(self._dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, len(self._du), self._order, self._du),
+                    "fmi2SetRealInputDerivatives")
 
     def outputs(self) -> list:
-        """fmi2GetReal of the outputs (master's order)."""
-        self._check(self.fmu.dll.fmi2GetReal(self._c, self._out_vr, len(self._out), self._out), "fmi2GetReal")
+        """The bound outputs now (bind order)."""
+        n = len(self._out)
+        if self.version == 2:
+            self._check(self._dll.fmi2GetReal(self._c, self._out_vr, n, self._out), "fmi2GetReal")
+        else:
+            self._check(self._dll.fmi3GetFloat64(self._c, self._out_vr, n, self._out, n), "fmi3GetFloat64")
         return self._out[:]
 
-    def output_jacobian(self, rows, columns) -> np.ndarray:
-        """d outputs[rows] / d inputs[columns] at the present inputs (nested lists [rows][columns]): the
-        FMU's directional derivatives, or central differences where it has none (the inputs are left
-        as they were)."""
+    def output_jacobian(self, rows, columns) -> list:
+        """d outputs[rows] / d inputs[columns] at the present inputs (nested lists [rows][columns],
+        bind positions): the FMU's directional derivatives, or central differences where it has
+        none (the inputs are left as they were)."""
+        J = [[0.0] * len(columns) for _ in rows]
+        n = len(self._out)
         if self.directional:
-            J = [[0.0] * len(columns) for _ in rows]
             for j, c in enumerate(columns):
-                self._check(self.fmu.dll.fmi2GetDirectionalDerivative(self._c, self._out_vr, len(self._out),
-                                                                      self._known[c], 1, self._seed, self._dd),
-                            "fmi2GetDirectionalDerivative")
+                if self.version == 2:
+                    status = self._dll.fmi2GetDirectionalDerivative(self._c, self._out_vr, n, self._known[c], 1,
+                                                                    self._seed, self._dd)
+                else:
+                    status = self._dll.fmi3GetDirectionalDerivative(self._c, self._out_vr, n, self._known[c], 1,
+                                                                    self._seed, 1, self._dd, n)
+                self._check(status, "the directional derivative")
                 for i, r in enumerate(rows):
                     J[i][j] = self._dd[r]
             return J
-        J = [[0.0] * len(columns) for _ in rows]
         base = self._in[:]
         for j, c in enumerate(columns):
             d = FD_STEP * max(1.0, abs(base[c]))
@@ -152,36 +346,49 @@ class Slave:
         self.set_inputs(base)
         return J
 
-    def step(self, t: float, h: float) -> None:
-        """fmi2DoStep(t, h)."""
-        self._check(self.fmu.dll.fmi2DoStep(self._c, fmi2Real(t), fmi2Real(h), 1), f"fmi2DoStep at t = {t:.6g} s")
+    def do_step(self, t: float, h: float) -> None:
+        """One communication step from t [s] by h [s]."""
+        if self.version == 2:
+            status = self._dll.fmi2DoStep(self._c, self._Real(t), self._Real(h), 1)
+        else:
+            status = self._dll.fmi3DoStep(self._c, self._Real(t), self._Real(h), False, *self._flag_refs)
+        self._check(status, f"the step at t = {t:.6g} s")
 
     def save(self):
-        """The FMU state now (fmi2GetFMUstate), for restore()."""
-        state = fmi2FMUstate()
-        self._check(self.fmu.dll.fmi2GetFMUstate(self._c, ctypes.byref(state)), "fmi2GetFMUstate")
+        """The FMU state now, for restore()."""
+        if self.version == 2:
+            from fmpy.fmi2 import fmi2FMUstate as State
+        else:
+            from fmpy.fmi3 import fmi3FMUState as State
+        state = State()
+        fn = self._dll.fmi2GetFMUstate if self.version == 2 else self._dll.fmi3GetFMUState
+        self._check(fn(self._c, ctypes.byref(state)), "getting the FMU state")
         return state
 
     def restore(self, state) -> None:
-        """fmi2SetFMUstate to a state save() returned (it stays valid)."""
-        self._check(self.fmu.dll.fmi2SetFMUstate(self._c, state), "fmi2SetFMUstate")
+        """Sets the FMU state save() returned (it stays valid)."""
+        fn = self._dll.fmi2SetFMUstate if self.version == 2 else self._dll.fmi3SetFMUState
+        self._check(fn(self._c, state), "setting the FMU state")
 
     def free(self, state) -> None:
-        self.fmu.dll.fmi2FreeFMUstate(self._c, ctypes.byref(state))
+        fn = self._dll.fmi2FreeFMUstate if self.version == 2 else self._dll.fmi3FreeFMUState
+        fn(self._c, ctypes.byref(state))
 
     def rewind(self) -> None:
         """Back to the state right after initialisation (a new run of the same instance)."""
         if self._initial is None:
-            raise CouplingError(f"{self.name} ({self.model_name}): cannot rewind an FMU without fmi2SetFMUstate")
+            raise CouplingError(f"{self.name} ({self.model_name}): cannot rewind an FMU that cannot set its state")
         self.restore(self._initial)
         self.messages.clear()
+        self.t = 0.0
 
     def close(self) -> None:
-        """Frees the instance and its unpacked files (idempotent)."""
-        if getattr(self, "fmu", None) is not None:
+        """Frees the instance and the folder it was extracted into (idempotent)."""
+        if self.fmu is not None:
             try:
                 if self._initial is not None:
                     self.free(self._initial)
+                    self._initial = None
                 self.fmu.terminate()
             except Exception:
                 pass
@@ -189,5 +396,17 @@ class Slave:
                 self.fmu.freeInstance()
             except Exception:
                 pass
+            try:
+                self.fmu.freeLibrary()
+            except Exception:
+                pass
             self.fmu = None
-        shutil.rmtree(self._directory, ignore_errors=True)
+        if self._directory is not None:
+            self._cleanup()
+            self._directory = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

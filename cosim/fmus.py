@@ -1,39 +1,89 @@
-"""The FMU files of a grid co-simulation, one machine FMU and one exciter FMU per generator, built
-from the generators' dynamic data and kept in a cache folder.
+"""Which FMUs a co-simulation runs for each unit of a case (the FMU kinds), and their files, built
+from the units' components and parameters and kept in the content-keyed cache (fmu_export.build_cache).
 
-Kinds (reference_models.grid.wscc9.GeneratorFMU): `surrogate` builds the machine's surrogate FMU
-from its operator file (refused unless the operator was trained for that machine) with a native
-reference IEEE1 exciter; `reference` builds native reference FMUs of both from the component
-definitions; `python` builds pythonfmu reference FMUs of both; `file` takes the two files as given.
-
-A built FMU is named by a hash of everything it is made from (kind, component, parameters, the
-operator file's bytes and the sources of the builders), so a cache entry is reused exactly when
-a build would give the same FMU; builds write atomically, so a cache can be shared.
+Kinds (`UnitFMU`, from a unit's `fmu` entry in the dynamic data, or one kind for every unit):
+`surrogate` builds the machine's surrogate FMU from its operator file (refused unless the operator
+was trained for that component and those parameters) with native reference FMUs of the unit's
+control components; `reference` builds native reference FMUs of every device; `python` pythonfmu
+reference FMUs of every device; `file` takes an FMU file per device as given (`<device>_fmu`, e.g.
+machine_fmu, exciter_fmu; paths relative to the dynamic-data file). `fmi_version` 2 or 3 chooses
+the FMI version of the native FMUs built.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fmu_export.build_cache import cached_fmu, default_cache
-from reference_models.grid import wscc9
-from reference_models.ieee1 import IEEE1
-from reference_models.sm4 import SM4
-
 from .fmu import CouplingError
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED_OPERATORS = ROOT / "surrogate" / "default"
+FMU_KINDS = ("surrogate", "reference", "python", "file")
+_NAMES = {"surrogate": "Surrogate", "reference": "Reference", "python": "Python"}
 
 
 @dataclass(frozen=True)
-class GeneratorFiles:
-    """The FMU files of one generator: `kind`, `machine` and `exciter` paths."""
+class UnitFMU:
+    """The FMUs a co-simulation runs for a unit: `kind` (FMU_KINDS), the machine's `operator` file
+    (surrogate), the FMU file of each device by device name (`files`, kind file)."""
+
+    kind: str = "reference"
+    operator: str | None = None
+    files: tuple = ()  # ((device name, path), ...)
+
+
+@dataclass(frozen=True)
+class UnitFiles:
+    """The FMU files of one unit: its bus, kind and one path per device (the unit's device order)."""
 
     bus: int
     kind: str
-    machine: Path
-    exciter: Path
+    paths: tuple
+
+
+def unit_fmu(unit, dynamic_data: Path | None) -> UnitFMU:
+    """The UnitFMU of a unit's `fmu` entry (default: native reference); CouplingError for a malformed
+    one. Paths are resolved against the dynamic-data file's folder; an operator not found there is
+    looked up among the shipped ones."""
+    where = f"{dynamic_data}: generator at bus {unit.bus}"
+    entry = unit.fmu if unit.fmu is not None else {"kind": "reference"}
+    entry = {"kind": entry} if isinstance(entry, str) else entry
+    if not isinstance(entry, dict) or entry.get("kind") not in FMU_KINDS:
+        raise CouplingError(f"{where}: fmu kind must be one of {', '.join(FMU_KINDS)}, got {str(entry)[:60]!r}")
+    names = [d.name for d in unit.devices]
+    known = {"kind", "operator", *(f"{n}_fmu" for n in names)}
+    unknown = set(entry) - known
+    if unknown:
+        raise CouplingError(f"{where}: unknown fmu keys {', '.join(sorted(unknown))} (known: {', '.join(sorted(known))})")
+    base = Path(dynamic_data).parent if dynamic_data is not None else Path.cwd()
+
+    def resolved(key):
+        value = entry.get(key)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value:
+            raise CouplingError(f"{where}: fmu {key} must be a file name")
+        beside = base / value
+        return str(beside) if beside.exists() or key != "operator" else value
+
+    kind = entry["kind"]
+    files = tuple((n, resolved(f"{n}_fmu")) for n in names if entry.get(f"{n}_fmu") is not None)
+    if kind == "surrogate" and entry.get("operator") is None:
+        raise CouplingError(f"{where}: a surrogate needs its operator file")
+    if kind == "file" and len(files) != len(names):
+        raise CouplingError(f"{where}: kind file needs {', '.join(f'{n}_fmu' for n in names)}")
+    return UnitFMU(kind, resolved("operator"), files)
+
+
+def unit_fmus(case, kind: str | None = None) -> tuple:
+    """The UnitFMU of every unit of `case`: its own, or `kind` for all (FMU_KINDS but file)."""
+    if kind is not None and kind not in FMU_KINDS:
+        raise CouplingError(f"FMU kind must be one of {', '.join(FMU_KINDS)}, got {kind!r}")
+    out = []
+    for unit in case.units:
+        fmu = unit_fmu(unit, case.dynamic_data)
+        out.append(fmu if kind is None else replace(fmu, kind=kind))
+    return tuple(out)
 
 
 def operator_path(name) -> Path:
@@ -47,22 +97,24 @@ def operator_path(name) -> Path:
     raise CouplingError(f"no operator file {name} (shipped: {', '.join(p.name for p in sorted(SHIPPED_OPERATORS.glob('*.onnx')))})")
 
 
-def _check_operator(path: Path, machine, bus: int) -> None:
-    """Refuses an operator that is not SM4 with Vs, theta_vs, Pm, Efd or was trained for another machine."""
+def _check_operator(path: Path, device, bus: int) -> None:
+    """Refuses an operator that is not of the device's component with its inputs, or was trained for
+    other parameters."""
     import onnx
 
     from surrogate.contract import ContractError, operator_metadata
 
+    component = device.component
     try:
         meta = operator_metadata({p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props})
     except ContractError as exc:
         raise CouplingError(f"generator at bus {bus}: {path}: {exc}") from None
     except Exception as exc:
         raise CouplingError(f"generator at bus {bus}: cannot read the operator {path}: {str(exc)[:160]}") from None
-    if meta["component"].name != SM4.name or tuple(meta["input_names"]) != SM4.input_names:
-        raise CouplingError(f"generator at bus {bus}: {path.name} is not an SM4 operator with inputs "
-                            f"{', '.join(SM4.input_names)}")
-    trained, wanted = meta["params"].to_dict(), machine.to_dict()
+    if meta["component"].name != component.name or tuple(meta["input_names"]) != tuple(component.input_names):
+        raise CouplingError(f"generator at bus {bus}: {path.name} is not a {component.name} operator with inputs "
+                            f"{', '.join(component.input_names)}")
+    trained, wanted = meta["params"].to_dict(), device.params.to_dict()
     differ = [f"{k} {trained.get(k)} (machine: {v})" for k, v in wanted.items()
               if abs(float(trained.get(k, float("nan"))) - float(v)) > 1e-9 * max(1.0, abs(float(v)))]
     if differ:
@@ -70,58 +122,74 @@ def _check_operator(path: Path, machine, bus: int) -> None:
                             + ", ".join(differ[:4]))
 
 
-def _build(kind: str, component, params, cache: Path, model_name: str, operator: Path | None = None,
-           progress=None) -> Path:
-    """The FMU of `component` with `params` of that kind, from the cache or built into it."""
-    from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
-    from fmu_export.native_reference_fmu import build_native_reference_fmu
-    from fmu_export.python_reference_fmu import build_reference_fmu
+def _build(kind: str, device, cache: Path, model_name: str, operator: Path | None = None, progress=None,
+           fmi_version: int = 2) -> Path:
+    """The FMU of `device` (component, parameters) of that kind, from the cache or built into it."""
+    from fmu_export.build_cache import cached_fmu
 
     payload = operator.read_bytes() if operator is not None else b""
 
     def build(out: Path) -> None:
+        from fmu_export.native_reference_fmu import build_native_reference_fmu
+        from fmu_export.python_reference_fmu import build_reference_fmu
+        from fmu_export.surrogate_fmu import BuildError, build_surrogate_fmu
+
         try:
             if kind == "surrogate":
-                build_surrogate_fmu(operator, out, model_name=model_name)
+                build_surrogate_fmu(operator, out, model_name=model_name, fmi_version=fmi_version)
             elif kind == "reference":
-                build_native_reference_fmu(out, model_name=model_name, component=component, params=params)
+                build_native_reference_fmu(out, model_name=model_name, component=device.component,
+                                           params=device.params, fmi_version=fmi_version)
             else:
-                build_reference_fmu(out, model_name=model_name, component=component, params=params)
+                build_reference_fmu(out, model_name=model_name, component=device.component, params=device.params)
         except (BuildError, ValueError, RuntimeError) as exc:
             raise CouplingError(f"cannot build {model_name}: {str(exc)[:300]}") from None
 
-    return cached_fmu(model_name, (kind, component.name, params.to_dict(), payload), build, cache,
-                      progress and (lambda name: progress(f"{name} ({kind})")))
+    parts = (kind, device.component.name, device.params.to_dict(), payload)
+    if fmi_version != 2:
+        parts += (f"fmi{fmi_version}",)
+    return cached_fmu(model_name, parts, build, cache, progress and (lambda name: progress(f"{name} ({kind})")))
 
 
-def generator_files(dynamics, kind: str | None = None, cache=None, progress=None) -> list:
-    """GeneratorFiles for every generator of `dynamics` (wscc9.GeneratorDynamics), each of its own
-    FMU kind or all of `kind`; `progress(text)` is told before each FMU that is not cached is built."""
+def _model_name(device, index: int, bus: int, kind: str) -> str:
+    stem = "Gen" if index == 0 else device.name[:1].upper() + device.name[1:]
+    return f"{stem}{bus}{_NAMES[kind]}"
+
+
+def check_unit_fmus(case, kind: str | None = None) -> tuple:
+    """unit_fmus with every file and operator checked (no build): CouplingError for an FMU file or
+    operator that is absent or an operator of another component or machine. Returns the UnitFMUs."""
+    fmus = unit_fmus(case, kind)
+    for unit, fmu in zip(case.units, fmus):
+        if fmu.kind == "file":
+            absent = [str(p) for _, p in fmu.files if not Path(p).is_file()]
+            if absent:
+                raise CouplingError(f"generator at bus {unit.bus}: no FMU file {', '.join(absent)}")
+        elif fmu.kind == "surrogate":
+            _check_operator(operator_path(fmu.operator), unit.machine, unit.bus)
+    return fmus
+
+
+def generator_files(case, kind: str | None = None, cache=None, progress=None, fmi_version: int = 2) -> list:
+    """UnitFiles for every unit of `case`, each of its own FMU kind or all of `kind`; `progress(text)`
+    is told before each FMU that is not cached is built."""
+    from fmu_export.build_cache import default_cache
+
     cache = Path(cache) if cache is not None else default_cache()
     files = []
-    for g in dynamics:
-        fmu = g.fmu if kind is None else replace(g.fmu, kind=kind)
-        if fmu.kind not in wscc9.FMU_KINDS:
-            raise CouplingError(f"FMU kind must be one of {', '.join(wscc9.FMU_KINDS)}, got {fmu.kind!r}")
+    for unit, fmu in zip(case.units, check_unit_fmus(case, kind)):
         if fmu.kind == "file":
-            paths = [Path(fmu.machine_fmu), Path(fmu.exciter_fmu)]
-            absent = [str(p) for p in paths if not p.is_file()]
-            if absent:
-                raise CouplingError(f"generator at bus {g.bus}: no FMU file {', '.join(absent)}")
-            files.append(GeneratorFiles(g.bus, fmu.kind, *paths))
+            by_name = dict(fmu.files)
+            files.append(UnitFiles(unit.bus, fmu.kind, tuple(Path(by_name[d.name]) for d in unit.devices)))
             continue
-        if fmu.kind == "surrogate":
-            if fmu.operator is None:
-                raise CouplingError(f"generator at bus {g.bus}: a surrogate needs an operator file (the "
-                                    "dynamic data names none)")
-            operator = operator_path(fmu.operator)
-            _check_operator(operator, g.machine, g.bus)
-        name = {"surrogate": "Surrogate", "reference": "Reference", "python": "Python"}[fmu.kind]
-        if fmu.kind == "surrogate":
-            machine = _build("surrogate", SM4, g.machine, cache, f"Gen{g.bus}{name}", operator, progress)
-            exciter = _build("reference", IEEE1, g.exciter, cache, f"Exciter{g.bus}Reference", progress=progress)
-        else:
-            machine = _build(fmu.kind, SM4, g.machine, cache, f"Gen{g.bus}{name}", progress=progress)
-            exciter = _build(fmu.kind, IEEE1, g.exciter, cache, f"Exciter{g.bus}{name}", progress=progress)
-        files.append(GeneratorFiles(g.bus, fmu.kind, machine, exciter))
+        paths = []
+        for j, device in enumerate(unit.devices):
+            if fmu.kind == "surrogate" and j == 0:
+                paths.append(_build("surrogate", device, cache, _model_name(device, j, unit.bus, "surrogate"),
+                                    operator_path(fmu.operator), progress, fmi_version))
+            else:
+                device_kind = "reference" if fmu.kind == "surrogate" else fmu.kind
+                paths.append(_build(device_kind, device, cache, _model_name(device, j, unit.bus, device_kind),
+                                    progress=progress, fmi_version=fmi_version))
+        files.append(UnitFiles(unit.bus, fmu.kind, tuple(paths)))
     return files

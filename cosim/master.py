@@ -38,19 +38,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_models.grid import wscc9
+from reference_models.grid.case import Case, external_impedance, step_order, unit_wiring
 from reference_models.grid.contingency import Contingency
-from reference_models.grid.monolithic import GridResult, WSCC9, system
-from reference_models.ieee1 import IEEE1
-from reference_models.sm4 import SM4
+from reference_models.grid.result import ROTOR_ANGLE, GridResult
 
-from .fmu import CouplingError, Slave
-
-MACHINE_INPUTS = ("Vs", "theta_vs", "Pm", "Efd")
-MACHINE_OUTPUTS = ("delta", "omega", "Ed_p", "Eq_p", "I_re", "I_im")
-EXCITER_INPUTS = ("Vt", "Vref")
-EXCITER_OUTPUTS = ("Efd", "RF", "VR")
-_I = (4, 5)  # rows of I_re, I_im in MACHINE_OUTPUTS
+from .fmu import FMU, CouplingError
 
 
 COUPLINGS = ("iterated", "extrapolated", "held")
@@ -122,46 +114,177 @@ class CosimResult:
     notes: tuple = ()
 
 
+MAX_STEPS = 10_000_000  # communication steps of one run
+
+
+def check_steps(stop: float, step: float) -> None:
+    """ValueError when a run to `stop` [s] in steps of `step` [s] has more than MAX_STEPS steps."""
+    if stop / step > MAX_STEPS:
+        raise ValueError(f"a run to {stop:g} s in steps of {step:g} s has {stop / step:.3g} communication steps "
+                         f"(at most {MAX_STEPS:.0e}: shorten the run or lengthen the step)")
+
+
+def communication_points(step: float, stop: float, changes):
+    """The communication points after 0 up to `stop` [s], one at a time, each with the topology that
+    starts there (or None): the multiples of `step` (the last one `stop`) and the start times of
+    `changes` (contingency.Topology), points closer than 1e-9 s to the one before merged, each
+    change at the point nearest to its start."""
+    n_steps = int(math.ceil(stop / step - 1e-9))
+    events = sorted(changes, key=lambda tp: tp.start)
+    k, e = 1, 0
+    previous_raw, kept = 0.0, 0.0
+    pending, waiting = [], None  # changes dropped with their own point; the kept point not yet given
+
+    def candidates():
+        nonlocal k, e
+        while k <= n_steps or e < len(events):
+            g = min(k * step, stop) if k <= n_steps else math.inf
+            ev = events[e].start if e < len(events) else math.inf
+            if ev < g:
+                e += 1
+                yield ev, events[e - 1]
+            elif ev == g:
+                k += 1
+                e += 1
+                yield g, events[e - 1]
+            else:
+                k += 1
+                yield g, None
+
+    for p, change in candidates():
+        if p == previous_raw and change is None:
+            continue  # the same time twice (the stop)
+        drop = p - previous_raw <= 1e-9
+        previous_raw = p
+        if drop:
+            if change is not None:
+                pending.append(change)
+            continue
+        here = change
+        for tp in pending:  # each to the nearer of the kept point before and this one
+            if abs(tp.start - kept) <= abs(p - tp.start):
+                if waiting is not None:
+                    waiting = (waiting[0], tp)
+            else:
+                here = tp
+        pending = []
+        if waiting is not None:
+            yield waiting
+        waiting, kept = (p, here), p
+    for tp in pending:
+        if waiting is not None:
+            waiting = (waiting[0], tp)
+    if waiting is not None:
+        yield waiting
+
+
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-class GridMaster:
-    """The master over the FMUs of every generator of `grid` (monolithic.WSCC9: network, load flow,
-    start values); files: cosim.fmus.GeneratorFiles per generator, in GENERATOR_BUSES order.
-    Use as a context manager, or call close()."""
+class _Unit:
+    """The FMUs of one unit under the master: `fmus` (device order, the machine first), the wiring of
+    their inputs from their ports, the bound inputs and outputs of each and where in them the
+    master finds the bus current, the rotor angle, the states and the link outputs."""
 
-    def __init__(self, files, grid: WSCC9 | None = None, settings: MasterSettings = MasterSettings()):
-        self.grid = grid if grid is not None else system()
-        self.settings = settings
-        self.files = tuple(files)
-        if [f.bus for f in self.files] != list(wscc9.GENERATOR_BUSES):
-            raise CouplingError(f"one FMU pair per generator bus {wscc9.GENERATOR_BUSES} is needed")
-        self.kinds = tuple(f.kind for f in self.files)
-        self.machines, self.exciters = [], []
-        self._networks = {}
-        self._Z = [complex(p.Re, p.Xep) for p in self.grid.machines]  # behind which Vt is measured
+    def __init__(self, unit, start, files, scratch=None):
+        self.bus = unit.bus
+        self.fmus = []
         try:
-            for k, f in enumerate(self.files):
-                x0 = self.grid.x0
-                ms, es = x0[self.grid.machine_slice(k)], x0[self.grid.exciter_slice(k)]
-                op = self.grid.flow.generator(f.bus)
-                start = {f"{n}0": float(v) for n, v in zip(SM4.state_names, ms)}
-                start.update(Vs=op["V"], theta_vs=op["theta"], Pm=float(self.grid.Pm[k]), Efd=float(self.grid.Efd0[k]))
-                self.machines.append(Slave(f.machine, f"machine at bus {f.bus}", MACHINE_INPUTS, MACHINE_OUTPUTS, start))
-                start = {f"{n}0": float(v) for n, v in zip(IEEE1.state_names, es)}
-                start.update(Vt=op["V"], Vref=float(self.grid.Vref[k]))
-                self.exciters.append(Slave(f.exciter, f"exciter at bus {f.bus}", EXCITER_INPUTS, EXCITER_OUTPUTS, start))
+            self._open(unit, start, files, scratch)
         except BaseException:
             self.close()
             raise
-        self.rolls_back = all(s.rolls_back for s in self.machines + self.exciters)
+
+    def _open(self, unit, start, files, scratch) -> None:
+        for device, path in zip(unit.devices, files.paths):
+            self.fmus.append(FMU(path, f"{device.name} at bus {unit.bus}", init=False, scratch=scratch))
+        for fmu in self.fmus:
+            if fmu.ports is None:
+                raise CouplingError(f"{fmu.name}: the FMU {fmu.model_name} declares no ports (no <Ports> element in "
+                                    "its model description) and is not an opfmu FMU of a known component")
+        if self.fmus[0].ports.bus is None:
+            raise CouplingError(f"{self.fmus[0].name}: the FMU {self.fmus[0].model_name} declares no bus port")
+        from reference_models.grid.case import CaseError
+
+        try:
+            self.wiring = unit_wiring([f.ports for f in self.fmus], f"generator at bus {unit.bus}")
+        except CaseError as exc:
+            raise CouplingError(str(exc)) from None
+        for device, begin, fmu in zip(unit.devices, start, self.fmus):
+            values = {f"{n}0": v for n, v in zip(device.component.state_names, begin.states)}
+            values.update(begin.inputs)
+            fmu.initialise(values, keep=True)
+        self.order = step_order(self.wiring)
+        needed = {j: [] for j in range(len(self.fmus))}
+        for wires in self.wiring:
+            for source in wires.values():
+                if source.kind == "device" and source.variable not in needed[source.device]:
+                    needed[source.device].append(source.variable)
+        bus = self.fmus[0].ports.bus
+        self.inputs, self.sources, self.held, self.state_rows, self.link_rows = [], [], [], [], []
+        for j, (device, fmu) in enumerate(zip(unit.devices, self.fmus)):
+            wires = self.wiring[j]
+            names = [n for n in wires]
+            outputs = list(device.component.state_names)
+            if j == 0:
+                outputs += [n for n in bus.current if n not in outputs]
+            outputs += [n for n in needed[j] if n not in outputs]
+            fmu.bind(names, outputs)
+            self.inputs.append(names)
+            self.sources.append([wires[n] for n in names])
+            self.held.append([float(start[j].inputs[n]) if n in start[j].inputs else fmu.starts.get(n, 0.0)
+                              for n in names])
+            self.state_rows.append(len(device.component.state_names))
+            self.link_rows.append({n: outputs.index(n) for n in needed[j]})
+        self.state_names = [d.component.state_names for d in unit.devices]
+        self.current_rows = tuple(outputs_index for outputs_index in
+                                  (self.fmus[0].output_names.index(n) for n in bus.current))
+        self.voltage_columns = tuple(self.inputs[0].index(n) for n in bus.voltage)
+        self.angle_row = unit.machine.component.state_names.index(ROTOR_ANGLE)
+        self.impedance = external_impedance(unit.machine)
+        # link values at the start of the coming step: the consumers' start values
+        self.links = {}
+        for j, sources in enumerate(self.sources):
+            for source, held in zip(sources, self.held[j]):
+                if source.kind == "device":
+                    self.links[(source.device, source.variable)] = held
+        self.initial_links = dict(self.links)
+
+    def close(self) -> None:
+        for f in self.fmus:
+            f.close()
+
+
+class GridMaster:
+    """The master over the FMUs of every unit of `case` (case.Case: network, load flow, units and
+    their start values); files: cosim.fmus.UnitFiles per unit, in the case's unit order; scratch:
+    the folder FMU files are extracted under (default: the system's temporary folder). Use as a
+    context manager, or call close()."""
+
+    def __init__(self, case: Case, files, settings: MasterSettings = MasterSettings(), scratch=None):
+        self.case = case
+        self.settings = settings
+        self.files = tuple(files)
+        if [f.bus for f in self.files] != list(case.generator_buses):
+            raise CouplingError(f"one set of FMUs per generator bus {case.generator_buses} is needed")
+        self.kinds = tuple(f.kind for f in self.files)
+        self.units = []
+        self._networks = {}
+        try:
+            for k, f in enumerate(self.files):
+                self.units.append(_Unit(case.units[k], case.starts[k], f, scratch))
+        except BaseException:
+            self.close()
+            raise
+        self.fmus = [fmu for u in self.units for fmu in u.fmus]
+        self.rolls_back = all(s.rolls_back for s in self.fmus)
         self.notes = ()
         if not self.rolls_back and settings.coupling == "iterated" and settings.passes > 1:
-            names = ", ".join(s.model_name for s in self.machines + self.exciters if not s.rolls_back)
+            names = ", ".join(s.model_name for s in self.fmus if not s.rolls_back)
             self.notes = (f"{names} cannot restore an FMU state: steps are not iterated (one pass, inputs "
                           "linear to the extrapolated end voltage)",)
-        self._Pm = [float(p) for p in self.grid.Pm]
+        self._gen_rows = [case.network.bus_index(b) for b in case.generator_buses]
         self._runs = 0
 
     def __enter__(self):
@@ -171,48 +294,61 @@ class GridMaster:
         self.close()
 
     def close(self) -> None:
-        for s in self.machines + self.exciters:
-            s.close()
-        self.machines, self.exciters = [], []
+        for u in self.units:
+            u.close()
+        self.units, self.fmus = [], []
 
     def network(self, topology):
         key = (topology.fault_bus, topology.open)
         if key not in self._networks:
-            self._networks[key] = self.grid.network(topology.fault_bus, self._fault_impedance, topology.open)
+            self._networks[key] = self.case.reduced(topology.fault_bus, self._fault_impedance, topology.open)
         return self._networks[key]
 
-    def _solve(self, network, V, Efd, theta_ref, timing: Timing):
-        """The generator-bus voltages [3] (complex) at which the machines' currents I(V) and the
+    def _machine_inputs(self, unit, Vs, theta):
+        """The machine's bound inputs now: the bus voltage (Vs, theta) and its links at their latest values."""
+        values = []
+        for source, held in zip(unit.sources[0], unit.held[0]):
+            if source.kind == "bus":
+                values.append(Vs if source.index == 0 else theta)
+            elif source.kind == "device":
+                values.append(unit.links[(source.device, source.variable)])
+            else:
+                values.append(held)
+        return values
+
+    def _solve(self, network, V, theta_ref, timing: Timing):
+        """The generator-bus voltages [g] (complex) at which the machines' currents I(V) and the
         network agree, Newton from V; the machines are left at those inputs. Returns (V, I, theta,
-        the machines' states [3, 4] as their outputs read them)."""
+        each machine's outputs as read)."""
         started = time.perf_counter()
         s = self.settings
-        n = len(self.machines)
+        n = len(self.units)
         v = np.empty(2 * n)
         v[0::2], v[1::2] = V.real, V.imag
         Y = network.Y_real
         i_vec = np.empty(2 * n)
         theta = np.empty(n)
-        states = np.empty((n, 4))
+        machine = [None] * n
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
-            for k, m in enumerate(self.machines):
+            for k, u in enumerate(self.units):
                 re, im = values[2 * k], values[2 * k + 1]
                 theta[k] = theta_ref[k] + _wrap(math.atan2(im, re) - theta_ref[k])
-                m.set_inputs((math.hypot(re, im), theta[k], self._Pm[k], Efd[k]))
+                m = u.fmus[0]
+                m.set_inputs(self._machine_inputs(u, math.hypot(re, im), theta[k]))
                 out = m.outputs()
-                states[k] = out[:4]
-                i_vec[2 * k], i_vec[2 * k + 1] = out[4], out[5]
+                machine[k] = out
+                i_vec[2 * k], i_vec[2 * k + 1] = out[u.current_rows[0]], out[u.current_rows[1]]
             F = Y @ v - i_vec
             mismatch = max(map(abs, F.tolist()))
             if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
                 break
             M = Y.copy()
-            for k, m in enumerate(self.machines):
+            for k, u in enumerate(self.units):
                 re, im = values[2 * k], values[2 * k + 1]
                 Vs = math.hypot(re, im)
                 c, sn = re / Vs, im / Vs
-                (a, b), (d, e) = m.output_jacobian(_I, (0, 1))  # d(I_re, I_im) / d(Vs, theta_vs)
+                (a, b), (d, e) = u.fmus[0].output_jacobian(u.current_rows, u.voltage_columns)  # d(I_re, I_im) / d(Vs, theta)
                 # chain rule with d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
                 r = 2 * k
                 M[r, r] -= a * c - b * sn / Vs
@@ -224,83 +360,91 @@ class GridMaster:
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")
         timing.network_s += time.perf_counter() - started
-        return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta, states
+        return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta, machine
 
     def _terminal(self, V, I):
-        return np.array([abs(V[k] + self._Z[k] * I[k]) for k in range(len(V))])
+        return np.array([abs(V[k] + u.impedance * I[k]) for k, u in enumerate(self.units)])
 
-    def _step(self, t0, h, V0, theta0, Vt0, Efd0, V1, theta1, Vt1, timing):
-        """One pass over [t0, t0 + h] with the inputs linear from (V0, Vt0, Efd0) to (V1, Vt1) and
-        Efd to the exciters' new values (held at the start values with coupling "held"); returns
-        the exciters' outputs (Efd, RF, VR) at t0 + h [3, 3]."""
+    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, timing):
+        """One pass over [t0, t0 + h]: every unit's devices stepped in their order, each input linear
+        from its start value to its end value (bus voltage and terminal voltage: V0, Vt0 to V1, Vt1;
+        a link from a device stepped before in this pass: to its new output; held otherwise), or
+        held at the start values with coupling "held". Returns every unit's outputs per device at
+        t0 + h, and sets the units' links to their new values."""
         started = time.perf_counter()
-        n = len(self.machines)
-        exciter = np.empty((n, len(EXCITER_OUTPUTS)))
-        held = self.settings.coupling == "held"
-        for k in range(n):
-            e, m = self.exciters[k], self.machines[k]
-            Vref = self.grid.Vref[k]
-            if held:
-                e.set_inputs((Vt0[k], Vref))
-                if e.interpolates:
-                    e.set_input_derivatives((0.0, 0.0))
-            elif e.interpolates:
-                e.set_inputs((Vt0[k], Vref))
-                e.set_input_derivatives(((Vt1[k] - Vt0[k]) / h, 0.0))
-            else:
-                e.set_inputs((0.5 * (Vt0[k] + Vt1[k]), Vref))
-            e.step(t0, h)
-            exciter[k] = e.outputs()
-            Vs0, Vs1 = abs(V0[k]), abs(V1[k])
-            Pm = self.grid.Pm[k]
-            if held:
-                m.set_inputs((Vs0, theta0[k], Pm, Efd0[k]))
-                if m.interpolates:
-                    m.set_input_derivatives((0.0, 0.0, 0.0, 0.0))
-            elif m.interpolates:
-                m.set_inputs((Vs0, theta0[k], Pm, Efd0[k]))
-                m.set_input_derivatives(((Vs1 - Vs0) / h, (theta1[k] - theta0[k]) / h, 0.0, (exciter[k, 0] - Efd0[k]) / h))
-            else:
-                m.set_inputs((0.5 * (Vs0 + Vs1), 0.5 * (theta0[k] + theta1[k]), Pm, 0.5 * (Efd0[k] + exciter[k, 0])))
-            m.step(t0, h)
+        held_coupling = self.settings.coupling == "held"
+        outputs = []
+        for k, u in enumerate(self.units):
+            new_links = {}
+            unit_out = [None] * len(u.fmus)
+            for j in u.order:
+                fmu = u.fmus[j]
+                a, b = [], []
+                for source, held in zip(u.sources[j], u.held[j]):
+                    if source.kind == "bus":
+                        if source.index == 0:
+                            a.append(abs(V0[k]))
+                            b.append(abs(V1[k]))
+                        else:
+                            a.append(theta0[k])
+                            b.append(theta1[k])
+                    elif source.kind == "terminal":
+                        a.append(Vt0[k])
+                        b.append(Vt1[k])
+                    elif source.kind == "device":
+                        key = (source.device, source.variable)
+                        a.append(u.links[key])
+                        b.append(new_links.get(key, u.links[key]))
+                    else:
+                        a.append(held)
+                        b.append(held)
+                if held_coupling:
+                    fmu.set_inputs(a)
+                    if fmu.interpolates:
+                        fmu.set_input_derivatives([0.0] * len(a))
+                elif fmu.interpolates:
+                    fmu.set_inputs(a)
+                    fmu.set_input_derivatives([(y - x) / h for x, y in zip(a, b)])
+                else:
+                    fmu.set_inputs([0.5 * (x + y) for x, y in zip(a, b)])
+                fmu.do_step(t0, h)
+                out = fmu.outputs()
+                unit_out[j] = out
+                for name, row in u.link_rows[j].items():
+                    new_links[(j, name)] = out[row]
+            u.links.update(new_links)
+            outputs.append(unit_out)
         timing.fmu_step_s += time.perf_counter() - started
-        return exciter
+        return outputs
 
     def run(self, contingency: Contingency, stop: float = 5.0) -> CosimResult:
         """The system from its load-flow equilibrium through `contingency` until `stop` [s]."""
         if not (isinstance(stop, (int, float)) and math.isfinite(stop) and stop > 0):
             raise ValueError(f"stop must be a positive time, got {stop!r}")
         s = self.settings
+        check_steps(stop, s.step)
         timing = Timing()
         started = time.perf_counter()
         if self._runs:
-            for slave in self.machines + self.exciters:
-                slave.rewind()
+            for fmu in self.fmus:
+                fmu.rewind()
+            for u in self.units:
+                u.links = dict(u.initial_links)
         self._runs += 1
         self._fault_impedance = contingency.fault_impedance
         topologies = contingency.topologies(stop)
-        n_steps = int(math.ceil(stop / s.step - 1e-9))
-        grid_points = [min(k * s.step, stop) for k in range(n_steps + 1)]
-        points = sorted(set(grid_points) | {tp.start for tp in topologies[1:]})
-        points = [p for i, p in enumerate(points) if i == 0 or p - points[i - 1] > 1e-9]  # no sliver steps
-        change_at = {}
-        for tp in topologies[1:]:
-            nearest = min(points, key=lambda p: abs(p - tp.start))
-            change_at[nearest] = tp
         topology = topologies[0]
-        n = len(self.machines)
-        state = [m.outputs() for m in self.machines]
-        theta_ref = np.array([float(x[0]) for x in state])  # continuous angles near the rotor angles
-        V = self.grid.flow.V_complex[[wscc9.bus_index(b) for b in wscc9.GENERATOR_BUSES]].copy()
-        Efd = np.array(self.grid.Efd0, dtype=float)
-        V, I, theta, machine = self._solve(self.network(topology), V, Efd, theta_ref, timing)
-        exciter = np.array([e.outputs() for e in self.exciters])
-        rows = []
+        n = len(self.units)
+        state = [u.fmus[0].outputs() for u in self.units]
+        theta_ref = np.array([float(x[u.angle_row]) for x, u in zip(state, self.units)])  # continuous angles
+        V = self.case.flow.V_complex[self._gen_rows].copy()
+        V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, timing)
+        devices = [[list(m)] + [f.outputs() for f in u.fmus[1:]] for m, u in zip(machine, self.units)]
+        rows = [self._row(0.0, V, I, theta, devices)]
         lost = None
         V_prev, h_prev = None, None
-        rows.append(self._row(0.0, V, I, theta, machine, exciter))
-        for j in range(1, len(points)):
-            t0, t1 = points[j - 1], points[j]
+        t0 = 0.0
+        for t1, new_topology in communication_points(s.step, stop, topologies[1:]):
             h = t1 - t0
             Vt0 = self._terminal(V, I)
             if V_prev is not None and s.coupling != "held":
@@ -313,85 +457,92 @@ class GridMaster:
             passes = s.passes if s.coupling == "iterated" else 1
             if passes > 1 and self.rolls_back:
                 t_save = time.perf_counter()
-                saved = [slave.save() for slave in self.machines + self.exciters]
+                saved = [fmu.save() for fmu in self.fmus]
+                links = [dict(u.links) for u in self.units]
                 timing.rollback_s += time.perf_counter() - t_save
             try:
                 for p in range(passes if saved is not None else 1):
                     if p > 0:
                         t_save = time.perf_counter()
-                        for slave, snap in zip(self.machines + self.exciters, saved):
-                            slave.restore(snap)
+                        for fmu, snap in zip(self.fmus, saved):
+                            fmu.restore(snap)
+                        for u, kept in zip(self.units, links):
+                            u.links = dict(kept)
                         timing.rollback_s += time.perf_counter() - t_save
                     Vt1 = self._terminal(V1, I1)
-                    exciter = self._step(t0, h, V, theta, Vt0, Efd, V1, theta1, Vt1, timing)
-                    Efd1 = exciter[:, 0].copy()
+                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, timing)
                     timing.passes += 1
-                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, Efd1, theta1, timing)
+                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, timing)
                     change = float(np.max(np.abs(new_V - V1)))
                     V1, theta1 = new_V, new_theta
                     if change < s.tolerance:
                         break
             finally:
                 if saved is not None:
-                    for slave, snap in zip(self.machines + self.exciters, saved):
-                        slave.free(snap)
+                    for fmu, snap in zip(self.fmus, saved):
+                        fmu.free(snap)
             timing.steps += 1
             V_prev, h_prev = V, h
-            V, I, theta, Efd = V1, I1, theta1, Efd1
-            if t1 in change_at:
-                topology = change_at[t1]
-                V, I, theta, machine = self._solve(self.network(topology), V, Efd, theta, timing)
+            V, I, theta = V1, I1, theta1
+            if new_topology is not None:
+                topology = new_topology
+                V, I, theta, machine = self._solve(self.network(topology), V, theta, timing)
                 V_prev = None  # no extrapolation across the jump
-            rows.append(self._row(t1, V, I, theta, machine, exciter))
+            devices = [[list(m)] + [list(o) for o in out[1:]] for m, out in zip(machine, outputs)]
+            rows.append(self._row(t1, V, I, theta, devices))
             if lost is None:
-                lost = _loss_time(rows)
+                lost = self._loss_time(rows)
                 if lost is not None and s.stop_at_loss:
                     break
+            t0 = t1
         timing.total_s = time.perf_counter() - started
         result = self._result(rows, topologies, lost)
-        messages = {f.bus: list(m.messages) + list(e.messages)
-                    for f, m, e in zip(self.files, self.machines, self.exciters)}
+        messages = {u.bus: list(dict.fromkeys(m for f in u.fmus for m in f.messages)) for u in self.units}
         return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages, notes=self.notes)
 
-    @staticmethod
-    def _row(t, V, I, theta, machine, exciter) -> dict:
-        return {"time": t, "machine": machine, "exciter": exciter, "V": V.copy(), "I": I.copy(), "theta": theta.copy()}
+    def _row(self, t, V, I, theta, devices) -> dict:
+        return {"time": t, "devices": devices, "V": V.copy(), "I": I.copy(), "theta": theta.copy(),
+                "inputs": [list(u.fmus[0]._in) for u in self.units]}
+
+    def _loss_time(self, rows) -> float | None:
+        """The time two rotor angles first got pi apart, linear between the last two rows; None if not."""
+        def spread(row):
+            d = [row["devices"][k][0][u.angle_row] for k, u in enumerate(self.units)]
+            return float(max(d) - min(d))
+
+        now = spread(rows[-1])
+        if now <= math.pi:
+            return None
+        if len(rows) < 2:
+            return rows[-1]["time"]
+        before = spread(rows[-2])
+        t0, t1 = rows[-2]["time"], rows[-1]["time"]
+        return t0 + (t1 - t0) * (math.pi - before) / (now - before) if now > before else t1
 
     def _result(self, rows, topologies, lost) -> GridResult:
         time_ = np.array([r["time"] for r in rows])
-        machine = np.stack([r["machine"] for r in rows])  # [n, 3, 4]
-        exciter = np.stack([r["exciter"] for r in rows])  # [n, 3, 3]
+        g = len(self.units)
+        states, inputs = {}, {}
+        for k, u in enumerate(self.units):
+            for j, names in enumerate(u.state_names):
+                values = np.array([r["devices"][k][j][:len(names)] for r in rows])
+                for i, name in enumerate(names):
+                    states.setdefault(name, np.full((len(rows), g), np.nan))[:, k] = values[:, i]
+            values = np.array([r["inputs"][k] for r in rows])
+            for i, name in enumerate(u.inputs[0]):
+                inputs.setdefault(name, np.full((len(rows), g), np.nan))[:, k] = values[:, i]
         V_gen = np.stack([r["V"] for r in rows])
         I_gen = np.stack([r["I"] for r in rows])
         S = V_gen * np.conj(I_gen)
         # bus voltages: the recovery of the topology in force at each row
-        V_bus = np.empty((len(rows), len(wscc9.BUSES)), dtype=complex)
+        V_bus = np.empty((len(rows), len(self.case.buses)), dtype=complex)
         for i, t in enumerate(time_):
             tp = [tp for tp in topologies if tp.start <= t + 1e-12][-1]
             V_bus[i] = self.network(tp).recovery @ V_gen[i]
         theta_vs = np.stack([r["theta"] for r in rows])
         theta_bus = np.unwrap(np.angle(V_bus), axis=0)
-        gen_rows = [wscc9.bus_index(b) for b in wscc9.GENERATOR_BUSES]
-        theta_bus[:, gen_rows] = theta_vs
-        return GridResult(time=time_, delta=machine[:, :, 0], omega=machine[:, :, 1], Ed_p=machine[:, :, 2],
-                          Eq_p=machine[:, :, 3], Efd=exciter[:, :, 0], RF=exciter[:, :, 1], VR=exciter[:, :, 2],
-                          Vs=np.abs(V_gen), theta_vs=theta_vs, P=S.real, Q=S.imag, V_bus=np.abs(V_bus),
-                          theta_bus=theta_bus, Pm=np.array(self.grid.Pm), Vref=np.array(self.grid.Vref),
-                          stable=lost is None, loss_of_synchronism_s=lost,
-                          events=tuple((tp.start, tp.description) for tp in topologies[1:]), exciters=True)
-
-
-def _loss_time(rows) -> float | None:
-    """The time two rotor angles first got pi apart, linear between the last two rows; None if not."""
-    def spread(row):
-        d = row["machine"][:, 0]
-        return float(np.max(d) - np.min(d))
-
-    now = spread(rows[-1])
-    if now <= math.pi:
-        return None
-    if len(rows) < 2:
-        return rows[-1]["time"]
-    before = spread(rows[-2])
-    t0, t1 = rows[-2]["time"], rows[-1]["time"]
-    return t0 + (t1 - t0) * (math.pi - before) / (now - before) if now > before else t1
+        theta_bus[:, self._gen_rows] = theta_vs
+        return GridResult(time=time_, states=states, Vs=np.abs(V_gen), theta_vs=theta_vs, P=S.real, Q=S.imag,
+                          V_bus=np.abs(V_bus), theta_bus=theta_bus, stable=lost is None, loss_of_synchronism_s=lost,
+                          events=tuple((tp.start, tp.description) for tp in topologies[1:]),
+                          gen_buses=self.case.generator_buses, buses=self.case.buses, machine_inputs=inputs)

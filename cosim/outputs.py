@@ -7,15 +7,74 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import shutil
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
 from reference_models.files import atomic_path
 
+RUN_FILES = ("result.csv", "result.png", "report.md", "summary.json")
+SCREENING_FILES = ("screening.csv", "screening.json", "screening.md", "screening.png")
+
 LABELS = {"surrogate": "surrogate FMUs", "reference": "native reference FMUs", "python": "pythonfmu reference FMUs",
           "file": "user FMUs", "monolithic": "monolithic DAE"}
 STYLES = {"monolithic": dict(color="k", lw=2.2, alpha=0.35), "reference": dict(ls="--", lw=1.2),
           "surrogate": dict(lw=1.0), "python": dict(ls=":", lw=1.2), "file": dict(ls="-.", lw=1.0)}
+
+
+class OutputError(ValueError):
+    """An output folder that cannot take a result set (one line)."""
+
+
+def check_output(out, names) -> Path:
+    """The folder `out`, created if absent, checked to take the files `names`: OutputError when it is a
+    file, cannot be written or one of the targets exists and is not a file."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise OutputError(f"--out {out} is a file, not a folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".opfmu-probe-")
+        probe.close()
+    except OSError as exc:
+        raise OutputError(f"cannot write into the output folder {out} ({exc.strerror or 'not writable'})") from None
+    for name in names:
+        target = out / name
+        if target.exists() and not target.is_file():
+            raise OutputError(f"cannot write {target}: it exists and is not a file")
+    return out
+
+
+@contextmanager
+def result_set(out, names):
+    """Writes a set of files whole or not at all: yields a staging folder beside them in `out`; when
+    the block ends without an error every file `names` written there is moved into `out` (each
+    move atomic), and the staging folder is removed in any case."""
+    out = check_output(out, names)
+    staging = Path(tempfile.mkdtemp(dir=out, prefix=".opfmu-staging-"))
+    try:
+        yield staging
+        missing = [n for n in names if not (staging / n).is_file()]
+        if missing:
+            raise OutputError(f"the result set lacks {', '.join(missing)}")
+        for name in names:
+            os.replace(staging / name, out / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _figure(figsize):
+    """A matplotlib Figure on the Agg canvas (no pyplot)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig
 
 
 def write_csv(path, result) -> None:
@@ -64,14 +123,12 @@ def errors(result, reference, fault=None) -> dict:
 
 def plot(path, runs: dict, title: str) -> None:
     """The figure: runs {kind: GridResult}, 2 x 2 panels."""
-    import matplotlib
+    from matplotlib import rcParams
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
+    fig = _figure((12, 7.5))
+    axes = fig.subplots(2, 2, sharex=True)
     first = next(iter(runs.values()))
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = rcParams["axes.prop_cycle"].by_key()["color"]
     for kind, result in runs.items():
         style = STYLES.get(kind, {})
         for k, bus in enumerate(result.gen_buses):
@@ -96,7 +153,6 @@ def plot(path, runs: dict, title: str) -> None:
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
 
 
 def _number(value, digits=4) -> str:
@@ -160,12 +216,6 @@ def screening_table(rows) -> str:
 def write_screening(out, rows, title: str) -> None:
     """screening.csv, screening.json, screening.md and screening.png (CCT per contingency) in `out`."""
     import json
-    from pathlib import Path
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     out = Path(out)
     text = io.StringIO()
@@ -180,7 +230,8 @@ def write_screening(out, rows, title: str) -> None:
     with atomic_path(out / "screening.md") as tmp:
         tmp.write_text(f"# {title}\n\n{screening_table(rows)}\n\nCCT: critical clearing time by bisection "
                        "(stable: no two rotor angles pi apart before the run's stop); '> x': stable up to x.\n")
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.45 * len(rows)), 4.0))
+    fig = _figure((max(6.0, 0.45 * len(rows)), 4.0))
+    ax = fig.subplots()
     labels = [f"{r['bus']}" + (f"\n{r['trip']}" if r["trip"] else "") for r in rows]
     values = [np.nan if r["cct_s"] is None else r["cct_s"] * 1e3 for r in rows]
     colors = ["tab:green" if r["stable"] else "tab:red" for r in rows]
@@ -195,4 +246,3 @@ def write_screening(out, rows, title: str) -> None:
     fig.tight_layout()
     with atomic_path(out / "screening.png") as tmp:
         fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)

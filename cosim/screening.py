@@ -1,47 +1,59 @@
 """Contingency screening: many faults and clearing actions as independent runs, on a dask cluster
-(a LocalCluster of single-threaded worker processes, or an existing scheduler), with a progress bar.
+(a LocalCluster of single-threaded worker processes, or an existing scheduler), with a progress
+report (a bar on a terminal, a line every few seconds otherwise).
 
 Each task is one contingency: its critical clearing time by bisection (stability.py), its verdict
 when cleared at the screening's clearing time, and the first-swing peak of that run. FMUs are built
 once, before any task is sent; a worker opens them once and reuses them for every task it gets
-(the master rewinds them between runs).
+(the master rewinds them between runs). They are extracted under one scratch folder of the
+screening, removed at its end whatever happened (also on an interrupt); local workers ignore
+Ctrl-C, so an interrupt is reported once, by the command.
 """
 from __future__ import annotations
 
 import logging
 import math
+import shutil
+import signal
+import sys
+import tempfile
+import time
 from dataclasses import dataclass
 
-from reference_models.grid import wscc9
 from reference_models.grid.contingency import Contingency
 
 from .master import MasterSettings
 from .stability import critical_clearing_time, first_swing_peak
 
+PROGRESS_EVERY_S = 5.0  # between two progress lines when stderr is not a terminal
+
 
 @dataclass(frozen=True)
 class ScreeningTask:
-    """What a worker needs: the contingency (its clearing time is the screening's), the run kind
-    and FMU files, the dynamic-data file, the master's settings and the CCT's stop and resolution."""
+    """What a worker needs: the case, the contingency (its clearing time is the screening's), the run
+    kind and FMU files (cosim.fmus.UnitFiles), the master's settings, the CCT's stop and
+    resolution, and the scratch folder FMUs are extracted under."""
 
+    case: object
     contingency: Contingency
     kind: str
     files: tuple
-    dynamic_data: str | None
     settings: MasterSettings
     stop: float
     resolution: float
+    scratch: str | None = None
 
 
-def contingencies(buses, trips: str = "each") -> list:
-    """Faults at `buses`, each without a trip and (trips "each") with every branch at the bus that
-    can open without cutting a generator off; clearing times are set per screening."""
+def contingencies(network, buses, trips: str = "each") -> list:
+    """Faults at `buses` of `network` (case.Network), each without a trip and (trips "each") with
+    every branch at the bus that can open without cutting a generator off; clearing times are set
+    per screening. ValueError for an unknown bus."""
     out = []
     for bus in buses:
-        wscc9.bus_index(bus)
+        network.bus_index(bus)
         out.append((bus, None))
         if trips == "each":
-            out += [(bus, t) for t in wscc9.trips_at(bus)]
+            out += [(bus, t) for t in network.trips_at(bus)]
     return out
 
 
@@ -49,15 +61,21 @@ _RUNNERS = {}
 
 
 def _runner(task: ScreeningTask):
-    """A runner per (kind, files, dynamic data, settings), opened once per worker process."""
-    from .runners import MasterRunner, MonolithicRunner, load_grid
+    """A runner per (kind, files, settings), opened once per worker process."""
+    from .runners import MasterRunner, MonolithicRunner
 
-    key = (task.kind, task.files, task.dynamic_data, task.settings)
+    key = (task.kind, task.files, task.settings, task.scratch)
     if key not in _RUNNERS:
-        grid = load_grid(task.dynamic_data)
-        _RUNNERS[key] = (MonolithicRunner(grid, task.settings.step, 1e-9) if task.kind == "monolithic"
-                         else MasterRunner(task.files, grid, task.settings))
+        _RUNNERS[key] = (MonolithicRunner(task.case, task.settings.step, 1e-9) if task.kind == "monolithic"
+                         else MasterRunner(task.files, task.case, task.settings, task.scratch))
     return _RUNNERS[key]
+
+
+def close_runners() -> None:
+    """Closes the runners this process opened (their FMUs and extracted files)."""
+    while _RUNNERS:
+        _, runner = _RUNNERS.popitem()
+        runner.close()
 
 
 def screen_one(task: ScreeningTask) -> dict:
@@ -77,18 +95,48 @@ def screen_one(task: ScreeningTask) -> dict:
             "cct_s": cct.cct_s, "bounded": cct.bounded, "runs": len(cct.runs) + 1}
 
 
-def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
-    """The rows of every task (in the tasks' order), run on dask: `scheduler` (an address) or a
-    LocalCluster of `workers` processes (0: in this process, no dask)."""
-    from tqdm import tqdm
+class _Progress:
+    """A tqdm bar (`bar`), a line on stderr every PROGRESS_EVERY_S (`lines`) or nothing (None)."""
 
-    bar = tqdm(total=len(tasks), desc="contingencies", unit="run", disable=not progress)
+    def __init__(self, total: int, mode: str | None):
+        self.total, self.done, self.mode = total, 0, mode
+        self.bar, self.last = None, time.monotonic()
+        if mode == "bar":
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc="contingencies", unit="run")
+
+    def update(self) -> None:
+        self.done += 1
+        if self.bar is not None:
+            self.bar.update()
+        elif self.mode == "lines" and (time.monotonic() - self.last >= PROGRESS_EVERY_S or self.done == self.total):
+            self.last = time.monotonic()
+            print(f"contingencies: {self.done}/{self.total} done", file=sys.stderr, flush=True)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: str | None = None) -> list:
+    """The rows of every task (in the tasks' order), run on dask: `scheduler` (an address) or a
+    LocalCluster of `workers` processes (0: in this process, no dask). progress: "bar", "lines" or
+    None."""
+    from dataclasses import replace
+
+    scratch = None if scheduler else tempfile.mkdtemp(prefix="opfmu_screen_")  # remote workers: their own
+    tasks = [replace(t, scratch=scratch) for t in tasks]
+    report = _Progress(len(tasks), progress)
     rows = [None] * len(tasks)
     try:
         if not scheduler and workers == 0:
-            for i, task in enumerate(tasks):
-                rows[i] = screen_one(task)
-                bar.update()
+            try:
+                for i, task in enumerate(tasks):
+                    rows[i] = screen_one(task)
+                    report.update()
+            finally:
+                close_runners()
             return rows
         from dask.distributed import Client, LocalCluster, as_completed
 
@@ -96,18 +144,28 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool
         if scheduler:
             client = Client(scheduler, timeout="20s")
         else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.CRITICAL)
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the worker processes
+            try:
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.CRITICAL)
+            finally:
+                signal.signal(signal.SIGINT, previous)
             client = Client(cluster)
         try:
             futures = {client.submit(screen_one, task, pure=False): i for i, task in enumerate(tasks)}
             for future in as_completed(futures):
                 rows[futures[future]] = future.result()
-                bar.update()
+                report.update()
         finally:
+            try:
+                client.run(close_runners)
+            except BaseException:
+                pass
             client.close()
             if cluster is not None:
                 cluster.close()
         return rows
     finally:
-        bar.close()
+        report.close()
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)

@@ -1,25 +1,29 @@
-"""`opfmu grid`: network co-simulation of the WSCC 9-bus system (DESIGN section 8).
+"""`opfmu grid`: network co-simulation of a grid case (the design card's grid section).
 
     opfmu grid run    one contingency: DIR/result.csv, DIR/result.png, DIR/report.md, DIR/summary.json
     opfmu grid cct    the critical clearing time of a fault and its clearing action (--json: one object)
     opfmu grid screen many contingencies on dask: CCTs, stable/unstable verdicts, first-swing peaks
 
-The FMUs of every generator are built from its dynamic data (--dynamic-data, default the shipped
-wscc9 file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed.
+The FMUs of every unit are built from its dynamic data (--dynamic-data, default the shipped wscc9
+file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed.
+Everything a command is asked is checked before any work (one line, exit code 2); a result set is
+written whole or not at all.
 """
 from __future__ import annotations
 
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
-from reference_models.files import atomic_path
+from opfmu.errors import UserError
 
 CASES = ("wscc9",)
+MAX_STOP_S = 3600.0  # the longest run a grid command takes [s]
 
 
-def _positive_time(text: str) -> float:
+def _time(text: str) -> float:
     import argparse
 
     try:
@@ -31,56 +35,61 @@ def _positive_time(text: str) -> float:
     return value
 
 
-def _common(p, kinds_default: str | None, trip: bool = True) -> None:
-    from cosim.runners import RUN_KINDS
+def _run_kinds() -> tuple:
+    from cosim.fmus import FMU_KINDS
 
+    return tuple(k for k in FMU_KINDS if k != "file") + ("monolithic",)
+
+
+def _common(p, trip: bool = True) -> None:
     p.add_argument("--case", default="wscc9", help="the network (only wscc9: the WSCC 9-bus system, Anderson & Fouad)")
     p.add_argument("--dynamic-data", default=None, metavar="FILE",
-                   help="generators' dynamic data (machines, exciters, FMU kinds; default: the shipped wscc9 file)")
-    p.add_argument("--fmus", choices=RUN_KINDS, default=kinds_default,
-                   help="the FMUs of every generator, or monolithic for the DAE reference "
-                        "(default: each generator's kind in the dynamic data: surrogate for the shipped file)")
+                   help="the units' dynamic data (machines, exciters, FMU kinds; default: the shipped wscc9 file)")
+    p.add_argument("--fmus", choices=_run_kinds(), default=None,
+                   help="the FMUs of every unit, or monolithic for the DAE reference "
+                        "(default: each unit's kind in the dynamic data: surrogate for the shipped file)")
+    p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
+                   help="FMI version of the native FMUs built (default 2; FMI 3.0 inputs are held over each step)")
     if trip:
         p.add_argument("--trip", default=None, metavar="FROM-TO", help="the branch opened at clearing, e.g. 5-7")
-    p.add_argument("--fault-start", type=_positive_time, default=0.0, help="fault start in s (default 0)")
+    p.add_argument("--fault-start", type=_time, default=0.0, help="fault start in s (default 0)")
     p.add_argument("--fault-impedance", type=float, default=None, metavar="PU",
-                   help="fault reactance in pu (default 1e-6: bolted)")
+                   help="fault reactance in pu, > 0 (default 1e-6: bolted)")
     p.add_argument("--step", type=float, default=0.01, help="communication step in s (default 0.01)")
     p.add_argument("--coupling", choices=("iterated", "extrapolated", "held"), default="iterated",
                    help="iterated: inputs linear over each step to a consistent end voltage, the step redone "
                         "from a saved FMU state (default); extrapolated: linear to the extrapolated end, one pass; "
                         "held: the start voltages held over the step (a plain master)")
-    p.add_argument("--passes", type=int, default=3,
-                   help="most passes of an iterated step (default 3)")
+    p.add_argument("--passes", type=int, default=3, help="most passes of an iterated step (default 3)")
     p.add_argument("--fmu-cache", default=None, metavar="DIR", help="where built FMUs are kept")
 
 
 def add_grid_parser(sub) -> None:
     grid = sub.add_parser("grid", help="network co-simulation (WSCC 9-bus): run, cct, screen",
-                          description="The WSCC 9-bus system with one FMU per machine and exciter, the network "
-                                      "solved at every communication point (Newton on the FMUs' directional "
+                          description="A grid case with one FMU per device (machine, exciter) of each unit, the "
+                                      "network solved at every communication point (Newton on the FMUs' directional "
                                       "derivatives), inputs linear over each step and the step iterated with "
                                       "FMU state rollback; or the monolithic DAE reference.")
     gsub = grid.add_subparsers(dest="grid_command", required=True)
     run = gsub.add_parser("run", help="one contingency", description="Simulate one contingency; writes DIR/result.csv "
                           "(one row per communication point), result.png, report.md and summary.json.")
     run.add_argument("--fault", type=int, required=True, metavar="BUS", help="faulted bus")
-    run.add_argument("--clear", type=_positive_time, required=True, metavar="SECONDS", help="clearing time in s")
-    run.add_argument("--stop", type=_positive_time, default=5.0, help="end time in s (default 5)")
+    run.add_argument("--clear", type=_time, required=True, metavar="SECONDS", help="clearing time in s (before --stop)")
+    run.add_argument("--stop", type=_time, default=5.0, help=f"end time in s (default 5, at most {MAX_STOP_S:g})")
     run.add_argument("--compare", default="monolithic",
                      help="runs drawn on the same figure and compared in the report: a comma list of "
                           "surrogate, reference, python, monolithic, or none (default monolithic)")
     run.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    _common(run, None)
+    _common(run)
     run.set_defaults(func=cmd_run)
 
     cct = gsub.add_parser("cct", help="critical clearing time", description="Critical clearing time of a fault and "
                           "its clearing action by bisection (stable: no two rotor angles pi apart before --stop).")
     cct.add_argument("--fault", type=int, required=True, metavar="BUS", help="faulted bus")
-    cct.add_argument("--stop", type=_positive_time, default=3.0, help="end of each run in s (default 3)")
+    cct.add_argument("--stop", type=_time, default=3.0, help="end of each run in s (default 3)")
     cct.add_argument("--resolution", type=float, default=1e-3, help="bisection resolution in s (default 0.001)")
     cct.add_argument("--json", action="store_true", help="print one JSON object (with cct_s)")
-    _common(cct, None)
+    _common(cct)
     cct.set_defaults(func=cmd_cct)
 
     scr = gsub.add_parser("screen", help="contingency screening on dask",
@@ -89,94 +98,162 @@ def add_grid_parser(sub) -> None:
     scr.add_argument("--faults", default="4,5,6,7,8,9", help="faulted buses, comma separated (default 4-9)")
     scr.add_argument("--trips", choices=("each", "none"), default="each",
                      help="each: also every trip at the faulted bus that keeps the generators connected (default)")
-    scr.add_argument("--clear", type=_positive_time, default=0.1, help="clearing time of the verdict runs (default 0.1 s)")
-    scr.add_argument("--stop", type=_positive_time, default=3.0, help="end of each run in s (default 3)")
+    scr.add_argument("--clear", type=_time, default=0.1, help="clearing time of the verdict runs (default 0.1 s)")
+    scr.add_argument("--stop", type=_time, default=3.0, help="end of each run in s (default 3)")
     scr.add_argument("--resolution", type=float, default=1e-3, help="CCT resolution in s (default 0.001)")
     scr.add_argument("--workers", type=int, default=2, help="local dask worker processes (0: no dask; default 2)")
     scr.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing dask scheduler instead")
     scr.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    scr.add_argument("--quiet", action="store_true", help="no progress bar")
-    _common(scr, None, trip=False)
+    scr.add_argument("--quiet", action="store_true", help="no progress report")
+    _common(scr, trip=False)
     scr.set_defaults(func=cmd_screen)
 
 
-class GridUserError(ValueError):
-    """A grid request opfmu cannot run as asked (one line)."""
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:300] or type(exc).__name__
 
 
-def _setup(args, with_contingency: bool = True):
-    """(grid, settings, contingency or None) from the common flags; GridUserError for what is wrong."""
-    from reference_models.grid.contingency import Contingency
-
-    from cosim.master import MasterSettings
-    from cosim.runners import load_grid
+def _case(args):
+    """The case of --case and --dynamic-data; UserError for what cannot be read."""
+    from reference_models.grid import wscc9
+    from reference_models.grid.case import CaseError
 
     if args.case not in CASES:
-        raise GridUserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
+        raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
     try:
-        grid = load_grid(args.dynamic_data)
-    except FileNotFoundError as exc:
-        raise GridUserError(f"no dynamic-data file {exc.filename}") from None
-    except (ValueError, KeyError, TypeError, OSError, AttributeError) as exc:
-        raise GridUserError(f"cannot use the dynamic data {args.dynamic_data}: {type(exc).__name__}: "
-                            f"{str(exc)[:200]}") from None
-    settings = MasterSettings(step=args.step, coupling=args.coupling, passes=args.passes)
-    if not with_contingency:
-        return grid, settings, None
-    z = _fault_impedance(args)
-    clear = getattr(args, "clear", None)
-    if clear is None:  # cct: a provisional clearing time, replaced by the bisection
-        clear = args.fault_start + 0.05
-    contingency = Contingency(args.fault, clear, args.trip, args.fault_start, z)
-    return grid, settings, contingency
+        return wscc9.case(args.dynamic_data)
+    except CaseError as exc:
+        raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
+
+
+def _settings(args):
+    from cosim.master import MasterSettings
+
+    try:
+        return MasterSettings(step=args.step, coupling=args.coupling, passes=args.passes)
+    except ValueError as exc:
+        raise UserError(_one_line(exc)) from None
+
+
+def _stop(args, settings) -> None:
+    from cosim.master import check_steps
+
+    if not 0 < args.stop <= MAX_STOP_S:
+        raise UserError(f"--stop must be a time in (0, {MAX_STOP_S:g}] s, got {args.stop:g}")
+    try:
+        check_steps(args.stop, settings.step)
+    except ValueError as exc:
+        raise UserError(_one_line(exc)) from None
+
+
+def _fault_impedance(args) -> complex:
+    from reference_models.grid.contingency import BOLTED_FAULT_IMPEDANCE
+
+    if args.fault_impedance is None:
+        return BOLTED_FAULT_IMPEDANCE
+    if not (math.isfinite(args.fault_impedance) and args.fault_impedance > 0):
+        raise UserError(f"--fault-impedance must be a finite reactance > 0 pu, got {args.fault_impedance:g}")
+    return complex(0.0, args.fault_impedance)
+
+
+def _contingency(case, bus, clear, trip, args):
+    from reference_models.grid.contingency import Contingency
+
+    try:
+        return Contingency(bus, clear, trip, args.fault_start, _fault_impedance(args), case.network)
+    except ValueError as exc:
+        raise UserError(_one_line(exc)) from None
+
+
+def _check_fmus(case, kind) -> None:
+    """The FMU kinds, FMU files and operators of every unit, checked before any build."""
+    from cosim.fmu import CouplingError
+    from cosim.fmus import check_unit_fmus
+
+    if kind == "monolithic":
+        return
+    try:
+        check_unit_fmus(case, kind)
+    except CouplingError as exc:
+        raise UserError(_one_line(exc)) from None
+
+
+def _main_kind(case, fmus) -> str:
+    from cosim.fmus import unit_fmus
+
+    return fmus or "+".join(sorted({f.kind for f in unit_fmus(case)}))
 
 
 def _progress(text: str) -> None:
     print(f"building {text}", file=sys.stderr)
 
 
+def _open(kind, case, settings, args, progress, **options):
+    from cosim.fmu import CouplingError
+    from cosim.runners import open_runner
+
+    try:
+        return open_runner(kind, case, settings, args.fmu_cache, progress, fmi_version=args.fmi_version, **options)
+    except CouplingError as exc:
+        raise UserError(_one_line(exc)) from None
+
+
 def cmd_run(args) -> None:
     from cosim import outputs
-    from cosim.runners import RUN_KINDS, open_runner
 
-    grid, settings, contingency = _setup(args)
+    case = _case(args)
+    settings = _settings(args)
+    _stop(args, settings)
+    contingency = _contingency(case, args.fault, args.clear, args.trip, args)
+    if contingency.clear_s >= args.stop:
+        raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
+    kinds_known = _run_kinds()
     compare = [] if args.compare.strip() in ("", "none") else [k.strip() for k in args.compare.split(",")]
-    unknown = [k for k in compare if k not in RUN_KINDS]
+    unknown = [k for k in compare if k not in kinds_known]
     if unknown:
-        raise GridUserError(f"--compare: unknown run kind {unknown[0]!r} (known: {', '.join(RUN_KINDS)}, none)")
-    main_kind = args.fmus or "+".join(sorted({g.fmu.kind for g in grid.dynamics}))
+        raise UserError(f"--compare: unknown run kind {unknown[0]!r} (known: {', '.join(kinds_known)}, none)")
+    main_kind = _main_kind(case, args.fmus)
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
+    for kind in kinds:
+        _check_fmus(case, kind)
+    try:
+        outputs.check_output(args.out, outputs.RUN_FILES)
+    except outputs.OutputError as exc:
+        raise UserError(str(exc)) from None
     runs, timings = {}, {}
     for kind in kinds:
-        runner = open_runner(kind, grid, settings, args.fmu_cache, _progress)
+        runner = _open(kind, case, settings, args, _progress)
         try:
             result, timing = runner.run(contingency, args.stop)
         finally:
             runner.close()
         label = kind or main_kind
         runs[label], timings[label] = result, timing
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     main = runs[main_kind]
-    outputs.write_csv(out / "result.csv", main)
     title = f"WSCC 9-bus: {contingency.label}"
-    outputs.plot(out / "result.png", runs, title)
     messages = {k: t.pop("messages", {}) for k, t in timings.items()}
     logged = [f"{_label(kind)}, generator {bus}: {text}" for kind, per_bus in messages.items()
               for bus, texts in per_bus.items() for _, text in texts[:3]]
     notes = [f"{_label(kind)}: {note}" for kind, t in timings.items() for note in t.pop("notes", [])]
-    outputs.report(out / "report.md", title, runs, timings, contingency,
-                   [f"Note: {n}" for n in notes]
-                   + ((["", "FMU log (first messages per generator):", ""] + [f"- {n}" for n in logged]) if logged else []))
     summary = {"contingency": contingency.label, "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
-               "passes": settings.passes}
+               "passes": settings.passes, "fmi_version": args.fmi_version}
     if "monolithic" in runs and main_kind != "monolithic":
         fault = (contingency.fault_start, contingency.clear_s)
         summary["difference_from_monolithic"] = {k: outputs.errors(r, runs["monolithic"], fault)
                                                  for k, r in runs.items() if k != "monolithic"}
-    with atomic_path(out / "summary.json") as tmp:
-        tmp.write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    out = Path(args.out)
+    try:
+        with outputs.result_set(out, outputs.RUN_FILES) as staging:
+            outputs.write_csv(staging / "result.csv", main)
+            outputs.plot(staging / "result.png", runs, title)
+            outputs.report(staging / "report.md", title, runs, timings, contingency,
+                           [f"Note: {n}" for n in notes]
+                           + ((["", "FMU log (first messages per generator):", ""] + [f"- {n}" for n in logged])
+                              if logged else []))
+            (staging / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    except (outputs.OutputError, OSError) as exc:
+        raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     verdict = "stable" if main.stable else f"unstable (loss of synchronism at {main.loss_of_synchronism_s:.3f} s)"
     print(f"{title}: {verdict}; {_label(main_kind)} in {timings[main_kind]['total_s']:.2f} s")
     for kind, e in summary.get("difference_from_monolithic", {}).items():
@@ -191,19 +268,27 @@ def _label(kind) -> str:
     return LABELS.get(kind, kind)
 
 
+def _resolution(args) -> None:
+    if not (math.isfinite(args.resolution) and 0 < args.resolution <= 0.1):
+        raise UserError(f"--resolution must be a time in (0, 0.1] s, got {args.resolution:g}")
+
+
 def cmd_cct(args) -> None:
-    from cosim.runners import open_runner
     from cosim.stability import critical_clearing_time
 
-    grid, settings, contingency = _setup(args)
-    runner = open_runner(args.fmus, grid, settings, args.fmu_cache, None if args.json else _progress,
-                         monolithic_rtol=1e-9)
+    case = _case(args)
+    settings = _settings(args)
+    _stop(args, settings)
+    _resolution(args)
+    contingency = _contingency(case, args.fault, args.fault_start + 0.05, args.trip, args)  # clearing: bisected
+    _check_fmus(case, args.fmus)
+    runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
     try:
         cct = critical_clearing_time(lambda c: runner.run(c, args.stop, stop_at_loss=True)[0].stable, contingency,
                                      args.resolution)
     finally:
         runner.close()
-    kind = args.fmus or "+".join(sorted({g.fmu.kind for g in grid.dynamics}))
+    kind = _main_kind(case, args.fmus)
     if args.json:
         print(json.dumps({"case": args.case, "fault": args.fault, "trip": contingency.trip,
                           "fault_start_s": args.fault_start, "fmus": kind, **cct.to_dict()}))
@@ -220,35 +305,50 @@ def cmd_cct(args) -> None:
 
 def cmd_screen(args) -> None:
     from cosim import outputs
+    from cosim.fmu import CouplingError
     from cosim.fmus import generator_files
     from cosim.screening import ScreeningTask, contingencies, screen
-    from reference_models.grid.contingency import Contingency
 
-    grid, settings, _ = _setup(args, with_contingency=False)
-    try:
-        buses = [int(b) for b in args.faults.split(",") if b.strip()]
-    except ValueError:
-        raise GridUserError(f"--faults must be bus numbers separated by commas, got {args.faults!r}") from None
+    case = _case(args)
+    settings = _settings(args)
+    _stop(args, settings)
+    _resolution(args)
+    parts = [b.strip() for b in args.faults.split(",")]
+    if not all(parts) or not all(p.lstrip("-").isdigit() for p in parts):
+        raise UserError(f"--faults must be bus numbers separated by commas, got {args.faults!r}")
     if args.workers < 0:
-        raise GridUserError("--workers must be >= 0")
-    pairs = contingencies(buses, args.trips)
-    files = () if args.fmus == "monolithic" else tuple(generator_files(grid.dynamics, args.fmus, args.fmu_cache, _progress))
-    kind = args.fmus or "+".join(sorted({g.fmu.kind for g in grid.dynamics}))
-    z = _fault_impedance(args)
-    tasks = [ScreeningTask(Contingency(bus, args.clear, trip, args.fault_start, z),
-                           "monolithic" if args.fmus == "monolithic" else kind, files,
+        raise UserError("--workers must be >= 0")
+    try:
+        pairs = contingencies(case.network, [int(b) for b in parts], args.trips)
+    except ValueError as exc:
+        raise UserError(_one_line(exc)) from None
+    if args.clear >= args.stop:
+        raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
+    tasks_contingencies = [_contingency(case, bus, args.clear, trip, args) for bus, trip in pairs]
+    _check_fmus(case, args.fmus)
+    try:
+        outputs.check_output(args.out, outputs.SCREENING_FILES)
+    except outputs.OutputError as exc:
+        raise UserError(str(exc)) from None
+    try:
+        files = () if args.fmus == "monolithic" else tuple(generator_files(case, args.fmus, args.fmu_cache, _progress,
+                                                                            args.fmi_version))
+    except CouplingError as exc:
+        raise UserError(_one_line(exc)) from None
+    kind = _main_kind(case, args.fmus)
+    tasks = [ScreeningTask(c, "monolithic" if args.fmus == "monolithic" else kind, files,
                            str(args.dynamic_data) if args.dynamic_data else None, settings, args.stop, args.resolution)
-             for bus, trip in pairs]
-    rows = screen(tasks, args.workers, args.scheduler, progress=not args.quiet)
+             for c in tasks_contingencies]
+    progress = None if args.quiet else ("bar" if sys.stderr.isatty() else "lines")
+    started = time.perf_counter()
+    rows = screen(tasks, args.workers, args.scheduler, progress=progress)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    outputs.write_screening(out, rows, f"WSCC 9-bus contingency screening ({_label(kind)}, verdicts at "
-                                       f"{args.clear:g} s clearing)")
+    try:
+        with outputs.result_set(out, outputs.SCREENING_FILES) as staging:
+            outputs.write_screening(staging, rows, f"WSCC 9-bus contingency screening ({_label(kind)}, verdicts at "
+                                                   f"{args.clear:g} s clearing)")
+    except (outputs.OutputError, OSError) as exc:
+        raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     print(outputs.screening_table(rows))
-    print(f"written: {out / 'screening.csv'}, {out / 'screening.md'}, {out / 'screening.png'}")
-
-
-def _fault_impedance(args) -> complex:
-    from reference_models.grid.contingency import BOLTED_FAULT_IMPEDANCE
-
-    return BOLTED_FAULT_IMPEDANCE if args.fault_impedance is None else complex(0.0, args.fault_impedance)
+    print(f"{len(rows)} contingencies in {time.perf_counter() - started:.1f} s; written: {out / 'screening.csv'}, "
+          f"{out / 'screening.md'}, {out / 'screening.png'}")

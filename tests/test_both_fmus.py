@@ -9,7 +9,7 @@ import pytest
 from fmpy import extract, read_model_description
 
 from fmu_export.binaries import fmi_headers
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.sm4 import SM4
 
 FUZZ_HARNESS = __file__.rsplit("/", 1)[0] + "/c/fuzz_harness.c"
@@ -56,7 +56,7 @@ def test_serialized_state_restored_in_a_fresh_process_continues_the_run(unzipped
     script = f"""
 import numpy as np, sys
 sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.sm4 import SM4
 from fmpy import read_model_description
 slave = Slave(({str(unzipped[0])!r}, read_model_description({str(unzipped[0])!r})))
@@ -133,3 +133,124 @@ def test_random_fmi_call_sequences_under_valgrind_are_clean(native, fuzz_harness
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]
     assert "ERROR SUMMARY: 0 errors" in result.stderr
+
+
+STATE_FUZZ = __file__.rsplit("/", 1)[0] + "/c/state_fuzz.c"
+# a parameter of each native FMU set to a value whose bit pattern marks its slot in the serialized state:
+# the surrogate's rollover horizon [s] (a horizon of 0 once made a step never return) and the
+# reference's rtol
+PROBES = {"rollover_horizon": 0.1234567, "rtol": 1.2345678e-7}
+
+
+@pytest.fixture(scope="module")
+def state_fuzz(tmp_path_factory):
+    out = tmp_path_factory.mktemp("state_fuzz") / "state_fuzz"
+    subprocess.run(["gcc", "-O1", "-g", "-I", str(fmi_headers()), STATE_FUZZ, "-o", str(out), "-ldl", "-lm"],
+                   check=True)
+    return out
+
+
+@pytest.fixture(scope="module")
+def small_surrogate_path(fmu_cache):
+    """The surrogate FMU (FMI 2.0) of a small shipped operator (wscc9_gen2.onnx, a trunk kernel a fifth
+    of the default operator's size), from the run's build cache: a state the fuzzer can sweep."""
+    from fmu_export.build_cache import cached_surrogate_fmu
+    from surrogate.operator import DEFAULT_OPERATOR
+
+    return cached_surrogate_fmu(DEFAULT_OPERATOR.parent / "wscc9_gen2.onnx", "Gen2Surrogate", n_check=4,
+                                cache=fmu_cache)
+
+
+def state_bytes(unzipped) -> bytes:
+    """The serialized FMU state of an instance after 20 steps of 10 ms."""
+    slave = Slave(unzipped)
+    for _ in range(20):
+        slave.step(0.01)
+    state = slave.fmu.getFMUstate()
+    data = bytes(slave.fmu.serializeFMUstate(state))
+    slave.fmu.freeFMUstate(state)
+    slave.close()
+    return data
+
+
+@pytest.fixture(scope="module", params=["small_surrogate_path", "native_reference_path"])
+def fuzzed(request, tmp_path_factory):
+    """(extracted FMU, the state fuzzer's command line for it with `cases` and `seed` to fill in): the
+    FMU's probe parameter and, as the foreign state, the other native FMU's serialized state."""
+    other = {"small_surrogate_path": "native_reference_path"}.get(request.param, "small_surrogate_path")
+    path = request.getfixturevalue(request.param)
+    unzipped = extract(str(path)), read_model_description(str(path))
+    foreign = tmp_path_factory.mktemp("foreign_state") / "state.bin"
+    other_path = request.getfixturevalue(other)
+    foreign.write_bytes(state_bytes((extract(str(other_path)), read_model_description(str(other_path)))))
+    directory, md = unzipped
+    variables = {v.name: v for v in md.modelVariables}
+    probe = next(name for name in PROBES if name in variables)
+    n_reals = sum(v.type == "Real" for v in md.modelVariables)
+
+    def command(cases: int, seed: int) -> list:
+        return [f"{directory}/binaries/linux64/{md.coSimulation.modelIdentifier}.so", md.guid, str(seed), str(cases),
+                str(n_reals), str(variables[probe].valueReference), repr(PROBES[probe]), str(foreign)]
+
+    return unzipped, command
+
+
+def run_state_fuzz(harness, command, timeout, prefix=()) -> tuple:
+    """(counts, completed process) of a state fuzzer run, within `timeout` seconds."""
+    result = subprocess.run([*prefix, str(harness), *command], capture_output=True, text=True, timeout=timeout)
+    words = result.stdout.split()
+    return dict(zip(words[0::2], map(int, words[1::2]))), result
+
+
+@pytest.fixture(scope="module")
+def state_fuzz_run(fuzzed, state_fuzz):
+    """The state fuzzer's counts on one FMU: the first, last and 300 random 8-byte slots of its state
+    with every bad value, random and half-random bytes, wrong sizes, another FMU's state."""
+    _, command = fuzzed
+    counts, result = run_state_fuzz(state_fuzz, command(300, 11), timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr[-2000:]
+    return counts
+
+
+def test_corrupt_serialized_states_are_refused_or_step_in_bounded_time(state_fuzz_run):
+    """Every deserialized or set state with a broken field, random bytes, a wrong size or another FMU's
+    bytes is refused (the instance unchanged, a reason logged) or steps with a valid status; the run
+    ends within its timeout (a state once made a step never return)."""
+    counts = state_fuzz_run
+    assert counts["failures"] == 0
+    assert counts["refused"] > 200 and counts["accepted"] > 100 and counts["steps"] > 100
+
+
+def test_a_state_with_an_out_of_range_parameter_is_refused(state_fuzz_run):
+    """The rollover horizon (surrogate) or rtol (reference) of a serialized state set to 0, -1, NaN,
+    +-inf, +-1e308 or the smallest subnormal: each refused, as fmi2SetReal refuses the value."""
+    assert state_fuzz_run["probe_cases"] == 8 and state_fuzz_run["probe_refused"] == 8
+
+
+def test_fmu_state_calls_refuse_a_pointer_the_instance_did_not_hand_out(state_fuzz_run):
+    """fmi2FreeFMUstate, fmi2SetFMUstate, the serialize calls and fmi2GetFMUstate/fmi2DeSerializeFMUstate
+    into it refuse a pointer the instance did not allocate, and free nothing (valgrind below sees no
+    double free)."""
+    assert state_fuzz_run["foreign_refused"] == 6
+
+
+def test_setup_experiment_refuses_a_tolerance_that_is_not_positive_and_finite(fuzzed, state_fuzz_run):
+    assert state_fuzz_run["tolerance_refused"] == 4  # -1, 0, NaN, inf (the fuzzer's calls)
+    slave = Slave(fuzzed[0], init=False)
+    with pytest.raises(Exception):
+        slave.fmu.setupExperiment(tolerance=-1.0, startTime=0.0)
+    assert any("tolerance -1 must be positive and finite" in m for _, m in slave.messages)
+    slave.fmu.setupExperiment(startTime=0.0)  # the instance is still usable
+    slave.fmu.enterInitializationMode()
+    slave.fmu.exitInitializationMode()
+    slave.close()
+
+
+@pytest.mark.platform_tools("valgrind")
+def test_the_state_fuzzer_under_valgrind_is_clean(fuzzed, state_fuzz):
+    _, command = fuzzed
+    counts, result = run_state_fuzz(state_fuzz, command(8, 5), timeout=600,
+                                    prefix=("valgrind", "--leak-check=full", "--error-exitcode=3",
+                                            "--errors-for-leak-kinds=definite,indirect,possible"))
+    assert result.returncode == 0, result.stdout + result.stderr[-3000:]
+    assert "ERROR SUMMARY: 0 errors" in result.stderr and counts["failures"] == 0

@@ -12,7 +12,7 @@ import onnx
 import pytest
 from fmpy import extract, read_model_description
 
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from hand_made import operator_without_trunk
 from opfmu.cli import main
 from reference_models.drift import frame_of

@@ -6,7 +6,7 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.sm4 import SM4
 
 DEFAULT = SM4.params()

@@ -1,19 +1,16 @@
-"""`opfmu grid run|cct|screen`: the DESIGN section 8 contract (result.csv columns, one row per
+"""`opfmu grid run|cct|screen`: the design card's grid contract (result.csv columns, one row per
 communication point, cct --json with cct_s), the surrogate FMUs against the monolithic run and its
-critical clearing time, and one-line errors with exit code 2 for what cannot run."""
+critical clearing time, one-line errors with exit code 2 for what cannot run, decided before any
+work, a result set written whole or not at all, and no extracted FMU folder left behind."""
 import csv
 import json
+import tempfile
 
 import numpy as np
 import pytest
 
 from opfmu.cli import main
 from reference_models.grid import wscc9
-
-
-@pytest.fixture(autouse=True)
-def fmu_cache(grid_fmu_cache, monkeypatch):
-    monkeypatch.setenv("OPFMU_FMU_CACHE", str(grid_fmu_cache))
 
 
 def read_csv(path):
@@ -63,10 +60,16 @@ def test_grid_cct_of_the_surrogate_fmus_is_within_5_ms_of_the_monolithic_one(cap
     assert abs(found["surrogate"]["cct_s"] - found["monolithic"]["cct_s"]) <= 0.005
 
 
-def test_grid_screen_tabulates_ccts_verdicts_and_first_swing_peaks_on_dask(tmp_path):
+def test_grid_screen_tabulates_ccts_verdicts_and_first_swing_peaks_on_dask(tmp_path, capsys, monkeypatch):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
     out = tmp_path / "screen"
     assert main(["grid", "screen", "--faults", "5", "--trips", "each", "--fmus", "reference", "--clear", "0.1",
-                 "--stop", "1.5", "--resolution", "0.004", "--workers", "1", "--quiet", "--out", str(out)]) == 0
+                 "--stop", "1.5", "--resolution", "0.004", "--workers", "1", "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err and "contingencies: 3/3 done" in err  # lines, not a bar, into a redirected stderr
+    assert not list(scratch.iterdir())  # every extracted FMU folder removed
     rows = json.loads((out / "screening.json").read_text())
     assert [(r["bus"], r["trip"]) for r in rows] == [(5, ""), (5, "4-5"), (5, "5-7")]
     for r in rows:
@@ -86,12 +89,83 @@ def test_grid_screen_tabulates_ccts_verdicts_and_first_swing_peaks_on_dask(tmp_p
     (["grid", "run", "--fault", "7", "--clear", "0.1", "--compare", "psse", "--out", "x"], "unknown run kind"),
     (["grid", "cct", "--fault", "7", "--resolution", "0", "--fmus", "monolithic"], "resolution"),
     (["grid", "screen", "--faults", "4,x", "--out", "x"], "bus numbers"),
+    (["grid", "screen", "--faults", ",", "--out", "x"], "bus numbers"),
+    (["grid", "screen", "--faults", "", "--out", "x"], "bus numbers"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "1e9", "--out", "x"], "--stop must be a time in (0, 3600] s"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "3000", "--step", "1e-5", "--out", "x"],
+     "communication steps (at most 1e+07"),
+    (["grid", "cct", "--fault", "7", "--stop", "1e9", "--fmus", "monolithic"], "--stop must be a time"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--fault-impedance", "-0.01", "--out", "x"],
+     "--fault-impedance must be a finite reactance > 0 pu"),
+    (["grid", "run", "--fault", "7", "--clear", "1e300", "--out", "x"], "must come before the stop at 5 s"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "0.05", "--out", "x"],
+     "the clearing at 0.1 s must come before the stop at 0.05 s"),
+    (["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "0.1", "--out", "x"], "must come before the stop"),
+    (["grid", "screen", "--faults", "7", "--clear", "5", "--stop", "3", "--out", "x"], "must come before the stop"),
+    (["grid", "screen", "--faults", "12", "--out", "x"], "no bus 12"),
 ])
 def test_grid_mistakes_end_in_one_line_and_exit_code_2(argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("OPFMU_FMU_CACHE", str(tmp_path / "cache"))
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "x").exists()  # refused before any work
+
+
+def test_an_output_folder_that_cannot_take_the_results_is_refused_before_any_build(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("OPFMU_FMU_CACHE", str(tmp_path / "cache"))
+    (tmp_path / "a_file").write_text("")
+    for out, message in ((tmp_path / "a_file", "is a file"), (tmp_path / "a_file" / "sub", "cannot write into")):
+        assert main(["grid", "run", "--fault", "7", "--clear", "0.1", "--fmus", "reference", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "cache").exists()
+
+
+def test_a_result_set_is_written_whole_or_not_at_all(capsys, tmp_path):
+    out = tmp_path / "run"
+    (out / "result.png").mkdir(parents=True)
+    argv = ["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "0.3", "--fmus", "monolithic", "--compare",
+            "none", "--out", str(out)]
+    assert main(argv) == 2
+    assert "result.png: it exists and is not a file" in capsys.readouterr().err
+    assert [p.name for p in out.iterdir()] == ["result.png"]
+    (out / "result.png").rmdir()
+    assert main(argv) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["report.md", "result.csv", "result.png", "summary.json"]
+
+
+@pytest.mark.parametrize("content", ['{"generators": [[1]]}', '{"generators": [{"bus": 1, "machine": null}]}',
+                                     '{"generators": [{"bus": 1, "machine": {"component": "sm4", "file": null}}]}',
+                                     '{"generators": [{"bus": "x"}]}'])
+def test_dynamic_data_refusals_show_no_python_internals(content, capsys, tmp_path):
+    path = tmp_path / "dyn.json"
+    path.write_text(content)
+    assert main(["grid", "run", "--fault", "7", "--clear", "0.1", "--dynamic-data", str(path),
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and err.count("\n") == 1
+    for internal in ("NoneType", "list indices", "object has no attribute", "Error:"):
+        assert internal not in err
+
+
+def test_a_refused_fmu_file_leaves_no_extracted_folder(capsys, tmp_path, monkeypatch):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    (tmp_path / "bad.fmu").write_bytes(b"not a zip")
+    data = json.loads(wscc9.DYNAMIC_DATA_FILE.read_text())
+    for g in data["generators"]:
+        g["machine"]["file"] = str(wscc9.machine_file(g["bus"]))
+        g["fmu"] = {"kind": "file", "machine_fmu": "bad.fmu", "exciter_fmu": "bad.fmu"}
+    path = tmp_path / "dyn.json"
+    path.write_text(json.dumps(data))
+    assert main(["grid", "run", "--fault", "7", "--clear", "0.1", "--stop", "0.2", "--compare", "none",
+                 "--dynamic-data", str(path), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.fmu is not a readable FMU" in err and err.count("\n") == 1 and str(scratch) not in err
+    assert not list(scratch.iterdir())
 
 
 @pytest.mark.parametrize("content", ["{not json", '{"generators": 3}', '{"generators": [{"bus": 1}]}',

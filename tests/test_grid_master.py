@@ -2,37 +2,37 @@
 the monolithic DAE to the coupling error of linear inputs over an iterated step (second order in
 the communication step), solves the network exactly at every communication point, puts events at
 their exact times, mixes FMU kinds, differentiates FMUs without directional derivatives by finite
-differences, rewinds its FMUs between runs, and refuses what it cannot couple."""
+differences, rewinds its FMUs between runs, runs FMI 3.0 FMUs, wires any FMU by the ports its model
+description declares, removes every extracted FMU folder, and refuses what it cannot couple."""
 import json
 import math
 import shutil
+import zipfile
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from cosim.fmu import FMU, CouplingError
 from cosim.fmus import generator_files
-from cosim.master import GridMaster, MasterSettings
+from cosim.master import GridMaster, MasterSettings, communication_points
 from cosim.outputs import errors
-from cosim.fmu import CouplingError, Slave
 from reference_models.grid import wscc9
 from reference_models.grid.contingency import Contingency
-from reference_models.grid.monolithic import WSCC9, simulate_contingency
+from reference_models.grid.monolithic import System, simulate
 
-
-@pytest.fixture(scope="session")
-def fmu_cache(grid_fmu_cache):
-    return grid_fmu_cache
+CASE = wscc9.case()
+SYSTEM = System(CASE)
 
 
 @pytest.fixture(scope="module")
 def reference_master(fmu_cache):
-    with GridMaster(generator_files(wscc9.dynamic_data(), "reference", fmu_cache)) as master:
+    with GridMaster(CASE, generator_files(CASE, "reference", fmu_cache)) as master:
         yield master
 
 
-def monolithic_on(run, contingency, stop):
-    return simulate_contingency(contingency, stop, t_eval=run.time)
+def monolithic_on(run, contingency, stop, system=SYSTEM):
+    return simulate(system, contingency, stop, t_eval=run.time)
 
 
 def angle_error_deg(run, reference) -> float:
@@ -52,10 +52,10 @@ def test_native_reference_fmus_follow_the_monolithic_solve_within_the_coupling_e
 
 def test_the_iterated_linear_coupling_is_second_order_in_the_step(fmu_cache):
     contingency = Contingency(9, 0.08)
-    files = generator_files(wscc9.dynamic_data(), "reference", fmu_cache)
+    files = generator_files(CASE, "reference", fmu_cache)
     error = {}
     for h in (0.02, 0.01):
-        with GridMaster(files, settings=MasterSettings(step=h, passes=8, tolerance=1e-9)) as master:
+        with GridMaster(CASE, files, settings=MasterSettings(step=h, passes=8, tolerance=1e-9)) as master:
             run = master.run(contingency, 1.5).result
         error[h] = angle_error_deg(run, monolithic_on(run, contingency, 1.5))
     assert error[0.02] / error[0.01] > 3.0  # 4 for second order; 2 for first
@@ -63,10 +63,10 @@ def test_the_iterated_linear_coupling_is_second_order_in_the_step(fmu_cache):
 
 def test_held_voltages_err_most_and_one_extrapolated_pass_more_than_an_iterated_step(fmu_cache):
     contingency = Contingency(7, 0.07, "7-8")
-    files = generator_files(wscc9.dynamic_data(), "reference", fmu_cache)
+    files = generator_files(CASE, "reference", fmu_cache)
     error = {}
     for coupling in ("held", "extrapolated", "iterated"):
-        with GridMaster(files, settings=MasterSettings(coupling=coupling)) as master:
+        with GridMaster(CASE, files, settings=MasterSettings(coupling=coupling)) as master:
             run = master.run(contingency, 1.5).result
         error[coupling] = angle_error_deg(run, monolithic_on(run, contingency, 1.5))
     assert error["iterated"] < 0.5 * error["extrapolated"] and error["extrapolated"] < 0.5 * error["held"]
@@ -107,7 +107,7 @@ def test_an_unstable_run_is_found_unstable_and_stops_early_when_asked(reference_
         run = reference_master.run(contingency, 3.0).result
     finally:
         reference_master.settings = replace(reference_master.settings, stop_at_loss=False)
-    mono = simulate_contingency(contingency, 3.0, stop_at_loss=True, rtol=1e-9)
+    mono = simulate(SYSTEM, contingency, 3.0, stop_at_loss=True, rtol=1e-9)
     assert not run.stable and not mono.stable
     assert run.time[-1] < 2.0
     assert abs(run.loss_of_synchronism_s - mono.loss_of_synchronism_s) < 0.02
@@ -115,10 +115,10 @@ def test_an_unstable_run_is_found_unstable_and_stops_early_when_asked(reference_
 
 def test_fmus_without_directional_derivatives_are_differentiated_numerically(fmu_cache):
     """pythonfmu reference FMUs: no directional derivatives, no input interpolation (midpoint hold)."""
-    files = generator_files(wscc9.dynamic_data(), "python", fmu_cache)
+    files = generator_files(CASE, "python", fmu_cache)
     contingency = Contingency(5, 0.05)
-    with GridMaster(files) as master:
-        assert not any(m.directional or m.interpolates for m in master.machines)
+    with GridMaster(CASE, files) as master:
+        assert not any(f.directional or f.interpolates for f in master.fmus)
         run = master.run(contingency, 0.6).result
     assert angle_error_deg(run, monolithic_on(run, contingency, 0.6)) < 0.3
 
@@ -138,28 +138,110 @@ def dynamic_data_with(tmp_path, fmus):
 def test_a_dynamic_data_file_mixes_fmu_kinds_per_generator(fmu_cache, tmp_path):
     path = dynamic_data_with(tmp_path, {1: {"kind": "surrogate", "operator": "wscc9_gen1.onnx"}, 2: "reference",
                                         3: {"kind": "python"}})
-    dynamics = wscc9.dynamic_data(path)
-    files = generator_files(dynamics, None, fmu_cache)
+    case = wscc9.case(path)
+    files = generator_files(case, None, fmu_cache)
     assert [f.kind for f in files] == ["surrogate", "reference", "python"]
     contingency = Contingency(6, 0.07)
-    with GridMaster(files, WSCC9(dynamics)) as master:
+    with GridMaster(case, files) as master:
         run = master.run(contingency, 0.5).result
-    assert angle_error_deg(run, monolithic_on(run, contingency, 0.5)) < 1.0
+    assert angle_error_deg(run, monolithic_on(run, contingency, 0.5, System(case))) < 1.0
 
 
 def test_a_surrogate_for_another_machine_is_refused(fmu_cache, tmp_path):
     path = dynamic_data_with(tmp_path, {2: {"kind": "surrogate", "operator": "wscc9_gen3.onnx"}})
     with pytest.raises(CouplingError, match="bus 2.*trained for another machine"):
-        generator_files(wscc9.dynamic_data(path), None, fmu_cache)
+        generator_files(wscc9.case(path), None, fmu_cache)
 
 
-def test_an_fmu_without_the_variables_of_its_role_is_refused(fmu_cache):
-    files = generator_files(wscc9.dynamic_data(), "reference", fmu_cache)
-    with pytest.raises(CouplingError, match="has no variable Vs"):
-        Slave(files[0].exciter, "machine", ("Vs", "theta_vs"), ("I_re",), {})
+def test_an_fmu_without_the_variables_it_is_bound_to_is_refused(fmu_cache, tmp_path):
+    files = generator_files(CASE, "reference", fmu_cache)
+    with FMU(files[0].paths[1], "exciter", scratch=tmp_path) as exciter:
+        with pytest.raises(CouplingError, match="has no variable Vs"):
+            exciter.bind(("Vs", "theta_vs"), ("I_re",))
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_fmu_without_a_bus_port_cannot_be_a_machine_and_leaves_no_folder(fmu_cache, tmp_path):
+    files = generator_files(CASE, "reference", fmu_cache)
+    exciter = files[0].paths[1]
+    wrong = [replace(files[0], paths=(exciter, exciter)), *files[1:]]
+    with pytest.raises(CouplingError, match="declares no bus port"):
+        GridMaster(CASE, wrong, scratch=tmp_path)
+    assert not list(tmp_path.iterdir())
+
+
+def foreign(path, out, ports: bool):
+    """The FMU at `path` as if another tool had built it: its generationTool and description changed,
+    with (ports) or without the <Ports> element of its component."""
+    import xml.etree.ElementTree as ET
+
+    from reference_models.components import COMPONENTS
+
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(out, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item.filename)
+            if item.filename == "modelDescription.xml":
+                root = ET.fromstring(data)
+                component = next(c for c in COMPONENTS.values() if root.get("description").startswith(c.description))
+                root.set("generationTool", "another tool")
+                root.set("description", "a machine")
+                for annotations in root.findall("VendorAnnotations"):
+                    root.remove(annotations)
+                if ports:
+                    annotations = ET.Element("VendorAnnotations")
+                    ET.SubElement(annotations, "Tool", name="opfmu").append(component.ports.element())
+                    root.insert(list(root).index(root.find("ModelVariables")), annotations)
+                data = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+            dst.writestr(item, data)
+    return out
+
+
+def test_an_fmu_another_tool_built_is_wired_by_the_ports_its_model_description_declares(fmu_cache, tmp_path):
+    files = generator_files(CASE, "reference", fmu_cache)
+    theirs = [replace(f, kind="file", paths=tuple(foreign(p, tmp_path / f"{f.bus}_{j}.fmu", ports=True)
+                                                   for j, p in enumerate(f.paths))) for f in files]
+    contingency = Contingency(8, 0.065)
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    with GridMaster(CASE, files) as ours, GridMaster(CASE, theirs, scratch=scratch) as master:
+        assert np.array_equal(master.run(contingency, 0.4).result.delta, ours.run(contingency, 0.4).result.delta)
+    assert not list(scratch.iterdir())
+
+
+def test_an_fmu_that_declares_no_ports_and_is_not_the_projects_is_refused(fmu_cache, tmp_path):
+    files = generator_files(CASE, "reference", fmu_cache)
+    bare = [replace(files[0], kind="file", paths=(foreign(files[0].paths[0], tmp_path / "m.fmu", ports=False),
+                                                 files[0].paths[1])), *files[1:]]
+    with pytest.raises(CouplingError, match="declares no ports"):
+        GridMaster(CASE, bare, scratch=tmp_path)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.fmu"]
+
+
+def test_fmi3_fmus_run_with_their_inputs_held_at_the_step_midpoint(fmu_cache):
+    contingency = Contingency(7, 0.083)
+    fmi2 = generator_files(CASE, "reference", fmu_cache)
+    fmi3 = generator_files(CASE, "reference", fmu_cache, fmi_version=3)
+    with GridMaster(CASE, fmi3) as master:
+        assert all(f.version == 3 and not f.interpolates and f.rolls_back for f in master.fmus)
+        run = master.run(contingency, 1.0).result
+    with GridMaster(CASE, fmi2) as master:
+        linear = master.run(contingency, 1.0).result
+    mono = monolithic_on(run, contingency, 1.0)
+    assert run.stable and angle_error_deg(run, mono) < 1.0
+    assert not np.array_equal(run.delta, linear.delta)
+
+
+def test_communication_points_are_the_step_multiples_and_the_event_times():
+    changes = Contingency(7, 5 / 60, "5-7", fault_start=0.0133).topologies(0.05 + 1e-3)[1:]
+    points = list(communication_points(0.01, 0.051, changes))
+    assert [round(t, 12) for t, _ in points] == [0.01, 0.0133, 0.02, 0.03, 0.04, 0.05, 0.051]
+    assert [t for t, c in points if c is not None] == [0.0133]
+    assert len(list(communication_points(0.01, 3600.0, ()))) == 360000
 
 
 def test_settings_and_contingencies_refuse_what_makes_no_sense():
+    with pytest.raises(ValueError, match="negative part"):
+        Contingency(7, 0.1, fault_impedance=-0.01j)
     with pytest.raises(ValueError, match="communication step"):
         MasterSettings(step=0.0)
     with pytest.raises(ValueError, match="passes"):

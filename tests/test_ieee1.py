@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 from fmu_export.c_derivatives import jacobians_c_source
 from fmu_export.c_equations import equations_c_source
 from fmu_export.native_reference_fmu import build_native_reference_fmu
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.component import ParameterError
 from reference_models.components import component
 from reference_models.ieee1 import IEEE1, NO_LIMIT

@@ -16,7 +16,7 @@ from fmu_export.binaries import fmi_headers
 from fmu_export.native_reference_fmu import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
                                          native_reference_variables)
 from fmu_export.python_reference_fmu import reference_variables
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.scenarios import scenario
 from reference_models.sm4 import SM4
 

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu, reference_variables
 from fmu_export.variables import REFERENCE_EXTRAS, fmu_variables
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.component import ParameterError
 from reference_models.sm4 import SM4
 
@@ -241,7 +241,7 @@ def test_three_hundred_instantiations_in_one_process_do_not_crash(reference_path
 import sys
 sys.path.insert(0, {str(__file__.rsplit('/', 1)[0])!r})
 from fmpy import extract, read_model_description
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 fmus = [(extract(p), read_model_description(p)) for p in ({str(reference_path)!r}, {str(machine_path)!r})]
 for k in range(300):
     slave = Slave(fmus[k % 2], f"i{{k}}")

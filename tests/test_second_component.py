@@ -10,7 +10,7 @@ from fmpy import extract, read_model_description
 from fmu_export.c_derivatives import jacobians_c_source
 from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_export.variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 from reference_models.component import Component, Parameters, ParameterError, Quantity
 
 

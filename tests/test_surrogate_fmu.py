@@ -19,7 +19,8 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 from fmu_export.step_mirror import StepMirror, affine_step, equilibrium, fmu_settings, jacobian, slow_mode
-from fmu_slave import Slave, on_the_fmus_kernel
+from cosim.fmu import FMU as Slave
+from kernel_mirror import on_the_fmus_kernel
 from hand_made import operator_without_trunk
 from reference_models.signals import Piecewise, Signal
 from reference_models.simulate import simulate

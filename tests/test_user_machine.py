@@ -19,7 +19,7 @@ from reference_models.sm4 import SM4
 from surrogate.data import load_metadata, load_split
 
 from conftest import preset_file, tiny
-from fmu_slave import Slave
+from cosim.fmu import FMU as Slave
 
 MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
            "Tq0_p": 0.6, "Xep": 0, "Re": 0}

@@ -1,22 +1,39 @@
-"""The WSCC 9-bus system (Anderson & Fouad): load flow, admittance matrix, start values, and the
-monolithic reference against the grid issue's measurements."""
+"""The WSCC 9-bus system (Anderson & Fouad) as a case: its shipped load flow (pandapower's, checked),
+admittance matrix, units and start values, refusals of malformed dynamic data, and the monolithic
+reference against the grid issue's measurements."""
+import json
 import math
 
 import numpy as np
 import pytest
 
-pytest.importorskip("pandapower")
-
-from reference_models.grid import monolithic, wscc9  # noqa: E402
-from reference_models.grid.monolithic import simulate_wscc9  # noqa: E402
-from reference_models.sm4 import SM4  # noqa: E402
+from reference_models.grid import monolithic, wscc9
+from reference_models.grid.case import CaseError, load_units
+from reference_models.grid.contingency import Contingency
+from reference_models.sm4 import SM4
 
 FIVE_CYCLES = 5.0 / 60.0
+CASE = wscc9.case()
 
 
 @pytest.fixture(scope="module")
 def grid():
-    return monolithic.system()
+    return monolithic.System(CASE)
+
+
+def simulate_wscc9(fault_bus, clear_s, trip=None, fault_start=0.0, stop=5.0, **options):
+    return monolithic.simulate(monolithic.System(CASE), Contingency(fault_bus, clear_s, trip, fault_start), stop,
+                               **options)
+
+
+def test_the_shipped_load_flow_is_pandapowers_solution_of_the_network():
+    pytest.importorskip("pandapower")
+    solved, shipped = wscc9.solve_load_flow(), wscc9.load_flow()
+    np.testing.assert_allclose(shipped.V, solved["V"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(shipped.theta, solved["theta"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(shipped.P_gen, solved["P"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(shipped.Q_gen, solved["Q"], rtol=0, atol=1e-12)
+    assert np.max(np.abs(solved["Ybus"] - wscc9.NETWORK.ybus())) < 1e-10
 
 
 def test_load_flow_matches_the_published_operating_point():
@@ -27,10 +44,9 @@ def test_load_flow_matches_the_published_operating_point():
     np.testing.assert_allclose(flow.V[:3], [1.04, 1.025, 1.025], atol=1e-12)
 
 
-def test_pandapower_ybus_is_the_one_assembled_from_the_data():
+def test_the_load_flow_satisfies_the_network_assembled_from_the_data():
     flow = wscc9.load_flow()
-    Y = wscc9.assemble_ybus()
-    assert np.max(np.abs(flow.Ybus - Y)) < 1e-10
+    Y = wscc9.NETWORK.ybus()
     # the load flow's own mismatch with that matrix: the generator and load injections
     S = flow.V_complex * np.conj(Y @ flow.V_complex)
     injected = -flow.S_load
@@ -38,17 +54,43 @@ def test_pandapower_ybus_is_the_one_assembled_from_the_data():
     assert np.max(np.abs(S - injected)) < 1e-9
 
 
-def test_machine_files_are_sm4_machine_files():
-    for g in wscc9.dynamic_data():
-        assert SM4.load_params(wscc9.machine_file(g.bus)) == g.machine
-        assert g.machine.D == 0 and g.machine.Xep == 0 and g.machine.Re == 0
-        assert g.machine.Wb == pytest.approx(2 * math.pi * 60)
-    assert wscc9.dynamic_data()[2].machine.H == 3.01
+def test_units_are_an_sm4_machine_from_its_file_and_an_exciter():
+    for unit in CASE.units:
+        machine = unit.machine
+        assert machine.component is SM4 and SM4.load_params(wscc9.machine_file(unit.bus)) == machine.params
+        assert machine.params.D == 0 and machine.params.Xep == 0 and machine.params.Re == 0
+        assert machine.params.Wb == pytest.approx(2 * math.pi * 60)
+        assert [d.name for d in unit.devices] == ["machine", "exciter"]
+    assert CASE.units[2].machine.params.H == 3.01
+
+
+def dynamic_data(tmp_path, generators):
+    path = tmp_path / "dynamic.json"
+    path.write_text(json.dumps({"generators": generators}))
+    for bus in wscc9.GENERATOR_BUSES:
+        (tmp_path / f"wscc9_gen{bus}.json").write_text(wscc9.machine_file(bus).read_text())
+    return path
+
+
+def unit(bus, machine="sm4", exciter="ieee1"):
+    first = {"component": machine, "file": f"wscc9_gen{bus}.json"} if machine == "sm4" else {"component": machine}
+    return {"bus": bus, "machine": first, "exciter": {"component": exciter, "params": {}}}
+
+
+@pytest.mark.parametrize("generators, message", [
+    ([unit(1), unit(2), unit(2), unit(3)], "bus 2: the bus has two generator entries"),
+    ([unit(1), unit(2)], "needs one generator at each of the buses"),
+    ([unit(1), unit(2), unit(3, exciter="avr9")], "unknown component"),
+    ([unit(1), unit(2), unit(3, machine="ieee1", exciter="ieee1")], "exactly one device with a bus port"),
+])
+def test_malformed_dynamic_data_is_refused_naming_the_generator(tmp_path, generators, message):
+    with pytest.raises(CaseError, match=message):
+        load_units(dynamic_data(tmp_path, generators), wscc9.GENERATOR_BUSES)
 
 
 def test_trips_that_keep_every_generator_connected():
-    assert wscc9.trips_at(7) == ("5-7", "7-8")
-    assert wscc9.disconnects_generator("1-4") and not wscc9.disconnects_generator("7-5")
+    assert wscc9.NETWORK.trips_at(7) == ("5-7", "7-8")
+    assert wscc9.NETWORK.disconnects_generator("1-4") and not wscc9.NETWORK.disconnects_generator("7-5")
     with pytest.raises(ValueError, match="disconnects a generator"):
         simulate_wscc9(7, 0.05, trip="2-7", stop=0.1)
     with pytest.raises(ValueError, match="no bus"):
@@ -60,18 +102,20 @@ def test_trips_that_keep_every_generator_connected():
 
 
 def test_start_values_match_the_published_ones(grid):
-    np.testing.assert_allclose(grid.Efd0, [1.0821, 1.7893, 1.4030], atol=5e-5)
-    delta = grid.x0[[grid.machine_slice(k).start for k in range(3)]]
+    machines = [start[0].inputs for start in CASE.starts]
+    np.testing.assert_allclose([m["Efd"] for m in machines], [1.0821, 1.7893, 1.4030], atol=5e-5)
+    delta = grid.x0[grid.rotor_angles]
     assert math.degrees(delta[1] - delta[0]) == pytest.approx(57.51, abs=5e-3)
     assert math.degrees(delta[2] - delta[0]) == pytest.approx(50.55, abs=5e-3)
-    np.testing.assert_allclose(grid.Pm, wscc9.load_flow().P_gen, rtol=1e-12)
+    np.testing.assert_allclose([m["Pm"] for m in machines], wscc9.load_flow().P_gen, rtol=1e-12)
 
 
 def test_machine_current_is_affine_in_its_bus_voltage(grid):
     rng = np.random.default_rng(1)
-    for k, p in enumerate(grid.machines):
-        x = list(grid.x0[grid.machine_slice(k)] + rng.normal(0, 0.3, 4))
-        c, A = monolithic._current_map(x, p, math)
+    for k, unit in enumerate(CASE.units):
+        p = unit.machine.params
+        x = list(grid.x0[grid.slices[k][0]] + rng.normal(0, 0.3, 4))
+        c, A = monolithic._current_map(SM4, x, p, math)
         for _ in range(3):
             Vs, theta = rng.uniform(0.2, 1.3), rng.uniform(-4, 4)
             y = SM4.output_values(np.array(x), np.array([Vs, theta, 0.0, 0.0]), p)
@@ -118,7 +162,7 @@ def test_bus7_fault_cleared_by_tripping_5_7_first_swing():
 
 
 def test_bus7_fault_with_field_voltage_held_loses_synchronism():
-    r = simulate_wscc9(7, FIVE_CYCLES, trip="5-7", stop=1.0, exciters=False)
+    r = simulate_wscc9(7, FIVE_CYCLES, trip="5-7", stop=1.0, controls=False)
     assert not r.stable
     assert 0.3 < r.loss_of_synchronism_s < 1.0
     np.testing.assert_allclose(r.Efd, np.broadcast_to(r.Efd[0], r.Efd.shape))
@@ -133,9 +177,9 @@ def test_solved_voltages_satisfy_the_full_network_equations(grid):
         rows = grid.observe(np.zeros(len(y)), y, net)
         for n in range(len(y)):
             injected = np.zeros(9, dtype=complex)
-            for k, p in enumerate(grid.machines):
+            for k, unit in enumerate(CASE.units):
                 u = np.array([rows["Vs"][n, k], rows["theta_vs"][n, k], 0.0, 0.0])
-                out = SM4.output_values(y[n, grid.machine_slice(k)], u, p)
+                out = SM4.output_values(y[n, grid.slices[k][0]], u, unit.machine.params)
                 injected[wscc9.bus_index(wscc9.GENERATOR_BUSES[k])] = out[2] + 1j * out[3]
             np.testing.assert_allclose(net.Y @ rows["V_bus"][n], injected, atol=1e-9)
 

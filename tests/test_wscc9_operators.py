@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from reference_models.drift import to_frame
-from reference_models.grid.monolithic import simulate_wscc9
+from reference_models.grid import wscc9
+from reference_models.grid.contingency import Contingency
+from reference_models.grid.monolithic import System, simulate
 from reference_models.grid.windows import machine_windows, window_starts
 from reference_models.sm4 import SM4
 from surrogate import Operator
@@ -30,7 +32,7 @@ def operators():
 def bus7_fault():
     """Bus 7 bolted, cleared after 5 cycles by tripping line 5-7: the grid issue's hardest case."""
     t = np.round(np.arange(0.0, 3.0 + 1e-9, 0.001), 9)
-    return simulate_wscc9(7, FIVE_CYCLES, trip="5-7", stop=3.0, t_eval=t, event_rows=True)
+    return simulate(System(wscc9.case()), Contingency(7, FIVE_CYCLES, "5-7"), 3.0, t_eval=t, event_rows=True)
 
 
 @pytest.mark.parametrize("gen", GENERATORS)
@@ -46,7 +48,8 @@ def test_a_wscc_operator_takes_any_extra_speed_and_angle_exactly(operators, bus7
     """D = 0: omega0 + c, theta_vs + a + c t give delta + a + c t, omega + c, the fluxes unchanged."""
     op = operators[2]
     grid = op.sensor_times
-    x0, u, _ = machine_windows(bus7_fault, 1, window_starts(bus7_fault, op.horizon, 0.25), grid, grid[:1])
+    x0, u, _ = machine_windows(bus7_fault, 1, window_starts(bus7_fault, op.horizon, 0.25), grid, grid[:1],
+                               SM4.state_names, SM4.input_names)
     base = op.predict(x0, u, grid)
     offset = 30.0
     turned = op.predict(x0 + [offset, speed, 0, 0], u + [0, offset, 0, 0] + speed * grid[None, :, None] * [0, 1, 0, 0],
@@ -62,7 +65,7 @@ def test_the_bus7_fault_windows_lie_in_the_envelope_and_on_the_monolithic_refere
     grid = op.sensor_times
     used = grid[grid <= op.rollover_horizon + 1e-9]
     starts = window_starts(bus7_fault, op.horizon, 0.05, events=(FIVE_CYCLES,))
-    x0, u, truth = machine_windows(bus7_fault, k, starts, grid, used)
+    x0, u, truth = machine_windows(bus7_fault, k, starts, grid, used, SM4.state_names, SM4.input_names)
     outside = [i for i in range(len(starts)) if op.outside_envelope(x0[i:i + 1], u[i:i + 1])]
     assert len(outside) <= 0.1 * len(starts), [op.outside_envelope(x0[i:i + 1], u[i:i + 1]) for i in outside[:3]]
     with warnings.catch_warnings():

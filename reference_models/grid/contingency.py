@@ -4,13 +4,12 @@ branch opened at clearing; or, without a fault, a branch opened at `clear_s`.
 
 `topologies(stop)` lists (start time, fault bus or None, open branches, description) from t = 0 on:
 what both the monolithic reference and the co-simulation master switch between, at exact times.
+Buses and branches are checked against `network` (case.Network; None: the shipped wscc9 network).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
-from . import wscc9
+from dataclasses import dataclass, field
 
 BOLTED_FAULT_IMPEDANCE = 1e-6  # pu
 
@@ -29,36 +28,42 @@ class Topology:
 @dataclass(frozen=True)
 class Contingency:
     """A fault and its clearing (see the module docstring). ValueError for an unknown bus or branch,
-    a trip that disconnects a generator, clearing before the fault or a non-finite time."""
+    a trip that disconnects a generator, clearing before the fault, a non-finite time or a fault
+    impedance that is zero, not finite or has a negative part."""
 
     fault_bus: int | None = None
     clear_s: float | None = None
     trip: str | None = None
     fault_start: float = 0.0
     fault_impedance: complex = BOLTED_FAULT_IMPEDANCE
+    network: object = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if self.network is None:
+            from .wscc9 import NETWORK
+
+            object.__setattr__(self, "network", NETWORK)
         if self.trip is not None:
-            object.__setattr__(self, "trip", wscc9.openable(self.trip).name)
+            object.__setattr__(self, "trip", self.network.openable(self.trip).name)
         if not (isinstance(self.fault_start, (int, float)) and math.isfinite(self.fault_start) and self.fault_start >= 0):
             raise ValueError(f"the fault start must be a time >= 0 s, got {self.fault_start!r}")
         if self.clear_s is not None and not (isinstance(self.clear_s, (int, float)) and math.isfinite(self.clear_s)):
             raise ValueError(f"the clearing time must be a finite time in s, got {self.clear_s!r}")
         if self.fault_bus is not None:
-            wscc9.bus_index(self.fault_bus)
+            self.network.bus_index(self.fault_bus)
             if self.clear_s is None or not self.clear_s > self.fault_start:
                 raise ValueError(f"the clearing time must come after the fault start ({self.fault_start} s), "
                                  f"got {self.clear_s!r}")
             z = complex(self.fault_impedance)
-            if z == 0 or not (math.isfinite(z.real) and math.isfinite(z.imag)):
-                raise ValueError(f"the fault impedance must be finite and nonzero (bolted: {BOLTED_FAULT_IMPEDANCE} pu), "
-                                 f"got {self.fault_impedance!r}")
+            if z == 0 or not (math.isfinite(z.real) and math.isfinite(z.imag)) or z.real < 0 or z.imag < 0:
+                raise ValueError(f"the fault impedance must be finite, nonzero and without a negative part "
+                                 f"(bolted: {BOLTED_FAULT_IMPEDANCE} pu), got {self.fault_impedance!r}")
         elif self.trip is not None and (self.clear_s is None or self.clear_s < 0):
             raise ValueError("a trip without a fault happens at the clearing time, which must be >= 0 s")
 
     def with_clearing(self, clear_s: float) -> "Contingency":
         """The same contingency cleared at `clear_s`."""
-        return Contingency(self.fault_bus, clear_s, self.trip, self.fault_start, self.fault_impedance)
+        return Contingency(self.fault_bus, clear_s, self.trip, self.fault_start, self.fault_impedance, self.network)
 
     @property
     def label(self) -> str:

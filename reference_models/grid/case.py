@@ -1,0 +1,497 @@
+"""A grid case: the network (buses, branches, shunts, loads), its load flow, the devices at the
+generator buses (each a component with its parameters, grouped into units) and the case's events.
+Everything that simulates a case (the co-simulation master, the monolithic DAE) is built from it.
+
+Units. The devices at one generator bus form a unit: one machine (the device whose component has
+a bus port, reference_models.ports) and its control components (exciters, governors, stabilisers).
+Within a unit an input link takes the output link of the same signal; `terminal_voltage` comes
+from the bus (the magnitude of the bus voltage plus the drop over the machine's external
+impedance, `external_impedance`); an input link nothing gives is a set point, held at its start
+value. `Case.starts` holds every device's start values, from the load flow.
+
+Files. A network file (JSON): base_mva, f_hz, buses [{number, kv}], branches [{from, to, r, x, b,
+kind}], loads [{bus, P, Q}], shunts [{bus, G, B}], generators [{bus, kind slack|pv, V, P}] and the
+solved load flow (V, theta per bus, P, Q per generator; per unit on base_mva, rad). A dynamic-data
+file (JSON): "generators": [{"bus": n, "<device>": {"component": name, "file": machine file |
+"params": {...}}, ..., "fmu": {...}}] - every key besides bus and fmu is a device, in file order;
+`fmu` is kept as it is for the co-simulation layer (which FMUs run the unit).
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+class CaseError(ValueError):
+    """A case file that cannot be used (one line, naming the file and the entry)."""
+
+
+@dataclass(frozen=True)
+class Branch:
+    """A pi branch between two buses: series R + jX and total shunt susceptance B [pu]."""
+
+    from_bus: int
+    to_bus: int
+    r: float
+    x: float
+    b: float
+    kind: str  # "line" or "transformer"
+
+    @property
+    def name(self) -> str:
+        return f"{self.from_bus}-{self.to_bus}"
+
+    def connects(self, bus: int) -> bool:
+        return bus in (self.from_bus, self.to_bus)
+
+
+@dataclass(frozen=True)
+class GeneratorData:
+    """A generator in the load flow: the slack (V, angle 0) or a PV bus (P, V) [pu]."""
+
+    bus: int
+    kind: str  # "slack" or "pv"
+    V: float
+    P: float | None = None
+
+
+@dataclass(frozen=True)
+class Network:
+    """Buses (numbers, in file order), branches, loads {bus: P + jQ} and shunts {bus: G + jB} [pu on
+    base_mva], the load-flow generators, nominal voltages {bus: kV}."""
+
+    name: str
+    base_mva: float
+    f_hz: float
+    buses: tuple
+    branches: tuple
+    loads: dict
+    shunts: dict
+    generators: tuple
+    kv: dict = field(default_factory=dict)
+
+    @property
+    def generator_buses(self) -> tuple:
+        return tuple(g.bus for g in self.generators)
+
+    def bus_index(self, bus: int) -> int:
+        """Row of bus number `bus` in the arrays of the case (bus order of the file)."""
+        if bus not in self.buses:
+            raise ValueError(f"{self.name} has no bus {bus!r} (buses {', '.join(map(str, self.buses))})")
+        return self.buses.index(bus)
+
+    def branch(self, name) -> Branch:
+        """The branch named "a-b" (or given as a pair (a, b)), in either order."""
+        if isinstance(name, Branch):
+            return name
+        try:
+            a, b = (int(v) for v in (name.split("-") if isinstance(name, str) else name))
+        except (ValueError, TypeError):
+            raise ValueError(f"a branch is named FROM-TO, e.g. 5-7; got {str(name)[:40]!r}") from None
+        for br in self.branches:
+            if {a, b} == {br.from_bus, br.to_bus}:
+                return br
+        raise ValueError(f"{self.name} has no branch {a}-{b} (branches: {', '.join(br.name for br in self.branches)})")
+
+    def connected_buses(self, out_of_service=()) -> set:
+        """The buses connected to the first generator's bus with the given branches open."""
+        removed = {self.branch(b) for b in out_of_service}
+        start = self.generators[0].bus
+        reach, frontier = {start}, [start]
+        while frontier:
+            bus = frontier.pop()
+            for br in self.branches:
+                if br in removed or not br.connects(bus):
+                    continue
+                other = br.to_bus if br.from_bus == bus else br.from_bus
+                if other not in reach:
+                    reach.add(other)
+                    frontier.append(other)
+        return reach
+
+    def disconnects_generator(self, trip) -> bool:
+        """Whether opening branch `trip` leaves a generator bus cut off from the others."""
+        return not set(self.generator_buses) <= self.connected_buses([trip])
+
+    def openable(self, name) -> Branch:
+        """The branch `name` (see `branch`); ValueError naming the branches that may open instead when
+        opening it would cut a generator off."""
+        br = self.branch(name)
+        if self.disconnects_generator(br):
+            raise ValueError(f"opening branch {br.name} disconnects a generator (branches that may open at its "
+                             f"buses: {', '.join(self.trips_at(br.from_bus))}; {', '.join(self.trips_at(br.to_bus))})")
+        return br
+
+    def trips_at(self, bus: int) -> tuple:
+        """The branches at `bus` whose opening keeps every generator connected (names "a-b")."""
+        self.bus_index(bus)
+        return tuple(br.name for br in self.branches if br.connects(bus) and not self.disconnects_generator(br))
+
+    def ybus(self, out_of_service=()) -> np.ndarray:
+        """The bus admittance matrix [n, n] (complex, pu, bus order) of the branches and shunts,
+        without loads; `out_of_service`: branches left out."""
+        removed = {self.branch(b) for b in out_of_service}
+        n = len(self.buses)
+        Y = np.zeros((n, n), dtype=complex)
+        for br in self.branches:
+            if br in removed:
+                continue
+            i, k = self.bus_index(br.from_bus), self.bus_index(br.to_bus)
+            y = 1.0 / complex(br.r, br.x)
+            Y[i, i] += y + 0.5j * br.b
+            Y[k, k] += y + 0.5j * br.b
+            Y[i, k] -= y
+            Y[k, i] -= y
+        for bus, s in self.shunts.items():
+            Y[self.bus_index(bus), self.bus_index(bus)] += s
+        return Y
+
+
+@dataclass(frozen=True)
+class LoadFlow:
+    """The load-flow solution: V, theta [n buses] (pu, rad, bus order); P_gen, Q_gen [n generators]
+    (pu, generator order); S_load [n buses] the loads' P + jQ (0 where none)."""
+
+    buses: tuple
+    generator_buses: tuple
+    V: np.ndarray
+    theta: np.ndarray
+    P_gen: np.ndarray
+    Q_gen: np.ndarray
+    S_load: np.ndarray
+
+    @property
+    def V_complex(self) -> np.ndarray:
+        return self.V * np.exp(1j * self.theta)
+
+    def load_admittances(self) -> np.ndarray:
+        """The constant-impedance loads [n] (complex, pu) drawing S_load at the load-flow voltages."""
+        return np.conj(self.S_load) / self.V ** 2
+
+    def generator(self, bus: int) -> dict:
+        """V, theta, P, Q of the generator at `bus`."""
+        k, i = self.generator_buses.index(bus), self.buses.index(bus)
+        return {"V": float(self.V[i]), "theta": float(self.theta[i]),
+                "P": float(self.P_gen[k]), "Q": float(self.Q_gen[k])}
+
+
+@dataclass(frozen=True)
+class Device:
+    """A component at a bus: `name` (the dynamic-data key, e.g. machine), the reference_models
+    Component, its parameters and where they came from (`source`: a file, or None)."""
+
+    name: str
+    component: object
+    params: object
+    source: Path | None = None
+
+
+@dataclass(frozen=True)
+class DeviceStart:
+    """A device's start: its states (component order) and the value of every input, by name."""
+
+    states: tuple
+    inputs: dict
+
+
+@dataclass(frozen=True)
+class Unit:
+    """The devices at one generator bus: the machine (the one with a bus port) first, then its
+    control components; `fmu`: the dynamic data's fmu entry, as given (for the co-simulation)."""
+
+    bus: int
+    devices: tuple
+    fmu: object = None
+
+    @property
+    def machine(self) -> Device:
+        return self.devices[0]
+
+    @property
+    def controls(self) -> tuple:
+        return self.devices[1:]
+
+
+def external_impedance(device: Device) -> complex:
+    """Re + j Xep [pu]: the impedance between a machine's terminals and its bus, where its parameters
+    declare one (0 otherwise). The exciter's terminal voltage is measured behind it."""
+    return complex(float(getattr(device.params, "Re", 0.0)), float(getattr(device.params, "Xep", 0.0)))
+
+
+@dataclass(frozen=True)
+class Reduced:
+    """One topology: the full admittance matrix Y [buses, buses] with loads and any fault shunt, its
+    reduction to the generator buses in real form Y_real [2g, 2g] on v = (V_re, V_im) per generator
+    (I = Y_real v), and the recovery of every bus voltage from the generator ones (V_bus = recovery
+    @ V_gen, complex [buses, g])."""
+
+    Y: np.ndarray
+    Y_real: np.ndarray
+    recovery: np.ndarray
+    description: str
+
+
+@dataclass(frozen=True)
+class Case:
+    """A grid case (see the module docstring): network, load flow, units (generator order) with their
+    start values (starts[k][j]: unit k, device j), the case's own events, and the dynamic-data file."""
+
+    name: str
+    network: Network
+    flow: LoadFlow
+    units: tuple
+    starts: tuple
+    events: tuple = ()
+    dynamic_data: Path | None = None
+
+    @property
+    def generator_buses(self) -> tuple:
+        return tuple(u.bus for u in self.units)
+
+    @property
+    def buses(self) -> tuple:
+        return self.network.buses
+
+    def reduced(self, fault_bus: int | None = None, fault_impedance: complex = 1e-6, out_of_service=()) -> Reduced:
+        """The topology with the loads (constant impedances at the load-flow voltages), a fault shunt
+        of `fault_impedance` [pu] at `fault_bus` (None: none) and the named branches open, reduced
+        to the generator buses (Kron)."""
+        net = self.network
+        opened = tuple(net.openable(b) for b in out_of_service)
+        Y = net.ybus(opened) + np.diag(self.flow.load_admittances())
+        parts = []
+        if fault_bus is not None:
+            z = complex(fault_impedance)
+            if z == 0 or not np.isfinite(z):
+                raise ValueError(f"fault impedance must be finite and nonzero, got {fault_impedance!r}")
+            i = net.bus_index(fault_bus)
+            Y[i, i] += 1.0 / z
+            parts.append(f"fault at bus {fault_bus}")
+        if opened:
+            parts.append("open " + ", ".join(br.name for br in opened))
+        g = [net.bus_index(u.bus) for u in self.units]
+        o = [i for i in range(len(net.buses)) if i not in g]
+        n = len(g)
+        Y_oo_inv_Y_og = np.linalg.solve(Y[np.ix_(o, o)], Y[np.ix_(o, g)])
+        Y_red = Y[np.ix_(g, g)] - Y[np.ix_(g, o)] @ Y_oo_inv_Y_og
+        recovery = np.zeros((len(net.buses), n), dtype=complex)
+        recovery[g, :] = np.eye(n)
+        recovery[o, :] = -Y_oo_inv_Y_og
+        Y_real = np.zeros((2 * n, 2 * n))
+        Y_real[0::2, 0::2] = Y_red.real
+        Y_real[0::2, 1::2] = -Y_red.imag
+        Y_real[1::2, 0::2] = Y_red.imag
+        Y_real[1::2, 1::2] = Y_red.real
+        for a in (Y, Y_real, recovery):
+            a.setflags(write=False)
+        return Reduced(Y=Y, Y_real=Y_real, recovery=recovery, description="; ".join(parts) or "intact")
+
+
+def _number(path, where: str, value) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise CaseError(f"{path}: {where} must be a finite number, got {str(value)[:40]!r}")
+    return float(value)
+
+
+def _entries(path, data, key: str) -> list:
+    value = data.get(key, [])
+    if not isinstance(value, list) or not all(isinstance(e, dict) for e in value):
+        raise CaseError(f"{path}: {key} must be a list of objects")
+    return value
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CaseError(f"no case file {path}") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise CaseError(f"{path} is not a readable JSON file ({' '.join(str(exc).split())[:120]})") from None
+    if not isinstance(data, dict):
+        raise CaseError(f"{path}: a JSON object is needed")
+    return data
+
+
+def load_network(path) -> tuple:
+    """(Network, LoadFlow) from a network file (see the module docstring)."""
+    data = _read_json(path)
+    try:
+        buses = tuple(int(b["number"]) for b in _entries(path, data, "buses"))
+        kv = {int(b["number"]): _number(path, "bus kv", b["kv"]) for b in _entries(path, data, "buses")}
+        branches = tuple(Branch(int(e["from"]), int(e["to"]), _number(path, "r", e["r"]), _number(path, "x", e["x"]),
+                                _number(path, "b", e.get("b", 0.0)), str(e.get("kind", "line")))
+                         for e in _entries(path, data, "branches"))
+        loads = {int(e["bus"]): complex(_number(path, "load P", e["P"]), _number(path, "load Q", e["Q"]))
+                 for e in _entries(path, data, "loads")}
+        shunts = {int(e["bus"]): complex(_number(path, "shunt G", e["G"]), _number(path, "shunt B", e["B"]))
+                  for e in _entries(path, data, "shunts")}
+        generators = tuple(GeneratorData(int(e["bus"]), str(e["kind"]), _number(path, "generator V", e["V"]),
+                                         None if e.get("P") is None else _number(path, "generator P", e["P"]))
+                           for e in _entries(path, data, "generators"))
+        network = Network(str(data.get("name", Path(path).stem)), _number(path, "base_mva", data["base_mva"]),
+                          _number(path, "f_hz", data["f_hz"]), buses, branches, loads, shunts, generators, kv)
+        lf = data["load_flow"]
+        V, theta = (np.array([_number(path, f"load_flow {k}", v) for v in lf[k]]) for k in ("V", "theta"))
+        P, Q = (np.array([_number(path, f"load_flow {k}", v) for v in lf[k]]) for k in ("P", "Q"))
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, CaseError):
+            raise
+        raise CaseError(f"{path}: malformed network data ({type(exc).__name__}: {str(exc)[:80]})") from None
+    if len(set(buses)) != len(buses) or not buses:
+        raise CaseError(f"{path}: bus numbers must be unique")
+    for bus in [b for br in branches for b in (br.from_bus, br.to_bus)] + list(loads) + list(shunts) + \
+            [g.bus for g in generators]:
+        if bus not in buses:
+            raise CaseError(f"{path}: bus {bus} is not among the buses")
+    if len(V) != len(buses) or len(theta) != len(buses) or len(P) != len(generators) or len(Q) != len(generators):
+        raise CaseError(f"{path}: the load flow needs V, theta per bus and P, Q per generator")
+    S_load = np.zeros(len(buses), dtype=complex)
+    for bus, s in loads.items():
+        S_load[buses.index(bus)] = s
+    flow = LoadFlow(buses, network.generator_buses, V, theta, P, Q, S_load)
+    for a in (flow.V, flow.theta, flow.P_gen, flow.Q_gen, flow.S_load):
+        a.setflags(write=False)
+    return network, flow
+
+
+def load_units(path, generator_buses) -> tuple:
+    """The units of a dynamic-data file (see the module docstring), in `generator_buses` order.
+    CaseError for an unknown component, a unit without exactly one machine first, a generator at a
+    bus that has none in the load flow, or two entries for one bus."""
+    from ..components import component
+
+    path = Path(path)
+    data = _read_json(path)
+    by_bus = {}
+    for g in _entries(path, data, "generators"):
+        try:
+            bus = int(g["bus"])
+        except (KeyError, TypeError, ValueError):
+            raise CaseError(f"{path}: every generator needs its bus number") from None
+        where = f"{path}: generator at bus {bus}"
+        if bus in by_bus:
+            raise CaseError(f"{where}: the bus has two generator entries")
+        devices = []
+        for name, entry in g.items():
+            if name in ("bus", "fmu"):
+                continue
+            if not isinstance(entry, dict):
+                raise CaseError(f"{where}: {name} must be an object with its component")
+            try:
+                comp = component(entry.get("component"))
+            except ValueError as exc:
+                raise CaseError(f"{where}: {name}: {exc}") from None
+            try:
+                if "file" in entry:
+                    source = path.parent / str(entry["file"])
+                    params = comp.load_params(source)
+                else:
+                    source = None
+                    params = comp.params(entry.get("params", {}))
+            except (ValueError, OSError, TypeError) as exc:
+                raise CaseError(f"{where}: {name}: {' '.join(str(exc).split())[:160]}") from None
+            devices.append(Device(name, comp, params, source))
+        machines = [d for d in devices if d.component.ports.bus is not None]
+        if len(machines) != 1 or devices[0] is not machines[0]:
+            raise CaseError(f"{where}: a unit needs exactly one device with a bus port (a machine), listed first")
+        by_bus[bus] = Unit(bus, tuple(devices), g.get("fmu"))
+    if sorted(by_bus) != sorted(generator_buses):
+        raise CaseError(f"{path}: needs one generator at each of the buses {tuple(generator_buses)}, got {sorted(by_bus)}")
+    return tuple(by_bus[bus] for bus in generator_buses)
+
+
+def unit_start(unit: Unit, op: dict) -> tuple:
+    """The DeviceStart of every device of `unit` at the load-flow operating point op (V, theta, P, Q
+    of its generator): the machine at its equilibrium, each control component holding the signal the
+    machine takes from it at the terminal voltage."""
+    from ..initialisation import exciter_start, machine_start
+
+    machine = unit.machine
+    ms = machine_start(op["V"], op["theta"], op["P"], op["Q"], machine.params)
+    bus = machine.component.ports.bus
+    given = {"mechanical_power": float(ms.Pm), "field_voltage": float(ms.Efd), "terminal_voltage": float(ms.Vt)}
+    m_inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
+    for link in machine.component.ports.inputs:
+        m_inputs[link.variable] = given[link.signal]
+    starts = [DeviceStart(tuple(float(v) for v in ms.x0), m_inputs)]
+    for device in unit.controls:
+        ports = device.component.ports
+        if ports.output("field_voltage") is None:
+            raise CaseError(f"generator at bus {unit.bus}: no start for {device.name} ({device.component.name}): "
+                            "only field-voltage controllers are initialised")
+        es = exciter_start(ms.Efd, ms.Vt, device.params)
+        values = {**given, "voltage_reference": float(es.Vref)}
+        inputs = {link.variable: values[link.signal] for link in ports.inputs}
+        starts.append(DeviceStart(tuple(float(v) for v in es.x0), inputs))
+    return tuple(starts)
+
+
+def load_case(network_file, dynamic_data, name: str | None = None) -> Case:
+    """The Case of a network file and a dynamic-data file."""
+    network, flow = load_network(network_file)
+    units = load_units(dynamic_data, network.generator_buses)
+    starts = tuple(unit_start(u, flow.generator(u.bus)) for u in units)
+    return Case(name or network.name, network, flow, units, starts, (), Path(dynamic_data))
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a device input comes from within its unit: `bus` (the bus voltage: index 0 its
+    magnitude, 1 its angle), `device` (output `variable` of device `device` of the unit),
+    `terminal` (the terminal voltage magnitude) or `held` (a set point at its start value)."""
+
+    kind: str
+    device: int | None = None
+    variable: str | None = None
+    index: int | None = None
+
+
+def unit_wiring(ports, where: str = "a unit") -> tuple:
+    """The wiring of a unit from its devices' Ports (the machine, with the bus port, first): per
+    device a dict {input variable: Source} over its bus-port and link inputs. An input link takes
+    the output link of the same signal of another device; `terminal_voltage` with no giver comes
+    from the bus; any other input link nothing gives is held. CaseError where two devices give one
+    signal or the first device has no bus port."""
+    ports = list(ports)
+    if not ports or ports[0] is None or ports[0].bus is None:
+        raise CaseError(f"{where}: its machine declares no bus port")
+    wiring = []
+    for j, p in enumerate(ports):
+        wires = {}
+        if p is None:
+            raise CaseError(f"{where}: device {j + 1} declares no ports")
+        if p.bus is not None:
+            if j > 0:
+                raise CaseError(f"{where}: only the machine may have a bus port")
+            wires[p.bus.voltage[0]] = Source("bus", index=0)
+            wires[p.bus.voltage[1]] = Source("bus", index=1)
+        for link in p.inputs:
+            givers = [(i, q.output(link.signal)) for i, q in enumerate(ports) if i != j and q.output(link.signal)]
+            if len(givers) > 1:
+                raise CaseError(f"{where}: {len(givers)} devices give the signal {link.signal}")
+            if givers:
+                wires[link.variable] = Source("device", device=givers[0][0], variable=givers[0][1])
+            elif link.signal == "terminal_voltage":
+                wires[link.variable] = Source("terminal")
+            else:
+                wires[link.variable] = Source("held")
+        wiring.append(wires)
+    return tuple(wiring)
+
+
+def step_order(wiring) -> tuple:
+    """The order in which a master steps a unit's devices: the control devices, each after the
+    control devices it takes a signal from (where they do not take one from each other), then the
+    machine (device 0) last, so that it gets every control signal at the step's end."""
+    controls = list(range(1, len(wiring)))
+    order = []
+    while controls:
+        ready = [j for j in controls if all(s.device in order or s.device in (0, j) or s.kind != "device"
+                                            for s in wiring[j].values())] or controls[:1]
+        order.append(ready[0])
+        controls.remove(ready[0])
+    return tuple(order) + (0,)
