@@ -85,3 +85,35 @@ def test_the_compare_command_says_in_one_line_which_fmu_cannot_be_loaded(fmu_pat
     assert_one_line_error(done, "the reference FMU SM4Reference cannot be loaded: binaries/linux64/SM4Reference.so",
                           reason)
     assert done.stdout == "" and not (tmp_path / "out").exists()
+
+
+def test_a_machine_on_a_bus_is_found_by_its_ports_and_a_component_without_them_is_refused():
+    from reference_models.ports import MachineInputs, machine_inputs
+
+    assert machine_inputs(SM4) == MachineInputs("Vs", "theta_vs", "Pm", "Efd")
+    with pytest.raises(PortError, match="'ieee1' is no machine on a bus"):
+        machine_inputs(IEEE1)
+
+
+def test_every_family_gives_the_machines_inputs_in_its_order():
+    import numpy as np
+
+    from reference_models.families import BASE_FAMILIES, COMPONENT
+
+    for fam in BASE_FAMILIES.values():
+        signal = fam.sample(np.full((1, fam.dim), 0.5), 1.0)[0]
+        assert signal.names == COMPONENT.input_names, fam.name
+
+
+def test_init_start_values_meet_where_the_ports_link_the_machine_and_the_exciter():
+    from opfmu.init_command import start_values
+
+    result = start_values(1.025, 0.16, 1.63, 0.0665, SM4.params(), IEEE1.params())
+    machine, exciter, point = result["machine"], result["exciter"], result["operating_point"]
+    magnitude, angle = SM4.ports.bus.voltage
+    assert (machine[magnitude], machine[angle]) == (1.025, 0.16)
+    # the exciter's field output starts where the machine's field input starts; it sees the terminal voltage
+    assert exciter[IEEE1.ports.output("field_voltage") + "0"] == machine[SM4.ports.input("field_voltage")]
+    assert exciter[IEEE1.ports.input("terminal_voltage")] == point["Vt"]
+    assert list(machine)[-SM4.n_inputs:] == list(SM4.input_names)
+    assert list(exciter)[-IEEE1.n_inputs:] == list(IEEE1.input_names)
