@@ -138,10 +138,43 @@ def cmd_operator(args) -> None:
     from opfmu.errors import UserError
     from reference_models.component import ParameterError
 
+    from surrogate.data import DatasetError
+    from surrogate.training import TrainError
+
     try:
         _run(args)
-    except (OperatorError, ParameterError) as exc:
+    except (OperatorError, ParameterError, DatasetError, TrainError) as exc:
         raise UserError(str(exc)) from None
+
+
+def _check_resumable(out: Path, preset, seed: int, params, config) -> None:
+    """OperatorError unless the dataset and the training run already in `out`, if any, are the ones
+    this command makes (same recipe, machine and seed; the training settings but for its epochs)."""
+    from surrogate.data.datasets import fingerprint
+    from surrogate.training import TrainConfig
+
+    key = fingerprint(preset, seed, params)
+    for path in (out / "data" / "metadata.json", out / "data" / ".partial" / "plan.json"):
+        if path.exists() and _json_object(path).get("fingerprint") != key:
+            raise OperatorError(f"{out} holds the dataset of another machine, recipe or seed; choose another --out")
+    if (out / "run" / "checkpoint.pt").exists():
+        saved = _json_object(out / "run" / "config.json")
+        try:
+            same = replace(TrainConfig.from_dict(saved.get("train", {})), epochs=config.epochs) == config
+        except (TypeError, ValueError, AttributeError):
+            same = False
+        if not same or saved.get("data", {}).get("fingerprint") != key:
+            raise OperatorError(f"{out} holds a training run with other settings; choose another --out")
+
+
+def _json_object(path: Path) -> dict:
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        data = None
+    if not isinstance(data, dict):
+        raise OperatorError(f"{path} is not a JSON object: remove it, or choose another --out")
+    return data
 
 
 def _run(args) -> None:
@@ -166,7 +199,12 @@ def _run(args) -> None:
         preset = recipe(levels, args.horizon, args.windows, args.recipe)
     except ValueError as exc:
         raise OperatorError(str(exc)) from None
+    from surrogate.training import TrainConfig
+
+    config = TrainConfig.from_dict({**RECIPE_TRAINING, **(GRID_TRAINING if args.recipe == "grid" else {}),
+                                    "epochs": args.epochs, "seed": args.seed})
     out = output_folder(args.out)
+    _check_resumable(out, preset, args.seed, params, config)
     out.mkdir(parents=True, exist_ok=True)
     started = time.perf_counter()
     timings = {}
@@ -181,14 +219,12 @@ def _run(args) -> None:
     timings["data"] = time.perf_counter() - t
     say(f"dataset: {out / 'data'} ({sum(meta['counts'].values())} windows of {args.horizon:g} s)")
 
-    from surrogate.training import TrainConfig, train
+    from surrogate.training import train
 
     if args.threads is not None:
         import torch
 
         torch.set_num_threads(args.threads)
-    config = TrainConfig.from_dict({**RECIPE_TRAINING, **(GRID_TRAINING if args.recipe == "grid" else {}),
-                                    "epochs": args.epochs, "seed": args.seed})
     t = time.perf_counter()
     result = train(out / "data", config, out / "run", progress=not args.quiet)
     timings["training"] = time.perf_counter() - t

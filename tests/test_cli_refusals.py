@@ -214,3 +214,19 @@ def test_ctrl_c_while_dask_workers_solve_is_one_line_and_keeps_the_finished_chun
                                                  "--workers", "2", "--quiet"])
     assert code == 130 and err.strip().splitlines() == ["interrupted: rerun the same command to resume"], err
     assert list((tmp_path / "d" / ".partial").glob("train-*.npz"))  # what the rerun resumes from
+
+
+def test_operator_into_a_folder_holding_another_dataset_or_run_is_refused_before_any_work(files, capsys):
+    out = files / "run"
+    (out / "data").mkdir(parents=True)
+    (out / "data" / "metadata.json").write_text(json.dumps({"fingerprint": "another"}))
+    argv = ["operator", "--machine", files / "machine.json", "--out", out]
+    assert "holds the dataset of another machine, recipe or seed" in refusal(capsys, *argv)
+    (out / "data" / "metadata.json").unlink()
+    (out / "run").mkdir()
+    (out / "run" / "checkpoint.pt").write_bytes(b"")
+    (out / "run" / "config.json").write_text("[]")
+    assert "run/config.json is not a JSON object" in refusal(capsys, *argv)
+    (out / "run" / "config.json").write_text(json.dumps({"train": {"lr": 1.0}, "data": {}}))
+    assert "holds a training run with other settings" in refusal(capsys, *argv)
+    assert sorted(p.name for p in (out / "run").iterdir()) == ["checkpoint.pt", "config.json"]
