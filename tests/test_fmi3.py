@@ -1,6 +1,9 @@
 """FMI 3.0 co-simulation of both native FMUs: the same model code behind another plumbing, so under fmpy
 its outputs, FMU states and directional derivatives equal the FMI 2.0 FMU's on the same inputs."""
+import json
 import shutil
+import subprocess
+import sys
 import zipfile
 from xml.etree import ElementTree
 
@@ -256,3 +259,102 @@ def test_the_fmi3_surrogate_dll_under_wine_gives_the_linux64_outputs(surrogate_f
     assert gaps["residual"] <= 1e-10
     assert np.all(cross_check.column_differences(base, other, "dd") <= 1e-12)
     assert sum(line.startswith("getbool 0 1") for line in base) > 100  # in the envelope throughout
+
+
+@pytest.fixture(scope="module")
+def small_surrogate_fmi3(fmu_cache):
+    """The FMI 3.0 surrogate FMU of a small shipped operator (wscc9_gen2.onnx), from the run's build cache."""
+    from fmu_export.build_cache import cached_surrogate_fmu
+
+    return cached_surrogate_fmu(DEFAULT_OPERATOR.parent / "wscc9_gen2.onnx", "Gen2Surrogate", n_check=4,
+                                fmi_version=3, cache=fmu_cache)
+
+
+@pytest.fixture(scope="module", params=["reference", "surrogate"])
+def fmi3_native(request, reference_pair, small_surrogate_fmi3):
+    """(FMI 3.0 native FMU, its parameter whose slot the state checks corrupt, a distinctive value for it)."""
+    if request.param == "reference":
+        return reference_pair[1], "rtol", 1.2345678e-7
+    return small_surrogate_fmi3, "rollover_horizon", 0.1234567
+
+
+# Run in a process of its own (a state the FMU wrongly accepted could make a step hang, a pointer it
+# wrongly freed abort the process): prints one JSON object of what each FMU-state call returned.
+STATE_CHECKS = r"""
+import ctypes, json, struct, sys
+from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave, fmi3FMUState
+path, probe, value = sys.argv[1], sys.argv[2], float(sys.argv[3])
+md = read_model_description(path)
+vr = {v.name: v.valueReference for v in md.modelVariables}
+messages = []
+fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier)
+fmu.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+fmu.enterInitializationMode(startTime=0.0)
+fmu.setFloat64([vr[probe]], [value])
+fmu.exitInitializationMode()
+for k in range(20):
+    fmu.doStep(0.01 * k, 0.01)
+state = fmu.getFMUState()
+data = bytes(fmu.serializeFMUState(state))
+found = {}
+offset = data.find(struct.pack("<d", value))
+for bad in ("nan", "0", "-1", "inf"):
+    corrupt = bytearray(data)
+    corrupt[offset:offset + 8] = struct.pack("<d", float(bad))
+    try:
+        fmu.deserializeFMUState(bytes(corrupt))
+        found[bad] = "accepted"
+    except Exception:
+        found[bad] = messages[-1]
+lookalike = ctypes.create_string_buffer(data)
+foreign = fmi3FMUState(ctypes.addressof(lookalike))
+found["free"] = fmu.dll.fmi3FreeFMUState(fmu.component, ctypes.byref(foreign))
+found["free_untouched"] = foreign.value == ctypes.addressof(lookalike)
+found["free_message"] = messages[-1]
+found["set"] = fmu.dll.fmi3SetFMUState(fmu.component, foreign)
+found["time"] = fmu.getFloat64([vr["time"]])[0]
+fmu.freeFMUState(state)
+fmu.terminate()
+fmu.freeInstance()
+print(json.dumps(found))
+"""
+
+
+@pytest.fixture(scope="module")
+def fmi3_state_checks(fmi3_native):
+    path, probe, value = fmi3_native
+    done = subprocess.run([sys.executable, "-c", STATE_CHECKS, str(path), probe, repr(value)], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return probe, json.loads(done.stdout)
+
+
+def test_an_fmi3_state_with_an_out_of_range_parameter_is_refused_with_a_reason(fmi3_state_checks):
+    """The rollover horizon (surrogate) or rtol (reference) of a serialized FMI 3.0 state set to NaN, 0,
+    -1 or inf: fmi3DeserializeFMUState refuses it, naming the parameter."""
+    probe, found = fmi3_state_checks
+    for bad in ("nan", "0", "-1", "inf"):
+        assert found[bad].startswith("fmi3DeserializeFMUState: corrupt state") and probe in found[bad], found[bad]
+
+
+def test_fmi3_state_calls_refuse_a_pointer_the_instance_did_not_hand_out(fmi3_state_checks):
+    _, found = fmi3_state_checks
+    assert found["free"] == 3 and found["free_untouched"] and "not freed" in found["free_message"]
+    assert found["set"] == 3 and found["time"] == pytest.approx(0.2)  # the instance is where it was
+
+
+def test_fmi3_enter_initialization_mode_refuses_a_tolerance_that_is_not_positive_and_finite(fmi3_native, tmp_path):
+    path, _, _ = fmi3_native
+    md = read_model_description(str(path))
+    messages = []
+    fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=extract(str(path), str(tmp_path / "x")),
+                    modelIdentifier=md.coSimulation.modelIdentifier)
+    fmu.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+    with pytest.raises(Exception):
+        fmu.enterInitializationMode(tolerance=-1.0, startTime=0.0)
+    assert messages == ["fmi3EnterInitializationMode: tolerance -1 must be positive and finite"]
+    fmu.enterInitializationMode(tolerance=1e-6, startTime=0.0)  # the instance is still usable
+    fmu.exitInitializationMode()
+    fmu.terminate()
+    fmu.freeInstance()

@@ -25,18 +25,8 @@ ModelStatus model_get_extra(const ModelState *m, unsigned int vr, double *value)
 static ModelStatus parameter_in_range(unsigned int vr, double value, char *message, size_t size)
 {
     const char *name = NULL, *zero_means = NULL, *weight_of = NULL;
-    if (!isfinite(value)) {
-        snprintf(message, size, "value reference %u: %g is not a finite number", vr, value);
-        return MODEL_ERROR;
-    }
     switch (vr) {
-    case VR_ROLLOVER_HORIZON:
-        if (!(value >= 10 * SENSOR_DT && value <= OPFMU_HORIZON + TIME_EPS)) {
-            snprintf(message, size, "rollover_horizon = %g s must lie in [%g, %g] s (the trained horizon)",
-                     value, 10 * SENSOR_DT, OPFMU_HORIZON);
-            return MODEL_ERROR;
-        }
-        return MODEL_OK;
+    case VR_ROLLOVER_HORIZON: name = "rollover_horizon"; break;
     case VR_RESIDUAL_LIMIT: name = "residual_limit", zero_means = "0 turns the check off"; break;
     case VR_RESTART_JUMP: name = "restart_jump", zero_means = "0: windows start at the rollover horizon only"; break;
     case VR_REST_RADIUS: name = "rest_radius", zero_means = "0 turns the rest correction off"; break;
@@ -44,6 +34,15 @@ static ModelStatus parameter_in_range(unsigned int vr, double value, char *messa
     case VR_SWING_WEIGHT: name = "swing_weight", weight_of = "the exact step of the affine states"; break;
     default:
         snprintf(message, size, "value reference %u is not a settable Real variable", vr);
+        return MODEL_ERROR;
+    }
+    if (!isfinite(value)) {
+        snprintf(message, size, "%s = %g is not a finite number", name, value);
+        return MODEL_ERROR;
+    }
+    if (vr == VR_ROLLOVER_HORIZON && !(value >= 10 * SENSOR_DT && value <= OPFMU_HORIZON + TIME_EPS)) {
+        snprintf(message, size, "rollover_horizon = %g s must lie in [%g, %g] s (the trained horizon)", value,
+                 10 * SENSOR_DT, OPFMU_HORIZON);
         return MODEL_ERROR;
     }
     if (zero_means && value < 0.0) {
