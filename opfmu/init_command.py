@@ -202,19 +202,23 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
 
 def add_init_parser(sub) -> None:
     """Registers `opfmu init` on the subcommand parsers `sub`."""
+    def names(component) -> str:
+        return (f"{', '.join(f'{n}0' for n in component.state_names)} and inputs "
+                f"{', '.join(component.input_names)}")
+
     init = sub.add_parser(
         "init", help="machine and exciter start values from a load-flow result",
-        description="Start values of an SM4 machine and its IEEE Type I exciter in equilibrium at a load-flow "
-                    "point (Sauer-Pai), keyed by the FMU variable names: the machine FMU's delta0, omega0, Ed_p0, "
-                    "Eq_p0 and inputs Vs, theta_vs, Pm, Efd; the exciter FMU's Efd0, RF0, VR0 and inputs Vt, Vref. "
-                    "P + jQ is the power the generator injects into its bus.")
+        description=f"Start values of a machine ({MACHINE.name}) and its exciter ({EXCITER.name}) "
+                    f"in equilibrium at a load-flow point (Sauer-Pai), keyed by the FMU variable names: the machine "
+                    f"FMU's {names(MACHINE)}; the exciter FMU's {names(EXCITER)}. P + jQ is the power the "
+                    "generator injects into its bus.")
     init.add_argument("--machine", default=None, metavar="FILE",
-                      help="JSON file of SM4 parameters (default: paper Table I; with --load-flow: for generators "
-                           "that name none)")
+                      help=f"JSON file of {MACHINE.name} parameters (default: paper Table I; with --load-flow: for "
+                           "generators that name none)")
     exciter = init.add_mutually_exclusive_group()
     exciter.add_argument("--exciter", default=None, metavar="FILE",
-                         help="JSON file of IEEE1 parameters (default: the WSCC exciter)")
-    exciter.add_argument("--no-exciter", action="store_true", help="the machine only (Efd held)")
+                         help=f"JSON file of {EXCITER.name} parameters (default: the WSCC exciter)")
+    exciter.add_argument("--no-exciter", action="store_true", help="the machine only (its field voltage held)")
     init.add_argument("--V", type=float, default=None, metavar="PU", help="bus voltage magnitude [pu]")
     angle = init.add_mutually_exclusive_group()
     angle.add_argument("--theta-deg", type=float, default=None, metavar="DEG", help="bus voltage angle [deg]")

@@ -31,13 +31,12 @@ import math
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .ieee1 import IEEE1, IEEE1Params
-from .initialisation import exciter_start, machine_start
+from .ieee1 import IEEE1Params
+from .initialisation import EXCITER, MACHINE, exciter_start, machine_start
 from .ports import machine_inputs
 from .signals import Signal, Table
-from .sm4 import SM4, SM4Params
+from .sm4 import SM4Params
 
-MACHINE, EXCITER = SM4, IEEE1  # the loop's machine and exciter (machine_start, exciter_start give their starts)
 MACHINE_INPUTS = machine_inputs(MACHINE)
 SAMPLE_S = 0.005  # s: the tabulation step of the recorded inputs
 BOLTED = 1e-4  # pu: the smallest fault reactance (a bolted fault)
