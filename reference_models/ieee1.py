@@ -32,11 +32,11 @@ NO_LIMIT = 1e6  # pu: a regulator limit this large (or larger) in magnitude is n
 
 
 # The physical range of each gain and time constant (low, high, unit): outside it an exciter is a
-# typing error or a mode no integrator follows in a co-simulation's time (KA / TA up to 2e5 1/s).
-# The regulator limits are any numbers (beyond NO_LIMIT: none).
+# typing error or has a mode no integrator follows in a co-simulation's time (within these ranges
+# the fastest is below 5e4 1/s). The regulator limits are any numbers (beyond NO_LIMIT: none).
 PARAMETER_RANGES = {
     "KA": (0.0, 1000.0, "pu"), "TA": (0.005, 10.0, "s"), "KE": (0.0, 10.0, "pu"), "TE": (0.01, 10.0, "s"),
-    "KF": (0.0, 10.0, "pu"), "TF": (0.01, 100.0, "s"), "Ax": (0.0, 1.0, "pu"), "Bx": (0.0, 5.0, "1/pu"),
+    "KF": (0.0, 1.0, "pu"), "TF": (0.01, 100.0, "s"), "Ax": (0.0, 1.0, "pu"), "Bx": (0.0, 5.0, "1/pu"),
 }
 
 

@@ -25,16 +25,19 @@ from .ports import BusPort, Link, Ports
 
 
 # The physical range of each parameter (low, high, unit): a machine outside it is a typing error or
-# one no integrator follows in a co-simulation's time (H = 1e-9 s puts the swing mode near 1e6 rad/s).
-# Wide enough for machine data on a system base (H of a large area's equivalent machine up to
-# hundreds of seconds) and for 16.7-400 Hz networks (Wb).
+# one no integrator follows in a co-simulation's time (H = 1e-9 s with Table I's D makes the speed's
+# damping rate Wb D / (2 H) 3e11 1/s). Wide enough for machine data on a system base (H of a large
+# area's equivalent machine up to hundreds of seconds) and for 16.7-400 Hz networks (Wb). D [pu
+# torque per rad/s] is bounded with H and Wb too: that damping rate (63 1/s for Table I's machine)
+# at most MAX_DAMPING_RATE. At the corners of these ranges the fastest mode is about 1e5 1/s.
 PARAMETER_RANGES = {
-    "H": (0.1, 1000.0, "s"), "D": (0.0, 1000.0, "pu"),
+    "H": (0.1, 1000.0, "s"), "D": (0.0, 100.0, "pu"),
     "Td0_p": (0.01, 100.0, "s"), "Tq0_p": (0.01, 100.0, "s"),
     "Xd": (0.01, 10.0, "pu"), "Xd_p": (0.01, 10.0, "pu"), "Xq": (0.01, 10.0, "pu"), "Xq_p": (0.01, 10.0, "pu"),
     "Rs": (0.0, 1.0, "pu"), "Re": (0.0, 1.0, "pu"), "Xep": (0.0, 10.0, "pu"),
     "Wb": (50.0, 3000.0, "rad/s"),
 }
+MAX_DAMPING_RATE = 1e4  # 1/s
 
 
 @dataclass(frozen=True)
@@ -62,6 +65,9 @@ class SM4Params(Parameters):
             self.require(name, getattr(self, name) >= 0, "be >= 0")
         for name, (low, high, unit) in PARAMETER_RANGES.items():
             self.require(name, low <= getattr(self, name) <= high, f"lie in [{low:g}, {high:g}] {unit}")
+        rate = self.Wb * self.D / (2.0 * self.H)
+        self.require("D", rate <= MAX_DAMPING_RATE, f"keep the speed's damping rate Wb D / (2 H) = {rate:.3g} 1/s "
+                                                   f"at most {MAX_DAMPING_RATE:g} 1/s")
         self.require("Xd_p", self.Xd_p <= self.Xd, f"not exceed Xd = {self.Xd!r}")
         self.require("Xq_p", self.Xq_p <= self.Xq, f"not exceed Xq = {self.Xq!r}")
 

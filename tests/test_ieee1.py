@@ -57,7 +57,8 @@ def test_the_generated_c_computes_what_numpy_computes(tmp_path):
                                           ({"TF": -1}, "parameter TF"), ({"Kx": 1}, "unknown ieee1 parameter"),
                                           ({"TA": 1e-9}, r"parameter TA = 1e-09 must lie in \[0.005, 10\] s"),
                                           ({"KA": 1e9}, r"parameter KA = 1000000000.0 must lie in \[0, 1000\] pu"),
-                                          ({"Bx": 100}, r"parameter Bx = 100.0 must lie in \[0, 5\] 1/pu")])
+                                          ({"Bx": 100}, r"parameter Bx = 100.0 must lie in \[0, 5\] 1/pu"),
+                                          ({"KF": 10}, r"parameter KF = 10.0 must lie in \[0, 1\] pu")])
 def test_bad_parameters_are_refused_naming_the_field(values, says):
     with pytest.raises(ParameterError, match=says):
         IEEE1.params(values)

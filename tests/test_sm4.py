@@ -108,7 +108,9 @@ def test_resistance_makes_bus_power_smaller_than_air_gap_power():
 @pytest.mark.parametrize("values, says", [
     ({"H": 1e-9}, "parameter H = 1e-09 must lie in [0.1, 1000] s"),
     ({"H": 1e308, "D": 1e308}, "parameter H = 1e+308 must lie in [0.1, 1000] s"),
-    ({"D": 1e308}, "parameter D = 1e+308 must lie in [0, 1000] pu"),
+    ({"D": 1e308}, "parameter D = 1e+308 must lie in [0, 100] pu"),
+    ({"H": 0.1, "D": 10.0, "Wb": 3000.0},
+     "parameter D = 10.0 must keep the speed's damping rate Wb D / (2 H) = 1.5e+05 1/s at most 10000 1/s"),
     ({"Td0_p": 1e-6}, "parameter Td0_p = 1e-06 must lie in [0.01, 100] s"),
     ({"Xd": 1e5}, "parameter Xd = 100000.0 must lie in [0.01, 10] pu"),
     ({"Wb": 1.0}, "parameter Wb = 1.0 must lie in [50, 3000] rad/s"),
