@@ -4,7 +4,7 @@ against the reference pair (issue 16's co-simulation goal).
     python benchmarks/cosim_controls.py [--operator FILE.onnx] [--machine FILE.json] [--exciter FILE.json]
         [--scenarios mix dip governor drift] [--seeds 3] [--stop 60] [--step 0.01] [--quick] [--out-dir DIR]
 
-Two pairs, each coupled by the master of benchmarks/cosim_master.py at the communication step h
+Two pairs, each coupled by cosim.bus_driven (wired by the FMUs' ports) at the communication step h
 (the exciter driven by the machine's terminal voltage Vt = |V + (Re + j Xep) I|, the machine's Efd
 from the exciter): the surrogate FMU of the operator with the native reference FMU of IEEE1, and
 the native reference FMU of the operator's machine with the same exciter FMU. Both take the same bus
@@ -12,12 +12,13 @@ inputs (the scenario's Vs, theta_vs and Pm at each communication point, held ove
 and `dip` move the bus voltage, `governor` steps and ramps Pm, `drift` turns the network at up to
 12 rad/s with Pm carrying the damping torque D c) and start from the same point: the machine at rest
 under the scenario's first input (in its network's turning frame for `drift`), the exciter at rest
-holding that Efd at that terminal voltage (Vref from reference_models.initialisation.exciter_start).
+holding that Efd at that terminal voltage (cosim.bus_driven.start_at_rest).
 
 Printed per scenario and seed: MaxAE of each machine state and of Efd, surrogate pair minus
 reference pair over every communication point; whether the goal (60 s at h = 10 ms: delta, omega
 <= 0.01 rad, rad/s; Ed_p, Eq_p <= 0.005 pu) is met; the surrogate's in_envelope over the run; the
-coupling error, the reference pair against a monolithic solve of machine + exciter (DOP853, rtol
+coupling error, the reference pair against a monolithic solve of machine + exciter
+(reference_models.grid.monolithic.simulate_unit: DOP853, rtol
 1e-10, the same zero-order-held bus inputs: what a 10 ms exchange costs either pair); and the seconds
 spent inside fmi2DoStep of the surrogate, the reference machine and the exciter. Writes
 cosim_controls.json (every row) and cosim_controls_worst.png (the run with the largest error
@@ -36,7 +37,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim_master import CouplingError, Unit, couple, monolithic, same_parameters, start_at_rest
+from cosim.bus_driven import UnitFMU, couple, same_parameters, start_at_rest
+from cosim.fmu import CouplingError
+from reference_models.grid.monolithic import simulate_unit
 from opfmu.compare import CompareError, operator_machine, scenario_inputs
 from opfmu.demo import GOAL_MAXAE
 from reference_models.component import ParameterError
@@ -53,7 +56,7 @@ def maxae(a: np.ndarray, b: np.ndarray) -> list[float]:
     return [float(v) for v in np.abs(a - b).max(axis=0)]
 
 
-def build(operator: Path, machine_file, exciter_file, tmp: Path) -> tuple[Unit, Unit, Unit]:
+def build(operator: Path, machine_file, exciter_file, tmp: Path) -> tuple[UnitFMU, UnitFMU, UnitFMU]:
     """(surrogate, reference machine, exciter) units: the surrogate FMU of `operator`, the native
     reference of its machine (checked against --machine), the native reference of IEEE1."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
@@ -71,8 +74,7 @@ def build(operator: Path, machine_file, exciter_file, tmp: Path) -> tuple[Unit, 
     build_surrogate_fmu(operator, tmp / "SM4Surrogate.fmu")
     build_native_reference_fmu(tmp / "SM4Reference.fmu", params=machine)
     build_native_reference_fmu(tmp / "IEEE1Reference.fmu", "IEEE1Reference", IEEE1, exciter)
-    units = (Unit(tmp / "SM4Surrogate.fmu", SM4), Unit(tmp / "SM4Reference.fmu", SM4),
-             Unit(tmp / "IEEE1Reference.fmu", IEEE1))
+    units = (UnitFMU(tmp / "SM4Surrogate.fmu"), UnitFMU(tmp / "SM4Reference.fmu"), UnitFMU(tmp / "IEEE1Reference.fmu"))
     same_parameters(units[0], units[1])
     return units
 
@@ -82,24 +84,23 @@ def run_one(name: str, seed: int, stop: float, step: float, units) -> tuple[dict
     surrogate, reference, exciter = units
     inputs = scenario_inputs(name, seed, stop, step, reference.params)
     bus, times = inputs.values[:, :3], inputs.times
-    start = start_at_rest(inputs.x0, bus[0], inputs.values[0, 3], reference.params, exciter.params)
-    ref = couple(reference, exciter, times, bus, start)
-    sur = couple(surrogate, exciter, times, bus, start)
+    start = start_at_rest((reference, exciter), inputs.x0, bus[0], {"Efd": inputs.values[0, 3]})
+    ref = couple((reference, exciter), times, bus, start)
+    sur = couple((surrogate, exciter), times, bus, start)
     began = time.perf_counter()
-    mono_x, mono_e = monolithic(times, bus, start, reference.params, exciter.params)
+    mono_x, mono_e = simulate_unit([reference.device(), exciter.device()], start, times, bus)
     mono_s = time.perf_counter() - began
-    errors = maxae(sur.machine, ref.machine) + [maxae(sur.exciter, ref.exciter)[0]]
-    coupling = maxae(ref.machine, mono_x) + [maxae(ref.exciter, mono_e)[0]]
+    errors = maxae(sur.machine, ref.machine) + [maxae(sur.states[1], ref.states[1])[0]]
+    coupling = maxae(ref.machine, mono_x) + [maxae(ref.states[1], mono_e)[0]]
     met = all(errors[STATES.index(s)] <= limit for s, limit in GOAL_MAXAE.items())
     row = {"scenario": name, "seed": seed, "stop_s": stop, "step_s": step, "speed_rad_s": float(inputs.x0[1]),
            "maxae": dict(zip(STATES + ("Efd",), errors)), "goal_met": met, "in_envelope": sur.in_envelope,
            "max_residual": sur.max_residual, "coupling_maxae": dict(zip(STATES + ("Efd",), coupling)),
-           "efd_range": [float(ref.exciter[:, 0].min()), float(ref.exciter[:, 0].max())],
-           "vt_range": [float(ref.Vt.min()), float(ref.Vt.max())],
-           "do_step_s": {"surrogate": sur.do_step_s["machine"], "reference": ref.do_step_s["machine"],
-                         "exciter": ref.do_step_s["exciter"]},
+           "efd_range": [float(ref.states[1][:, 0].min()), float(ref.states[1][:, 0].max())],
+           "vt_range": [float(ref.terminal_voltage.min()), float(ref.terminal_voltage.max())],
+           "do_step_s": {"surrogate": sur.do_step_s[0], "reference": ref.do_step_s[0], "exciter": ref.do_step_s[1]},
            "wall_s": {"surrogate_pair": sur.wall_s, "reference_pair": ref.wall_s, "monolithic": mono_s},
-           "warnings": sorted({m for m in sur.messages["machine"] if "warning" in m.lower()})[:5]}
+           "warnings": sorted({m for status, m in sur.messages[0] if status == 1})[:5]}
     trajectories = {"times": times, "bus": bus, "reference": ref, "surrogate": sur}
     return row, trajectories
 
@@ -121,8 +122,8 @@ def plot_worst(row: dict, traj: dict, path: Path) -> None:
               ("omega [rad/s]", ref.machine[:, 1], sur.machine[:, 1], "omega"),
               ("Ed_p [pu]", ref.machine[:, 2], sur.machine[:, 2], "Ed_p"),
               ("Eq_p [pu]", ref.machine[:, 3], sur.machine[:, 3], "Eq_p"),
-              ("Efd [pu] (exciter)", ref.exciter[:, 0], sur.exciter[:, 0], "Efd"),
-              ("Vt [pu] (terminal voltage)", ref.Vt, sur.Vt, None)]
+              ("Efd [pu] (exciter)", ref.states[1][:, 0], sur.states[1][:, 0], "Efd"),
+              ("Vt [pu] (terminal voltage)", ref.terminal_voltage, sur.terminal_voltage, None)]
     fig, axes = plt.subplots(3, 2, figsize=(12, 9), sharex=True)
     for ax, (label, a, b, key) in zip(axes.flat, panels):
         ax.plot(t, a, "k-", lw=1.0, label="reference FMU + exciter FMU")

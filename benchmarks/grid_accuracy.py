@@ -30,13 +30,12 @@ from cosim.runners import MonolithicRunner  # noqa: E402
 from cosim.stability import critical_clearing_time  # noqa: E402
 from reference_models.grid import wscc9  # noqa: E402
 from reference_models.grid.contingency import Contingency  # noqa: E402
-from reference_models.grid.monolithic import system  # noqa: E402
 
 KINDS = ("reference", "surrogate")
 
 
 def pairs():
-    return [(bus, trip) for bus in range(4, 10) for trip in (None, *wscc9.trips_at(bus))]
+    return [(bus, trip) for bus in range(4, 10) for trip in (None, *wscc9.NETWORK.trips_at(bus))]
 
 
 def main():
@@ -47,8 +46,8 @@ def main():
     parser.add_argument("--out", default=str(Path(__file__).parent))
     args = parser.parse_args()
     clears = [float(c) for c in args.clear.split(",")]
-    grid = system()
-    masters = {k: GridMaster(generator_files(grid.dynamics, k), grid, MasterSettings()) for k in KINDS}
+    grid = wscc9.case()
+    masters = {k: GridMaster(grid, generator_files(grid, k), MasterSettings()) for k in KINDS}
     mono = MonolithicRunner(grid)
     rows = []
     started = time.perf_counter()

@@ -22,7 +22,8 @@ from cosim.fmus import generator_files  # noqa: E402
 from cosim.master import GridMaster, MasterSettings  # noqa: E402
 from cosim.outputs import errors  # noqa: E402
 from reference_models.grid.contingency import Contingency  # noqa: E402
-from reference_models.grid.monolithic import simulate_contingency, system  # noqa: E402
+from reference_models.grid import wscc9  # noqa: E402
+from reference_models.grid.monolithic import System, simulate  # noqa: E402
 
 CONTINGENCIES = (Contingency(4, 0.08), Contingency(9, 0.07, "6-9"), Contingency(7, 0.06, "7-8"),
                  Contingency(7, 5 / 60, "5-7"))
@@ -36,8 +37,9 @@ def main():
     parser.add_argument("--stop", type=float, default=5.0)
     parser.add_argument("--out", default=str(Path(__file__).parent))
     args = parser.parse_args()
-    grid = system()
-    files = generator_files(grid.dynamics, "reference")
+    grid = wscc9.case()
+    system = System(grid)
+    files = generator_files(grid, "reference")
     table = []
     for c in CONTINGENCIES:
         for h in (0.005, 0.01, 0.02):
@@ -45,9 +47,9 @@ def main():
             for name, settings in SCHEMES:
                 from dataclasses import replace
 
-                with GridMaster(files, grid, replace(settings, step=h)) as master:
+                with GridMaster(grid, files, replace(settings, step=h)) as master:
                     run = master.run(c, args.stop)
-                mono = simulate_contingency(c, args.stop, t_eval=run.result.time, grid=grid)
+                mono = simulate(system, c, args.stop, t_eval=run.result.time)
                 row[name] = {"angle_deg": errors(run.result, mono)["angle_deg"],
                              "passes": run.timing.passes / run.timing.steps, "stable": run.result.stable,
                              "monolithic_stable": mono.stable}

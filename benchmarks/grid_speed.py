@@ -22,8 +22,8 @@ from cosim.fmus import generator_files  # noqa: E402
 from cosim.master import GridMaster, MasterSettings  # noqa: E402
 from cosim.runners import MonolithicRunner  # noqa: E402
 from cosim.stability import critical_clearing_time  # noqa: E402
+from reference_models.grid import wscc9  # noqa: E402
 from reference_models.grid.contingency import Contingency  # noqa: E402
-from reference_models.grid.monolithic import system  # noqa: E402
 
 CONTINGENCY = Contingency(7, 5 / 60, "7-8")
 SWEEP = (Contingency(7, 0.1, "5-7"), Contingency(4, 0.1, "4-5"), Contingency(9, 0.1))
@@ -35,9 +35,9 @@ def main():
     parser.add_argument("--no-python", action="store_true", help="leave out the pythonfmu FMUs (slow)")
     parser.add_argument("--out", default=str(Path(__file__).parent))
     args = parser.parse_args()
-    grid = system()
+    grid = wscc9.case()
     kinds = ["surrogate", "reference"] + ([] if args.no_python else ["python"])
-    masters = {k: GridMaster(generator_files(grid.dynamics, k), grid, MasterSettings()) for k in kinds}
+    masters = {k: GridMaster(grid, generator_files(grid, k), MasterSettings()) for k in kinds}
     mono = MonolithicRunner(grid)
     runs = {}
     for kind in kinds + ["monolithic"]:

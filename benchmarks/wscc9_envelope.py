@@ -36,6 +36,7 @@ import numpy as np
 
 from reference_models.files import write_json
 from reference_models.grid import monolithic, wscc9
+from reference_models.grid.contingency import BOLTED_FAULT_IMPEDANCE, Contingency
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 
@@ -51,7 +52,7 @@ WINDOWED = ("omega_change", "theta_vs_frame", "delta_change_frame", "delta_in_wi
 def contingencies() -> list:
     """(fault bus, clearing cycles, trip or None) of every run."""
     return [(bus, cycles, trip) for bus in FAULT_BUSES for cycles in CLEARING_CYCLES
-            for trip in (None,) + wscc9.trips_at(bus)]
+            for trip in (None,) + wscc9.NETWORK.trips_at(bus)]
 
 
 def window_starts(time_s: np.ndarray, stop: float) -> np.ndarray:
@@ -86,9 +87,10 @@ def run_one(case: tuple, stop: float) -> dict:
     bus, cycles, trip = case
     started = time.perf_counter()
     t_eval = np.linspace(0.0, stop, int(round(stop / SAMPLE_S)) + 1)
-    r = monolithic.simulate_wscc9(bus, cycles / 60.0, trip=trip, stop=stop, t_eval=t_eval, event_rows=True)
+    r = monolithic.simulate(monolithic.System(wscc9.case()), Contingency(bus, cycles / 60.0, trip), stop, t_eval=t_eval,
+                            event_rows=True)
     solved = time.perf_counter()
-    static = {"Vs": r.Vs, "Efd": r.Efd, "Pm": np.broadcast_to(r.Pm, r.Vs.shape), "omega": r.omega,
+    static = {"Vs": r.Vs, "Efd": r.Efd, "Pm": r.machine_inputs["Pm"], "omega": r.omega,
               "delta_minus_theta_vs": r.delta - r.theta_vs}
     windows = window_ranges(r.time, r.omega, r.theta_vs, r.delta, stop)
     machines = {}
@@ -199,23 +201,24 @@ def main() -> None:
     print_tables(records, env)
     print(f"\n{len(records)} runs ({len(stable)} stable) of {args.stop:g} s in {wall:.1f} s wall "
           f"({args.workers} workers, cluster start {startup:.1f} s; {sum(r['wall_s'] for r in records):.1f} s in runs)")
-    grid = monolithic.system()
+    case = wscc9.case()
+    grid = monolithic.System(case)
     write_json(args.out, {
         "description": "What each WSCC 9-bus machine sees in the grid issue's contingencies (see "
                        "benchmarks/wscc9_envelope.py): per machine (generator bus) min/max over the stable runs "
                        "and over all runs; angles rad, speeds rad/s deviation, voltages pu.",
         "settings": {"case": "wscc9", "fault_buses": list(FAULT_BUSES), "clearing_cycles": list(CLEARING_CYCLES),
                      "clearing_s": [c / 60.0 for c in CLEARING_CYCLES], "fault_start_s": 0.0,
-                     "fault_impedance_pu": monolithic.BOLTED_FAULT_IMPEDANCE, "trips": "none, or each branch at the "
+                     "fault_impedance_pu": BOLTED_FAULT_IMPEDANCE, "trips": "none, or each branch at the "
                      "faulted bus that keeps every generator connected", "stop_s": args.stop, "exciters": True,
                      "solver": "DOP853 rtol 1e-10 atol 1e-12", "sample_s": SAMPLE_S, "window_s": WINDOW_S,
                      "window_start_grid_s": WINDOW_GRID_S,
                      "stability": "no rotor-angle difference between two machines exceeds pi before stop"},
-        "operating_point": {str(g.bus): {"Pm": float(grid.Pm[k]), "Efd0": float(grid.Efd0[k]),
-                                         "Vref": float(grid.Vref[k]),
-                                         "x0": [float(v) for v in grid.x0[grid.machine_slice(k)]],
-                                         "machine_file": f"reference_models/grid/data/{g.machine_file.name}"}
-                            for k, g in enumerate(grid.dynamics)},
+        "operating_point": {str(g.bus): {"Pm": case.starts[k][0].inputs["Pm"], "Efd0": case.starts[k][0].inputs["Efd"],
+                                         "Vref": case.starts[k][1].inputs["Vref"],
+                                         "x0": [float(v) for v in grid.x0[grid.slices[k][0]]],
+                                         "machine_file": f"reference_models/grid/data/{g.machine.source.name}"}
+                            for k, g in enumerate(case.units)},
         "envelope": env,
         "counts": {"runs": len(records), "stable": len(stable)},
         "contingencies": records,

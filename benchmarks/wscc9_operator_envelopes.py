@@ -28,9 +28,11 @@ import numpy as np
 
 from reference_models.drift import to_frame
 from reference_models.files import write_json
-from reference_models.grid import monolithic
+from reference_models.grid import monolithic, wscc9
+from reference_models.grid.contingency import Contingency
 from reference_models.grid.windows import machine_windows, window_starts
 from reference_models.progress import progress_bar
+from reference_models.sm4 import SM4
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from wscc9_envelope import contingencies  # noqa: E402
@@ -59,14 +61,14 @@ def windows_of(case: tuple, stop: float, operators: dict) -> dict:
     bus, cycles, trip = case
     clear = cycles / 60.0
     t = np.round(np.arange(0.0, stop + 1e-9, SAMPLE_S), 9)
-    r = monolithic.simulate_wscc9(bus, clear, trip=trip, stop=stop, t_eval=t, event_rows=True)
+    r = monolithic.simulate(monolithic.System(wscc9.case()), Contingency(bus, clear, trip), stop, t_eval=t, event_rows=True)
     out = {"stable": bool(r.stable)}
     for k, gen in enumerate(r.gen_buses):
         op, low, high, rollover = operators[gen]
         grid = np.linspace(0.0, op.horizon, op.n_sensors)
         starts = window_starts(r, op.horizon, STARTS_EVERY_S, events=(clear,))
         t_used = grid[grid <= rollover + 1e-9]
-        x0, u, truth = machine_windows(r, k, starts, grid, t_used)
+        x0, u, truth = machine_windows(r, k, starts, grid, t_used, SM4.state_names, SM4.input_names)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # windows outside the envelope are counted, not warned about
             predicted = op.predict(x0, u, t_used).astype(np.float64)

@@ -169,6 +169,15 @@ class FMU:
                 raise CouplingError(f"{self.name}: cannot instantiate {md.modelName}: {self._said(exc)}") from None
         self._c = self.fmu.component
         self._dll = self.fmu.dll
+        if self.version == 2:
+            from fmpy.fmi2 import fmi2Real as Real
+        else:
+            from fmpy.fmi3 import fmi3Boolean, fmi3Float64 as Real
+
+            self._flags = [fmi3Boolean() for _ in range(3)]
+            self._last = Real()
+            self._flag_refs = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._last)]
+        self._Real = Real
         if init:
             self.initialise(start)
 
@@ -270,7 +279,6 @@ class FMU:
             from fmpy.fmi2 import fmi2Integer as Int, fmi2Real as Real, fmi2ValueReference as VR
         else:
             from fmpy.fmi3 import fmi3Float64 as Real, fmi3Int32 as Int, fmi3ValueReference as VR
-        self._Real = Real
         self.input_names, self.output_names = tuple(inputs), tuple(outputs)
         self._in_vr = _array(VR, [self.vr[n] for n in inputs])
         self._in = (Real * len(inputs))()
@@ -281,12 +289,6 @@ class FMU:
         self._seed = _array(Real, [1.0])
         self._dd = (Real * len(outputs))()
         self._known = [_array(VR, [self.vr[n]]) for n in inputs]
-        if self.version == 3:
-            from fmpy.fmi3 import fmi3Boolean
-
-            self._flags = [fmi3Boolean() for _ in range(3)]
-            self._last = Real()
-            self._flag_refs = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._last)]
 
     def set_inputs(self, values) -> None:
         """Sets the bound inputs (bind order)."""
@@ -347,7 +349,7 @@ class FMU:
         return J
 
     def do_step(self, t: float, h: float) -> None:
-        """One communication step from t [s] by h [s]."""
+        """One communication step from t [s] by h [s] (the inputs as they were set)."""
         if self.version == 2:
             status = self._dll.fmi2DoStep(self._c, self._Real(t), self._Real(h), 1)
         else:

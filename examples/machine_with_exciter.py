@@ -7,67 +7,37 @@ exciter with the WSCC gains (IEEE1Reference.fmu), and with --surrogate also the 
 the shipped operator (SM4Surrogate.fmu; skipped with a note where that operator does not build).
 The start values come from a load-flow point with opfmu's initialisation API: the machine injects
 P + jQ = 0.8 + j0.3 pu into a bus at 1.0 pu, 0.1 rad; `machine_start` gives its state, Pm and Efd,
-`exciter_start` the exciter's state and Vref that hold that Efd. Then 5 s at h = 10 ms with the
-exciter in the loop: the bus voltage dips to 0.5 pu at t = 1 s for 150 ms. Every step the master
-sets the bus voltage, reads the machine's bus current I, gives the exciter the terminal voltage
-Vt = |V + (Re + j Xep) I|, steps it, gives its Efd to the machine and steps the machine. Writes
-DIR/machine_with_exciter.png (Efd and the rotor angle).
+`cosim.bus_driven.start_at_rest` the exciter's state and Vref that hold that Efd. Then 5 s at
+h = 10 ms with the exciter in the loop (cosim.bus_driven.couple, wired by the FMUs' ports): the bus
+voltage dips to 0.5 pu at t = 1 s for 150 ms. Every step the master sets the bus voltage, reads the
+machine's bus current I, gives the exciter the terminal voltage Vt = |V + (Re + j Xep) I|, steps
+it, gives its Efd to the machine and steps the machine. Writes DIR/machine_with_exciter.png (Efd and
+the rotor angle).
 """
 import argparse
-import cmath
 from pathlib import Path
 
 import numpy as np
-from fmpy import extract, instantiate_fmu, read_model_description
 
+from cosim.bus_driven import UnitFMU, couple, start_at_rest
 from fmu_export.native_reference_fmu import build_native_reference_fmu
 from reference_models.ieee1 import IEEE1
-from reference_models.initialisation import exciter_start, machine_start
+from reference_models.initialisation import machine_start
 from reference_models.sm4 import SM4
 
 STOP, STEP = 5.0, 0.01
 BUS = dict(V=1.0, theta=0.1, P=0.8, Q=0.3)  # the load-flow point: bus voltage [pu, rad], power injected [pu]
 
 
-def open_fmu(path, **start):
-    """An initialised FMU2Slave of the FMU at `path`, with start values by name; (fmu, value references)."""
-    directory = extract(str(path))
-    md = read_model_description(directory)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmu = instantiate_fmu(directory, md, fmi_type="CoSimulation")
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.setReal([vr[n] for n in start], list(start.values()))
-    fmu.exitInitializationMode()
-    return fmu, vr
-
-
-def run(machine_fmu, exciter_fmu, machine, field, bus_voltage):
+def run(machine_fmu, exciter_fmu, machine, bus_voltage):
     """Co-simulate the machine with its exciter; bus_voltage(t) -> (Vs, theta_vs). Returns the
     times and the recorded delta, Efd."""
-    m, mv = open_fmu(machine_fmu, **dict(zip(("delta0", "omega0", "Ed_p0", "Eq_p0"), map(float, machine.x0))),
-                     Vs=BUS["V"], theta_vs=BUS["theta"], Pm=machine.Pm, Efd=machine.Efd)
-    e, ev = open_fmu(exciter_fmu, **dict(zip(("Efd0", "RF0", "VR0"), map(float, field.x0))),
-                     Vt=machine.Vt, Vref=field.Vref)
-    p = SM4.params()  # the machine's Re, Xep (Table I: 0, 0.1)
+    units = (UnitFMU(machine_fmu), UnitFMU(exciter_fmu))
     times = np.arange(int(round(STOP / STEP)) + 1) * STEP
-    delta, efd = [machine.x0[0]], [machine.Efd]
-    for t in times[:-1]:
-        Vs, theta = bus_voltage(t)
-        m.setReal([mv["Vs"], mv["theta_vs"]], [Vs, theta])
-        I = complex(*m.getReal([mv["I_re"], mv["I_im"]]))  # bus current, recomputed for the new voltage
-        Vt = abs(cmath.rect(Vs, theta) + complex(p.Re, p.Xep) * I)
-        e.setReal([ev["Vt"]], [Vt])
-        e.doStep(t, STEP)
-        Efd = e.getReal([ev["Efd"]])[0]
-        m.setReal([mv["Efd"]], [Efd])
-        m.doStep(t, STEP)
-        delta.append(m.getReal([mv["delta"]])[0])
-        efd.append(Efd)
-    for fmu in (m, e):
-        fmu.terminate()
-        fmu.freeInstance()
-    return times, np.array(delta), np.array(efd)
+    bus = np.array([(*bus_voltage(t), machine.Pm) for t in times])  # Vs, theta_vs, and Pm held
+    starts = start_at_rest(units, machine.x0, (BUS["V"], BUS["theta"], machine.Pm), {"Efd": machine.Efd})
+    result = couple(units, times, bus, starts)
+    return times, result.machine[:, 0], result.states[1][:, 0]
 
 
 def main() -> None:
@@ -91,15 +61,13 @@ def main() -> None:
             print(f"no surrogate: {exc}")
 
     machine = machine_start(BUS["V"], BUS["theta"], BUS["P"], BUS["Q"], SM4.params())
-    field = exciter_start(machine.Efd, machine.Vt, IEEE1.params())
     print(f"load flow V = {BUS['V']} pu at {BUS['theta']} rad, P = {BUS['P']}, Q = {BUS['Q']} pu: delta0 = "
-          f"{machine.x0[0]:.4f} rad, Pm = {machine.Pm:.4f}, Efd = {machine.Efd:.4f}, Vt = {machine.Vt:.4f}, "
-          f"Vref = {field.Vref:.4f} pu")
+          f"{machine.x0[0]:.4f} rad, Pm = {machine.Pm:.4f}, Efd = {machine.Efd:.4f}, Vt = {machine.Vt:.4f} pu")
 
     def dip(t):
         return (0.5 if 1.0 <= t + 1e-9 < 1.15 else BUS["V"]), BUS["theta"]
 
-    results = {name: run(path, args.out / "IEEE1Reference.fmu", machine, field, dip) for name, path in fmus.items()}
+    results = {name: run(path, args.out / "IEEE1Reference.fmu", machine, dip) for name, path in fmus.items()}
     for name, (_, delta, efd) in results.items():
         print(f"{name}: Efd peak {efd.max():.3f} pu, delta swing {delta.min():.3f}..{delta.max():.3f} rad")
     if "surrogate" in results:

@@ -408,22 +408,43 @@ def unit_start(unit: Unit, op: dict) -> tuple:
     """The DeviceStart of every device of `unit` at the load-flow operating point op (V, theta, P, Q
     of its generator): the machine at its equilibrium, each control component holding the signal the
     machine takes from it at the terminal voltage."""
-    from ..initialisation import exciter_start, machine_start
+    from ..initialisation import machine_start
 
     machine = unit.machine
     ms = machine_start(op["V"], op["theta"], op["P"], op["Q"], machine.params)
+    given = {"mechanical_power": float(ms.Pm), "field_voltage": float(ms.Efd)}
     bus = machine.component.ports.bus
-    given = {"mechanical_power": float(ms.Pm), "field_voltage": float(ms.Efd), "terminal_voltage": float(ms.Vt)}
-    m_inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
+    inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
     for link in machine.component.ports.inputs:
-        m_inputs[link.variable] = given[link.signal]
-    starts = [DeviceStart(tuple(float(v) for v in ms.x0), m_inputs)]
-    for device in unit.controls:
+        inputs[link.variable] = given[link.signal]
+    return at_rest(unit.devices, ms.x0, inputs, f"generator at bus {unit.bus}")
+
+
+def at_rest(devices, x0, machine_inputs: dict, where: str = "the unit") -> tuple:
+    """The DeviceStart of every device of a unit whose machine (devices[0]) is at rest in state x0
+    under `machine_inputs` (every input by name): each control component started holding the signal
+    the machine takes from it, at the terminal voltage (the bus voltage behind the machine's
+    external impedance)."""
+    from ..initialisation import exciter_start
+
+    machine = devices[0]
+    component = machine.component
+    bus = component.ports.bus
+    u = np.array([float(machine_inputs[n]) for n in component.input_names])
+    y = component.output_values(np.asarray(x0, dtype=float), u, machine.params)
+    current = complex(y[component.output_names.index(bus.current[0])], y[component.output_names.index(bus.current[1])])
+    V = machine_inputs[bus.voltage[0]] * np.exp(1j * machine_inputs[bus.voltage[1]])
+    Vt = float(abs(V + external_impedance(machine) * current))
+    given = {"terminal_voltage": Vt}
+    for link in component.ports.inputs:
+        given[link.signal] = float(machine_inputs[link.variable])
+    starts = [DeviceStart(tuple(float(v) for v in x0), dict(machine_inputs))]
+    for device in devices[1:]:
         ports = device.component.ports
         if ports.output("field_voltage") is None:
-            raise CaseError(f"generator at bus {unit.bus}: no start for {device.name} ({device.component.name}): "
-                            "only field-voltage controllers are initialised")
-        es = exciter_start(ms.Efd, ms.Vt, device.params)
+            raise CaseError(f"{where}: no start for {device.name} ({device.component.name}): only field-voltage "
+                            "controllers are initialised")
+        es = exciter_start(given["field_voltage"], Vt, device.params)
         values = {**given, "voltage_reference": float(es.Vref)}
         inputs = {link.variable: values[link.signal] for link in ports.inputs}
         starts.append(DeviceStart(tuple(float(v) for v in es.x0), inputs))
@@ -495,3 +516,9 @@ def step_order(wiring) -> tuple:
         order.append(ready[0])
         controls.remove(ready[0])
     return tuple(order) + (0,)
+
+
+def held_inputs(ports, wires) -> tuple:
+    """The link inputs of a device (its Ports and wiring) that nothing in its unit gives (set
+    points), in its ports' order."""
+    return tuple(link.variable for link in ports.inputs if wires[link.variable].kind == "held")

@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from .case import Case, Reduced, external_impedance, unit_wiring
+from .case import Case, Reduced, external_impedance, held_inputs, unit_wiring
 from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency
 from .result import ROTOR_ANGLE, GridResult
 
@@ -53,6 +53,102 @@ def _current_map(component, x, p, m):
     r_re, r_im = current(1.0, 0.0)
     i_re_, i_im_ = current(1.0, 0.5 * math.pi)
     return (c_re, c_im), ((r_re - c_re, i_re_ - c_re), (r_im - c_im, i_im_ - c_im))
+
+
+def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, controls: bool = True, m=math,
+                held=None) -> list:
+    """The inputs of every device of a unit (tuples in component order), wired by `wiring`
+    (case.unit_wiring): the bus voltage V_re + j V_im (scalars, m = math; arrays, m = numpy), the
+    devices' states `state(j)` (lists in component order), the terminal voltage behind `impedance`,
+    set points at their start values in `starts` (or `held` {variable: value} of the machine where
+    given). controls=False: the machine's links from other devices held at their start values."""
+    if m is math:
+        Vs, theta = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
+    else:
+        Vs, theta = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
+    held = held or {}
+    inputs = [None] * len(devices)
+
+    def value(j, variable):
+        d = devices[j]
+        if variable in d.component.state_names:
+            return state(j)[d.component.state_names.index(variable)]
+        return d.component.output_equations(state(j), inputs_of(j), d.params, m)[d.component.output_names.index(variable)]
+
+    def terminal():
+        if impedance == 0:
+            return Vs
+        bus = devices[0].component.ports.bus
+        I_re, I_im = (value(0, n) for n in bus.current)
+        return abs(complex(V_re, V_im) + impedance * complex(I_re, I_im)) if m is math else \
+            np.abs((V_re + 1j * V_im) + impedance * (I_re + 1j * I_im))
+
+    def inputs_of(j):
+        if inputs[j] is None:
+            inputs[j] = ()  # a cycle reads a held start value below
+            d, wires = devices[j], wiring[j]
+            values = []
+            for name in d.component.input_names:
+                source = wires.get(name)
+                start = held.get(name, starts[j].inputs[name]) if j == 0 else starts[j].inputs[name]
+                if source is None or source.kind == "held" or (source.kind != "bus" and not controls and j == 0):
+                    values.append(start)
+                elif source.kind == "bus":
+                    values.append(Vs if source.index == 0 else theta)
+                elif source.kind == "terminal":
+                    values.append(terminal())
+                else:
+                    values.append(value(source.device, source.variable))
+            inputs[j] = tuple(values)
+        return inputs[j]
+
+    return [inputs_of(j) for j in range(len(devices))]
+
+
+def simulate_unit(devices, starts, times, bus, rtol: float = 1e-10, atol: float = 1e-12):
+    """The states of every device of a unit on a bus whose voltage is prescribed, solved as one ODE
+    (scipy DOP853): bus [T, 2 + k] holds over [times[i], times[i + 1]] the bus voltage magnitude [pu]
+    and angle [rad] and the k machine inputs nothing in the unit gives (its held links, in its
+    ports' order); each stretch of equal rows in one solve. Returns a list per device of its states
+    [T, n_j]. devices: case.Device (the machine first); starts: case.DeviceStart per device."""
+    from scipy.integrate import solve_ivp
+
+    wiring = unit_wiring([d.component.ports for d in devices], "the unit")
+    impedance = external_impedance(devices[0])
+    held_names = held_inputs(devices[0].component.ports, wiring[0])
+    sizes = [d.component.n_states for d in devices]
+    bounds = np.cumsum([0] + sizes)
+
+    def f(y, row):
+        def state(j):
+            return list(y[bounds[j]:bounds[j + 1]])
+
+        Vs, theta = row[0], row[1]
+        inputs = unit_inputs(devices, wiring, starts, impedance, state, Vs * math.cos(theta), Vs * math.sin(theta),
+                             held=dict(zip(held_names, row[2:])))
+        out = []
+        for j, d in enumerate(devices):
+            out += list(d.component.derivatives(state(j), inputs[j], d.params, math))
+        return out
+
+    times, bus = np.asarray(times, dtype=float), np.asarray(bus, dtype=float)
+    y = np.concatenate([np.asarray(s.states, dtype=float) for s in starts])
+    out = np.empty((len(times), len(y)))
+    out[0] = y
+    k = 0
+    while k < len(times) - 1:
+        end = k + 1
+        while end < len(times) - 1 and np.array_equal(bus[end], bus[k]):
+            end += 1  # bus[k] holds over [times[k], times[end]]
+        row = tuple(bus[k])
+        sol = solve_ivp(lambda _t, s, row=row: f(s, row), (times[k], times[end]), y, method="DOP853", rtol=rtol,
+                        atol=atol, t_eval=times[k + 1:end + 1])
+        if not sol.success:
+            raise RuntimeError(f"the monolithic solve failed at t = {times[k]:.4f} s: {sol.message}")
+        out[k + 1:end + 1] = sol.y.T
+        y = sol.y[:, -1]
+        k = end
+    return [out[:, bounds[j]:bounds[j + 1]] for j in range(len(devices))]
 
 
 class System:
@@ -126,54 +222,15 @@ class System:
     def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math) -> list:
         """The inputs of every device of unit k (tuples in component order) at state y (scalars, m =
         math; or arrays over rows, m = numpy) and bus voltage V_re + j V_im."""
-        unit, wiring, starts = self.units[k], self.wiring[k], self.case.starts[k]
+        slices = self.slices[k]
         if m is math:
-            Vs, theta = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
+            def state(j):
+                return [y[i] for i in range(slices[j].start, slices[j].stop)]
         else:
-            Vs, theta = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
-        inputs = [None] * len(unit.devices)
-
-        def state(j):
-            return [y[i] for i in range(self.slices[k][j].start, self.slices[k][j].stop)] if m is math \
-                else [y[:, i] for i in range(self.slices[k][j].start, self.slices[k][j].stop)]
-
-        def value(j, variable):
-            d = unit.devices[j]
-            if variable in d.component.state_names:
-                s = self.slices[k][j]
-                i = s.start + d.component.state_names.index(variable)
-                return y[i] if m is math else y[:, i]
-            return d.component.output_equations(state(j), inputs_of(j), d.params, m)[d.component.output_names.index(variable)]
-
-        def terminal():
-            z = self.impedance[k]
-            if z == 0:
-                return Vs
-            bus = unit.machine.component.ports.bus
-            I_re, I_im = (value(0, n) for n in bus.current)
-            return abs(complex(V_re, V_im) + z * complex(I_re, I_im)) if m is math else \
-                np.abs((V_re + 1j * V_im) + z * (I_re + 1j * I_im))
-
-        def inputs_of(j):
-            if inputs[j] is None:
-                inputs[j] = ()  # a cycle reads a held start value below
-                d, wires = unit.devices[j], wiring[j]
-                values = []
-                for name in d.component.input_names:
-                    source = wires.get(name)
-                    held = starts[j].inputs[name]
-                    if source is None or source.kind == "held" or (source.kind != "bus" and not controls and j == 0):
-                        values.append(held)
-                    elif source.kind == "bus":
-                        values.append(Vs if source.index == 0 else theta)
-                    elif source.kind == "terminal":
-                        values.append(terminal())
-                    else:
-                        values.append(value(source.device, source.variable))
-                inputs[j] = tuple(values)
-            return inputs[j]
-
-        return [inputs_of(j) for j in range(len(unit.devices))]
+            def state(j):
+                return [y[:, i] for i in range(slices[j].start, slices[j].stop)]
+        return unit_inputs(self.units[k].devices, self.wiring[k], self.case.starts[k], self.impedance[k], state,
+                           V_re, V_im, controls, m)
 
     def rhs(self, t, y, network: Reduced, controls: bool = True) -> np.ndarray:
         """dy/dt [n_states] with the network voltages solved for the state y."""
