@@ -254,3 +254,28 @@ def test_the_state_fuzzer_under_valgrind_is_clean(fuzzed, state_fuzz):
                                             "--errors-for-leak-kinds=definite,indirect,possible"))
     assert result.returncode == 0, result.stdout + result.stderr[-3000:]
     assert "ERROR SUMMARY: 0 errors" in result.stderr and counts["failures"] == 0
+
+
+# in a process of its own, so that a step that never returns fails the test by its timeout
+FAR_START = r"""
+import sys
+from cosim.fmu import FMU
+slave = FMU(sys.argv[1], init=False)
+slave.fmu.setupExperiment(startTime=1e16)
+slave.fmu.enterInitializationMode()
+slave.fmu.exitInitializationMode()
+try:
+    slave.fmu.doStep(1e16, 4.0)
+    print("stepped")
+except Exception:
+    print(slave.last_message())
+"""
+
+
+def test_a_step_whose_window_end_the_time_cannot_resolve_is_refused_not_endless(small_surrogate_path):
+    """At t = 1e16 s a double does not resolve the 0.16 s rollover horizon: the window's end is the
+    current time, which once made the step loop forever; now the step is an error with the reason."""
+    done = subprocess.run([sys.executable, "-c", FAR_START, str(small_surrogate_path)], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "does not resolve the rollover horizon" in done.stdout, done.stdout
