@@ -25,7 +25,7 @@ def cmd_data(args) -> None:
     from surrogate.data import generate
     from surrogate.data.plots import plot_preview
     from surrogate.data.presets import load_preset
-    from surrogate.data.runner import SolveRunner
+    from surrogate.data.runner import SchedulerError, SolveRunner
 
     if args.workers < 0:
         raise UserError("--workers must be >= 0")
@@ -37,8 +37,11 @@ def cmd_data(args) -> None:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     output_folder(args.out)
-    meta = generate(recipe, args.out, seed=args.seed, runner=SolveRunner(args.workers, args.scheduler),
-                    progress=not args.quiet, params=params)
+    try:
+        meta = generate(recipe, args.out, seed=args.seed, runner=SolveRunner(args.workers, args.scheduler),
+                        progress=not args.quiet, params=params)
+    except SchedulerError as exc:
+        raise UserError(str(exc)) from None
     preview = plot_preview(args.out)
     print(summary_table(meta))
     print(f"dataset written to {args.out} ({meta['wall_time_s']} s); preview: {preview}")
@@ -143,6 +146,8 @@ def cmd_export(args) -> None:
     from surrogate.training import TrainError
 
     output_file(args.output)
+    for run in args.runs:
+        _check_run_config(Path(run))
     try:
         meta = export_onnx(args.runs, args.output, data_dir=args.data)
     except (ExportError, TrainError, FileNotFoundError) as exc:
@@ -151,6 +156,21 @@ def cmd_export(args) -> None:
     print(f"wrote {args.output}: {describe(json.loads(meta['architecture']))} operator, horizon {meta['horizon_s']} s, "
           f"{meta['n_sensors']} sensors; test MSE {metrics['mse']:.3e}, MAE {metrics['mae']:.3e}, "
           f"MaxAE {metrics['maxae']:.3e} (physical units); onnxruntime matches torch")
+
+
+def _check_run_config(run: Path) -> None:
+    """UserError unless the config.json of a trained run (one with model.pt) is the object `opfmu
+    train` writes: the objects train and data, data naming the dataset's folder."""
+    if not (run / "model.pt").is_file():
+        return  # the export names the missing model
+    path = run / "config.json"
+    if not path.is_file():
+        raise UserError(f"{run} has a model.pt but no config.json: not a run of `opfmu train`")
+    config = json_object_file(path, "run config")
+    train, data = config.get("train"), config.get("data")
+    if not (isinstance(train, dict) and isinstance(data, dict) and isinstance(data.get("dir"), str)):
+        raise UserError(f"run config {path} must hold the objects train and data (data.dir: the dataset's folder), "
+                        "as `opfmu train` writes it")
 
 
 def cmd_build_fmu(args) -> None:

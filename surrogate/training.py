@@ -380,7 +380,10 @@ def _save(run_dir: Path, model, optimizer, generator, state: _State, config: Tra
 
 
 def _restore(path: Path, model, optimizer, generator) -> _State:
-    checkpoint = torch.load(path, weights_only=False)
+    try:
+        checkpoint = torch.load(path, weights_only=False)
+    except Exception as exc:  # torch.load raises pickle's, zipfile's and its own errors for a damaged file
+        raise TrainError(f"{path} is not a readable checkpoint ({_reason(exc)}): remove it to train again") from None
     model.load_state_dict(checkpoint["model"])
     optimizer.load_state_dict(checkpoint["optimizer"])
     generator.set_state(checkpoint["generator"])
@@ -427,9 +430,17 @@ def load_model(path) -> OperatorModel:
     path = Path(path)
     if path.is_dir():
         path = path / "model.pt"
-    if not path.exists():
+    if not path.is_file():
         raise TrainError(f"no trained model at {path}")
-    payload = torch.load(path, weights_only=False)
+    try:
+        payload = torch.load(path, weights_only=False)
+    except Exception as exc:  # torch.load raises pickle's, zipfile's and its own errors for a damaged file
+        raise TrainError(f"{path} is not a readable model file ({_reason(exc)})") from None
     model = build_model(OperatorConfig.from_dict(payload["model_config"]), NormStats.from_dict(payload["stats"]))
     model.load_state_dict(payload["state_dict"])
     return model.eval()
+
+
+def _reason(exc: Exception) -> str:
+    """An exception's message on one line, at most 200 characters."""
+    return " ".join(str(exc).split())[:200] or type(exc).__name__

@@ -230,3 +230,58 @@ def test_operator_into_a_folder_holding_another_dataset_or_run_is_refused_before
     (out / "run" / "config.json").write_text(json.dumps({"train": {"lr": 1.0}, "data": {}}))
     assert "holds a training run with other settings" in refusal(capsys, *argv)
     assert sorted(p.name for p in (out / "run").iterdir()) == ["checkpoint.pt", "config.json"]
+
+
+def test_a_scheduler_that_is_not_an_address_is_one_line(tmp_path, capsys):
+    spec = preset_file(tmp_path / "p.json", tiny("paper"))
+    line = refusal(capsys, "data", "--preset", spec, "--out", tmp_path / "d", "--scheduler", "no address")
+    assert line.startswith("error: cannot use the dask scheduler 'no address':")
+
+
+def damaged_copy(source, target, damage):
+    import shutil
+
+    shutil.copytree(source, target)
+    damage(target)
+    return target
+
+
+@pytest.mark.parametrize("damage, expected", [
+    (lambda d: (d / "train.npz").write_bytes(b"not an archive"), "train.npz is not a readable split"),
+    (lambda d: __import__("numpy").savez(d / "train.npz", y=[1.0]), "train.npz lacks the arrays x0, u, t, x"),
+    (lambda d: (d / "metadata.json").write_text(json.dumps({**json.loads((d / "metadata.json").read_text()),
+                                                            "horizon_s": "1 s"})), "horizon_s must be a number > 0"),
+    (lambda d: (d / "metadata.json").write_text(json.dumps({**json.loads((d / "metadata.json").read_text()),
+                                                            "envelope": "all"})), "envelope must be"),
+])
+def test_a_damaged_dataset_names_the_file_and_what_it_lacks(tmp_path, capsys, paper_tiny, damage, expected):
+    data = damaged_copy(paper_tiny[1], tmp_path / "ds", damage)
+    assert expected in refusal(capsys, "train", "--data", data, "--out", tmp_path / "run", "--epochs", "1", "--quiet")
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory, paper_tiny):
+    out = tmp_path_factory.mktemp("trained") / "run"
+    assert main(["train", "--data", str(paper_tiny[1]), "--out", str(out), "--epochs", "2", "--quiet"]) == 0
+    return out
+
+
+def test_a_damaged_checkpoint_or_model_file_is_named(tmp_path, capsys, paper_tiny, trained_run):
+    run = damaged_copy(trained_run, tmp_path / "run", lambda d: (d / "checkpoint.pt").write_bytes(b"x"))
+    line = refusal(capsys, "train", "--data", paper_tiny[1], "--out", run, "--epochs", "3", "--quiet")
+    assert f"{run / 'checkpoint.pt'} is not a readable checkpoint" in line
+    (run / "model.pt").write_bytes(b"x")
+    for argv in (["evaluate", run, "--data", paper_tiny[1], "--out", tmp_path / "e"],
+                 ["export", run, "-o", tmp_path / "x.onnx"]):
+        assert f"{run / 'model.pt'} is not a readable model file" in refusal(capsys, *argv)
+
+
+@pytest.mark.parametrize("config, expected", [
+    ("[1]", "must be a JSON object, got a list"),
+    ('{"train": {}, "data": []}', "must hold the objects train and data"),
+])
+def test_export_of_a_run_whose_config_is_not_what_train_writes_is_refused(tmp_path, capsys, trained_run, config,
+                                                                           expected):
+    run = damaged_copy(trained_run, tmp_path / "run", lambda d: (d / "config.json").write_text(config))
+    assert expected in refusal(capsys, "export", run, "-o", tmp_path / "x.onnx")
+    assert not (tmp_path / "x.onnx").exists()

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import platform
 import shutil
 import time
@@ -203,8 +204,15 @@ def load_split(directory: str | Path, split: str, frame: bool = True) -> dict:
         raise DatasetError(f"{directory} was made by an older opfmu (dataset format {meta.get('format')}, "
                            f"now {FORMAT_VERSION}): regenerate it")
     model, params = machine_of(meta)
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
+    try:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError):  # not an npz archive, or one holding pickled objects
+        raise DatasetError(f"{path} is not a readable split (not an .npz archive of plain arrays): "
+                           "regenerate the dataset") from None
+    missing = [k for k in ("x0", "u", "t") + (("x",) if LABELED.get(split) else ()) if k not in arrays]
+    if missing:
+        raise DatasetError(f"{path} lacks the arrays {', '.join(missing)}: regenerate the dataset")
     if frame:
         arrays.update(zip(("x0", "u", "x"), in_frame(arrays, model, params)))
     return {**arrays, "component": model}
@@ -227,7 +235,37 @@ def _json_object(path: Path) -> dict:
         raise DatasetError(f"{path} is not readable JSON ({reason}): remove the dataset and regenerate it") from None
     if not isinstance(data, dict):
         raise DatasetError(f"{path} must be a JSON object: remove the dataset and regenerate it")
+    _check_metadata_types(data, path)
     return data
+
+
+def _check_metadata_types(meta: dict, path: Path) -> None:
+    """DatasetError naming the field unless each field the later stages read, where present, has its type."""
+    def number(value) -> bool:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+    def pair(value) -> bool:
+        return isinstance(value, list) and len(value) == 2 and all(number(v) for v in value)
+
+    envelope = meta.get("envelope", {"x0": {}, "u": {}})
+    checks = {
+        "horizon_s": ("a number > 0", number(meta.get("horizon_s", 1.0)) and meta.get("horizon_s", 1.0) > 0),
+        "n_points": ("an integer >= 2", isinstance(meta.get("n_points", 2), int)
+                     and not isinstance(meta.get("n_points", 2), bool) and meta.get("n_points", 2) >= 2),
+        "state_names": ("a list of names", isinstance(meta.get("state_names", []), list)
+                        and all(isinstance(n, str) for n in meta.get("state_names", []))),
+        "input_names": ("a list of names", isinstance(meta.get("input_names", []), list)
+                        and all(isinstance(n, str) for n in meta.get("input_names", []))),
+        "envelope": ('{"x0": {state: [low, high]}, "u": {input: [low, high]}}', isinstance(envelope, dict)
+                     and all(isinstance(envelope.get(g), dict) and all(pair(r) for r in envelope[g].values())
+                             for g in ("x0", "u"))),
+        "preset": ("an object", isinstance(meta.get("preset", {}), dict)),
+        "counts": ("an object", isinstance(meta.get("counts", {}), dict)),
+        "fingerprint": ("a string", isinstance(meta.get("fingerprint", ""), str)),
+    }
+    for field, (expected, good) in checks.items():
+        if not good:
+            raise DatasetError(f"{path}: {field} must be {expected}: remove the dataset and regenerate it")
 
 
 def machine_of(meta: dict):

@@ -29,6 +29,10 @@ def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict
     return np.stack(states)
 
 
+class SchedulerError(ValueError):
+    """A dask scheduler address that cannot be used (unreachable, or not an address)."""
+
+
 @contextmanager
 def _interrupts_left_to_this_process():
     """SIGINT ignored while the block starts worker processes, which inherit that: a Ctrl-C, sent to
@@ -79,7 +83,11 @@ class SolveRunner:
         if self.scheduler:
             from dask.distributed import Client
 
-            self._client = Client(self.scheduler, timeout="20s")
+            try:
+                self._client = Client(self.scheduler, timeout="20s")
+            except (OSError, ValueError, TypeError) as exc:  # unreachable, or not an address
+                raise SchedulerError(f"cannot use the dask scheduler {self.scheduler!r}: "
+                                     f"{' '.join(str(exc).split())[:200]}") from None
         elif self.workers > 0:
             from dask.distributed import Client, LocalCluster
 
