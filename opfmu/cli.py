@@ -516,6 +516,10 @@ def _version() -> str:
     return f"opfmu {__version__}"
 
 
+def _one_line(exc: Exception) -> str:
+    return " ".join(str(exc).splitlines())
+
+
 def interrupted_message(args) -> str:
     """The one line a Ctrl-C ends a command with: "rerun to resume" only where a rerun does (the
     finished chunks of a dataset and the last checkpoint of a training are kept)."""
@@ -533,10 +537,10 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         _run(args)
     except (UserError, DatasetError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # a failed reference solve: finished work is kept for the rerun
-        print(f"failed: {exc}", file=sys.stderr)
+        print(f"failed: {_one_line(exc)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(interrupted_message(args), file=sys.stderr)
