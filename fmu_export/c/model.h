@@ -70,6 +70,12 @@ OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned in
 /* MODEL_ERROR (why written) unless the component's fields of m (time, u, du, x, x_start) are finite
    and the inputs at or above their lower bounds, as the setters and steps keep them */
 OPFMU_INTERNAL ModelStatus check_component_state(const ModelState *m, char *why, size_t size);
+/* MODEL_ERROR (message written) where an input with a nonzero derivative ends a step at u_end
+   non-finite or below its lower bound (an input held over the step is u_end itself, already checked) */
+OPFMU_INTERNAL ModelStatus check_inputs_at_step_end(const ModelState *m, const double u_end[OPFMU_N_INPUTS],
+                                                    char *message, size_t size);
+/* the index of the first of the n values at v that is not finite, or -1 */
+OPFMU_INTERNAL int first_non_finite(const double *v, int n);
 
 /* --- each model provides --- */
 OPFMU_INTERNAL void model_defaults(ModelState *m);

@@ -54,16 +54,8 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
     const double stop = m->time + h;
     double u_end[N_U], x[N_X], h_guess = m->h_guess;
-    for (int c = 0; c < N_U; ++c) {
-        u_end[c] = m->u[c] + m->du[c] * h;
-        if (!isfinite(u_end[c]) || u_end[c] < OPFMU_INPUT_MIN[c]) {
-            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
-                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
-                     m->du[c], OPFMU_INPUT_UNITS[c], u_end[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
-                     OPFMU_INPUT_UNITS[c]);
-            return MODEL_ERROR;
-        }
-    }
+    for (int c = 0; c < N_U; ++c) u_end[c] = m->u[c] + m->du[c] * h;
+    if (check_inputs_at_step_end(m, u_end, message, size) != MODEL_OK) return MODEL_ERROR;
     StepInputs inputs = {m->u, m->du, m->time};
     DopriStats stats;
     memcpy(x, m->x, sizeof x);

@@ -90,14 +90,6 @@ const char *model_no_derivative(unsigned int vr)
     return NULL;
 }
 
-/* the first of the n values at v that is not finite: its index, or -1 */
-static int first_non_finite(const double *v, int n)
-{
-    for (int i = 0; i < n; ++i)
-        if (!isfinite(v[i])) return i;
-    return -1;
-}
-
 /* a flag that is neither 0 nor 1 */
 static int not_a_flag(int value) { return value != 0 && value != 1; }
 

@@ -77,8 +77,7 @@ ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double val
     return MODEL_OK;
 }
 
-/* index of the first non-finite value of v[n], or -1 */
-static int non_finite(const double *v, int n)
+int first_non_finite(const double *v, int n)
 {
     for (int i = 0; i < n; ++i)
         if (!isfinite(v[i])) return i;
@@ -103,13 +102,28 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
             return MODEL_ERROR;
         }
     }
-    if ((i = non_finite(m->x, OPFMU_N_STATES)) >= 0) {
+    if ((i = first_non_finite(m->x, OPFMU_N_STATES)) >= 0) {
         snprintf(why, size, "state %d: %g is not a finite number", i, m->x[i]);
         return MODEL_ERROR;
     }
-    if ((i = non_finite(m->x_start, OPFMU_N_STATES)) >= 0) {
+    if ((i = first_non_finite(m->x_start, OPFMU_N_STATES)) >= 0) {
         snprintf(why, size, "initial state %d: %g is not a finite number", i, m->x_start[i]);
         return MODEL_ERROR;
+    }
+    return MODEL_OK;
+}
+
+ModelStatus check_inputs_at_step_end(const ModelState *m, const double u_end[OPFMU_N_INPUTS], char *message,
+                                     size_t size)
+{
+    for (int c = 0; c < OPFMU_N_INPUTS; ++c) {
+        if (m->du[c] != 0.0 && (!isfinite(u_end[c]) || u_end[c] < OPFMU_INPUT_MIN[c])) {
+            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
+                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
+                     m->du[c], OPFMU_INPUT_UNITS[c], u_end[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
+                     OPFMU_INPUT_UNITS[c]);
+            return MODEL_ERROR;
+        }
     }
     return MODEL_OK;
 }

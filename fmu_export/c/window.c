@@ -370,15 +370,7 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
     double u_start[N_U], u_stop[N_U]; /* the inputs at the step's start and end */
     memcpy(u_start, m->u, sizeof u_start);
     input_after(m, u_start, h, u_stop);
-    for (int c = 0; c < N_U; ++c) {
-        if (m->du[c] != 0.0 && (!isfinite(u_stop[c]) || u_stop[c] < OPFMU_INPUT_MIN[c])) {
-            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
-                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
-                     m->du[c], OPFMU_INPUT_UNITS[c], u_stop[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
-                     OPFMU_INPUT_UNITS[c]);
-            return MODEL_ERROR;
-        }
-    }
+    if (check_inputs_at_step_end(m, u_stop, message, size) != MODEL_OK) return MODEL_ERROR;
     /* an input jump starts a new window here, so the jump is at window time 0, where the operator
        learned its transients (every training window starts with one) */
     if (m->restart_jump > 0.0 && m->time > m->window_start + TIME_EPS && input_jumped(m))
