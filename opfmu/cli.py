@@ -304,6 +304,11 @@ def cmd_compare(args) -> None:
         raise UserError(f"{args.surrogate} is not a readable FMU ({exc})") from None
     if "resources/model.onnx" not in names:
         raise UserError(f"{args.surrogate} is not a surrogate FMU of opfmu (it has no resources/model.onnx)")
+    if args.inputs is not None and not Path(args.inputs).is_file():
+        raise UserError(f"no inputs file at {args.inputs}")
+    if not 0 <= args.seed <= MAX_COUNT:
+        raise UserError(f"--seed must lie in [0, {MAX_COUNT}]")
+    _communication_points(args.stop_time, args.step)
     parameters = _parameters(args.param)
     out = output_folder(args.out)
     tmp = None
@@ -319,6 +324,7 @@ def cmd_compare(args) -> None:
             else:
                 inputs = csv_inputs(args.inputs, machine)
                 stop_time = args.stop_time or float(inputs.times[-1])
+                _communication_points(stop_time, args.step, "--stop-time" if args.stop_time else f"{args.inputs}: time")
             result = compare(surrogate_dir, reference_dir, inputs, stop_time, args.step, parameters)
     except (CompareError, ValueError) as exc:  # paths inside the FMUs named by the FMU, not the temporary folder
         message = str(exc) if tmp is None else str(exc).replace(f"{tmp}/surrogate", f"{args.surrogate}:").replace(
@@ -329,6 +335,20 @@ def cmd_compare(args) -> None:
     write_json(out / f"{stem}.json", summary(result))
     print(format_table(result))
     print(f"plots: {', '.join(str(p) for p in plots)}; summary: {out / f'{stem}.json'}")
+
+
+MAX_POINTS = 10**7  # communication points of one comparison: 10^7 steps of both FMUs take hours
+
+
+def _communication_points(stop_time, step, stop_name: str = "--stop-time") -> None:
+    """UserError unless `stop_time` [s] (None: given by the scenario or the inputs; named `stop_name`)
+    and `step` [s] are finite, positive and give at most MAX_POINTS communication points."""
+    for name, value in ((stop_name, stop_time), ("--step", step)):
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise UserError(f"{name} must be a finite number of seconds > 0, got {value:g}")
+    if stop_time is not None and stop_time / step > MAX_POINTS:
+        raise UserError(f"{stop_name} {stop_time:g} s at --step {step:g} s is {stop_time / step:.3g} communication "
+                        f"points, more than {MAX_POINTS:g}")
 
 
 def _parameters(specs) -> dict:
@@ -350,6 +370,7 @@ def cmd_demo(args) -> None:
 
     if not 1 <= args.epochs <= MAX_COUNT or args.workers < 0 or not 0 <= args.seed <= MAX_COUNT:
         raise UserError(f"--epochs must lie in [1, {MAX_COUNT}], --workers be >= 0 and --seed in [0, {MAX_COUNT}]")
+    _communication_points(args.stop_time, args.step)
     output_folder(args.out)
     try:
         communication_points(args.stop_time, args.step)

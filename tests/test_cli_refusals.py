@@ -285,3 +285,44 @@ def test_export_of_a_run_whose_config_is_not_what_train_writes_is_refused(tmp_pa
     run = damaged_copy(trained_run, tmp_path / "run", lambda d: (d / "config.json").write_text(config))
     assert expected in refusal(capsys, "export", run, "-o", tmp_path / "x.onnx")
     assert not (tmp_path / "x.onnx").exists()
+
+
+@pytest.fixture
+def look_alike_fmus(tmp_path):
+    """Two zip files with the entries `compare` looks for first: enough for what it refuses before opening them."""
+    import zipfile
+
+    paths = []
+    for name in ("S.fmu", "R.fmu"):
+        with zipfile.ZipFile(tmp_path / name, "w") as archive:
+            archive.writestr("modelDescription.xml", "<fmiModelDescription/>")
+            archive.writestr("resources/model.onnx", b"")
+        paths.append(tmp_path / name)
+    return paths
+
+
+@pytest.mark.parametrize("extra, expected", [
+    (["--scenario", "dip", "--step", "0"], "--step must be a finite number of seconds > 0, got 0"),
+    (["--scenario", "dip", "--stop-time", "nan"], "--stop-time must be a finite number of seconds > 0, got nan"),
+    (["--scenario", "dip", "--stop-time", "1e12"], "is 1e+14 communication points, more than 1e+07"),
+    (["--scenario", "dip", "--seed", "-1"], "--seed must lie in"),
+    (["--inputs", "no_such.csv"], "no inputs file at no_such.csv"),
+    (["--scenario", "dip", "--param", "rollover_horizon"], "--param needs NAME=NUMBER"),
+])
+def test_compare_refuses_what_it_cannot_run_before_opening_the_fmus(tmp_path, capsys, look_alike_fmus, extra,
+                                                                    expected):
+    surrogate, reference = look_alike_fmus
+    out = tmp_path / "comparison"
+    assert expected in refusal(capsys, "compare", "--surrogate", surrogate, "--reference", reference, "--out", out,
+                               *extra)
+    assert not out.exists()
+
+
+def test_compare_names_an_fmu_that_carries_no_operator(tmp_path, capsys, look_alike_fmus):
+    import zipfile
+
+    with zipfile.ZipFile(tmp_path / "plain.fmu", "w") as archive:
+        archive.writestr("modelDescription.xml", "<fmiModelDescription/>")
+    line = refusal(capsys, "compare", "--surrogate", tmp_path / "plain.fmu", "--reference", look_alike_fmus[1],
+                   "--scenario", "dip")
+    assert line == f"error: {tmp_path / 'plain.fmu'} is not a surrogate FMU of opfmu (it has no resources/model.onnx)"
