@@ -64,6 +64,9 @@ OPFMU_INTERNAL ModelStatus model_get_real(const ModelState *m, unsigned int vr, 
 OPFMU_INTERNAL ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size);
 /* the derived outputs' Jacobian at the current state and inputs, J[i * OPFMU_N_COLUMNS + j] */
 OPFMU_INTERNAL void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+/* every field of m zero but the component's: inputs at their start values, the initial state and
+   the state at the default initial state */
+OPFMU_INTERNAL void component_defaults(ModelState *m);
 /* sets the first time derivative of input c (0-based) for the next steps [unit/s] */
 OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
                                                       size_t size);

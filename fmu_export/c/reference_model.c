@@ -18,10 +18,7 @@
 
 void model_defaults(ModelState *m)
 {
-    memset(m, 0, sizeof *m);
-    memcpy(m->u, OPFMU_START_U, sizeof m->u);
-    memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
-    memcpy(m->x, m->x_start, sizeof m->x);
+    component_defaults(m);
     m->rtol = OPFMU_RTOL;
     m->atol = OPFMU_ATOL;
 }

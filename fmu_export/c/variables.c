@@ -5,6 +5,7 @@
    after the groups) are the model's: model_get_extra, model_set_extra. */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "model.h"
 #include "variables.h"
@@ -14,6 +15,14 @@ static const unsigned char REAL_KINDS[VR_REAL_COUNT] = VR_REAL_KINDS;
 int model_real_kind(unsigned int vr)
 {
     return vr < VR_REAL_COUNT ? (int)REAL_KINDS[vr] : -1;
+}
+
+void component_defaults(ModelState *m)
+{
+    memset(m, 0, sizeof *m);
+    memcpy(m->u, OPFMU_START_U, sizeof m->u);
+    memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
+    memcpy(m->x, m->x_start, sizeof m->x);
 }
 
 ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)

@@ -29,16 +29,13 @@
 
 void model_defaults(ModelState *m)
 {
-    memset(m, 0, sizeof *m);
-    memcpy(m->u, OPFMU_START_U, sizeof m->u);
-    memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
+    component_defaults(m);
     m->rollover_horizon = OPFMU_ROLLOVER_HORIZON;
     m->residual_limit = OPFMU_RESIDUAL_LIMIT;
     m->restart_jump = OPFMU_RESTART_JUMP;
     m->rest_radius = OPFMU_REST_RADIUS;
     m->slow_weight = OPFMU_SLOW_WEIGHT;
     m->swing_weight = OPFMU_SWING_WEIGHT;
-    memcpy(m->x, m->x_start, sizeof m->x);
     memcpy(m->x_operator, m->x, sizeof m->x);
     m->in_envelope = 1;
 }

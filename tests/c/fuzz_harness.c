@@ -15,19 +15,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
-
-static uint64_t rng_state;
-
-static uint64_t next_random(void) /* splitmix64 */
-{
-    uint64_t z = (rng_state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-static int below(int n) { return (int)(next_random() % (uint64_t)n); }
-static double uniform(void) { return (double)(next_random() >> 11) / 9007199254740992.0; }
+#include "fuzz_random.h"
 
 static int bad_messages;
 

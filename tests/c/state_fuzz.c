@@ -28,6 +28,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "fuzz_random.h"
 
 #define FUNCTIONS(X)                                                                                             \
     X(fmi2Instantiate) X(fmi2FreeInstance) X(fmi2SetupExperiment) X(fmi2EnterInitializationMode)                 \
@@ -37,18 +38,6 @@
 
 #define DECLARE(name) name##TYPE *name;
 static struct { FUNCTIONS(DECLARE) } F;
-
-static uint64_t rng_state;
-
-static uint64_t next_random(void) /* splitmix64 */
-{
-    uint64_t z = (rng_state += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-static size_t below(size_t n) { return (size_t)(next_random() % (uint64_t)n); }
 
 static long refused, accepted, steps, step_errors, failures;
 static long logged_errors;
@@ -226,7 +215,7 @@ int main(int argc, char **argv)
     for (long k = 0; k < n; ++k) {
         size_t slot = n == (long)n_slots ? (size_t)k
                       : (size_t)k < ends ? (size_t)k : (size_t)k < 2 * ends ? n_slots - 1 - ((size_t)k - ends)
-                      : below(n_slots);
+                      : (size_t)below((int)n_slots);
         for (size_t v = 0; v < N_BAD_DOUBLES; ++v) {
             memcpy(bytes, saved, size);
             put_double(bytes, 8 * slot, BAD_DOUBLES[v]);
@@ -234,7 +223,7 @@ int main(int argc, char **argv)
         }
         for (size_t v = 0; v < N_BAD_INTS; ++v) {
             memcpy(bytes, saved, size);
-            put_int(bytes, 8 * slot + 4 * below(2), BAD_INTS[v]);
+            put_int(bytes, 8 * slot + 4 * (size_t)below(2), BAD_INTS[v]);
             attempt(c, good, bytes, size, 0);
         }
     }
@@ -246,7 +235,7 @@ int main(int argc, char **argv)
         memcpy(bytes, saved, 64 < size ? 64 : size);
         attempt(c, good, bytes, size, 0);
         memcpy(bytes, saved, size);
-        size_t start = below(size), length = 1 + below(64);
+        size_t start = (size_t)below((int)size), length = 1 + (size_t)below(64);
         for (size_t i = start; i < size && i < start + length; ++i) bytes[i] = (unsigned char)next_random();
         attempt(c, good, bytes, size, 0);
     }
