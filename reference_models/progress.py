@@ -8,20 +8,34 @@ from __future__ import annotations
 import sys
 import time
 
-from tqdm.auto import tqdm
-
 LINE_EVERY_S = 10.0
 
 
 def progress_bar(total: int, desc: str, unit: str, enabled: bool = True, initial: int = 0, stream=None):
     """A progress object with update(n), set_postfix(**values) and close(): a tqdm bar when `stream`
-    (default stderr) is a terminal, else a LineProgress; nothing drawn or printed unless enabled."""
+    (default stderr) is a terminal, else a LineProgress; a Silent one unless enabled. tqdm is
+    imported only for a bar."""
     stream = sys.stderr if stream is None else stream
     if not enabled:
-        return tqdm(total=total, initial=initial, disable=True)
+        return Silent()
     if getattr(stream, "isatty", lambda: False)():
+        from tqdm import tqdm
+
         return tqdm(total=total, initial=initial, desc=desc, unit=unit, file=stream)
     return LineProgress(total, desc, unit, initial, stream)
+
+
+class Silent:
+    """Progress that shows nothing."""
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def set_postfix(self, **values) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
 
 
 class LineProgress:

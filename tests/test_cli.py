@@ -81,3 +81,20 @@ def test_line_progress_prints_at_most_one_line_per_interval_and_one_at_the_end()
         bar.update(1)
     bar.close()
     assert stream.getvalue().count("\n") == 1 and "work: 1000/1000 item (100%" in stream.getvalue()
+
+
+def test_progress_that_is_off_shows_nothing_and_needs_no_tqdm():
+    import io
+
+    from reference_models.progress import progress_bar
+
+    stream = io.StringIO()
+    bar = progress_bar(10, "work", "item", enabled=False, stream=stream)
+    bar.update(10)
+    bar.set_postfix(loss=1.0)
+    bar.close()
+    assert stream.getvalue() == ""
+    result = subprocess.run([sys.executable, "-c", "import sys; from reference_models.progress import progress_bar; "
+                             "progress_bar(3, 'w', 'i').close(); print('tqdm' in sys.modules)"],
+                            capture_output=True, text=True)
+    assert result.stdout.strip() == "False" and result.stderr.startswith("w: 0/3 i (0%")

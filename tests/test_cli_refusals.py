@@ -326,3 +326,4 @@ def test_compare_names_an_fmu_that_carries_no_operator(tmp_path, capsys, look_al
     line = refusal(capsys, "compare", "--surrogate", tmp_path / "plain.fmu", "--reference", look_alike_fmus[1],
                    "--scenario", "dip")
     assert line == f"error: {tmp_path / 'plain.fmu'} is not a surrogate FMU of opfmu (it has no resources/model.onnx)"
+
