@@ -1,4 +1,4 @@
-"""The native surrogate FMU under fmpy: FMI 2.0 behaviour and the step semantics of DESIGN section 5.
+"""The native surrogate FMU under fmpy: FMI 2.0 behaviour and the step semantics of docs/design.md ("The FMUs").
 
 The FMUs here are built from tiny operators trained for a few epochs on tiny datasets (SM4, four
 inputs, working in the window frame): the damped default machine (conftest's cosim_tiny) and an
