@@ -398,10 +398,6 @@ class FMU:
                 self.fmu.freeInstance()
             except Exception:
                 pass
-            try:
-                self.fmu.freeLibrary()
-            except Exception:
-                pass
             self.fmu = None
         if self._directory is not None:
             self._cleanup()

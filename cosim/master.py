@@ -1,20 +1,26 @@
-"""The grid co-simulation master: one machine FMU and one exciter FMU per generator, coupled through
-the network, which is solved at every communication point.
+"""The grid co-simulation master: the FMUs of every unit of a case (case.Case: a machine with a bus
+port and its control devices per generator bus), coupled through the network, which is solved at
+every communication point. The FMUs are wired by the ports their model descriptions declare
+(case.unit_wiring); the master names no component and no variable.
 
 Coupling, over each communication step [t0, t1] (h = t1 - t0):
 
 1. The bus voltages V(t0) are known (the network solved at t0), and an end guess V(t1): extrapolated
    linearly from the last two communication points, or held after an event.
-2. Each exciter gets its terminal voltage Vt = |V + (Re + jXep) I| linear from Vt(t0) to the guess
-   Vt(t1) and steps; its field voltage Efd(t1) comes back. Each machine gets its bus voltage (Vs,
-   theta_vs) linear from V(t0) to the guess V(t1) and Efd linear from Efd(t0) to Efd(t1), and steps.
-   "Linear" is fmi2SetRealInputDerivatives where the FMU can interpolate its inputs; an FMU that
-   cannot gets the mean of the start and end values held over the step (the midpoint rule: the same
-   second order in h for what the step integrates).
-3. The network is solved at t1 with the machines' new states: each machine's bus current is
-   I(V) (outputs I_re, I_im), and Y_red V = I(V) at the generator buses is solved by Newton with the
-   FMUs' directional derivatives dI/d(Vs, theta_vs) (central differences for an FMU without them).
-   SM4's current is affine in V for given states, so one Newton step solves it; the next confirms.
+2. Each unit's control devices step first (each after those it takes a signal from), the machine
+   last. Every input is linear over the step from its value at t0 to its value at t1: the bus
+   voltage (magnitude, angle) to the guess V(t1); the terminal voltage |V + (Re + jXep) I| to its
+   value at the guess; a link from a device stepped before in this pass to that device's new output
+   (the exciter's field voltage for the machine); a link from a device not yet stepped, and a set
+   point, held. "Linear" is fmi2SetRealInputDerivatives where the FMU can interpolate its inputs
+   (FMI 2.0 canInterpolateInputs); an FMU that cannot, and every FMI 3.0 FMU (FMI 3.0
+   co-simulation takes no input derivatives), gets the mean of the start and end values held over
+   the step (the midpoint rule: the same second order in h for what the step integrates).
+3. The network is solved at t1 with the machines' new states: each machine's bus current I(V)
+   (its bus-port current outputs), and Y_red V = I(V) at the generator buses is solved by Newton
+   with the FMUs' directional derivatives dI/d(voltage magnitude, angle) (central differences for
+   an FMU without them). A machine whose current is affine in V for given states is solved by
+   one Newton step; the next confirms.
 4. If V(t1) moved by more than `tolerance` from the guess, the FMUs are set back to t0
    (fmi2SetFMUstate) and the step is done again from 2 with V(t1) as the guess: at most `passes`
    passes. Converged, the inputs over the step are linear between two consistent network solutions:
@@ -26,8 +32,10 @@ communication points: the step before an event is shortened to end there. At an 
 network is solved twice: in the old topology (the end of the step before) and in the new one (the
 start of the step after; the inputs jump there). The row recorded at an event time is the one after.
 
-The master runs on fmpy's FMU2Slave (slave.py). Every FMU is rewound to its initial state between
-runs (fmi2SetFMUstate), so one master serves the many runs of a critical-clearing-time bisection.
+The master runs FMI 2.0 and 3.0 FMUs over fmpy (cosim.fmu.FMU). Every FMU is rewound to its initial
+state between runs (set FMU state), so one master serves the many runs of a critical-clearing-time
+bisection. A run refuses more than MAX_STEPS communication steps before it starts, and the
+communication points are generated one at a time.
 """
 from __future__ import annotations
 

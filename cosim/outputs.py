@@ -150,7 +150,7 @@ def plot(path, runs: dict, title: str) -> None:
         ax.grid(alpha=0.3)
     axes[0, 1].legend(fontsize=7, ncol=1 if len(runs) < 3 else 2)
     fig.suptitle(title)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.07, top=0.93, wspace=0.2, hspace=0.08)  # tight_layout's, fixed
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
 

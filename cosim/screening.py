@@ -6,8 +6,8 @@ Each task is one contingency: its critical clearing time by bisection (stability
 when cleared at the screening's clearing time, and the first-swing peak of that run. FMUs are built
 once, before any task is sent; a worker opens them once and reuses them for every task it gets
 (the master rewinds them between runs). They are extracted under one scratch folder of the
-screening, removed at its end whatever happened (also on an interrupt); local workers ignore
-Ctrl-C, so an interrupt is reported once, by the command.
+screening (also the local workers' own folder), removed at its end whatever happened (also on an
+interrupt); local workers ignore Ctrl-C, so an interrupt is reported once, by the command.
 """
 from __future__ import annotations
 
@@ -18,6 +18,7 @@ import signal
 import sys
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass
 
 from reference_models.grid.contingency import Contingency
@@ -146,8 +147,11 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: str 
         else:
             previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the worker processes
             try:
-                cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                                       silence_logs=logging.CRITICAL)
+                with warnings.catch_warnings():  # a busy default port: dask takes another and says so
+                    warnings.simplefilter("ignore")
+                    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, silence_logs=logging.CRITICAL,
+                                           local_directory=scratch)
             finally:
                 signal.signal(signal.SIGINT, previous)
             client = Client(cluster)

@@ -215,7 +215,8 @@ def cmd_build_reference_fmu(args) -> None:
     try:
         if args.python:
             if not args.name.isidentifier():
-                raise ValueError(f"model name {args.name[:80]!r} must be a Python identifier (it names the slave class)")
+                raise ValueError(f"model name {args.name[:80]!r} must be a Python identifier "
+                                 "(it names the slave class)")
         else:
             check_model_name(args.name)
             check_fmi_version(args.fmi_version)

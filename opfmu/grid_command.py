@@ -336,9 +336,8 @@ def cmd_screen(args) -> None:
     except CouplingError as exc:
         raise UserError(_one_line(exc)) from None
     kind = _main_kind(case, args.fmus)
-    tasks = [ScreeningTask(c, "monolithic" if args.fmus == "monolithic" else kind, files,
-                           str(args.dynamic_data) if args.dynamic_data else None, settings, args.stop, args.resolution)
-             for c in tasks_contingencies]
+    tasks = [ScreeningTask(case, c, "monolithic" if args.fmus == "monolithic" else kind, files, settings, args.stop,
+                           args.resolution) for c in tasks_contingencies]
     progress = None if args.quiet else ("bar" if sys.stderr.isatty() else "lines")
     started = time.perf_counter()
     rows = screen(tasks, args.workers, args.scheduler, progress=progress)

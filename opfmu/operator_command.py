@@ -128,7 +128,8 @@ def _operating_point(args, model, params, levels) -> tuple:
     try:
         x = model.steady_state(u, params)
     except ValueError as exc:
-        raise OperatorError(f"no operating point at Pm = {operating[0]:g} pu, Efd = {operating[1]:g} pu: {exc}") from None
+        raise OperatorError(f"no operating point at Pm = {operating[0]:g} pu, Efd = {operating[1]:g} pu: "
+                            f"{exc}") from None
     if not np.all(np.isfinite(x)):
         raise OperatorError(f"the machine has no equilibrium at Pm = {operating[0]:g} pu, Efd = {operating[1]:g} pu")
     return operating
