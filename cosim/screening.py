@@ -139,6 +139,7 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: str 
             finally:
                 close_runners()
             return rows
+        import dask
         from dask.distributed import Client, LocalCluster, as_completed
 
         cluster = None
@@ -147,8 +148,8 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: str 
         else:
             previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the worker processes
             try:
-                with warnings.catch_warnings():  # a busy default port: dask takes another and says so
-                    warnings.simplefilter("ignore")
+                with warnings.catch_warnings(), dask.config.set({"temporary-directory": scratch}):
+                    warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
                     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                            dashboard_address=None, silence_logs=logging.CRITICAL,
                                            local_directory=scratch)
