@@ -279,3 +279,29 @@ def test_a_step_whose_window_end_the_time_cannot_resolve_is_refused_not_endless(
                           text=True, timeout=60)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "does not resolve the rollover horizon" in done.stdout, done.stdout
+
+
+@pytest.mark.parametrize("name", ["small_surrogate_path", "native_reference_path"])
+def test_every_state_a_run_passes_through_is_accepted_back(request, name):
+    """The state checks refuse nothing a run makes: after each of 300 steps (random held and ramped
+    inputs, steps of 1 ms to 0.3 s across window boundaries) the state is set back and round-trips
+    through bytes."""
+    path = request.getfixturevalue(name)
+    slave = Slave(path)
+    fmu, rng = slave.fmu, np.random.default_rng(4)
+    refs = [slave.vr[n] for n in slave.inputs]
+    for k in range(300):
+        if k % 5 == 0:
+            slave.set(**{n: slave.starts[n] * (1 + rng.uniform(-0.03, 0.03)) for n in slave.inputs})
+            fmu.setRealInputDerivatives(refs, [1] * len(refs), list(rng.uniform(-0.1, 0.1, len(refs)) * (k % 10 == 0)))
+        h = float(rng.choice([0.001, 0.0037, 0.01, 0.05, 0.3]))
+        fmu.doStep(currentCommunicationPoint=slave.t, communicationStepSize=h)
+        slave.t += h
+        state = fmu.getFMUstate()
+        fmu.setFMUstate(state)
+        copy = fmu.deSerializeFMUstate(fmu.serializeFMUstate(state))
+        fmu.setFMUstate(copy)
+        fmu.freeFMUstate(state)
+        fmu.freeFMUstate(copy)
+    assert slave.t > 10.0 and not [m for status, m in slave.messages if status >= 3]
+    slave.close()
