@@ -97,7 +97,8 @@ def screen_one(task: ScreeningTask) -> dict:
 
 
 class _Progress:
-    """A tqdm bar (`bar`), a line on stderr every PROGRESS_EVERY_S (`lines`) or nothing (None)."""
+    """A tqdm bar (`bar`), a line on stderr after the first and the last task and at most every
+    PROGRESS_EVERY_S between (`lines`), or nothing (None)."""
 
     def __init__(self, total: int, mode: str | None):
         self.total, self.done, self.mode = total, 0, mode
@@ -111,7 +112,7 @@ class _Progress:
         self.done += 1
         if self.bar is not None:
             self.bar.update()
-        elif self.mode == "lines" and (time.monotonic() - self.last >= PROGRESS_EVERY_S or self.done == self.total):
+        elif self.mode == "lines" and (time.monotonic() - self.last >= PROGRESS_EVERY_S or self.done in (1, self.total)):
             self.last = time.monotonic()
             print(f"contingencies: {self.done}/{self.total} done", file=sys.stderr, flush=True)
 

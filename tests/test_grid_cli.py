@@ -4,6 +4,10 @@ critical clearing time, one-line errors with exit code 2 for what cannot run, de
 work, a result set written whole or not at all, and no extracted FMU folder left behind."""
 import csv
 import json
+import os
+import signal
+import subprocess
+import sys
 import tempfile
 
 import numpy as np
@@ -178,3 +182,20 @@ def test_a_malformed_dynamic_data_file_is_one_line_and_exit_code_2(content, caps
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1
+
+
+def test_ctrl_c_during_a_screening_on_dask_workers_ends_in_one_interrupted_line(tmp_path):
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    screening = subprocess.Popen(
+        [sys.executable, "-m", "opfmu", "grid", "screen", "--fmus", "monolithic", "--faults", "4,5,6,7",
+         "--workers", "2", "--stop", "2", "--out", str(tmp_path / "out")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env=dict(os.environ, TMPDIR=str(scratch)))
+    first = screening.stderr.readline()  # the first contingency done: the workers are busy
+    assert first.startswith("contingencies: 1/")
+    os.killpg(screening.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
+    _, rest = screening.communicate(timeout=300)
+    assert screening.returncode == 130
+    assert rest == "interrupted\n"  # no worker traceback, no "rerun to resume" (a rerun starts over)
+    assert not list(scratch.iterdir())
