@@ -14,7 +14,6 @@ each. Prints Markdown tables; writes DIR/grid_accuracy.json, grid_accuracy.md an
 """
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path

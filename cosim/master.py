@@ -122,7 +122,7 @@ class CosimResult:
     notes: tuple = ()
 
 
-MAX_STEPS = 10_000_000  # communication steps of one run
+MAX_STEPS = 1_000_000  # communication steps of one run (a row each in the result)
 
 
 def check_steps(stop: float, step: float) -> None:

@@ -8,7 +8,7 @@ import time
 from dataclasses import replace
 
 from .fmus import FMU_KINDS, generator_files
-from .master import GridMaster, MasterSettings
+from .master import GridMaster, MasterSettings, check_steps
 
 RUN_KINDS = tuple(k for k in FMU_KINDS if k != "file") + ("monolithic",)  # what --fmus may name
 
@@ -27,6 +27,7 @@ class MonolithicRunner:
 
         from reference_models.grid.monolithic import simulate
 
+        check_steps(stop, self.step)
         n = int(np.ceil(stop / self.step - 1e-9))
         times = {min(k * self.step, stop) for k in range(n + 1)}
         times |= {tp.start for tp in contingency.topologies(stop)[1:]}

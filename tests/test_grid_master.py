@@ -5,7 +5,6 @@ their exact times, mixes FMU kinds, differentiates FMUs without directional deri
 differences, rewinds its FMUs between runs, runs FMI 3.0 FMUs, wires any FMU by the ports its model
 description declares, removes every extracted FMU folder, and refuses what it cannot couple."""
 import json
-import math
 import shutil
 import zipfile
 from dataclasses import replace
