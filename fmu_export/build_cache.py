@@ -19,6 +19,8 @@ import zipfile
 from pathlib import Path
 from typing import Callable
 
+from reference_models.files import atomic_path
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = (ROOT / "fmu_export", ROOT / "reference_models", ROOT / "surrogate")
 
@@ -65,7 +67,8 @@ def is_fmu_archive(path: Path) -> bool:
 def cached_fmu(model_name: str, parts: tuple, build: Callable[[Path], object], cache=None,
                progress: Callable[[str], None] | None = None) -> Path:
     """The FMU `<cache>/<model_name>-<key of parts>.fmu`: reused when present and readable, else built
-    by `build(path)` (which must write `path` atomically); `progress(model_name)` before a build.
+    by `build(path)` (which must write `path` atomically; a dict it returns is kept beside the FMU,
+    for build_report); `progress(model_name)` before a build.
     BuildError (one line) when the cache folder cannot be made."""
     from .binaries import BuildError
 
@@ -80,8 +83,21 @@ def cached_fmu(model_name: str, parts: tuple, build: Callable[[Path], object], c
         return out
     if progress:
         progress(model_name)
-    build(out)
+    report = build(out)
+    if isinstance(report, dict):
+        with atomic_path(out.with_suffix(".json")) as tmp:
+            tmp.write_text(json.dumps(report, default=str))
     return out
+
+
+def build_report(path) -> dict:
+    """What the build of a cached FMU returned (a dict: the builders' guid, checks, binaries, ...),
+    as JSON read back; {} when its build returned none or the file does not read."""
+    try:
+        report = json.loads(Path(path).with_suffix(".json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return report if isinstance(report, dict) else {}
 
 
 def _platform_names(platforms) -> list[str]:

@@ -40,7 +40,7 @@ class DemoConfig:
 
 def run_demo(config: DemoConfig, say=print) -> Path:
     """Runs the demo; returns the report's path. `say` gets one line per stage."""
-    from fmu_export.build_cache import cached_native_reference_fmu, cached_surrogate_fmu, default_cache
+    from fmu_export.build_cache import build_report, cached_native_reference_fmu, cached_surrogate_fmu, default_cache
     from opfmu.compare import operator_machine
     from surrogate.operator import DEFAULT_OPERATOR
 
@@ -52,9 +52,10 @@ def run_demo(config: DemoConfig, say=print) -> Path:
     def building(name: str) -> None:
         say(f"building {name} (not in the cache)")
 
-    surrogate_fmu = copied(cached_surrogate_fmu(operator, "SM4Surrogate", progress=building), out / "SM4Surrogate.fmu")
-    say(f"{surrogate_fmu}: {surrogate_fmu.stat().st_size / 1e6:.2f} MB (its compiled kernel was checked against "
-        "onnxruntime when it was built)")
+    cached = cached_surrogate_fmu(operator, "SM4Surrogate", progress=building)
+    surrogate_fmu = copied(cached, out / "SM4Surrogate.fmu")
+    say(f"{surrogate_fmu}: {surrogate_fmu.stat().st_size / 1e6:.2f} MB; its kernel matched onnxruntime to "
+        f"{build_report(cached).get('max_abs_diff', float('nan')):.1e} when it was built")
     reference_fmu = copied(cached_native_reference_fmu("SM4Reference", params=operator_machine(operator),
                                                        progress=building), out / "SM4Reference.fmu")
     say(f"{reference_fmu}: the native reference FMU of the operator's machine")

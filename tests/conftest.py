@@ -65,7 +65,7 @@ def fmu_path(fmu_cache):
     from fmu_export.build_cache import cached_surrogate_fmu
     from surrogate.operator import DEFAULT_OPERATOR
 
-    return cached_surrogate_fmu(DEFAULT_OPERATOR, "SM4Surrogate", cache=fmu_cache)
+    return cached_surrogate_fmu(DEFAULT_OPERATOR, "SM4Surrogate", n_check=4, cache=fmu_cache)
 
 
 @pytest.fixture(scope="session")

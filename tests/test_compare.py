@@ -194,6 +194,7 @@ def test_compare_command_refuses_a_stop_time_that_is_not_whole_steps(fmu_path, r
     assert_one_line_error(result, "not a whole number of steps")
 
 
+@pytest.mark.slow
 def test_demo_builds_both_fmus_compares_every_scenario_and_writes_the_report(tmp_path):
     result = opfmu("demo", "--out", str(tmp_path), "--stop-time", "2")
     assert result.returncode == 0, result.stderr
@@ -205,6 +206,7 @@ def test_demo_builds_both_fmus_compares_every_scenario_and_writes_the_report(tmp
     assert (tmp_path / "SM4Surrogate.fmu").exists() and (tmp_path / "SM4Reference.fmu").exists()
 
 
+@pytest.mark.slow
 def test_demo_with_train_trains_exports_and_compares_its_own_operator(tmp_path):
     recipe = preset_file(tmp_path / "tiny.json", tiny("quick", probes_per_family=1))
     result = opfmu("demo", "--train", "--preset", str(recipe), "--epochs", "3", "--out", str(tmp_path / "run"),

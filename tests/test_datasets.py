@@ -124,6 +124,7 @@ def test_local_dask_cluster_gives_the_same_data_as_serial_solves(paper_tiny, tmp
     np.testing.assert_array_equal(load_split(tmp_path, "train")["x"], load_split(first, "train")["x"])
 
 
+@pytest.mark.slow
 def test_interrupted_generation_resumes_and_gives_the_same_files(tmp_path):
     recipe = tiny("paper", counts={"train": 40, "collocation": 2, "val": 2, "test": 2}, chunk_size=1)
     spec = preset_file(tmp_path / "preset.json", recipe)

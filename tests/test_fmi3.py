@@ -14,7 +14,6 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
-from fmu_export.surrogate_fmu import build_surrogate_fmu
 from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_export.platforms import PLATFORMS
 from surrogate.operator import DEFAULT_OPERATOR
@@ -94,14 +93,27 @@ def reference_pair(tmp_path_factory):
     return two, three, info
 
 
+GEN2 = DEFAULT_OPERATOR.parent / "wscc9_gen2.onnx"  # a small shipped operator (201 sensors)
+
+
 @pytest.fixture(scope="module")
-def surrogate_fmi3(tmp_path_factory):
-    """The FMI 3.0 surrogate FMU of the shipped operator, with a win64 binary where MinGW-w64 is here
-    (then run under wine at build time where wine is)."""
+def surrogate_fmi3(fmu_cache):
+    """(path, what its build returned) of the FMI 3.0 surrogate FMU of a small shipped operator
+    (wscc9_gen2.onnx), with a win64 binary where MinGW-w64 is here (then run under wine at build time
+    where wine is); from the run's build cache."""
+    from fmu_export.build_cache import build_report, cached_surrogate_fmu
+
     chosen = ["linux64"] + (["win64"] if PLATFORMS["win64"].compiler_found() else [])
-    path = tmp_path_factory.mktemp("fmi3_surrogate") / "SM4Surrogate.fmu"
-    info = build_surrogate_fmu(DEFAULT_OPERATOR, path, platforms=chosen, fmi_version=3)
-    return path, info
+    path = cached_surrogate_fmu(GEN2, "Gen2Surrogate", platforms=chosen, fmi_version=3, n_check=4, cache=fmu_cache)
+    return path, build_report(path)
+
+
+@pytest.fixture(scope="module")
+def surrogate_fmi2(fmu_cache):
+    """The FMI 2.0 surrogate FMU of the same operator, from the run's build cache."""
+    from fmu_export.build_cache import cached_surrogate_fmu
+
+    return cached_surrogate_fmu(GEN2, "Gen2Surrogate", n_check=4, cache=fmu_cache)
 
 
 def test_the_fmi3_reference_validates_and_declares_what_it_does(reference_pair):
@@ -196,12 +208,12 @@ def test_fmpy_simulates_the_fmi3_reference_like_the_fmi2_one(reference_pair):
 
 
 @pytest.mark.platform_tools  # with a win64 binary where MinGW-w64 is here
-def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi3, fmu_path, tmp_path):
+def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi3, surrogate_fmi2, tmp_path):
     path, info = surrogate_fmi3
     assert validate_fmu(str(path)) == []
     if "win64" in info["checks"]:
         assert info["checks"]["win64"].startswith(("ran under wine", "not run here"))
-    a, b = Instance(fmu_path, tmp_path), Instance(path, tmp_path)
+    a, b = Instance(surrogate_fmi2, tmp_path), Instance(path, tmp_path)
     ya, yb = drive(a, np.random.default_rng(21), 150), drive(b, np.random.default_rng(21), 150)
     np.testing.assert_allclose(yb, ya, rtol=0, atol=1e-12)
     md = read_model_description(str(path))
@@ -217,10 +229,10 @@ def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi
 def test_build_fmu_fmi3_writes_the_fmi3_folders(surrogate_fmi3):
     path, info = surrogate_fmi3
     names = zipfile.ZipFile(path).namelist()
-    assert "binaries/x86_64-linux/SM4Surrogate.so" in names and "sources/fmi3_cs.c" in names
+    assert "binaries/x86_64-linux/Gen2Surrogate.so" in names and "sources/fmi3_cs.c" in names
     assert "sources/fmi2_cs.c" not in names
     if "win64" in info["binaries"]:
-        assert "binaries/x86_64-windows/SM4Surrogate.dll" in names
+        assert "binaries/x86_64-windows/Gen2Surrogate.dll" in names
 
 
 def test_the_pythonfmu_reference_is_fmi2_only(tmp_path):
@@ -243,13 +255,13 @@ def test_the_fmi3_surrogate_dll_under_wine_gives_the_linux64_outputs(surrogate_f
 
     win64 = platforms.PLATFORMS["win64"]
     path, info = surrogate_fmi3
-    _, meta = load_operator(DEFAULT_OPERATOR)
-    variables = fmu_variables(meta["component"], meta["params"], default_state(meta, DEFAULT_OPERATOR),
+    _, meta = load_operator(GEN2)
+    variables = fmu_variables(meta["component"], meta["params"], default_state(meta, GEN2),
                               SURROGATE_EXTRAS, surrogate_starts(meta), meta.get("operating_point"))
     script = cross_check.scenario_script(variables, info["guid"], 3, seed=404, steps=100)
     host = platforms.host()
-    base = cross_check.run_script(host, extract_binary(path, host, 3, "SM4Surrogate", tmp_path), script, tmp_path, 3)
-    other = cross_check.run_script(win64, extract_binary(path, win64, 3, "SM4Surrogate", tmp_path), script, tmp_path, 3)
+    base = cross_check.run_script(host, extract_binary(path, host, 3, "Gen2Surrogate", tmp_path), script, tmp_path, 3)
+    other = cross_check.run_script(win64, extract_binary(path, win64, 3, "Gen2Surrogate", tmp_path), script, tmp_path, 3)
     assert cross_check.compare(base, other).mismatch == ""
     gaps = dict(zip([v.name for v in variables if v.kind == "Real" and v.causality == "output"],
                     cross_check.column_differences(base, other)))
@@ -266,7 +278,7 @@ def small_surrogate_fmi3(fmu_cache):
     """The FMI 3.0 surrogate FMU of a small shipped operator (wscc9_gen2.onnx), from the run's build cache."""
     from fmu_export.build_cache import cached_surrogate_fmu
 
-    return cached_surrogate_fmu(DEFAULT_OPERATOR.parent / "wscc9_gen2.onnx", "Gen2Surrogate", n_check=4,
+    return cached_surrogate_fmu(GEN2, "Gen2Surrogate", n_check=4,
                                 fmi_version=3, cache=fmu_cache)
 
 

@@ -22,6 +22,7 @@ def quick_run(tmp_path_factory):
     return machine, out
 
 
+@pytest.mark.slow
 def test_operator_writes_the_dataset_run_operator_both_fmus_and_a_report(quick_run):
     _, out = quick_run
     for name in ("data/metadata.json", "run/result.json", "operator.onnx", "Gen3Surrogate.fmu", "Gen3Reference.fmu",
@@ -34,6 +35,7 @@ def test_operator_writes_the_dataset_run_operator_both_fmus_and_a_report(quick_r
     assert "| mix |" in report and "| governor |" in report
 
 
+@pytest.mark.slow
 def test_operator_trains_for_the_machine_in_the_file_with_the_levels_given(quick_run):
     import onnx
 
@@ -47,6 +49,7 @@ def test_operator_trains_for_the_machine_in_the_file_with_the_levels_given(quick
     assert "network" in {name for name, _ in data["preset"]["families"]}
 
 
+@pytest.mark.slow
 def test_rerunning_the_same_command_resumes_from_the_finished_stages(quick_run):
     machine, out = quick_run
     before = (out / "run" / "result.json").read_text()

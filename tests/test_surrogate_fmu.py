@@ -520,6 +520,7 @@ def test_build_fmu_command_refuses_a_file_that_is_not_an_operator(tmp_path):
     assert "not a readable ONNX file" in result.stderr and not (tmp_path / "x.fmu").exists()
 
 
+@pytest.mark.slow  # a build of the shipped operator through the command line (a 46 MB FMU)
 def test_build_fmu_command_builds_the_shipped_operator_by_default(shipped, tmp_path):
     out = tmp_path / "Machine.fmu"
     result = subprocess.run([sys.executable, "-m", "opfmu", "build-fmu", "-o", str(out), "--name", "Machine",
