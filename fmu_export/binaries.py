@@ -1,8 +1,8 @@
 """Compiling an FMU's C sources into one binary per platform, for FMI 2.0 or 3.0.
 
 Both native builders (surrogate_fmu.py: the surrogate; native_reference_fmu.py: the reference) hand their
-sources here. The FMI plumbing is the only thing that differs between the versions: fmi2_cs.c or
-fmi3_cs.c (PLUMBING) is compiled with the same model sources. The host's binary is always built,
+sources here. The FMI API is the only thing that differs between the versions: fmi2_cs.c or
+fmi3_cs.c (PLUMBING) is compiled with cosimulation.c (their shared logic) and the same model sources. The host's binary is always built,
 since it is the one loaded here (the kernel check, the cross-platform runs); every binary's export
 and import tables are checked (platforms.check_linkage) before it goes into an FMU.
 """

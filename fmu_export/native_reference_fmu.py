@@ -6,8 +6,8 @@ solver's default tolerances, GUID), variables.h (the value references of the mod
 fmu_export.variables: the same table as the surrogate's, less its own variables, plus rtol and atol),
 equations.c (the component's right-hand side and derived outputs, fmu_export.c_equations: the same
 C the surrogate FMU runs) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
-With the static sources in c/ (fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 plumbing both native FMUs
-share; variables.c: the component's variables; reference_model.c and reference_state.h: the step and
+With the static sources in c/ (cosimulation.c: the FMI plumbing both versions share, with fmi2_cs.c
+or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; variables.c: the component's variables; reference_model.c and reference_state.h: the step and
 the state; dopri5.c: the integrator) they compile into one binary per platform (binaries.py: gcc for
 linux64, MinGW-w64 for win64, ...), which needs the C runtime only.
 The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;

@@ -6,8 +6,9 @@ config.h (sizes, envelope, defaults, component tables, GUID), variables.h (the v
 the model description, fmu_export.variables), equations.c (the component's right-hand side and
 outputs, fmu_export.c_equations), derivatives.c (their exact partial derivatives,
 fmu_export.c_derivatives: the directional derivatives), operator_kernel.c (from the ONNX graph) and
-sensor_sums.c. With the static sources in c/ (fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 plumbing;
-model.h: its interface to a model; window.c: the window-and-sensor engine; corrections.c;
+sensor_sums.c. With the static sources in c/ (cosimulation.c: the FMI plumbing both versions share,
+with fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; model.h: its interface to a model;
+window.c: the window-and-sensor engine; frame.c: the window frame; corrections.c;
 variables.c: the component's variables; surrogate_variables.c and surrogate_state.h: the
 surrogate's own variables and state; linalg.c) they compile into one binary per platform
 (binaries.py), which needs the C runtime only. The host's compiled kernel is checked against
