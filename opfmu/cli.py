@@ -85,7 +85,7 @@ def cmd_train(args) -> None:
         config = TrainConfig.from_dict({**base, **flags, "physics": args.physics or base.get("physics", False)})
         config = _with_arch(config, args.arch, OperatorConfig)
     except (ValueError, TypeError) as exc:
-        raise UserError(f"{args.config + ': ' if args.config else ''}{exc}") from None
+        raise UserError(str(exc)) from None
     if not (0 <= config.seed <= MAX_COUNT and 1 <= config.epochs <= MAX_COUNT):
         raise UserError(f"the seed must lie in [0, {MAX_COUNT}] and the epochs in [1, {MAX_COUNT}]")
     if not (math.isfinite(config.lr) and config.lr > 0):
