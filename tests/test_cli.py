@@ -1,9 +1,13 @@
-"""The command line: user mistakes are one line with exit code 2."""
+"""The command line: user mistakes are one line with exit code 2.
+
+Refusals are checked in this process (opfmu.cli.main, as `python -m opfmu` runs it, without an
+interpreter start-up each); the commands that do work run as the shell runs them."""
 import subprocess
 import sys
 
 import numpy as np
 
+from opfmu.cli import main
 from surrogate.data import load_split
 
 from conftest import preset_file, tiny
@@ -11,6 +15,15 @@ from conftest import preset_file, tiny
 
 def opfmu(*args):
     return subprocess.run([sys.executable, "-m", "opfmu", *args], capture_output=True, text=True)
+
+
+def in_process(capsys, *args):
+    """`opfmu ARGS` run by opfmu.cli.main in this process: its exit code and output as subprocess.run
+    gives them."""
+    capsys.readouterr()
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(["opfmu", *args], code, out, err)
 
 
 def assert_one_line_error(result, *words):
@@ -22,26 +35,28 @@ def assert_one_line_error(result, *words):
         assert word in lines[0]
 
 
-def test_unknown_preset_is_a_one_line_error():
-    assert_one_line_error(opfmu("data", "--preset", "huge", "--out", "x"), "unknown preset 'huge'")
+def test_unknown_preset_is_a_one_line_error(capsys, tmp_path):
+    assert_one_line_error(in_process(capsys, "data", "--preset", "huge", "--out", tmp_path / "x"),
+                          "unknown preset 'huge'")
+    assert not (tmp_path / "x").exists()
 
 
-def test_missing_output_directory_is_a_one_line_error():
-    assert_one_line_error(opfmu("data", "--preset", "quick"), "--out")
+def test_missing_output_directory_is_a_one_line_error(capsys):
+    assert_one_line_error(in_process(capsys, "data", "--preset", "quick"), "--out")
 
 
-def test_unknown_subcommand_is_a_one_line_error():
-    assert_one_line_error(opfmu("frobnicate"), "invalid choice")
+def test_unknown_subcommand_is_a_one_line_error(capsys):
+    assert_one_line_error(in_process(capsys, "frobnicate"), "invalid choice")
 
 
-def test_malformed_preset_file_is_a_one_line_error(tmp_path):
+def test_malformed_preset_file_is_a_one_line_error(capsys, tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
-    assert_one_line_error(opfmu("data", "--preset", str(bad), "--out", str(tmp_path / "d")), "not a valid preset")
+    assert_one_line_error(in_process(capsys, "data", "--preset", bad, "--out", tmp_path / "d"), "not a valid preset")
 
 
-def test_negative_worker_count_is_a_one_line_error(tmp_path):
-    assert_one_line_error(opfmu("data", "--workers", "-1", "--out", str(tmp_path)), "--workers")
+def test_negative_worker_count_is_a_one_line_error(capsys, tmp_path):
+    assert_one_line_error(in_process(capsys, "data", "--workers", "-1", "--out", tmp_path), "--workers")
 
 
 def test_data_command_writes_the_splits_a_preview_and_a_summary(tmp_path):
@@ -54,11 +69,12 @@ def test_data_command_writes_the_splits_a_preview_and_a_summary(tmp_path):
     assert np.isfinite(load_split(tmp_path / "d", "train")["x"]).all()
 
 
-def test_a_preset_file_with_an_unknown_family_or_bad_counts_is_a_one_line_error(tmp_path):
+def test_a_preset_file_with_an_unknown_family_or_bad_counts_is_a_one_line_error(capsys, tmp_path):
     for name, changes in (("family", {"families": [["nope", 1.0]]}), ("counts", {"counts": {"train": -1}})):
         spec = tmp_path / f"{name}.json"
         spec.write_text(__import__("json").dumps({**tiny("paper").to_dict(), **changes}))
-        assert_one_line_error(opfmu("data", "--preset", str(spec), "--out", str(tmp_path / name)), "not a valid preset")
+        assert_one_line_error(in_process(capsys, "data", "--preset", spec, "--out", tmp_path / name),
+                              "not a valid preset")
 
 
 def test_progress_off_a_terminal_is_plain_lines_not_bar_redraws(tmp_path):
