@@ -44,6 +44,14 @@ SIGNALS = {
     "stabiliser_signal": ("Vss", "pu", "stabiliser output: a power system stabiliser's output, an exciter's input"),
     "voltage_reference": ("Vref", "pu", "voltage set point of an exciter"),
     "power_reference": ("Pref", "pu", "power set point of a governor"),
+    "rotor_speed": ("omega", "pu", "rotor speed in pu of synchronous speed (1 at rest): a standard machine's output, "
+                    "a standard governor's, exciter's or stabiliser's input"),
+    "field_current": ("XadIfd", "pu", "field current times the d-axis mutual reactance: a standard machine's output, "
+                      "a static exciter's input"),
+    "terminal_voltage_angle": ("theta_vs", "rad", "terminal voltage angle (network frame): an exciter's input"),
+    "terminal_current_real": ("I_re", "pu", "machine current into the bus, real part, system base: an exciter's input"),
+    "terminal_current_imaginary": ("I_im", "pu", "machine current into the bus, imaginary part, system base: "
+                                   "an exciter's input"),
 }
 
 TOOL_NAME = "opfmu"

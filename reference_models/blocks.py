@@ -1,0 +1,176 @@
+"""Reusable control blocks of the standard dynamic models, written against a math namespace `m`.
+
+Every function here takes and returns values of the namespace the equations run on (the `math`
+module with Python floats, numpy arrays, torch tensors, or the C tracers of fmu_export), using only
++ - * /, `m.sqrt` and `reference_models.piecewise.where` for conditions, so one definition serves
+scipy, autograd and code generation. Parameters (gains, time constants, limits) are Python floats:
+a block decides on them in Python (a time constant of 0 gives another equation, not a conditional).
+
+A block with a state returns `(derivative, output)`. A block whose time constant is 0 keeps its
+state (so a component's state vector is fixed whatever its data): the derivative is then 0 (the
+state is held, unused) and the output is what the block degenerates to (a lag or lead-lag with
+T = 0: its input times the gain), as ANDES treats a zero time constant.
+
+Limits (ANDES' terms, andes.core.discrete and andes.core.block):
+* windup limiter (`clip`): the output is the input clipped to [low, high]; nothing is held;
+* non-windup (anti-windup) limit (`non_windup`, `lag_non_windup`, `integrator_non_windup`): the
+  state itself stays within [low, high]: at a limit while its unlimited derivative pushes outward,
+  the derivative is 0; it leaves as soon as the derivative turns back.
+
+Saturation: `quadratic_saturation` (GENROU's S(x) = B (x - A)^2 / x above A, ANDES' ExcQuadSat
+coefficients from two points), `exponential_saturation` (ANDES' ExcExpSat: S(x) = A exp(B x)).
+`rectifier_loading`: ESST3A's FEX(IN).
+"""
+from __future__ import annotations
+
+import math
+
+from .piecewise import where
+
+NO_LIMIT = 1e6  # pu: a limit this large (or larger) in magnitude is no limit (no conditional is generated)
+
+
+def _lower(low: float) -> float:
+    return low if low > -NO_LIMIT else -math.inf
+
+
+def _upper(high: float) -> float:
+    return high if high < NO_LIMIT else math.inf
+
+
+def clip(m, x, low: float, high: float):
+    """Windup limiter: x clipped to [low, high] (a limit beyond NO_LIMIT is absent)."""
+    low, high = _lower(low), _upper(high)
+    if high < math.inf:
+        x = where(m, x >= high, high + 0.0 * x, x)
+    if low > -math.inf:
+        x = where(m, x <= low, low + 0.0 * x, x)
+    return x
+
+
+def clip_between(m, x, low, high):
+    """x clipped to [low, high] where the limits are values of the namespace (e.g. ones that move
+    with an input): high where x >= high, else low where x <= low, else x."""
+    return where(m, x >= high, high, where(m, x <= low, low, x))
+
+
+def non_windup(m, rate, x, low: float, high: float):
+    """The derivative of a state x under a non-windup limit [low, high]: `rate` (the unlimited
+    derivative), 0 where x is at or beyond high while rate > 0, or at or beyond low while rate < 0."""
+    low, high = _lower(low), _upper(high)
+    if high < math.inf:
+        rate = where(m, x >= high, where(m, rate > 0.0, 0.0 * rate, rate), rate)
+    if low > -math.inf:
+        rate = where(m, x <= low, where(m, rate < 0.0, 0.0 * rate, rate), rate)
+    return rate
+
+
+def non_windup_between(m, rate, x, low, high):
+    """`non_windup` with limits that are values of the namespace (e.g. proportional to an input)."""
+    rate = where(m, x >= high, where(m, rate > 0.0, 0.0 * rate, rate), rate)
+    return where(m, x <= low, where(m, rate < 0.0, 0.0 * rate, rate), rate)
+
+
+def lag(m, u, x, K: float, T: float):
+    """First-order lag K / (1 + s T): (dx/dt, y). T > 0: T dx/dt = K u - x, y = x. T = 0: the
+    state is held (dx/dt = 0) and y = K u."""
+    if T > 0:
+        return (K * u - x) / T, x
+    return 0.0 * x, K * u
+
+
+def lag_non_windup(m, u, x, K: float, T: float, low: float, high: float):
+    """Lag K / (1 + s T) with a non-windup limit [low, high] on its state (ANDES' LagAntiWindup):
+    (dx/dt, y = x). T must be > 0."""
+    return non_windup(m, (K * u - x) / T, x, low, high), x
+
+
+def integrator_non_windup(m, u, x, K: float, T: float, low: float, high: float):
+    """Integrator K / (s T) with a non-windup limit [low, high] (ANDES' IntegratorAntiWindup):
+    (dx/dt, y = x)."""
+    return non_windup(m, K * u / T, x, low, high), x
+
+
+def lead_lag(m, u, x, K: float, T1: float, T2: float):
+    """Lead-lag K (1 + s T1) / (1 + s T2) (ANDES' LeadLag with zero_out): (dx/dt, y).
+    T2 > 0: T2 dx/dt = u - x, y = K (T1 / T2 (u - x) + x). T2 = 0: the state is held
+    (dx/dt = 0) and y = K u (the block is a gain)."""
+    if T2 > 0:
+        return (u - x) / T2, K * (T1 / T2 * (u - x) + x)
+    return 0.0 * x, K * u
+
+
+def washout(m, u, x, K: float, T: float):
+    """Washout s K / (1 + s T) (ANDES' Washout): (dx/dt, y); T dx/dt = u - x, y = K (u - x) / T.
+    T must be > 0."""
+    return (u - x) / T, K * (u - x) / T
+
+
+def washout_or_lag(m, u, x, K: float, T: float):
+    """ANDES' WashoutOrLag: a washout s K / (1 + s T) for K > 0; for K = 0 the lag 1 / (1 + s T)
+    (y = x). T must be > 0."""
+    if K > 0:
+        return washout(m, u, x, K, T)
+    return (u - x) / T, x
+
+
+def lag_second_order(m, u, x, y, K: float, T1: float, T2: float):
+    """Second-order lag K / (1 + s T1 + s^2 T2) (ANDES' Lag2ndOrd): (dx/dt, dy/dt, y) with
+    T2 dx/dt = K u - y - T1 x, dy/dt = x. T2 = 0: both states held, output K u."""
+    if T2 > 0:
+        return (K * u - y - T1 * x) / T2, x, y
+    return 0.0 * x, 0.0 * y, K * u
+
+
+def lead_lag_second_order(m, u, x1, x2, T1: float, T2: float, T3: float, T4: float):
+    """Second-order lead-lag (1 + s T3 + s^2 T4) / (1 + s T1 + s^2 T2) (ANDES' LeadLag2ndOrd with
+    zero_out): (dx1/dt, dx2/dt, y) with T2 dx1/dt = u - x2 - T1 x1, dx2/dt = x1,
+    T2 y = T2 x2 + T2 T3 x1 + T4 (u - x2 - T1 x1). T2 = 0: both states held, y = u."""
+    if T2 > 0:
+        rest = u - x2 - T1 * x1
+        return rest / T2, x1, x2 + T3 * x1 + T4 / T2 * rest
+    return 0.0 * x1, 0.0 * x2, u
+
+
+def quadratic_saturation_coefficients(E1: float, SE1: float, E2: float, SE2: float) -> tuple:
+    """(A, B) of the quadratic saturation S(x) = B (x - A)^2 / x through S(E1) = SE1, S(E2) = SE2
+    (ANDES' ExcQuadSat): a = sqrt(SE1 E1 / (SE2 E2)), A = E2 - (E1 - E2) / (a - 1),
+    B = SE2 E2 (a - 1)^2 / (E1 - E2)^2. SE2 = 0 or SE1 = 0: no saturation (B = 0)."""
+    if SE2 == 0:
+        E2, SE2 = E2 + 2.0, SE2 + 2.0
+    a = math.sqrt(SE1 * E1 / (SE2 * E2)) if SE1 * E1 / (SE2 * E2) > 0 else 0.0
+    A = E2 - (E1 - E2) / (a - 1.0)
+    B = SE2 * E2 * (a - 1.0) ** 2 / (E1 - E2) ** 2 if a != 0 else 0.0
+    return A, B
+
+
+def quadratic_saturation_product(m, x, A: float, B: float):
+    """S(x) x = B (x - A)^2 where x >= A, else 0 [pu] (the saturation times its argument)."""
+    if B == 0:
+        return 0.0 * x
+    return where(m, x >= A, B * (x - A) * (x - A), 0.0 * x)
+
+
+def exponential_saturation_coefficients(E1: float, SE1: float, E2: float, SE2: float) -> tuple:
+    """(A, B) of the exponential saturation x S(x) = A exp(B x) through the points (E1, SE1),
+    (E2, SE2) (ANDES' ExcExpSat); E1 = 0 or E2 = 0: no saturation (A = 0)."""
+    if E1 == 0 or E2 == 0:
+        return 0.0, 0.0
+    ratio = E2 * SE2 / (E1 * SE1)
+    B = -math.log(ratio) / (E1 - E2)
+    return E1 * SE1 * math.exp(E1 * math.log(ratio) / (E1 - E2)), B
+
+
+def exponential_saturation(m, x, A: float, B: float):
+    """A exp(B x) [pu]."""
+    return A * m.exp(B * x)
+
+
+def rectifier_loading(m, IN):
+    """ESST3A's rectifier loading factor FEX(IN) (IEEE 421.5 / ANDES' Piecewise): 1 for IN <= 0,
+    1 - 0.577 IN up to 0.433, sqrt(0.75 - IN^2) up to 0.75, 1.732 (1 - IN) up to 1, 0 beyond."""
+    root = m.sqrt(where(m, IN <= 0.75, 0.75 - IN * IN, 0.1875 + 0.0 * IN))
+    return where(m, IN <= 0.0, 1.0 + 0.0 * IN,
+                 where(m, IN <= 0.433, 1.0 - 0.577 * IN,
+                       where(m, IN <= 0.75, root,
+                             where(m, IN <= 1.0, 1.732 * (1.0 - IN), 0.0 * IN))))

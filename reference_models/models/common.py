@@ -1,0 +1,64 @@
+"""What the standard models share: parameter range checks, the machine's network interface and
+the search of a controller's set point (the set point at which a given output is at rest)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def check_ranges(params, ranges: dict) -> None:
+    """Raise ParameterError unless every parameter named in `ranges` {name: (low, high, unit)} lies
+    in [low, high]."""
+    for name, (low, high, unit) in ranges.items():
+        params.require(name, low <= getattr(params, name) <= high, f"lie in [{low:g}, {high:g}] {unit}")
+
+
+def check_limits(params, low: str, high: str) -> None:
+    """Raise ParameterError unless limit `high` exceeds limit `low`."""
+    params.require(high, getattr(params, high) > getattr(params, low), f"exceed {low} = {getattr(params, low)!r}")
+
+
+def dq_voltage(delta, Vs, theta_vs, m):
+    """(vd, vq) [pu]: the bus voltage in the rotor's dq frame, vd + j vq = Vs exp(j (theta_vs + pi/2 - delta))."""
+    return Vs * m.sin(delta - theta_vs), Vs * m.cos(delta - theta_vs)
+
+
+def network_current(delta, Id, Iq, m):
+    """(I_re, I_im) [pu]: the dq current in the network frame, I = (Id + j Iq) exp(j (delta - pi/2))."""
+    return Id * m.sin(delta) + Iq * m.cos(delta), Iq * m.sin(delta) - Id * m.cos(delta)
+
+
+def stator_currents(psi2d, psi2q, vd, vq, ra: float, xd2: float, xq2: float):
+    """(Id, Iq) [pu, machine base] from the stator equations without transients (ANDES' Flux0):
+    xd2 Id + ra Iq = psi2d - vq, ra Id - xq2 Iq = psi2q - vd."""
+    det = -xd2 * xq2 - ra * ra
+    a, b = psi2d - vq, psi2q - vd
+    return (-xq2 * a - ra * b) / det, (xd2 * b - ra * a) / det
+
+
+def set_point(output_of, target: float, guess: float, name: str, scale: float = 1.0) -> float:
+    """The set point s with output_of(s) = target (1-D root of a function increasing or decreasing
+    in s, bracketed outward from `guess`); ValueError naming the component where there is none."""
+    from scipy.optimize import brentq
+
+    def miss(s):
+        return output_of(s) - target
+
+    step = scale
+    low, high = guess - step, guess + step
+    for _ in range(60):
+        f_low, f_high = miss(low), miss(high)
+        if np.isfinite(f_low) and np.isfinite(f_high) and f_low * f_high <= 0:
+            return brentq(miss, low, high, xtol=1e-14, rtol=1e-15)
+        step *= 2.0
+        low, high = guess - step, guess + step
+    raise ValueError(f"{name}: no steady state at these inputs")
+
+
+def finite_inputs(u, name: str) -> tuple:
+    """The inputs as floats; ValueError naming the component unless all are finite."""
+    values = tuple(float(v) for v in u)
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{name}: no steady state at non-finite inputs {values}")
+    return values
