@@ -1,6 +1,6 @@
 """Contingency screening: many faults and clearing actions as independent runs, on a dask cluster
 (a LocalCluster of single-threaded worker processes, or an existing scheduler), with a progress
-report (a bar on a terminal, a line every few seconds otherwise).
+report (a bar on a terminal, a line every few seconds otherwise: reference_models.progress).
 
 Each task is one contingency: its critical clearing time by bisection (stability.py), its verdict
 when cleared at the screening's clearing time, and the first-swing peak of that run. FMUs are built
@@ -15,9 +15,7 @@ import logging
 import math
 import shutil
 import signal
-import sys
 import tempfile
-import time
 import warnings
 from dataclasses import dataclass
 
@@ -25,9 +23,6 @@ from reference_models.grid.contingency import Contingency
 
 from .master import MasterSettings
 from .stability import critical_clearing_time, first_swing_peak
-
-PROGRESS_EVERY_S = 5.0  # between two progress lines when stderr is not a terminal
-
 
 @dataclass(frozen=True)
 class ScreeningTask:
@@ -96,40 +91,17 @@ def screen_one(task: ScreeningTask) -> dict:
             "cct_s": cct.cct_s, "bounded": cct.bounded, "runs": len(cct.runs) + 1}
 
 
-class _Progress:
-    """A tqdm bar (`bar`), a line on stderr after the first and the last task and at most every
-    PROGRESS_EVERY_S between (`lines`), or nothing (None)."""
-
-    def __init__(self, total: int, mode: str | None):
-        self.total, self.done, self.mode = total, 0, mode
-        self.bar, self.last = None, time.monotonic()
-        if mode == "bar":
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=total, desc="contingencies", unit="run")
-
-    def update(self) -> None:
-        self.done += 1
-        if self.bar is not None:
-            self.bar.update()
-        elif self.mode == "lines" and (time.monotonic() - self.last >= PROGRESS_EVERY_S or self.done in (1, self.total)):
-            self.last = time.monotonic()
-            print(f"contingencies: {self.done}/{self.total} done", file=sys.stderr, flush=True)
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-
-
-def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: str | None = None) -> list:
+def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
     """The rows of every task (in the tasks' order), run on dask: `scheduler` (an address) or a
-    LocalCluster of `workers` processes (0: in this process, no dask). progress: "bar", "lines" or
-    None."""
+    LocalCluster of `workers` processes (0: in this process, no dask); progress: a bar on a terminal,
+    a line every few seconds elsewhere (reference_models.progress)."""
     from dataclasses import replace
+
+    from reference_models.progress import progress_bar
 
     scratch = None if scheduler else tempfile.mkdtemp(prefix="opfmu_screen_")  # remote workers: their own
     tasks = [replace(t, scratch=scratch) for t in tasks]
-    report = _Progress(len(tasks), progress)
+    report = progress_bar(len(tasks), "contingencies", "runs", enabled=progress)
     rows = [None] * len(tasks)
     try:
         if not scheduler and workers == 0:

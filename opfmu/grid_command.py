@@ -338,9 +338,8 @@ def cmd_screen(args) -> None:
     kind = _main_kind(case, args.fmus)
     tasks = [ScreeningTask(case, c, "monolithic" if args.fmus == "monolithic" else kind, files, settings, args.stop,
                            args.resolution) for c in tasks_contingencies]
-    progress = None if args.quiet else ("bar" if sys.stderr.isatty() else "lines")
     started = time.perf_counter()
-    rows = screen(tasks, args.workers, args.scheduler, progress=progress)
+    rows = screen(tasks, args.workers, args.scheduler, progress=not args.quiet)
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.SCREENING_FILES) as staging:
