@@ -116,9 +116,12 @@ def washout_or_lag(m, u, x, K: float, T: float):
 
 def lag_second_order(m, u, x, y, K: float, T1: float, T2: float):
     """Second-order lag K / (1 + s T1 + s^2 T2) (ANDES' Lag2ndOrd): (dx/dt, dy/dt, y) with
-    T2 dx/dt = K u - y - T1 x, dy/dt = x. T2 = 0: both states held, output K u."""
+    T2 dx/dt = K u - y - T1 x, dy/dt = x. T2 = 0 < T1: the first-order lag T1 dy/dt = K u - y,
+    x held; T1 = T2 = 0: both states held, output K u."""
     if T2 > 0:
         return (K * u - y - T1 * x) / T2, x, y
+    if T1 > 0:
+        return 0.0 * x, (K * u - y) / T1, y
     return 0.0 * x, 0.0 * y, K * u
 
 

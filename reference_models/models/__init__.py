@@ -1,0 +1,27 @@
+"""The standard dynamic models of PSS/E and ANDES as components (reference_models.component):
+machines GENCLS, GENROU; exciters IEEEX1, EXDC2, EXST1, ESST3A, SEXS; governors TGOV1, TGOV1N,
+IEEEG1; the stabiliser IEEEST. ANDES 2.0's model reference is the source of their equations
+(docs/standard-models.md). `STANDARD_MODELS`: model name (ANDES' spelling) -> Component.
+
+Machines give `operating_point(Vs, theta_vs, P, Q, params)` (the steady state from the load flow
+and the Pm, Efd holding it); controllers give `initialise(output, inputs, params)` (the state at
+rest giving an output and the set point holding it), each in its model's module.
+"""
+from .esst3a import ESST3A
+from .exdc2 import EXDC2
+from .exst1 import EXST1
+from .gencls import GENCLS
+from .genrou import GENROU
+from .ieeeg1 import IEEEG1
+from .ieeest import IEEEST
+from .ieeex1 import IEEEX1
+from .sexs import SEXS
+from .tgov1 import TGOV1
+from .tgov1n import TGOV1N
+
+STANDARD_MODELS = {
+    "GENCLS": GENCLS, "GENROU": GENROU,
+    "IEEEX1": IEEEX1, "EXDC2": EXDC2, "EXST1": EXST1, "ESST3A": ESST3A, "SEXS": SEXS,
+    "TGOV1": TGOV1, "TGOV1N": TGOV1N, "IEEEG1": IEEEG1,
+    "IEEEST": IEEEST,
+}

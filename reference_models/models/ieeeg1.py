@@ -1,0 +1,141 @@
+"""IEEEG1: the IEEE Type 1 speed-governing model (PSS/E IEEEG1, ANDES), one machine (high-pressure
+output; ANDES' optional second machine on the low-pressure output is not modelled).
+
+States  x = (LL_x [pu] lead-lag state, IAW_y [pu] valve position held within [PMIN, PMAX],
+        L4_y, L5_y, L6_y, L7_y [pu] turbine stage lags)
+Inputs  u = (omega [pu] rotor speed, Pref [pu] power reference: ANDES' tm012)
+Outputs y = (Pm [pu] mechanical power)
+
+Equations (ANDES 2.0 model reference, TurbineGov: IEEEG1):
+
+    wd = wref0 - omega
+    lead-lag K (1 + s T2) / (1 + s T1) of wd (T1 = 0: the gain K) -> LL_y
+    vs = (LL_y + Pref - IAW_y) / T3,  vsl = vs clipped to [UC, UO] (windup limiter)
+    non-windup integrator:  dIAW_y/dt = vsl,  PMIN <= IAW_y <= PMAX
+    lags 1 / (1 + s T4..T7) in series: L4 of IAW_y, L5 of L4_y, L6 of L5_y, L7 of L6_y (T = 0:
+        the stage passes its input)
+    Pm = K1n L4 + K3n L5 + K5n L6 + K7n L7,  Kin = Ki / (K1 + ... + K8)
+
+Bases: as TGOV1 (the machine's base).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..blocks import clip, integrator_non_windup, lag, lead_lag
+from ..component import Component, Parameters, Quantity
+from ..ports import Link, Ports
+from .common import check_limits, check_ranges, finite_inputs
+
+PARAMETER_RANGES = {"K": (0.0, 1000.0, "pu"), "T1": (0.0, 100.0, "s"), "T2": (0.0, 100.0, "s"),
+                    "T3": (0.001, 100.0, "s"), "T4": (0.0, 100.0, "s"), "T5": (0.0, 100.0, "s"),
+                    "T6": (0.0, 100.0, "s"), "T7": (0.0, 100.0, "s"), "wref0": (0.5, 1.5, "pu"),
+                    **{f"K{i}": (0.0, 1.0, "pu") for i in range(1, 9)}}
+
+
+@dataclass(frozen=True)
+class IEEEG1Params(Parameters):
+    """ANDES/PSS/E IEEEG1 data: gain K [pu], time constants [s], valve rate limits UO, UC [pu/s],
+    valve limits PMAX, PMIN [pu], stage fractions K1..K8 [pu], speed reference wref0 [pu]."""
+
+    K: float = 20.0
+    T1: float = 1.0
+    T2: float = 1.0
+    T3: float = 0.1
+    UO: float = 0.1
+    UC: float = -0.1
+    PMAX: float = 5.0
+    PMIN: float = 0.0
+    T4: float = 0.4
+    K1: float = 0.3
+    K2: float = 0.0
+    T5: float = 7.0
+    K3: float = 0.3
+    K4: float = 0.0
+    T6: float = 0.6
+    K5: float = 0.4
+    K6: float = 0.0
+    T7: float = 0.0
+    K7: float = 0.0
+    K8: float = 0.0
+    wref0: float = 1.0
+
+    def check(self) -> None:
+        check_ranges(self, PARAMETER_RANGES)
+        check_limits(self, "UC", "UO")
+        check_limits(self, "PMIN", "PMAX")
+        total = sum(getattr(self, f"K{i}") for i in range(1, 9))
+        self.require("K1", total > 0, "with K2..K8 sum to more than 0")
+
+    @property
+    def high_pressure_fractions(self) -> tuple:
+        """(K1n, K3n, K5n, K7n): the stage fractions on the machine, normalised by K1 + ... + K8."""
+        total = sum(getattr(self, f"K{i}") for i in range(1, 9))
+        return tuple(getattr(self, f"K{i}") / total for i in (1, 3, 5, 7))
+
+
+def _stages(x, p: IEEEG1Params, m):
+    """(derivatives of L4..L7, their outputs)."""
+    signal, rates, outs = x[1], [], []
+    for state, T in zip(x[2:], (p.T4, p.T5, p.T6, p.T7)):
+        rate, signal = lag(m, signal, state, 1.0, T)
+        rates.append(rate)
+        outs.append(signal)
+    return rates, outs
+
+
+def derivatives(x, u, p: IEEEG1Params, m):
+    """(dLL_x, dIAW_y, dL4_y, dL5_y, dL6_y, dL7_y)/dt for x as the states, u = (omega, Pref)."""
+    LL_x, IAW_y = x[0], x[1]
+    omega, Pref = u
+    d_LL, LL_y = lead_lag(m, p.wref0 - omega, LL_x, p.K, p.T2, p.T1)
+    vsl = clip(m, (LL_y + Pref - IAW_y) / p.T3, p.UC, p.UO)
+    d_IAW, _ = integrator_non_windup(m, vsl, IAW_y, 1.0, 1.0, p.PMIN, p.PMAX)
+    rates, _ = _stages(x, p, m)
+    return (d_LL, d_IAW, *rates)
+
+
+def outputs(x, u, p: IEEEG1Params, m):
+    """(Pm,) = K1n L4 + K3n L5 + K5n L6 + K7n L7."""
+    _, outs = _stages(x, p, m)
+    return (sum(k * y for k, y in zip(p.high_pressure_fractions, outs)),)
+
+
+def initialise(Pm: float, u, p: IEEEG1Params) -> tuple:
+    """(x [6], Pref [pu]): the state at rest giving Pm [pu] at speed u[0] and the reference that
+    holds it (ANDES: Pref = tm0 at omega = wref0; the valve at Pm / (K1n + K3n + K5n + K7n))."""
+    wd = p.wref0 - float(u[0])
+    valve = Pm / sum(p.high_pressure_fractions)
+    return np.array([wd, valve, valve, valve, valve, valve]), valve - p.K * wd
+
+
+def equilibrium(u, p: IEEEG1Params) -> np.ndarray:
+    """The steady state [6] at constant (omega, Pref); ValueError outside the valve limits."""
+    omega, Pref = finite_inputs(u, "IEEEG1")
+    wd = p.wref0 - omega
+    valve = Pref + p.K * wd
+    if not p.PMIN <= valve <= p.PMAX:
+        raise ValueError(f"IEEEG1: the valve position {valve:.6g} pu at rest lies outside [PMIN, PMAX]")
+    return np.array([wd, valve, valve, valve, valve, valve])
+
+
+IEEEG1 = Component(
+    name="ieeeg1",
+    description="IEEEG1 IEEE Type 1 speed-governing model (PSS/E, ANDES), one machine",
+    states=(Quantity("LL_x", "pu", "lead-lag state"),
+            Quantity("IAW_y", "pu", "valve position (non-windup limited)"),
+            Quantity("L4_y", "pu", "first stage"), Quantity("L5_y", "pu", "second stage"),
+            Quantity("L6_y", "pu", "third stage"), Quantity("L7_y", "pu", "fourth stage")),
+    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
+            Quantity("Pref", "pu", "power reference", start=0.7, operating_range=(0.0, 1.2))),
+    outputs=(Quantity("Pm", "pu", "mechanical power"),),
+    params_type=IEEEG1Params,
+    derivatives=derivatives,
+    output_equations=outputs,
+    equilibrium=equilibrium,
+    state_scales=(0.01, 0.2, 0.2, 0.2, 0.2, 0.2),
+    ports=Ports(inputs=(Link("rotor_speed", "omega"), Link("power_reference", "Pref")),
+                outputs=(Link("mechanical_power", "Pm"),)),
+)
