@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 # The largest difference allowed between onnxruntime and torch at export, relative to check_scale
-# (the build's check of the compiled kernel has its own, fmu_export.builder.KERNEL_TOLERANCE). Both
+# (the build's check of the compiled kernel has its own, fmu_export.surrogate_fmu.KERNEL_TOLERANCE). Both
 # round to float32, in different orders: a DeepONet's answer is a sum of basis terms that can be
 # 100 times the answer itself, and its first layer a dot product over thousands of sensor values,
 # so rounding differences scale with the terms, not with the answer (up to 2.1e-5 measured on the
@@ -63,7 +63,7 @@ REQUIRED_KEYS = ("component", "params", "state_names", "input_names", "horizon_s
 
 
 class ContractError(ValueError):
-    """Operator metadata that breaks the contract (DESIGN section 4); the message is one line."""
+    """Operator metadata that breaks the contract (docs/design.md, "The ONNX operator"); the message is one line."""
 
 
 def operator_metadata(source) -> dict:
