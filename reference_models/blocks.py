@@ -81,8 +81,10 @@ def lag(m, u, x, K: float, T: float):
 
 def lag_non_windup(m, u, x, K: float, T: float, low: float, high: float):
     """Lag K / (1 + s T) with a non-windup limit [low, high] on its state (ANDES' LagAntiWindup):
-    (dx/dt, y = x). T must be > 0."""
-    return non_windup(m, (K * u - x) / T, x, low, high), x
+    (dx/dt, y = x). T = 0: the state is held and y = K u clipped to [low, high]."""
+    if T > 0:
+        return non_windup(m, (K * u - x) / T, x, low, high), x
+    return 0.0 * x, clip(m, K * u, low, high)
 
 
 def integrator_non_windup(m, u, x, K: float, T: float, low: float, high: float):

@@ -14,6 +14,7 @@ Equations (ANDES 2.0 model reference, Exciter: ESST3A):
         under-excitation gate max(UEL, vil) passes vil, UEL = -9999 as ANDES)
     lead-lag (1 + s TC) / (1 + s TB) of vil (TB = 0: a gain of 1) -> LL_y
     non-windup lag KA / (1 + s TA):  TA dVR/dt = KA LL_y - VR,  VRMIN <= VR <= VRMAX
+        (TA = 0: VR held, KA LL_y clipped to the limits used)
     VE = |KPC V + j (KI + KPC XL) I|,  KPC = KP exp(j THETAP [deg]), V = Vt exp(j theta_vs),
         I = I_re + j I_im (both rotate with the rotor frame alike, so VE equals ANDES' dq form)
     IN = KC XadIfd / VE,  FEX = FEX(IN) (reference_models.blocks.rectifier_loading)
@@ -36,7 +37,7 @@ from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs, set_point
 
 PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KM": (0.01, 5000.0, "pu"), "TC": (0.0, 100.0, "s"),
-                    "TB": (0.0, 100.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.001, 10.0, "s"),
+                    "TB": (0.0, 100.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.0, 10.0, "s"),
                     "KG": (0.0, 10.0, "pu"), "KP": (0.0, 100.0, "pu"), "KI": (0.0, 100.0, "pu"),
                     "VBMAX": (0.01, 1000.0, "pu"), "KC": (0.0, 10.0, "pu"), "XL": (0.0, 10.0, "pu"),
                     "VGMAX": (0.0, 1000.0, "pu"), "THETAP": (-180.0, 180.0, "deg"), "TM": (0.001, 10.0, "s")}
@@ -93,7 +94,7 @@ def derivatives(x, u, p: ESST3AParams, m):
     d_LG, sensed = lag(m, Vt, LG_y, 1.0, p.TR)
     vil = clip(m, Vref - sensed + Vss, p.VIMIN, p.VIMAX)
     d_LL, LL_y = lead_lag(m, vil, LL_x, 1.0, p.TC, p.TB)
-    d_VR, _ = lag_non_windup(m, LL_y, VR, p.KA, p.TA, p.VRMIN, p.VRMAX)
+    d_VR, VR = lag_non_windup(m, LL_y, VR, p.KA, p.TA, p.VRMIN, p.VRMAX)
     Efd = bridge_voltage(Vt, theta_vs, I_re, I_im, XadIfd, p, m) * VM
     VG = clip(m, p.KG * Efd, -math.inf, p.VGMAX)
     d_VM, _ = lag_non_windup(m, VR - VG, VM, p.KM, p.TM, p.VMMIN, p.VMMAX)

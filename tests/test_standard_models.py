@@ -1,0 +1,118 @@
+"""The standard dynamic models (reference_models.models): at rest at their equilibrium, the same
+derivatives on every math namespace, limiters that hold and release, lead-lags that degenerate to
+gains, and ANDES' initial states of its shipped cases (where ANDES is installed)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from reference_models import blocks
+from reference_models.models import STANDARD_MODELS
+from reference_models.models import genrou, sexs
+
+MODELS = sorted(STANDARD_MODELS)
+
+
+def _rest(name):
+    component = STANDARD_MODELS[name]
+    p = component.params_type()
+    u = component.start_inputs
+    return component, p, u, component.steady_state(u, p)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_equilibrium_makes_every_derivative_zero(name):
+    component, p, u, x = _rest(name)
+    rates = component.rhs(x, u, p)
+    assert np.all(np.abs(rates) <= 1e-10 * (1.0 + np.abs(x).max())), rates
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_numpy_torch_and_math_derivatives_agree(name):
+    torch = pytest.importorskip("torch")
+    component, p, u, x = _rest(name)
+    rng = np.random.default_rng(7)
+    xs = x + 0.1 * np.array(component.state_scales) * rng.standard_normal((5, component.n_states))
+    us = u + 0.01 * rng.standard_normal((5, component.n_inputs))
+    by_numpy = component.rhs(xs, us, p)
+    by_torch = component.rhs(torch.tensor(xs, dtype=torch.float64), torch.tensor(us, dtype=torch.float64), p).numpy()
+    by_math = np.array([component.derivatives(list(a), list(b), p, math) for a, b in zip(xs, us)], dtype=float)
+    np.testing.assert_allclose(by_torch, by_numpy, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(by_math, by_numpy, rtol=1e-12, atol=1e-12)
+    outputs = component.output_values(xs, us, p)
+    np.testing.assert_allclose(
+        np.array([component.output_equations(list(a), list(b), p, math) for a, b in zip(xs, us)], dtype=float),
+        outputs, rtol=1e-12, atol=1e-12)
+
+
+def test_non_windup_holds_a_state_pushed_outward_at_its_limit_and_releases_it_inward():
+    assert blocks.non_windup(math, 2.0, 1.0, -1.0, 1.0) == 0.0
+    assert blocks.non_windup(math, -2.0, 1.0, -1.0, 1.0) == -2.0
+    assert blocks.non_windup(math, -2.0, -1.0, -1.0, 1.0) == 0.0
+    assert blocks.non_windup(math, 2.0, -1.0, -1.0, 1.0) == 2.0
+    assert blocks.non_windup(math, 2.0, 0.5, -1.0, 1.0) == 2.0
+
+
+def test_windup_limiter_clips_and_no_limit_beyond_the_marker():
+    assert blocks.clip(math, 3.0, -1.0, 1.0) == 1.0
+    assert blocks.clip(math, -3.0, -1.0, 1.0) == -1.0
+    assert blocks.clip(math, 0.3, -1.0, 1.0) == 0.3
+    assert blocks.clip(math, 3e7, -blocks.NO_LIMIT, blocks.NO_LIMIT) == 3e7
+
+
+def test_lead_lag_with_zero_lag_time_is_its_gain_and_holds_its_state():
+    rate, y = blocks.lead_lag(math, 0.7, 5.0, 3.0, 2.0, 0.0)
+    assert (rate, y) == (0.0, 3.0 * 0.7)
+    rate, y = blocks.lag(math, 0.7, 5.0, 2.0, 0.0)
+    assert (rate, y) == (0.0, 1.4)
+
+
+def test_exciter_output_at_its_ceiling_is_held_while_pushed_up_and_falls_when_pushed_down():
+    p = sexs.SEXSParams(EMAX=3.0)
+    at_ceiling = np.array([0.0, 3.0])
+    up = sexs.SEXS.rhs(at_ceiling, np.array([0.8, 1.2, 0.0]), p)  # K LL_y = 3.2 > EMAX
+    down = sexs.SEXS.rhs(at_ceiling, np.array([1.2, 1.0, 0.0]), p)
+    assert up[1] == 0.0
+    assert down[1] < 0.0
+
+
+def test_genrou_saturation_coefficients_pass_through_their_two_points():
+    A, B = blocks.quadratic_saturation_coefficients(1.0, 0.05, 1.2, 0.3)
+    assert B * (1.0 - A) ** 2 / 1.0 == pytest.approx(0.05, rel=1e-12)
+    assert B * (1.2 - A) ** 2 / 1.2 == pytest.approx(0.3, rel=1e-12)
+
+
+def test_genrou_operating_point_delivers_the_load_flow_power():
+    p = genrou.GENROUParams(S10=0.05, S12=0.3)
+    x, Pm, Efd = genrou.operating_point(1.03, 0.2, 7.0, 1.5, p)
+    u = np.array([1.03, 0.2, Pm, Efd])
+    _, _, P, Q, _, _ = genrou.GENROU.output_values(x, u, p)
+    assert (P, Q) == (pytest.approx(7.0, abs=1e-12), pytest.approx(1.5, abs=1e-12))
+    np.testing.assert_allclose(genrou.GENROU.steady_state(u, p), x, atol=1e-10)
+
+
+def test_rectifier_loading_is_continuous_at_its_breakpoints():
+    for point in (0.0, 0.433, 0.75, 1.0):
+        below, above = (blocks.rectifier_loading(math, point + d) for d in (-1e-9, 1e-9))
+        assert abs(below - above) < 2e-3
+
+
+ANDES_CASES = ["kundur/kundur_full.xlsx", "kundur/kundur_sexs.xlsx", "kundur/kundur_exst1.xlsx",
+               "kundur/kundur_esst3a.xlsx", "kundur/kundur_ieeeg1.xlsx", "kundur/kundur_ieeest.xlsx",
+               "ieee14/ieee14_full.xlsx", "ieee39/ieee39_full.xlsx", "npcc/npcc.xlsx"]
+
+
+@pytest.mark.parametrize("case", ANDES_CASES)
+def test_initial_states_and_set_points_match_andes_and_are_at_rest(case):
+    pytest.importorskip("andes")
+    from andes_reference import compare
+
+    results = compare(case)
+    assert results
+    for name, r in results.items():
+        assert r["devices"] > 0
+        assert r["state"] < 1e-8, (name, r)
+        assert r["set_point"] < 1e-8, (name, r)
+        assert r["our_rate"] < 1e-8, (name, r)
