@@ -33,7 +33,7 @@ import numpy as np
 
 from reference_models.grid.case import CaseError, Device, at_rest, external_impedance, held_inputs, unit_wiring
 
-from .fmu import FMU, CouplingError
+from .fmu import FMU, CouplingError, component_described
 
 
 def fmu_parameters(directory: Path, component):
@@ -76,8 +76,6 @@ class UnitFMU:
     def __init__(self, path, params=None, name: str | None = None):
         from fmpy import extract, read_model_description
 
-        from reference_models.components import COMPONENTS
-
         path = Path(path)
         try:
             if path.is_file():
@@ -96,9 +94,7 @@ class UnitFMU:
         probe.close()
         if self.ports is None:
             raise CouplingError(f"{self.name} declares no ports and is not an opfmu FMU of a known component")
-        description = str(md.description or "")
-        self.component = next((c for c in COMPONENTS.values() if c.description and description.startswith(c.description)),
-                              None)
+        self.component = component_described(md.description)
         if params is None and self.component is None:
             raise CouplingError(f"{self.name}: its component is unknown; give its parameters")
         self.params = params if params is not None else fmu_parameters(directory, self.component)
@@ -234,12 +230,13 @@ def couple(units, times, bus, starts, machine_parameters: dict | None = None) ->
             machine.set(**{ports.bus.voltage[0]: row[0], ports.bus.voltage[1]: row[1]}, **dict(zip(held, row[2:])))
             I_re, I_im = machine.get(*ports.bus.current)
             V = row[0] * np.exp(1j * row[1])
-            Vt[k] = abs(V + impedance * complex(I_re, I_im))
+            terminal = V + impedance * complex(I_re, I_im)
+            Vt[k] = abs(terminal)
             for j in range(1, len(fmus)):
                 inputs = {}
                 for name, source in wiring[j].items():
                     if source.kind == "terminal":
-                        inputs[name] = Vt[k]
+                        inputs[name] = Vt[k] if source.index == 0 else float(np.angle(terminal))
                     elif source.kind == "device" and source.device == 0:
                         inputs[name] = machine.get(source.variable)[0]
                 if inputs:

@@ -64,13 +64,18 @@ def ports_of_fmu(root: ET.Element):
         return ports
     if not str(root.get("generationTool") or "").startswith("opfmu"):
         return None
+    component = component_described(root.get("description"))
+    return None if component is None else component.ports
+
+
+def component_described(description):
+    """The registered component whose description begins the model description's `description`
+    (the longest that does: the builders write the component's description first), or None."""
     from reference_models.components import COMPONENTS
 
-    description = str(root.get("description") or "")
-    for component in COMPONENTS.values():
-        if component.description and description.startswith(component.description):
-            return component.ports
-    return None
+    text = str(description or "")
+    found = [c for c in COMPONENTS.values() if c.description and text.startswith(c.description)]
+    return max(found, key=lambda c: len(c.description)) if found else None
 
 
 class FMU:

@@ -370,8 +370,12 @@ class GridMaster:
         timing.network_s += time.perf_counter() - started
         return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta, machine
 
-    def _terminal(self, V, I):
-        return np.array([abs(V[k] + u.impedance * I[k]) for k, u in enumerate(self.units)])
+    def _terminal(self, V, I, theta):
+        """The terminal voltage behind each machine's external impedance: (magnitudes [g], angles [g],
+        continuous with the bus angles theta)."""
+        Vt = [V[k] + u.impedance * I[k] for k, u in enumerate(self.units)]
+        return (np.array([abs(v) for v in Vt]),
+                np.array([theta[k] + _wrap(cmath.phase(v) - theta[k]) for k, v in enumerate(Vt)]))
 
     def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, timing):
         """One pass over [t0, t0 + h]: every unit's devices stepped in their order, each input linear
@@ -397,8 +401,8 @@ class GridMaster:
                             a.append(theta0[k])
                             b.append(theta1[k])
                     elif source.kind == "terminal":
-                        a.append(Vt0[k])
-                        b.append(Vt1[k])
+                        a.append(Vt0[source.index][k])
+                        b.append(Vt1[source.index][k])
                     elif source.kind == "device":
                         key = (source.device, source.variable)
                         a.append(u.links[key])
@@ -454,7 +458,7 @@ class GridMaster:
         t0 = 0.0
         for t1, new_topology in communication_points(s.step, stop, topologies[1:]):
             h = t1 - t0
-            Vt0 = self._terminal(V, I)
+            Vt0 = self._terminal(V, I, theta)
             if V_prev is not None and s.coupling != "held":
                 V1 = V + (V - V_prev) * (h / h_prev)
             else:
@@ -477,7 +481,7 @@ class GridMaster:
                         for u, kept in zip(self.units, links):
                             u.links = dict(kept)
                         timing.rollback_s += time.perf_counter() - t_save
-                    Vt1 = self._terminal(V1, I1)
+                    Vt1 = self._terminal(V1, I1, theta1)
                     outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, timing)
                     timing.passes += 1
                     new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, timing)

@@ -459,11 +459,15 @@ def load_case(network_file, dynamic_data, name: str | None = None) -> Case:
     return Case(name or network.name, network, flow, units, starts, (), Path(dynamic_data))
 
 
+TERMINAL = ("terminal_voltage", "terminal_voltage_angle")  # what the bus gives a unit: |Vt|, angle of Vt
+
+
 @dataclass(frozen=True)
 class Source:
     """Where a device input comes from within its unit: `bus` (the bus voltage: index 0 its
     magnitude, 1 its angle), `device` (output `variable` of device `device` of the unit),
-    `terminal` (the terminal voltage magnitude) or `held` (a set point at its start value)."""
+    `terminal` (the terminal voltage: index 0 its magnitude, 1 its angle) or `held` (a set point at
+    its start value)."""
 
     kind: str
     device: int | None = None
@@ -474,8 +478,9 @@ class Source:
 def unit_wiring(ports, where: str = "a unit") -> tuple:
     """The wiring of a unit from its devices' Ports (the machine, with the bus port, first): per
     device a dict {input variable: Source} over its bus-port and link inputs. An input link takes
-    the output link of the same signal of another device; `terminal_voltage` with no giver comes
-    from the bus; any other input link nothing gives is held. CaseError where two devices give one
+    the output link of the same signal of another device; `terminal_voltage` and
+    `terminal_voltage_angle` with no giver come from the bus (behind the machine's external
+    impedance); any other input link nothing gives is held. CaseError where two devices give one
     signal or the first device has no bus port."""
     ports = list(ports)
     if not ports or ports[0] is None or ports[0].bus is None:
@@ -496,8 +501,8 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
                 raise CaseError(f"{where}: {len(givers)} devices give the signal {link.signal}")
             if givers:
                 wires[link.variable] = Source("device", device=givers[0][0], variable=givers[0][1])
-            elif link.signal == "terminal_voltage":
-                wires[link.variable] = Source("terminal")
+            elif link.signal in TERMINAL:
+                wires[link.variable] = Source("terminal", index=TERMINAL.index(link.signal))
             else:
                 wires[link.variable] = Source("held")
         wiring.append(wires)

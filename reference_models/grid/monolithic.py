@@ -75,13 +75,16 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
             return state(j)[d.component.state_names.index(variable)]
         return d.component.output_equations(state(j), inputs_of(j), d.params, m)[d.component.output_names.index(variable)]
 
-    def terminal():
+    def terminal(index):
         if impedance == 0:
-            return Vs
+            return Vs if index == 0 else theta
         bus = devices[0].component.ports.bus
         I_re, I_im = (value(0, n) for n in bus.current)
-        return abs(complex(V_re, V_im) + impedance * complex(I_re, I_im)) if m is math else \
-            np.abs((V_re + 1j * V_im) + impedance * (I_re + 1j * I_im))
+        if m is math:
+            Vt = complex(V_re, V_im) + impedance * complex(I_re, I_im)
+            return abs(Vt) if index == 0 else theta + math.remainder(math.atan2(Vt.imag, Vt.real) - theta, 2 * math.pi)
+        Vt = (V_re + 1j * V_im) + impedance * (I_re + 1j * I_im)
+        return np.abs(Vt) if index == 0 else theta + np.remainder(np.angle(Vt) - theta + np.pi, 2 * np.pi) - np.pi
 
     def inputs_of(j):
         if inputs[j] is None:
@@ -96,7 +99,7 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
                 elif source.kind == "bus":
                     values.append(Vs if source.index == 0 else theta)
                 elif source.kind == "terminal":
-                    values.append(terminal())
+                    values.append(terminal(source.index))
                 else:
                     values.append(value(source.device, source.variable))
             inputs[j] = tuple(values)
