@@ -186,6 +186,16 @@ def communication_points(step: float, stop: float, changes):
         yield waiting
 
 
+def _code(source) -> int:
+    """The master's code of an input's Source: 0, 1 bus voltage magnitude, angle; 2, 3 terminal voltage
+    magnitude, angle; 4 a link from another device; 5 a set point."""
+    if source.kind == "bus":
+        return source.index
+    if source.kind == "terminal":
+        return 2 + source.index
+    return 4 if source.kind == "device" else 5
+
+
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
@@ -245,6 +255,8 @@ class _Unit:
                               for n in names])
             self.state_rows.append(len(device.component.state_names))
             self.link_rows.append({n: outputs.index(n) for n in needed[j]})
+        self.plan = [[(_code(source), (source.device, source.variable) if source.kind == "device" else None, held)
+                      for source, held in zip(sources, helds)] for sources, helds in zip(self.sources, self.held)]
         self.state_names = [d.component.state_names for d in unit.devices]
         self.current_rows = tuple(outputs_index for outputs_index in
                                   (self.fmus[0].output_names.index(n) for n in bus.current))
@@ -286,6 +298,7 @@ class GridMaster:
             self.close()
             raise
         self.fmus = [fmu for u in self.units for fmu in u.fmus]
+        self._angles = any(code == 3 for u in self.units for plan in u.plan for code, _, _ in plan)
         self.rolls_back = all(s.rolls_back for s in self.fmus)
         self.notes = ()
         if not self.rolls_back and settings.coupling == "iterated" and settings.passes > 1:
@@ -312,17 +325,12 @@ class GridMaster:
             self._networks[key] = self.case.reduced(topology.fault_bus, self._fault_impedance, topology.open)
         return self._networks[key]
 
-    def _machine_inputs(self, unit, Vs, theta):
+    @staticmethod
+    def _machine_inputs(unit, Vs, theta):
         """The machine's bound inputs now: the bus voltage (Vs, theta) and its links at their latest values."""
-        values = []
-        for source, held in zip(unit.sources[0], unit.held[0]):
-            if source.kind == "bus":
-                values.append(Vs if source.index == 0 else theta)
-            elif source.kind == "device":
-                values.append(unit.links[(source.device, source.variable)])
-            else:
-                values.append(held)
-        return values
+        links = unit.links
+        return [Vs if code == 0 else theta if code == 1 else links[key] if code == 4 else held
+                for code, key, held in unit.plan[0]]
 
     def _solve(self, network, V, theta_ref, timing: Timing):
         """The generator-bus voltages [g] (complex) at which the machines' currents I(V) and the
@@ -372,10 +380,12 @@ class GridMaster:
 
     def _terminal(self, V, I, theta):
         """The terminal voltage behind each machine's external impedance: (magnitudes [g], angles [g],
-        continuous with the bus angles theta)."""
-        Vt = [V[k] + u.impedance * I[k] for k, u in enumerate(self.units)]
-        return (np.array([abs(v) for v in Vt]),
-                np.array([theta[k] + _wrap(cmath.phase(v) - theta[k]) for k, v in enumerate(Vt)]))
+        continuous with the bus angles theta; None where no device takes them), lists."""
+        Vt = [v + u.impedance * i for v, i, u in zip(V.tolist(), I.tolist(), self.units)]
+        angles = None
+        if self._angles:
+            angles = [t + _wrap(cmath.phase(v) - t) for v, t in zip(Vt, theta.tolist())]
+        return [abs(v) for v in Vt], angles
 
     def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, timing):
         """One pass over [t0, t0 + h]: every unit's devices stepped in their order, each input linear
@@ -385,28 +395,23 @@ class GridMaster:
         t0 + h, and sets the units' links to their new values."""
         started = time.perf_counter()
         held_coupling = self.settings.coupling == "held"
+        ends = (([abs(v) for v in V0.tolist()], [abs(v) for v in V1.tolist()]), (theta0.tolist(), theta1.tolist()),
+                (Vt0[0], Vt1[0]), (Vt0[1], Vt1[1]))
         outputs = []
         for k, u in enumerate(self.units):
-            new_links = {}
+            links, new_links = u.links, {}
             unit_out = [None] * len(u.fmus)
             for j in u.order:
                 fmu = u.fmus[j]
                 a, b = [], []
-                for source, held in zip(u.sources[j], u.held[j]):
-                    if source.kind == "bus":
-                        if source.index == 0:
-                            a.append(abs(V0[k]))
-                            b.append(abs(V1[k]))
-                        else:
-                            a.append(theta0[k])
-                            b.append(theta1[k])
-                    elif source.kind == "terminal":
-                        a.append(Vt0[source.index][k])
-                        b.append(Vt1[source.index][k])
-                    elif source.kind == "device":
-                        key = (source.device, source.variable)
-                        a.append(u.links[key])
-                        b.append(new_links.get(key, u.links[key]))
+                for code, key, held in u.plan[j]:
+                    if code < 4:
+                        start, end = ends[code]
+                        a.append(start[k])
+                        b.append(end[k])
+                    elif code == 4:
+                        a.append(links[key])
+                        b.append(new_links.get(key, links[key]))
                     else:
                         a.append(held)
                         b.append(held)
