@@ -86,50 +86,38 @@ def _andes_rates(ss, model, component, i, name):
     return np.array(rates)
 
 
-def compare(case: str) -> dict:
-    """{model: {"devices", "state", "set_point", "our_rate", "andes_rate"}}: the largest absolute
-    differences of our initial states and set points from ANDES', our largest |dx/dt| at ANDES'
-    initial point, and ANDES' own largest |dx/dt| there."""
-    ss = load(case)
-    results = {}
+def _pss_output(ss, exciter_idx) -> float:
+    """The stabiliser signal ANDES feeds the exciter (0 without a stabiliser)."""
+    model = ss.IEEEST
+    for i in range(model.n):
+        if model.avr.v[i] == exciter_idx:
+            return float(model.vsout.v[i])
+    return 0.0
 
-    def record(name, state_diff, set_diff, our_rate, andes_rate):
-        r = results.setdefault(name, dict(devices=0, state=0.0, set_point=0.0, our_rate=0.0, andes_rate=0.0))
-        r["devices"] += 1
-        for key, value in (("state", state_diff), ("set_point", set_diff), ("our_rate", our_rate),
-                           ("andes_rate", andes_rate)):
-            r[key] = max(r[key], float(value))
 
+def devices(ss):
+    """Per device of our models in the system: (name, module, params, u, x_andes, andes model, i,
+    state scale), with the inputs u and ANDES' states x_andes as our model takes them (machine
+    base for governors' powers)."""
     for name, module in MACHINES.items():
         model, component = getattr(ss, name), STANDARD_MODELS[name]
         for i in range(model.n):
             p = params(model, component, i, {"Sb": ss.config.mva, "Sn": float(model.Sn.v[i]),
                                              "fn": float(model.fn.v[i])})
-            bus = list(ss.Bus.idx.v).index(model.bus.v[i])
-            V, a = float(ss.Bus.v.v[bus]), float(ss.Bus.a.v[bus])
-            x, Pm, Efd = module.operating_point(V, a, float(model.p0.v[i]), float(model.q0.v[i]), p)
-            ours = _andes_states(model, component, i, name)
-            signals = _machine_signals(ss, model.idx.v[i])
-            u = np.array([V, a, signals["Pm"], signals["Efd"]])
-            record(name, np.abs(x - ours).max(), max(abs(Pm - signals["Pm"]), abs(Efd - signals["Efd"])),
-                   np.abs(component.rhs(ours, u, p)).max(), np.abs(_andes_rates(ss, model, component, i, name)).max())
+            s = _machine_signals(ss, model.idx.v[i])
+            u = np.array([s["Vt"], s["theta"], s["Pm"], s["Efd"]])
+            yield name, module, p, u, _andes_states(model, component, i, name), model, i, None
 
     for name, module in EXCITERS.items():
         model, component = getattr(ss, name), STANDARD_MODELS[name]
         for i in range(model.n):
             s = _machine_signals(ss, model.syn.v[i])
-            Vss = 0.0
-            base = {"SEXS": [s["Vt"], 0.0, Vss], "EXST1": [s["Vt"], 0.0, Vss, s["XadIfd"]],
-                    "EXDC2": [s["Vt"], 0.0, Vss, s["omega"]], "IEEEX1": [s["Vt"], 0.0, Vss],
-                    "ESST3A": [s["Vt"], s["theta"], s["I_re"], s["I_im"], 0.0, Vss, s["XadIfd"]]}[name]
-            p = params(model, component, i)
-            x, Vref = module.initialise(s["Efd"], base, p)
-            ref_at = 4 if name == "ESST3A" else 1
-            base[ref_at] = Vref
-            ours = _andes_states(model, component, i, name)
-            record(name, np.abs(x - ours).max(), abs(Vref - _v(model.vref, i)),
-                   np.abs(component.rhs(ours, np.array(base), p)).max(),
-                   np.abs(_andes_rates(ss, model, component, i, name)).max())
+            Vref, Vss = _v(model.vref, i), _pss_output(ss, model.idx.v[i])
+            u = {"SEXS": [s["Vt"], Vref, Vss], "EXST1": [s["Vt"], Vref, Vss, s["XadIfd"]],
+                 "EXDC2": [s["Vt"], Vref, Vss, s["omega"]], "IEEEX1": [s["Vt"], Vref, Vss],
+                 "ESST3A": [s["Vt"], s["theta"], s["I_re"], s["I_im"], Vref, Vss, s["XadIfd"]]}[name]
+            yield (name, module, params(model, component, i), np.array(u),
+                   _andes_states(model, component, i, name), model, i, None)
 
     for name, module in GOVERNORS.items():
         model, component = getattr(ss, name), STANDARD_MODELS[name]
@@ -137,29 +125,122 @@ def compare(case: str) -> dict:
             if name == "IEEEG1" and model.syn2.v[i] is not None:
                 continue  # a turbine on two machines: not modelled
             s = _machine_signals(ss, model.syn.v[i])
-            p = params(model, component, i)
-            x, Pref = module.initialise(s["Pm"], [s["omega"], 0.0], p)
             # ANDES' governor powers are on the system base: ours on the machine base
             k = ss.config.mva / float(model.Sn.v[i])
             scale = np.array([1.0 if state == "LL_x" and name == "IEEEG1" else k for state in component.state_names])
-            ours = _andes_states(model, component, i, name) * scale
             if name == "TGOV1":  # pref = R tm0, both converted by ANDES: the product is base-free
-                andes_ref = _v(model.pref, i)
+                Pref = _v(model.pref, i)
             else:
-                andes_ref = (_v(model.pref, i) if name == "TGOV1N" else float(model.tm012.v[i])) * k
-            record(name, np.abs(x - ours).max(), abs(Pref - andes_ref),
-                   np.abs(component.rhs(ours, np.array([s["omega"], Pref]), p)).max(),
-                   np.abs(_andes_rates(ss, model, component, i, name)).max())
+                Pref = (_v(model.pref, i) if name == "TGOV1N" else float(model.tm012.v[i])) * k
+            extra = {"Sn": float(model.Sn.v[i]), "Sb": ss.config.mva} if name == "IEEEG1" else None
+            yield (name, module, params(model, component, i, extra), np.array([s["omega"], Pref]),
+                   _andes_states(model, component, i, name) * scale, model, i, scale)
 
     model, component = ss.IEEEST, STANDARD_MODELS["IEEEST"]
     for i in range(model.n):
         exciter = next(getattr(ss, n) for n in EXCITERS if model.avr.v[i] in list(getattr(ss, n).idx.v))
-        syn = exciter.syn.v[list(exciter.idx.v).index(model.avr.v[i])]
-        s = _machine_signals(ss, syn)
-        p = params(model, component, i)
-        u = np.array([s["omega"], s["Pe"], s["Vt"]])
-        x = component.steady_state(u, p)
-        ours = _andes_states(model, component, i, "IEEEST")
-        record("IEEEST", np.abs(x - ours).max(), 0.0, np.abs(component.rhs(ours, u, p)).max(),
-               np.abs(_andes_rates(ss, model, component, i, "IEEEST")).max())
+        s = _machine_signals(ss, exciter.syn.v[list(exciter.idx.v).index(model.avr.v[i])])
+        yield ("IEEEST", None, params(model, component, i), np.array([s["omega"], s["Pe"], s["Vt"]]),
+               _andes_states(model, component, i, "IEEEST"), model, i, None)
+
+
+def _record(results, name, **values):
+    r = results.setdefault(name, dict(devices=0, **{key: 0.0 for key in values}))
+    r["devices"] += 1
+    for key, value in values.items():
+        r[key] = max(r[key], float(value))
+
+
+def compare(case: str) -> dict:
+    """{model: {"devices", "state", "set_point", "our_rate", "andes_rate"}}: the largest absolute
+    differences of our initial states and set points (Pm and Efd of a machine, Vref of an exciter,
+    Pref of a governor) from ANDES', our largest |dx/dt| at ANDES' initial point, and ANDES' own
+    largest |dx/dt| there."""
+    ss = load(case)
+    results = {}
+    for name, module, p, u, x_andes, model, i, _ in devices(ss):
+        component = STANDARD_MODELS[name]
+        if name in MACHINES:
+            bus = list(ss.Bus.idx.v).index(model.bus.v[i])
+            x, Pm, Efd = module.operating_point(u[0], u[1], float(model.p0.v[i]), float(model.q0.v[i]), p)
+            set_diff = max(abs(Pm - u[2]), abs(Efd - u[3]))
+        elif name in EXCITERS:
+            ref_at = 4 if name == "ESST3A" else 1
+            x, Vref = module.initialise(_v(_machine(ss, model.syn.v[i])[0].vf, _machine(ss, model.syn.v[i])[1]), u, p)
+            set_diff = abs(Vref - u[ref_at])
+        elif name in GOVERNORS:
+            s = _machine_signals(ss, model.syn.v[i])
+            x, Pref = module.initialise(s["Pm"], u, p)
+            set_diff = abs(Pref - u[1])
+        else:
+            x, set_diff = component.steady_state(u, p), 0.0
+        _record(results, name, state=np.abs(x - x_andes).max(), set_point=set_diff,
+                our_rate=np.abs(component.rhs(x_andes, u, p)).max(),
+                andes_rate=np.abs(_andes_rates(ss, model, component, i, name)).max())
     return results
+
+
+def compare_in_transient(case: str, t: float, fault_bus=None, tol: float = 1e-6) -> dict:
+    """{model: {"devices", "rate", "andes_rate", "held_rate", "output", "at_limit"}}: ANDES runs the case (its own events,
+    and a three-phase fault at `fault_bus` from 1.0 s to 1.1 s where given) to time t [s], its f
+    is evaluated at the point it reached, and our derivatives at ANDES' states and inputs there
+    are compared with ANDES' dx/dt (f / Tf): the largest absolute difference, ANDES' largest
+    |dx/dt|, our largest |dx/dt| of the states ANDES treats as algebraic (a zero time constant:
+    ours are held, 0), the largest difference of the main output (`output`), and how many of the model's devices have a non-windup state at a limit there."""
+    import andes
+
+    andes.config_logger(stream_level=40)
+    ss = andes.load(andes.get_case(case), setup=False, no_output=True, default_config=True)
+    if fault_bus is not None:
+        ss.add("Fault", {"bus": fault_bus, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
+    ss.setup()
+    ss.PFlow.run()
+    ss.TDS.config.tf = t
+    ss.TDS.config.tol = tol
+    ss.TDS.config.fixt = 1
+    ss.TDS.config.tstep = 0.005
+    ss.TDS.config.no_tqdm = 1
+    ss.TDS.run()
+    ss.TDS.fg_update(ss.exist.tds)
+    results = {}
+    for name, _, p, u, x_andes, model, i, scale in devices(ss):
+        component = STANDARD_MODELS[name]
+        theirs = _andes_rates(ss, model, component, i, name) * (1.0 if scale is None else scale)
+        ours = component.rhs(x_andes, u, p)
+        # a state with a zero time constant is algebraic in ANDES (no rate), and a degenerate
+        # second-order filter's states follow its input there; ours are held: rate 0
+        held = np.isnan(theirs) | np.isin(component.state_names, held_states(name, p))
+        ours_out, theirs_out = output(ss, name, component, p, x_andes, u, model, i)
+        _record(results, name, rate=np.abs(ours - theirs)[~held].max(), andes_rate=np.abs(theirs[~held]).max(),
+                held_rate=np.abs(ours[held]).max(initial=0.0), output=abs(ours_out - theirs_out), at_limit=0.0)
+        results[name]["at_limit"] += float(_at_limit(model, i))
+    return results
+
+
+def held_states(name: str, p) -> tuple:
+    """Our states that a degenerate block holds unused (IEEEST's second-order filters with A2 = 0
+    or A4 = 0) and that ANDES keeps as states following the input."""
+    if name != "IEEEST":
+        return ()
+    return (("F1_x", "F1_y") if p.A2 == 0 else ()) + (("F2_x1", "F2_x2") if p.A4 == 0 else ())
+
+
+def output(ss, name, component, p, x, u, model, i) -> tuple:
+    """(ours, ANDES') of the device's main output: a machine's P (system base), an exciter's Efd,
+    a governor's Pm (machine base), the stabiliser's Vss."""
+    values = component.output_values(x, u, p)
+    if name in MACHINES:
+        return float(values[2]), _v(model.Pe, i)
+    if name in GOVERNORS:
+        return float(values[0]), _v(model.pout, i) * ss.config.mva / float(model.Sn.v[i])
+    if name == "IEEEST":
+        return float(values[0]), _v(model.vsout, i)
+    return float(values[0]), _v(model.vout, i)
+
+
+def _at_limit(model, i) -> bool:
+    """Whether a non-windup limiter of ANDES' device i holds its state at a limit."""
+    for block in model.discrete.values():
+        if type(block).__name__ == "AntiWindup" and (block.zu[i] or block.zl[i]):
+            return True
+    return False

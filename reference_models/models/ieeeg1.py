@@ -10,13 +10,15 @@ Equations (ANDES 2.0 model reference, TurbineGov: IEEEG1):
 
     wd = wref0 - omega
     lead-lag K (1 + s T2) / (1 + s T1) of wd (T1 = 0: the gain K) -> LL_y
-    vs = (LL_y + Pref - IAW_y) / T3,  vsl = vs clipped to [UC, UO] (windup limiter)
+    vs = (LL_y + Pref - IAW_y) / T3,  vsl = vs clipped to [UC, UO] Sb / Sn (windup limiter)
     non-windup integrator:  dIAW_y/dt = vsl,  PMIN <= IAW_y <= PMAX
     lags 1 / (1 + s T4..T7) in series: L4 of IAW_y, L5 of L4_y, L6 of L5_y, L7 of L6_y (T = 0:
         the stage passes its input)
     Pm = K1n L4 + K3n L5 + K5n L6 + K7n L7,  Kin = Ki / (K1 + ... + K8)
 
-Bases: as TGOV1 (the machine's base).
+Bases: as TGOV1 (the machine's base), except the valve rate limits UO, UC: ANDES 2.0 applies them
+unconverted to its system-base valve position, so on the machine base they are UO Sb / Sn,
+UC Sb / Sn (parameters Sn, Sb [MVA]; Sn = Sb: the limits as PSS/E reads them).
 """
 from __future__ import annotations
 
@@ -32,13 +34,15 @@ from .common import check_limits, check_ranges, finite_inputs
 PARAMETER_RANGES = {"K": (0.0, 1000.0, "pu"), "T1": (0.0, 100.0, "s"), "T2": (0.0, 100.0, "s"),
                     "T3": (0.001, 100.0, "s"), "T4": (0.0, 100.0, "s"), "T5": (0.0, 100.0, "s"),
                     "T6": (0.0, 100.0, "s"), "T7": (0.0, 100.0, "s"), "wref0": (0.5, 1.5, "pu"),
+                    "Sn": (1e-3, 1e5, "MVA"), "Sb": (1e-3, 1e5, "MVA"),
                     **{f"K{i}": (0.0, 1.0, "pu") for i in range(1, 9)}}
 
 
 @dataclass(frozen=True)
 class IEEEG1Params(Parameters):
     """ANDES/PSS/E IEEEG1 data: gain K [pu], time constants [s], valve rate limits UO, UC [pu/s],
-    valve limits PMAX, PMIN [pu], stage fractions K1..K8 [pu], speed reference wref0 [pu]."""
+    valve limits PMAX, PMIN [pu], stage fractions K1..K8 [pu], speed reference wref0 [pu], the
+    turbine's base Sn and the system base Sb [MVA] (for ANDES' rate limits)."""
 
     K: float = 20.0
     T1: float = 1.0
@@ -61,6 +65,8 @@ class IEEEG1Params(Parameters):
     K7: float = 0.0
     K8: float = 0.0
     wref0: float = 1.0
+    Sn: float = 100.0
+    Sb: float = 100.0
 
     def check(self) -> None:
         check_ranges(self, PARAMETER_RANGES)
@@ -91,7 +97,7 @@ def derivatives(x, u, p: IEEEG1Params, m):
     LL_x, IAW_y = x[0], x[1]
     omega, Pref = u
     d_LL, LL_y = lead_lag(m, p.wref0 - omega, LL_x, p.K, p.T2, p.T1)
-    vsl = clip(m, (LL_y + Pref - IAW_y) / p.T3, p.UC, p.UO)
+    vsl = clip(m, (LL_y + Pref - IAW_y) / p.T3, p.UC * p.Sb / p.Sn, p.UO * p.Sb / p.Sn)
     d_IAW, _ = integrator_non_windup(m, vsl, IAW_y, 1.0, 1.0, p.PMIN, p.PMAX)
     rates, _ = _stages(x, p, m)
     return (d_LL, d_IAW, *rates)
