@@ -140,3 +140,43 @@ def test_derivatives_and_outputs_match_andes_during_and_after_a_fault(case, faul
         assert r["rate"] < 1e-4, (name, r)
         assert r["held_rate"] == 0.0, (name, r)
         assert r["output"] < 1e-6, (name, r)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_declared_affine_states_are_affine_in_themselves_with_a_constant_non_negative_decay(name):
+    component, p, u, x = _rest(name)
+    rng = np.random.default_rng(3)
+    for i in component.affine_states:
+        decays = []
+        for _ in range(4):
+            point = x + 0.2 * np.array(component.state_scales) * rng.standard_normal(component.n_states)
+            values = []
+            for value in (-1.0, 0.0, 1.0):
+                probe = point.copy()
+                probe[i] = value
+                values.append(component.rhs(probe, u, p)[i])
+            assert values[0] - 2 * values[1] + values[2] == pytest.approx(0.0, abs=1e-9)
+            decays.append(values[1] - values[2])
+        assert min(decays) >= 0.0
+        np.testing.assert_allclose(decays, decays[0], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_every_standard_model_traces_into_c_equations_and_jacobians(name):
+    from fmu_export.c_derivatives import jacobians_c_source
+    from fmu_export.c_equations import equations_c_source
+
+    component = STANDARD_MODELS[name]
+    p = component.params_type()
+    assert "static" in equations_c_source(component, p)
+    assert "static" in jacobians_c_source(component, p)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_an_out_of_range_parameter_is_refused_naming_it(name):
+    from reference_models.component import ParameterError
+
+    component = STANDARD_MODELS[name]
+    first = next(iter(component.params_type.__dataclass_fields__))
+    with pytest.raises(ParameterError, match=f"parameter {first} "):
+        component.params({first: 1e9})

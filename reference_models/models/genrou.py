@@ -214,6 +214,8 @@ GENROU = Component(
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.5, 0.01, 0.1, 0.1, 0.1, 0.1),
+    # M d omega/dt = Pm - Pe(delta, fluxes, u) - D (omega - 1): affine in omega alone
+    affine_states=(1,),
     ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im")),
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
                 outputs=(Link("rotor_speed", "omega"), Link("electrical_power", "Pe"),
