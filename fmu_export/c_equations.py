@@ -7,17 +7,36 @@ lost). Each traced value also knows which inputs it depends on, which gives the 
 its direct input dependencies. A comparison of traced values is a `Condition` (a C comparison), which
 `CMath.where` turns into a conditional expression (reference_models.piecewise.where); it has no
 Python truth value, so an equation that branches with `if` on a traced value fails loudly.
+
+The conditions of the right-hand side are its switching functions (`switching_c_source`): for the
+comparison `a op b`, g = a - b, and the branch each `where` takes is its mode (the comparison's
+truth). The native reference FMU integrates with the modes locked (the right-hand side smooth within
+a solver step) and locates the instant a mode changes (fmu_export/c/dopri5.c, docs/fmu.md).
 """
 from __future__ import annotations
 
+import re
+
 from reference_models.component import Component
+
+_NAME = re.compile(r"\bt\d+\b")
 
 
 class _Recorder:
     """Collects `const double tN = ...;` statements."""
 
-    def __init__(self):
+    def __init__(self, locked: bool = False):
         self.lines: list[str] = []
+        self.conditions: list["Condition"] = []  # the distinct conditions `where` selected on, in order
+        self.locked = locked  # `where` selects on mode[k] (the locked branch) instead of the comparison
+
+    def mode(self, condition: "Condition") -> int:
+        """The index k of a condition among the distinct ones recorded (by its C code)."""
+        codes = [c.code for c in self.conditions]
+        if condition.code not in codes:
+            self.conditions.append(condition)
+            return len(self.conditions) - 1
+        return codes.index(condition.code)
 
     def emit(self, expression: str, inputs: frozenset) -> "Traced":
         name = f"t{len(self.lines)}"
@@ -53,7 +72,8 @@ class Traced:
     def _compare(self, other, op):
         traced = isinstance(other, Traced)
         rhs = other.code if traced else _literal(other)
-        return Condition(f"{self.code} {op} {rhs}", self.recorder, self.inputs | (other.inputs if traced else frozenset()))
+        return Condition(f"{self.code} {op} {rhs}", self.recorder, self.inputs | (other.inputs if traced else frozenset()),
+                         f"{self.code} - {rhs}")
 
     __lt__ = lambda self, o: self._compare(o, "<")  # noqa: E731
     __le__ = lambda self, o: self._compare(o, "<=")  # noqa: E731
@@ -62,10 +82,11 @@ class Traced:
 
 
 class Condition:
-    """A C comparison of traced values (`code`), for `CMath.where`; `inputs` as Traced's."""
+    """A C comparison of traced values `a op b` (`code`), for `CMath.where`; `inputs` as Traced's;
+    `switching`: the C expression a - b (its switching function)."""
 
-    def __init__(self, code: str, recorder: _Recorder, inputs: frozenset):
-        self.code, self.recorder, self.inputs = code, recorder, inputs
+    def __init__(self, code: str, recorder: _Recorder, inputs: frozenset, switching: str):
+        self.code, self.recorder, self.inputs, self.switching = code, recorder, inputs, switching
 
     def __bool__(self):
         raise TypeError("a traced comparison has no Python truth value: select with "
@@ -96,12 +117,15 @@ class CMath:
             return a if condition else b
         code = [v.code if isinstance(v, Traced) else _literal(v) for v in (a, b)]
         inputs = condition.inputs.union(*(v.inputs for v in (a, b) if isinstance(v, Traced)))
-        return condition.recorder.emit(f"({condition.code}) ? {code[0]} : {code[1]}", inputs)
+        k = condition.recorder.mode(condition)
+        select = f"mode[{k}]" if condition.recorder.locked else f"({condition.code})"
+        return condition.recorder.emit(f"{select} ? {code[0]} : {code[1]}", inputs)
 
 
-def _trace(fn, component: Component, params):
-    """(statements, results) of fn(x, u, params, CMath) on the C arrays x[], u[]."""
-    recorder = _Recorder()
+def _trace(fn, component: Component, params, locked: bool = False, recorder: _Recorder | None = None):
+    """(statements, results) of fn(x, u, params, CMath) on the C arrays x[], u[] (locked: every
+    `where` selects on mode[k])."""
+    recorder = recorder or _Recorder(locked)
     x = [Traced(f"x[{i}]", recorder) for i in range(component.n_states)]
     u = [Traced(f"u[{i}]", recorder, frozenset({i})) for i in range(component.n_inputs)]
     return recorder.lines, fn(x, u, params, CMath)
@@ -143,3 +167,51 @@ def equations_c_source(component: Component, params, linkage: str = "static") ->
     outs = c_function("model_outputs", component.output_equations, component, params,
                       list(component.output_names), f"{component.name} derived outputs", linkage)
     return header + deriv + "\n" + outs
+
+
+def switching_conditions(component: Component, params) -> list:
+    """The distinct conditions (`Condition`) the right-hand side selects on, in the order of their
+    modes: its switching functions."""
+    recorder = _Recorder()
+    _trace(component.derivatives, component, params, recorder=recorder)
+    return recorder.conditions
+
+
+def _live(lines: list[str], uses: list[str]) -> list[str]:
+    """The statements `uses` need, in order."""
+    needed = set(_NAME.findall(" ".join(uses)))
+    kept = []
+    for line in reversed(lines):
+        name, _, expression = line.partition(" = ")
+        if name.split()[-1] in needed:
+            kept.append(line)
+            needed.update(_NAME.findall(expression))
+    return kept[::-1]
+
+
+def switching_c_source(component: Component, params, linkage: str = "static") -> tuple:
+    """(n_g, C source) of the right-hand side's switching functions: n_g, the number of distinct
+    conditions its `where`s select on; with n_g > 0 the source defines
+        model_switching(x, u, g, mode)        g[k] = a - b and mode[k] = (a op b) of condition k
+        model_derivatives_locked(x, u, mode, dx)   dx/dt with each `where` taking the branch mode[k]
+    (model_derivatives_locked with mode from model_switching at the same x, u is model_derivatives);
+    with n_g = 0, an empty source."""
+    recorder = _Recorder()
+    lines, _ = _trace(component.derivatives, component, params, recorder=recorder)
+    conditions = recorder.conditions
+    n, n_x, n_u = len(conditions), component.n_states, component.n_inputs
+    if n == 0:
+        return 0, ""
+    stores = [f"    g[{k}] = {c.switching};\n    mode[{k}] = {c.code};" for k, c in enumerate(conditions)]
+    listing = _comment("; ".join(f"{k}: {c.code}" for k, c in enumerate(conditions)))
+    switching = (f"/* {_comment(component.name)} switching functions of the right-hand side: g[k] = a - b of its "
+                 f"condition k (a op b), mode[k] = the condition's truth ({listing}) */\n"
+                 f"{linkage} void model_switching(const double x[{n_x}], const double u[{n_u}], double g[{n}], "
+                 f"int mode[{n}])\n{{\n    (void)x;\n    (void)u;\n"
+                 + "\n".join(_live(lines, stores) + stores) + "\n}\n")
+    lines, results = _trace(component.derivatives, component, params, locked=True)
+    body = lines + [f"    dx[{i}] = {r.code if isinstance(r, Traced) else _literal(r)};" for i, r in enumerate(results)]
+    locked = (f"/* {_comment(component.name)} right-hand side dx/dt with condition k's branch locked to mode[k] */\n"
+              f"{linkage} void model_derivatives_locked(const double x[{n_x}], const double u[{n_u}], "
+              f"const int mode[{n}], double dx[{n_x}])\n{{\n    (void)mode;\n" + "\n".join(body) + "\n}\n")
+    return n, switching + "\n" + locked

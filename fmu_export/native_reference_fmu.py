@@ -39,7 +39,7 @@ from reference_models.sm4 import SM4
 
 from .binaries import PLUMBING, check_fmi_version, compile_binaries, targets
 from .surrogate_fmu import BuildError, _c_double, check_model_name, component_config, derivatives_source
-from .c_equations import equations_c_source
+from .c_equations import equations_c_source, switching_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
@@ -90,13 +90,15 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         raise NativeReferenceError(str(exc)) from None
     x_start = _start_state(component, params, operating_point)
     variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point)
+    n_switching, switching = switching_c_source(component, params, linkage="OPFMU_INTERNAL")
     generated = {
         "variables.h": vr_header(variables, component),
-        "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL"),
+        "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
+                       + ("\n" + switching if switching else ""),
         "derivatives.c": derivatives_source(component, params),
     }
     guid = _guid(model_name, component, params, generated, operating_point, version)
-    generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point)
+    generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
                             interpolates_inputs=True, fmi_version=version)
@@ -118,15 +120,18 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
             "binaries": written["binaries"], "checks": checks}
 
 
-def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None) -> str:
+def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None,
+                  n_switching: int = 0) -> str:
     """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
-    escaped names."""
+    escaped names; n_switching: the number of switching functions of the right-hand side
+    (c_equations.switching_c_source)."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
                                        x_start, operating_point)
     lines = opening + [
         f"#define OPFMU_RTOL {_c_double(SOLVER_STARTS['rtol'])} /* default of the parameter rtol */",
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
         f"#define OPFMU_RTOL_MIN {_c_double(RTOL_MIN)} /* the smallest rtol accepted */",
+        f"#define OPFMU_N_SWITCHING {int(n_switching)} /* switching functions of the right-hand side */",
         *tables,
         "#endif", "",
     ]

@@ -3,7 +3,15 @@
    The method: J. R. Dormand and P. J. Prince, A family of embedded Runge-Kutta formulae, J. Comp.
    Appl. Math. 6 (1980); the controller and the initial step guess: E. Hairer, S. P. Norsett and
    G. Wanner, Solving Ordinary Differential Equations I, sections II.4 (step size selection,
-   starting step size) and IV.2 (PI control, beta = 0.04 for this method). */
+   starting step size), II.5 (dense output: the continuous extension of order 4, coefficients D1-D7)
+   and IV.2 (PI control, beta = 0.04 for this method).
+
+   Event location (dopri5_events): the caller's right-hand side takes the branches it is locked to,
+   so it is smooth within each step. After each accepted step the caller says whether the locked
+   branches still hold at its end (`crossed`); where they do not, the first instant they stop holding
+   is bracketed by bisection on the step's dense output to the time resolution DOPRI5_EVENT_RESOLUTION,
+   the step ends at the bracket's right end (on the dense output, where the new branches hold), the
+   right-hand side is locked there (`lock`), and the integration restarts from that point. */
 #include <float.h>
 #include <math.h>
 #include <stdlib.h>
@@ -22,6 +30,9 @@ static const double A61 = 9017.0 / 3168.0, A62 = -355.0 / 33.0, A63 = 46732.0 / 
                     A65 = -5103.0 / 18656.0;
 static const double B1 = 35.0 / 384.0, B3 = 500.0 / 1113.0, B4 = 125.0 / 192.0, B5 = -2187.0 / 6784.0,
                     B6 = 11.0 / 84.0;
+static const double D1 = -12715105075.0 / 11282082432.0, D3 = 87487479700.0 / 32700410799.0,
+                    D4 = -10690763975.0 / 1880347072.0, D5 = 701980252875.0 / 199316789632.0,
+                    D6 = -1453857185.0 / 822651844.0, D7 = 69997945.0 / 29380423.0;
 static const double E1 = 71.0 / 57600.0, E3 = -71.0 / 16695.0, E4 = 71.0 / 1920.0, E5 = -17253.0 / 339200.0,
                     E6 = 22.0 / 525.0, E7 = -1.0 / 40.0;
 
@@ -68,9 +79,24 @@ static double initial_step(Dopri5Rhs f, void *ctx, int n, double t0, double span
     return isfinite(h) && h > 0.0 ? fmin(h, span) : h0;
 }
 
+/* the dense output of the step of size h from x (stages k1..k7, new state x_new) at the fraction theta
+   of the step: Hairer's continuous extension of order 4 */
+static void dense(int n, double theta, double h, const double *x, const double *x_new, const double *k1,
+                  const double *k3, const double *k4, const double *k5, const double *k6, const double *k7,
+                  double *out)
+{
+    const double s = 1.0 - theta;
+    for (int i = 0; i < n; ++i) {
+        const double r2 = x_new[i] - x[i], r3 = h * k1[i] - r2, r4 = r2 - h * k7[i] - r3;
+        const double r5 = h * (D1 * k1[i] + D3 * k3[i] + D4 * k4[i] + D5 * k5[i] + D6 * k6[i] + D7 * k7[i]);
+        out[i] = x[i] + theta * (r2 + s * (r3 + theta * (r4 + s * r5)));
+    }
+}
+
 /* the integration proper, in the workspace `work` [10 n] */
 static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x_out, double rtol, double atol,
-                     double *h_guess, DopriStats *st, Dopri5Observer observer, void *observer_ctx, double *work)
+                     double *h_guess, DopriStats *st, const Dopri5Events *events, Dopri5Observer observer,
+                     void *observer_ctx, double *work)
 {
     double *k1 = work, *k2 = k1 + n, *k3 = k2 + n, *k4 = k3 + n, *k5 = k4 + n, *k6 = k5 + n, *k7 = k6 + n;
     double *y = k7 + n, *x_new = y + n, *x = x_new + n;
@@ -78,6 +104,7 @@ static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double
     int rejected_last = 0, not_finite = 0;
 
     memcpy(x, x_out, (size_t)n * sizeof *x);
+    if (events) events->lock(events->ctx, t, x);
     f(ctx, t, x, k1);
     st->evaluations++;
     if (!all_finite(n, x) || !all_finite(n, k1)) return DOPRI5_NOT_FINITE;
@@ -136,6 +163,46 @@ static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double
             if (rejected_last) h_new = fmin(h_new, h);
             log_err_old = log(fmax(err, ERR_FLOOR));
             st->accepted++;
+            if (events && events->crossed(events->ctx, t_new, x_new)) {
+                /* the locked branches stop holding within the step: bracket the first instant by
+                   bisection on the dense output, end the step at the bracket's right end */
+                double lo = t, hi = t_new;
+                const double resolution = DOPRI5_EVENT_RESOLUTION * fmax(1.0, fabs(t_new));
+                for (int it = 0; it < 200 && hi - lo > resolution; ++it) {
+                    const double mid = lo + 0.5 * (hi - lo);
+                    if (mid <= lo || mid >= hi) break;
+                    dense(n, (mid - t) / h, h, x, x_new, k1, k3, k4, k5, k6, k7, y);
+                    if (events->crossed(events->ctx, mid, y))
+                        hi = mid;
+                    else
+                        lo = mid;
+                }
+                if (hi < t_new) {
+                    dense(n, (hi - t) / h, h, x, x_new, k1, k3, k4, k5, k6, k7, y);
+                    memcpy(x_new, y, (size_t)n * sizeof *x);
+                }
+                st->events++;
+                if (observer) {
+                    f(ctx, hi, x_new, k2); /* the rate at the step's end on the branches it was taken on */
+                    st->evaluations++;
+                    observer(observer_ctx, t, x, k1, hi, x_new, k2);
+                }
+                events->lock(events->ctx, hi, x_new);
+                f(ctx, hi, x_new, k1); /* the new branches' rate: the next step's first stage */
+                st->evaluations++;
+                memcpy(x, x_new, (size_t)n * sizeof *x);
+                if (!all_finite(n, k1)) return DOPRI5_NOT_FINITE;
+                t = hi;
+                rejected_last = 0;
+                if (hi >= t1) {
+                    double next = h < h_try ? fmax(h_new, h_try) : h_new;
+                    if (h_guess) *h_guess = fmin(next, 10.0 * (t1 - t0));
+                    memcpy(x_out, x, (size_t)n * sizeof *x);
+                    return DOPRI5_OK;
+                }
+                h = h_new;
+                continue;
+            }
             if (observer) observer(observer_ctx, t, x, k1, t_new, x_new, k7);
             double *swap = k1;
             k1 = k7; /* first same as last */
@@ -163,17 +230,24 @@ static int integrate(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double
 int dopri5(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
            double *h_guess, DopriStats *stats)
 {
-    return dopri5_observed(f, ctx, n, t0, t1, x, rtol, atol, h_guess, stats, NULL, NULL);
+    return dopri5_events(f, ctx, n, t0, t1, x, rtol, atol, h_guess, stats, NULL, NULL, NULL);
 }
 
 int dopri5_observed(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
                     double *h_guess, DopriStats *stats, Dopri5Observer observer, void *observer_ctx)
 {
+    return dopri5_events(f, ctx, n, t0, t1, x, rtol, atol, h_guess, stats, NULL, observer, observer_ctx);
+}
+
+int dopri5_events(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol, double atol,
+                  double *h_guess, DopriStats *stats, const Dopri5Events *events, Dopri5Observer observer,
+                  void *observer_ctx)
+{
     DopriStats local;
     DopriStats *st = stats ? stats : &local;
     memset(st, 0, sizeof *st);
     if (!f || !x || n < 1 || !isfinite(t0) || !isfinite(t1) || t1 < t0 || !(rtol >= 10.0 * DBL_EPSILON) ||
-        !isfinite(rtol) || !(atol > 0.0) || !isfinite(atol))
+        !isfinite(rtol) || !(atol > 0.0) || !isfinite(atol) || (events && (!events->crossed || !events->lock)))
         return DOPRI5_BAD_ARGUMENT;
     if (t1 == t0) return DOPRI5_OK;
     double stack[10 * DOPRI5_STACK_N], *work = stack;
@@ -181,7 +255,7 @@ int dopri5_observed(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double 
         work = (double *)malloc(10 * (size_t)n * sizeof *work);
         if (!work) return DOPRI5_NO_MEMORY;
     }
-    const int rc = integrate(f, ctx, n, t0, t1, x, rtol, atol, h_guess, st, observer, observer_ctx, work);
+    const int rc = integrate(f, ctx, n, t0, t1, x, rtol, atol, h_guess, st, events, observer, observer_ctx, work);
     if (work != stack) free(work);
     return rc;
 }

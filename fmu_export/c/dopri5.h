@@ -1,7 +1,10 @@
 /* A generic explicit Runge-Kutta integrator: Dormand-Prince 5(4) with local extrapolation (the
    5th-order solution is propagated, the embedded 4th-order one estimates the error), first same as
    last (6 right-hand sides per step), a PI step-size controller and Hairer's initial step guess.
-   No dense output. libc and libm only; no global state (reentrant).
+   Optional event location (dopri5_events): a right-hand side with branches (limits, switches) locked
+   within each step, the first instant within an accepted step where they stop holding located on
+   the step's dense output, the step ended there and the integration restarted with the branches
+   that hold. libc and libm only; no global state (reentrant).
 
        double x[2] = {1.0, 0.0}, h = 0.0;   (h: the step size guess, 0: none yet)
        DopriStats stats;
@@ -31,6 +34,7 @@ typedef struct {
     long accepted;    /* steps accepted */
     long rejected;    /* steps rejected (error above the tolerance, or a non-finite stage) */
     long evaluations; /* right-hand side evaluations */
+    long events;      /* steps ended at a located change of the locked branches (dopri5_events) */
     double h_last;    /* the last step size tried [time units] */
 } DopriStats;
 
@@ -67,6 +71,31 @@ typedef void (*Dopri5Observer)(void *ctx, double t0, const double *x0, const dou
 DOPRI5_API int dopri5_observed(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol,
                                double atol, double *h_guess, DopriStats *stats, Dopri5Observer observer,
                                void *observer_ctx);
+
+/* Event location. The right-hand side f takes branches locked by `lock` (e.g. the side of each
+   limit, the truth of each condition of its equations), so f is smooth between two locks.
+   crossed(ctx, t, x): nonzero where, at (t, x), the branches that hold differ from the locked ones in a
+   way that changes f (a change that leaves f as it is may be ignored). lock(ctx, t, x): locks f to
+   the branches that hold at (t, x). dopri5_events locks at t0, and after each accepted step whose end
+   is `crossed` brackets the first such instant by bisection on the step's dense output (Hairer's
+   continuous extension of order 4) to DOPRI5_EVENT_RESOLUTION * max(1, |t|), ends the step at the
+   bracket's right end (where `crossed` holds), locks there and restarts from that point. A change
+   that starts and ends within one step goes unseen. */
+typedef struct {
+    int (*crossed)(void *ctx, double t, const double *x);
+    void (*lock)(void *ctx, double t, const double *x);
+    void *ctx;
+} Dopri5Events;
+
+#ifndef DOPRI5_EVENT_RESOLUTION
+#define DOPRI5_EVENT_RESOLUTION 1e-12 /* the width of the bracket a crossing is located to, relative to max(1, |t|) */
+#endif
+
+/* dopri5 with event location (events NULL: none) and an observer of every accepted step (which ends
+   at a located event where there is one) */
+DOPRI5_API int dopri5_events(Dopri5Rhs f, void *ctx, int n, double t0, double t1, double *x, double rtol,
+                             double atol, double *h_guess, DopriStats *stats, const Dopri5Events *events,
+                             Dopri5Observer observer, void *observer_ctx);
 
 /* one line saying what an error code of dopri5 means */
 DOPRI5_API const char *dopri5_message(int code);

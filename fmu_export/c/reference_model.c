@@ -4,7 +4,15 @@
    set their first derivatives (fmi2SetRealInputDerivatives). The solver's step size carries over
    from step to step and is part of the FMU state. A step the solver cannot complete to the
    tolerance (step size underflow, too many steps, a non-finite state) is refused with the reason and
-   leaves the state where it was. */
+   leaves the state where it was.
+
+   A component whose right-hand side has conditions (limits, switches: reference_models.piecewise.where)
+   has OPFMU_N_SWITCHING > 0 switching functions (the generated model_switching): the solver integrates
+   with each condition's branch locked (model_derivatives_locked), so the right-hand side is smooth
+   within each solver step, and Dormand-Prince locates the instant a condition's truth changes in a way
+   that changes the right-hand side, ends its step there and restarts with the branches that then
+   hold (dopri5_events). The branches are locked afresh from the state and inputs at the start of
+   each communication step, so they are no part of the FMU state. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -15,6 +23,15 @@
 
 #define N_X OPFMU_N_STATES
 #define N_U OPFMU_N_INPUTS
+#define N_G OPFMU_N_SWITCHING
+
+#if N_G > 0
+/* g[k] = a - b and mode[k] = (a op b) of the right-hand side's condition k (equations.c) */
+OPFMU_INTERNAL void model_switching(const double x[N_X], const double u[N_U], double g[N_G], int mode[N_G]);
+/* dx/dt with condition k's branch locked to mode[k] (equations.c) */
+OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u[N_U], const int mode[N_G],
+                                             double dx[N_X]);
+#endif
 
 void model_defaults(ModelState *m)
 {
@@ -33,19 +50,55 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
     return MODEL_OK;
 }
 
-/* the inputs over a step: u(t) = u0 + du (t - t0) */
+/* the inputs over a step: u(t) = u0 + du (t - t0); the branches the right-hand side is locked to */
 typedef struct {
     const double *u0, *du;
     double t0;
+#if N_G > 0
+    int mode[N_G];
+#endif
 } StepInputs;
+
+static void inputs_at(const StepInputs *in, double t, double u[N_U])
+{
+    for (int c = 0; c < N_U; ++c) u[c] = in->u0[c] + in->du[c] * (t - in->t0);
+}
 
 static void rhs(void *ctx, double t, const double *x, double *dx)
 {
     const StepInputs *in = (const StepInputs *)ctx;
     double u[N_U];
-    for (int c = 0; c < N_U; ++c) u[c] = in->u0[c] + in->du[c] * (t - in->t0);
+    inputs_at(in, t, u);
+#if N_G > 0
+    model_derivatives_locked(x, u, in->mode, dx);
+#else
     model_derivatives(x, u, dx);
+#endif
 }
+
+#if N_G > 0
+/* the branches that hold at (t, x) differ from the locked ones and give another dx/dt there */
+static int crossed(void *ctx, double t, const double *x)
+{
+    const StepInputs *in = (const StepInputs *)ctx;
+    double u[N_U], g[N_G], locked[N_X], now[N_X];
+    int mode[N_G];
+    inputs_at(in, t, u);
+    model_switching(x, u, g, mode);
+    if (memcmp(mode, in->mode, sizeof mode) == 0) return 0;
+    model_derivatives_locked(x, u, in->mode, locked);
+    model_derivatives_locked(x, u, mode, now);
+    return memcmp(locked, now, sizeof now) != 0;
+}
+
+static void lock(void *ctx, double t, const double *x)
+{
+    StepInputs *in = (StepInputs *)ctx;
+    double u[N_U], g[N_G];
+    inputs_at(in, t, u);
+    model_switching(x, u, g, in->mode);
+}
+#endif
 
 ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
@@ -56,7 +109,13 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
     StepInputs inputs = {m->u, m->du, m->time};
     DopriStats stats;
     memcpy(x, m->x, sizeof x);
+#if N_G > 0
+    const Dopri5Events events = {crossed, lock, &inputs};
+    const int rc = dopri5_events(rhs, &inputs, N_X, m->time, stop, x, m->rtol, m->atol, &h_guess, &stats, &events,
+                                 NULL, NULL);
+#else
     const int rc = dopri5(rhs, &inputs, N_X, m->time, stop, x, m->rtol, m->atol, &h_guess, &stats);
+#endif
     if (rc != DOPRI5_OK) {
         snprintf(message, size, "t = %.9g s: Dormand-Prince 5(4) cannot complete the step to %.9g s within rtol = %g, "
                  "atol = %g: %s (after %ld steps and %ld rejected, last step size %g s)", m->time, stop, m->rtol,
