@@ -2,25 +2,37 @@
 generator buses (each a component with its parameters, grouped into units) and the case's events.
 Everything that simulates a case (the co-simulation master, the monolithic DAE) is built from it.
 
-Units. The devices at one generator bus form a unit: one machine (the device whose component has
-a bus port, reference_models.ports) and its control components (exciters, governors, stabilisers).
+Units. The devices of one load-flow generator form a unit (a bus may hold several generators):
+one machine (the device whose component has a bus port, reference_models.ports) and its control
+components (exciters, governors, stabilisers).
 Within a unit an input link takes the output link of the same signal; `terminal_voltage` comes
 from the bus (the magnitude of the bus voltage plus the drop over the machine's external
 impedance, `external_impedance`); an input link nothing gives is a set point, held at its start
 value. `Case.starts` holds every device's start values, from the load flow.
 
 Files. A network file (JSON): base_mva, f_hz, buses [{number, kv}], branches [{from, to, r, x, b,
-kind}], loads [{bus, P, Q}], shunts [{bus, G, B}], generators [{bus, kind slack|pv, V, P}] and the
-solved load flow (V, theta per bus, P, Q per generator; per unit on base_mva, rad). A dynamic-data
-file (JSON): "generators": [{"bus": n, "<device>": {"component": name, "file": machine file |
-"params": {...}}, ..., "fmu": {...}}] - every key besides bus and fmu is a device, in file order;
-`fmu` is kept as it is for the co-simulation layer (which FMUs run the unit).
+kind, tap, phi}] (tap ratio and phase shift [rad] at the from side, default 1 and 0), loads [{bus,
+P, Q}], shunts [{bus, G, B}], generators [{bus, kind slack|pv, V, P, name}] and the solved load flow
+(V, theta per bus, P, Q per generator; per unit on base_mva, rad), and optionally the case's own
+events [{kind, time, ...}] (`Event`). A dynamic-data file (JSON): "generators": [{"bus": n,
+"generator": name, "<device>": {"component": name, "file": machine file | "params": {...}}, ...,
+"fmu": {...}}] - every key besides bus, generator and fmu is a device, in file order; `generator`
+(optional) names the load-flow generator where a bus has several; `fmu` is kept as it is for the
+co-simulation layer (which FMUs run the unit).
+
+Standard models (reference_models.models: GENROU, GENCLS and their exciters, governors and
+stabilisers) start from the load flow by their modules' `operating_point` and `initialise`: the
+stabiliser at rest first (its signal held by the exciter), then the exciter holding the machine's
+field voltage and the governor holding its mechanical power, each with the set point that does.
+
+Shipped cases (`shipped_case(name)`, `SHIPPED_CASES`): data/NAME_network.json + data/NAME.json.
 """
 from __future__ import annotations
 
 import json
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +52,13 @@ class Branch:
     x: float
     b: float
     kind: str  # "line" or "transformer"
+    tap: float = 1.0  # off-nominal turns ratio at the from side
+    phi: float = 0.0  # phase shift [rad] of the from side
+    parallel: int = 1  # 1-based position among the branches between the same two buses (file order)
 
     @property
     def name(self) -> str:
-        return f"{self.from_bus}-{self.to_bus}"
+        return f"{self.from_bus}-{self.to_bus}" + (f":{self.parallel}" if self.parallel > 1 else "")
 
     def connects(self, bus: int) -> bool:
         return bus in (self.from_bus, self.to_bus)
@@ -57,6 +72,24 @@ class GeneratorData:
     kind: str  # "slack" or "pv"
     V: float
     P: float | None = None
+    name: str | None = None  # the generator's name in its source (where a bus has several)
+
+
+@dataclass(frozen=True)
+class Event:
+    """One of a case's own events at `time` [s]: kind "fault" (a shunt of `impedance` [pu] at
+    `bus` from `time` to `clear`), "branch" (branch `branch`, named as Network.branch takes it,
+    switched to `status`: 0 open, 1 closed) or "generator" (the unit of generator `generator`
+    switched to `status`: 0 tripped)."""
+
+    kind: str
+    time: float
+    bus: int | None = None
+    clear: float | None = None
+    impedance: complex | None = None
+    branch: str | None = None
+    generator: str | None = None
+    status: int | None = None
 
 
 @dataclass(frozen=True)
@@ -85,16 +118,23 @@ class Network:
         return self.buses.index(bus)
 
     def branch(self, name) -> Branch:
-        """The branch named "a-b" (or given as a pair (a, b)), in either order."""
+        """The branch named "a-b" (or given as a pair (a, b)), in either order; "a-b:K" the K-th
+        (1-based, file order) of the parallel branches between a and b."""
         if isinstance(name, Branch):
             return name
+        k = 1
         try:
+            if isinstance(name, str) and ":" in name:
+                name, k = name.split(":", 1)
+                k = int(k)
             a, b = (int(v) for v in (name.split("-") if isinstance(name, str) else name))
         except (ValueError, TypeError):
             raise ValueError(f"a branch is named FROM-TO, e.g. 5-7; got {str(name)[:40]!r}") from None
         for br in self.branches:
             if {a, b} == {br.from_bus, br.to_bus}:
-                return br
+                k -= 1
+                if k == 0:
+                    return br
         raise ValueError(f"{self.name} has no branch {a}-{b} (branches: {', '.join(br.name for br in self.branches)})")
 
     def connected_buses(self, out_of_service=()) -> set:
@@ -142,10 +182,17 @@ class Network:
                 continue
             i, k = self.bus_index(br.from_bus), self.bus_index(br.to_bus)
             y = 1.0 / complex(br.r, br.x)
-            Y[i, i] += y + 0.5j * br.b
-            Y[k, k] += y + 0.5j * br.b
-            Y[i, k] -= y
-            Y[k, i] -= y
+            if br.tap == 1.0 and br.phi == 0.0:
+                Y[i, i] += y + 0.5j * br.b
+                Y[k, k] += y + 0.5j * br.b
+                Y[i, k] -= y
+                Y[k, i] -= y
+            else:  # ideal transformer tap e^{j phi} : 1 at the from side, then the pi branch
+                m = br.tap * np.exp(1j * br.phi)
+                Y[i, i] += (y + 0.5j * br.b) / br.tap ** 2
+                Y[k, k] += y + 0.5j * br.b
+                Y[i, k] -= y / np.conj(m)
+                Y[k, i] -= y / m
         for bus, s in self.shunts.items():
             Y[self.bus_index(bus), self.bus_index(bus)] += s
         return Y
@@ -173,8 +220,12 @@ class LoadFlow:
         return np.conj(self.S_load) / self.V ** 2
 
     def generator(self, bus: int) -> dict:
-        """V, theta, P, Q of the generator at `bus`."""
-        k, i = self.generator_buses.index(bus), self.buses.index(bus)
+        """V, theta, P, Q of the (first) generator at `bus`."""
+        return self.generator_at(self.generator_buses.index(bus))
+
+    def generator_at(self, k: int) -> dict:
+        """V, theta, P, Q of generator k (generator order)."""
+        i = self.buses.index(self.generator_buses[k])
         return {"V": float(self.V[i]), "theta": float(self.theta[i]),
                 "P": float(self.P_gen[k]), "Q": float(self.Q_gen[k])}
 
@@ -200,12 +251,14 @@ class DeviceStart:
 
 @dataclass(frozen=True)
 class Unit:
-    """The devices at one generator bus: the machine (the one with a bus port) first, then its
-    control components; `fmu`: the dynamic data's fmu entry, as given (for the co-simulation)."""
+    """The devices of one generator at `bus`: the machine (the one with a bus port) first, then its
+    control components; `fmu`: the dynamic data's fmu entry, as given (for the co-simulation);
+    `generator`: the load-flow generator's name where the data give one."""
 
     bus: int
     devices: tuple
     fmu: object = None
+    generator: str | None = None
 
     @property
     def machine(self) -> Device:
@@ -259,7 +312,7 @@ class Case:
     def reduced(self, fault_bus: int | None = None, fault_impedance: complex = 1e-6, out_of_service=()) -> Reduced:
         """The topology with the loads (constant impedances at the load-flow voltages), a fault shunt
         of `fault_impedance` [pu] at `fault_bus` (None: none) and the named branches open, reduced
-        to the generator buses (Kron)."""
+        to the generator buses (Kron; each bus once, in unit order, where several units share one)."""
         net = self.network
         opened = tuple(net.openable(b) for b in out_of_service)
         Y = net.ybus(opened) + np.diag(self.flow.load_admittances())
@@ -273,7 +326,7 @@ class Case:
             parts.append(f"fault at bus {fault_bus}")
         if opened:
             parts.append("open " + ", ".join(br.name for br in opened))
-        g = [net.bus_index(u.bus) for u in self.units]
+        g = list(dict.fromkeys(net.bus_index(u.bus) for u in self.units))  # units at one bus share it
         o = [i for i in range(len(net.buses)) if i not in g]
         n = len(g)
         Y_oo_inv_Y_og = np.linalg.solve(Y[np.ix_(o, o)], Y[np.ix_(o, g)])
@@ -322,15 +375,22 @@ def load_network(path) -> tuple:
     try:
         buses = tuple(int(b["number"]) for b in _entries(path, data, "buses"))
         kv = {int(b["number"]): _number(path, "bus kv", b["kv"]) for b in _entries(path, data, "buses")}
-        branches = tuple(Branch(int(e["from"]), int(e["to"]), _number(path, "r", e["r"]), _number(path, "x", e["x"]),
-                                _number(path, "b", e.get("b", 0.0)), str(e.get("kind", "line")))
-                         for e in _entries(path, data, "branches"))
+        branches, seen = [], {}
+        for e in _entries(path, data, "branches"):
+            ends = frozenset((int(e["from"]), int(e["to"])))
+            seen[ends] = seen.get(ends, 0) + 1
+            branches.append(Branch(int(e["from"]), int(e["to"]), _number(path, "r", e["r"]), _number(path, "x", e["x"]),
+                                   _number(path, "b", e.get("b", 0.0)), str(e.get("kind", "line")),
+                                   _number(path, "tap", e.get("tap", 1.0)), _number(path, "phi", e.get("phi", 0.0)),
+                                   seen[ends]))
+        branches = tuple(branches)
         loads = {int(e["bus"]): complex(_number(path, "load P", e["P"]), _number(path, "load Q", e["Q"]))
                  for e in _entries(path, data, "loads")}
         shunts = {int(e["bus"]): complex(_number(path, "shunt G", e["G"]), _number(path, "shunt B", e["B"]))
                   for e in _entries(path, data, "shunts")}
         generators = tuple(GeneratorData(int(e["bus"]), str(e["kind"]), _number(path, "generator V", e["V"]),
-                                         None if e.get("P") is None else _number(path, "generator P", e["P"]))
+                                         None if e.get("P") is None else _number(path, "generator P", e["P"]),
+                                         None if e.get("name") is None else str(e["name"]))
                            for e in _entries(path, data, "generators"))
         network = Network(str(data.get("name", Path(path).stem)), _number(path, "base_mva", data["base_mva"]),
                           _number(path, "f_hz", data["f_hz"]), buses, branches, loads, shunts, generators, kv)
@@ -343,6 +403,8 @@ def load_network(path) -> tuple:
         raise CaseError(f"{path}: malformed network data ({type(exc).__name__}: {str(exc)[:80]})") from None
     if len(set(buses)) != len(buses) or not buses:
         raise CaseError(f"{path}: bus numbers must be unique")
+    if any(br.tap <= 0 for br in branches):
+        raise CaseError(f"{path}: a branch's tap must be > 0")
     for bus in [b for br in branches for b in (br.from_bus, br.to_bus)] + list(loads) + list(shunts) + \
             [g.bus for g in generators]:
         if bus not in buses:
@@ -358,26 +420,30 @@ def load_network(path) -> tuple:
     return network, flow
 
 
-def load_units(path, generator_buses) -> tuple:
-    """The units of a dynamic-data file (see the module docstring), in `generator_buses` order.
-    CaseError for an unknown component, a unit without exactly one machine first, a generator at a
-    bus that has none in the load flow, or two entries for one bus."""
+def load_units(path, generator_buses, generator_names=None) -> tuple:
+    """The units of a dynamic-data file (see the module docstring), in `generator_buses` order
+    (`generator_names`: the load-flow generators' names, None where they have none; a unit is
+    matched by bus and, where it gives one, generator name). CaseError for an unknown component, a
+    unit without exactly one machine first, a generator at a bus that has none in the load flow,
+    or two entries for one generator."""
     from ..components import component
 
     path = Path(path)
     data = _read_json(path)
-    by_bus = {}
+    names = list(generator_names) if generator_names is not None else [None] * len(generator_buses)
+    by_key = {}
     for g in _entries(path, data, "generators"):
         try:
             bus = int(g["bus"])
         except (KeyError, TypeError, ValueError):
             raise CaseError(f"{path}: every generator needs its bus number") from None
-        where = f"{path}: generator at bus {bus}"
-        if bus in by_bus:
+        generator = None if g.get("generator") is None else str(g["generator"])
+        where = f"{path}: generator at bus {bus}" + (f" ({generator})" if generator else "")
+        if (bus, generator) in by_key:
             raise CaseError(f"{where}: the bus has two generator entries")
         devices = []
         for name, entry in g.items():
-            if name in ("bus", "fmu"):
+            if name in ("bus", "fmu", "generator"):
                 continue
             if not isinstance(entry, dict):
                 raise CaseError(f"{where}: {name} must be an object with its component")
@@ -398,10 +464,37 @@ def load_units(path, generator_buses) -> tuple:
         machines = [d for d in devices if d.component.ports.bus is not None]
         if len(machines) != 1 or devices[0] is not machines[0]:
             raise CaseError(f"{where}: a unit needs exactly one device with a bus port (a machine), listed first")
-        by_bus[bus] = Unit(bus, tuple(devices), g.get("fmu"))
-    if sorted(by_bus) != sorted(generator_buses):
-        raise CaseError(f"{path}: needs one generator at each of the buses {tuple(generator_buses)}, got {sorted(by_bus)}")
-    return tuple(by_bus[bus] for bus in generator_buses)
+        by_key[(bus, generator)] = Unit(bus, tuple(devices), g.get("fmu"), generator)
+    keys = [(bus, name if (bus, name) in by_key else None) for bus, name in zip(generator_buses, names)]
+    if sorted(by_key, key=str) != sorted(keys, key=str):
+        raise CaseError(f"{path}: needs one generator at each of the buses {tuple(generator_buses)}, "
+                        f"got {sorted(bus for bus, _ in by_key)}")
+    return tuple(by_key[key] for key in keys)
+
+
+def load_events(path) -> tuple:
+    """The events of a network file (see `Event`; none where it has no "events"), by time."""
+    data = _read_json(path)
+    events = []
+    for e in _entries(path, data, "events"):
+        try:
+            kind, time = str(e["kind"]), _number(path, "event time", e["time"])
+            if kind == "fault":
+                event = Event(kind, time, bus=int(e["bus"]), clear=_number(path, "fault clear", e["clear"]),
+                              impedance=complex(_number(path, "fault r", e.get("r", 0.0)),
+                                                _number(path, "fault x", e["x"])))
+            elif kind == "branch":
+                event = Event(kind, time, branch=str(e["branch"]), status=int(e["status"]))
+            elif kind == "generator":
+                event = Event(kind, time, bus=int(e["bus"]), generator=str(e["generator"]), status=int(e["status"]))
+            else:
+                raise CaseError(f"{path}: unknown event kind {kind[:20]!r} (known: fault, branch, generator)")
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, CaseError):
+                raise
+            raise CaseError(f"{path}: malformed event ({type(exc).__name__}: {str(exc)[:80]})") from None
+        events.append(event)
+    return tuple(sorted(events, key=lambda ev: ev.time))
 
 
 def unit_start(unit: Unit, op: dict) -> tuple:
@@ -411,6 +504,15 @@ def unit_start(unit: Unit, op: dict) -> tuple:
     from ..initialisation import machine_start
 
     machine = unit.machine
+    module = _standard_module(machine.component)
+    if module is not None:
+        x0, Pm, Efd = module.operating_point(op["V"], op["theta"], op["P"], op["Q"], machine.params)
+        given = {"mechanical_power": float(Pm), "field_voltage": float(Efd)}
+        bus = machine.component.ports.bus
+        inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
+        for link in machine.component.ports.inputs:
+            inputs[link.variable] = given[link.signal]
+        return at_rest(unit.devices, x0, inputs, f"generator at bus {unit.bus}")
     ms = machine_start(op["V"], op["theta"], op["P"], op["Q"], machine.params)
     given = {"mechanical_power": float(ms.Pm), "field_voltage": float(ms.Efd)}
     bus = machine.component.ports.bus
@@ -439,6 +541,8 @@ def at_rest(devices, x0, machine_inputs: dict, where: str = "the unit") -> tuple
     for link in component.ports.inputs:
         given[link.signal] = float(machine_inputs[link.variable])
     starts = [DeviceStart(tuple(float(v) for v in x0), dict(machine_inputs))]
+    if any(_standard_module(d.component) is not None for d in devices[1:]):
+        return tuple(starts) + _standard_controls_at_rest(devices, x0, y, Vt, V, machine_inputs, where)
     for device in devices[1:]:
         ports = device.component.ports
         if ports.output("field_voltage") is None:
@@ -451,15 +555,94 @@ def at_rest(devices, x0, machine_inputs: dict, where: str = "the unit") -> tuple
     return tuple(starts)
 
 
+def _standard_module(component):
+    """The module of a standard model's component (reference_models.models), None for others."""
+    from .. import models
+
+    if models.STANDARD_MODELS.get(component.name.upper()) is not component:
+        return None
+    return getattr(models, component.name)
+
+
+def _standard_controls_at_rest(devices, x0, y, Vt: float, V: complex, machine_inputs: dict, where: str) -> tuple:
+    """The DeviceStarts of a unit's standard control devices (devices[1:]) with its machine at
+    rest in state x0 with outputs y and terminal voltage Vt (bus voltage phasor V): stabilisers
+    at their equilibrium first (their signal goes to the exciter), then exciters and governors
+    holding the machine's field voltage and mechanical power by their `initialise`."""
+    machine = devices[0]
+    component = machine.component
+    bus = component.ports.bus
+    outputs = dict(zip(component.output_names, (float(v) for v in y)))
+    current = complex(outputs[bus.current[0]], outputs[bus.current[1]])
+    signals = {"terminal_voltage": Vt,
+               "terminal_voltage_angle": float(np.angle(V + external_impedance(machine) * current)),
+               "terminal_current_real": current.real, "terminal_current_imaginary": current.imag,
+               "stabiliser_signal": 0.0, "voltage_reference": 0.0, "power_reference": 0.0}
+    states = dict(zip(component.state_names, (float(v) for v in x0)))
+    for link in component.ports.outputs:
+        signals[link.signal] = outputs[link.variable] if link.variable in outputs else states[link.variable]
+    for link in component.ports.inputs:
+        signals[link.signal] = float(machine_inputs[link.variable])
+    rank = {"stabiliser_signal": 0, "field_voltage": 1, "mechanical_power": 2}
+    order = sorted(range(1, len(devices)), key=lambda j: min(
+        (rank.get(link.signal, 3) for link in devices[j].component.ports.outputs), default=3))
+    starts = {}
+    for j in order:
+        device = devices[j]
+        comp, ports = device.component, device.component.ports
+        module = _standard_module(comp)
+        signal_of = {link.variable: link.signal for link in ports.inputs}
+        missing = [v for v in comp.input_names if v not in signal_of]
+        if module is None or missing:
+            raise CaseError(f"{where}: no start for {device.name} ({comp.name}): "
+                            + ("not a standard model" if module is None else f"inputs {missing} are not linked"))
+        u = np.array([signals[signal_of[v]] for v in comp.input_names])
+        try:
+            if ports.output("field_voltage") is not None:
+                x, ref = module.initialise(signals["field_voltage"], u, device.params)
+                u[comp.input_names.index(ports.input("voltage_reference"))] = ref
+            elif ports.output("mechanical_power") is not None:
+                x, ref = module.initialise(signals["mechanical_power"], u, device.params)
+                u[comp.input_names.index(ports.input("power_reference"))] = ref
+            else:
+                x = comp.equilibrium(u, device.params)
+                for link in ports.outputs:
+                    signals[link.signal] = float(comp.output_values(x, u, device.params)[
+                        comp.output_names.index(link.variable)])
+        except ValueError as exc:
+            raise CaseError(f"{where}: {device.name} ({comp.name}) has no rest: {' '.join(str(exc).split())[:160]}") \
+                from None
+        starts[j] = DeviceStart(tuple(float(v) for v in x), dict(zip(comp.input_names, (float(v) for v in u))))
+    return tuple(starts[j] for j in range(1, len(devices)))
+
+
 def load_case(network_file, dynamic_data, name: str | None = None) -> Case:
     """The Case of a network file and a dynamic-data file."""
     network, flow = load_network(network_file)
-    units = load_units(dynamic_data, network.generator_buses)
-    starts = tuple(unit_start(u, flow.generator(u.bus)) for u in units)
-    return Case(name or network.name, network, flow, units, starts, (), Path(dynamic_data))
+    units = load_units(dynamic_data, network.generator_buses, [g.name for g in network.generators])
+    starts = tuple(unit_start(u, flow.generator_at(k)) for k, u in enumerate(units))
+    return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data))
+
+
+DATA_DIR = Path(__file__).resolve().parent / "data"
+#: The cases that ship with opfmu (data/NAME_network.json and data/NAME.json each).
+SHIPPED_CASES = ("wscc9", "kundur", "ieee14", "ieee39", "npcc")
+
+
+def shipped_case(name: str) -> Case:
+    """The shipped case `name` (one of SHIPPED_CASES); CaseError naming them otherwise."""
+    if name not in SHIPPED_CASES:
+        raise CaseError(f"no shipped case {str(name)[:40]!r} (shipped: {', '.join(SHIPPED_CASES)})")
+    return _shipped_case(name)
+
+
+@lru_cache(maxsize=None)
+def _shipped_case(name: str) -> Case:
+    return load_case(DATA_DIR / f"{name}_network.json", DATA_DIR / f"{name}.json", name)
 
 
 TERMINAL = ("terminal_voltage", "terminal_voltage_angle")  # what the bus gives a unit: |Vt|, angle of Vt
+TERMINAL_CURRENT = ("terminal_current_real", "terminal_current_imaginary")  # the machine's bus-port current
 
 
 @dataclass(frozen=True)
@@ -480,7 +663,8 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
     device a dict {input variable: Source} over its bus-port and link inputs. An input link takes
     the output link of the same signal of another device; `terminal_voltage` and
     `terminal_voltage_angle` with no giver come from the bus (behind the machine's external
-    impedance); any other input link nothing gives is held. CaseError where two devices give one
+    impedance), `terminal_current_real` and `_imaginary` with no giver from the machine's bus-port
+    current outputs (system base, network frame); any other input link nothing gives is held. CaseError where two devices give one
     signal or the first device has no bus port."""
     ports = list(ports)
     if not ports or ports[0] is None or ports[0].bus is None:
@@ -503,6 +687,9 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
                 wires[link.variable] = Source("device", device=givers[0][0], variable=givers[0][1])
             elif link.signal in TERMINAL:
                 wires[link.variable] = Source("terminal", index=TERMINAL.index(link.signal))
+            elif link.signal in TERMINAL_CURRENT and j > 0:
+                wires[link.variable] = Source("device", device=0,
+                                              variable=ports[0].bus.current[TERMINAL_CURRENT.index(link.signal)])
             else:
                 wires[link.variable] = Source("held")
         wiring.append(wires)
