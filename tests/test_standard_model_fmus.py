@@ -1,0 +1,202 @@
+"""The native reference FMUs (FMI 2.0, 3.0) of the standard dynamic models (reference_models.models):
+they build, validate, carry their ports, rest at their equilibrium, follow an independent solver of
+their own equations through limit crossings (scipy's DOP853 with the same branches locked between
+located crossings), give exact directional derivatives on either side of a limit, and their
+switching functions are those of the equations' conditions."""
+import math
+
+import numpy as np
+import pytest
+from fmpy.validation import validate_fmu
+from scipy.integrate import solve_ivp
+
+from cosim.fmu import FMU as Slave
+from fmu_export.build_cache import cached_native_reference_fmu
+from fmu_export.c_equations import switching_c_source, switching_conditions
+from reference_models.models import STANDARD_MODELS
+from reference_models.ports import ports_of_fmu
+
+H = 0.05  # s: the communication step of the runs below
+# per model: the inputs over the run, pieces (until [s], {input: value}) from the start inputs, chosen
+# to drive the model's limiters (a terminal-voltage dip deep enough to hit an exciter's ceiling, a
+# speed step that opens a governor's valve to its limit and one that closes it to the other)
+VOLTAGE_DIP = ((0.1, {}), (0.6, {"Vt": 0.5}), (1.5, {}))
+SPEED_STEPS = ((0.1, {}), (0.8, {"omega": 0.95}), (1.5, {"omega": 1.05}))
+RUNS = {
+    "GENCLS": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
+    "GENROU": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
+    "IEEEX1": VOLTAGE_DIP, "EXDC2": VOLTAGE_DIP, "EXST1": VOLTAGE_DIP, "ESST3A": VOLTAGE_DIP, "SEXS": VOLTAGE_DIP,
+    "TGOV1": SPEED_STEPS, "TGOV1N": SPEED_STEPS,
+    # the valve's rate limit at the speed step, and left within a step as the valve settles back
+    "IEEEG1": ((0.1, {}), (0.8, {"omega": 0.95}), (1.5, {})),
+    "IEEEST": ((0.1, {}), (0.6, {"omega": 1.01, "Vt": 0.5}), (1.2, {"omega": 0.99})),
+}
+
+
+# parameters other than the defaults: SEXS's ceiling (99 pu by default) within reach of the dip
+PARAMS = {"SEXS": {"EMAX": 3.0, "EMIN": 0.0}}
+
+
+def params(name):
+    return STANDARD_MODELS[name].params(PARAMS.get(name))
+
+
+@pytest.fixture(scope="session")
+def standard_fmus(fmu_cache):
+    """{(model, FMI version): path} of every standard model's native reference FMU (host platform,
+    parameters `params(model)`), built once per run through the build cache."""
+    return {(name, v): cached_native_reference_fmu(f"{name}Reference", STANDARD_MODELS[name], PARAMS.get(name),
+                                                   fmi_version=v, cache=fmu_cache)
+            for name in STANDARD_MODELS for v in (2, 3)}
+
+
+class Branches:
+    """The math namespace of scalars with the conditions of `where` recorded in the order they are
+    met (`truth`) and, with `modes`, each `where` taking the branch modes[k] instead of its condition's."""
+
+    sin, cos, exp, sqrt = np.sin, np.cos, np.exp, np.sqrt
+
+    def __init__(self, modes=None):
+        self.modes, self.truth = modes, []
+
+    def where(self, condition, a, b):
+        k = len(self.truth)
+        self.truth.append(bool(condition))
+        return a if (self.modes[k] if self.modes is not None else condition) else b
+
+
+def rhs(component, p, x, u, modes=None) -> np.ndarray:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.array(component.derivatives(list(x), u, p, Branches(modes)), dtype=float)
+
+
+def live_modes(component, p, x, u) -> list:
+    ns = Branches()
+    with np.errstate(invalid="ignore", divide="ignore"):
+        component.derivatives(list(x), u, p, ns)
+    return ns.truth
+
+
+def crossed(component, p, x, u, locked) -> bool:
+    """The branches that hold at x differ from `locked` and give another right-hand side."""
+    now = live_modes(component, p, x, u)
+    return now != locked and not np.array_equal(rhs(component, p, x, u, locked), rhs(component, p, x, u, now))
+
+
+def locked_solution(component, p, x, u, h):
+    """(state after h [s] with inputs u held, crossings located): scipy's DOP853 (rtol = atol = 1e-12)
+    on the component's equations with their branches locked, the first crossing among its steps
+    bracketed by bisection on its dense output to 1e-13 s, restarted there with the branches then
+    holding: an independent solver of the same piecewise equations."""
+    t, x, events = 0.0, np.array(x, dtype=float), 0
+    while True:
+        modes = live_modes(component, p, x, u)
+        sol = solve_ivp(lambda _t, y: rhs(component, p, y, u, modes), (t, h), x, method="DOP853", rtol=1e-12,
+                        atol=1e-12, dense_output=True)
+        assert sol.success, sol.message
+        hit = next((i for i in range(1, len(sol.t)) if crossed(component, p, sol.y[:, i], u, modes)), None)
+        if hit is None:
+            return sol.y[:, -1], events
+        lo, hi = sol.t[hit - 1], sol.t[hit]
+        while hi - lo > 1e-13:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if crossed(component, p, sol.sol(mid), u, modes) else (mid, hi)
+        t, x, events = hi, sol.sol(hi), events + 1
+
+
+def run_inputs(component, pieces):
+    """The inputs [n_steps, n_u] held over each step of H of a run given as pieces."""
+    start, rows = dict(zip(component.input_names, component.start_inputs)), []
+    begin = 0.0
+    for until, changes in pieces:
+        values = [float({**start, **changes}[n]) for n in component.input_names]
+        rows += [values] * int(round((until - begin) / H))
+        begin = until
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("name", sorted(STANDARD_MODELS))
+def test_every_standard_model_fmu_validates_and_carries_its_ports(standard_fmus, name, version):
+    path = standard_fmus[name, version]
+    assert validate_fmu(str(path)) == []
+    assert ports_of_fmu(path) == STANDARD_MODELS[name].ports
+
+
+@pytest.mark.parametrize("name", sorted(STANDARD_MODELS))
+def test_at_its_equilibrium_each_model_stays_at_rest(standard_fmus, name):
+    component = STANDARD_MODELS[name]
+    rest = component.steady_state(None, params(name))
+    for version in (2, 3):
+        slave = Slave(standard_fmus[name, version], component=component)
+        np.testing.assert_allclose(slave.state(), rest, rtol=0, atol=1e-12)
+        for _ in range(20):
+            x = slave.step(H)
+        slave.close()
+        np.testing.assert_allclose(x, rest, rtol=0, atol=1e-10)
+
+
+@pytest.mark.parametrize("name", sorted(STANDARD_MODELS))
+def test_states_and_outputs_follow_an_independent_solver_through_the_limits(standard_fmus, name):
+    component, p = STANDARD_MODELS[name], params(name)
+    inputs = run_inputs(component, RUNS[name])
+    x = component.steady_state(None, p)
+    expected, crossings = [], 0
+    for u in inputs:
+        x, events = locked_solution(component, p, x, tuple(u), H)
+        crossings += events
+        expected.append(np.concatenate([x, component.output_equations(list(x), tuple(u), p, Branches())]))
+    expected = np.array(expected)
+    for version in (2, 3):
+        slave = Slave(standard_fmus[name, version], component=component)
+        got = []
+        for u in inputs:
+            got.append(np.concatenate([slave.step(H, *u), slave.get(*component.output_names)]))
+        slave.close()
+        scale = np.maximum(1.0, np.abs(expected).max(axis=0))
+        worst = (np.abs(np.array(got) - expected) / scale).max(axis=0)
+        assert worst.max() < 1e-8, dict(zip(component.state_names + component.output_names, worst))
+    if switching_conditions(component, p):
+        assert crossings > 0, f"{name}: the run crosses no switching function"
+
+
+def test_the_switching_functions_are_the_conditions_of_the_right_hand_side():
+    tgov1 = STANDARD_MODELS["TGOV1"]
+    n, source = switching_c_source(tgov1, tgov1.params_type())
+    assert n == 4 and "g[1] = x[0] - 1.2;" in source and "mode[3] = x[0] <= 0.0;" in source
+    assert "mode[1] ? " in source  # the locked right-hand side selects on the modes
+    gencls = STANDARD_MODELS["GENCLS"]
+    assert switching_c_source(gencls, gencls.params_type()) == (0, "")
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_directional_derivatives_are_exact_on_either_side_of_a_limit(standard_fmus, version):
+    """IEEEST's Vss is its washout's output clipped to [LSMIN, LSMAX]: clipped, dVss/domega = 0;
+    within the limits, KS / T6 times the lead-lags' gains. The FMU's derivatives match central
+    differences of the component's outputs wherever both one-sided differences agree (away from
+    the switch), on both sides of it."""
+    component = STANDARD_MODELS["IEEEST"]
+    p = component.params_type()
+    slave = Slave(standard_fmus["IEEEST", version], component=component)
+    slave.bind(component.input_names, component.output_names)
+    compared, sides = 0, set()
+    for u in run_inputs(component, RUNS["IEEEST"]):
+        slave.set_inputs(list(u))
+        slave.do_step(slave.t, H)
+        slave.t += H
+        x = slave.state()
+        J = np.array(slave.output_jacobian([0], list(range(component.n_inputs))))
+        for j in range(component.n_inputs):
+            d = 1e-7 * max(1.0, abs(u[j]))
+            plus, minus = u.copy(), u.copy()
+            plus[j] += d
+            minus[j] -= d
+            out = [component.output_equations(list(x), tuple(v), p, math)[0] for v in (plus, u, minus)]
+            right, left = (out[0] - out[1]) / d, (out[1] - out[2]) / d
+            if abs(right - left) < 1e-5 * max(1.0, abs(right)):
+                assert J[0, j] == pytest.approx(0.5 * (right + left), rel=1e-6, abs=1e-6)
+                compared += 1
+                if j == 0:
+                    sides.add(J[0, 0] == 0.0)
+    slave.close()
+    assert compared >= len(run_inputs(component, RUNS["IEEEST"])) and sides == {True, False}
