@@ -154,3 +154,32 @@ def test_start_values_are_andes_initial_states(name):
         assert r["state"] < ANDES_TOLERANCE and r["set_point"] < ANDES_TOLERANCE, model
         counts[model.lower()] = r["devices"]
     assert counts == EXPECTED[name][2]
+
+
+@pytest.mark.andes
+def test_converted_events_are_the_case_files_own(tmp_path):
+    pytest.importorskip("andes")
+    from reference_models.grid.andes_case import convert
+    from reference_models.grid.case import load_case
+
+    fault = load_case(*convert("ieee14/ieee14_fault.xlsx", tmp_path, "fault"))
+    trip = load_case(*convert("ieee14/ieee14_gentrip.xlsx", tmp_path, "trip"))
+    assert [(e.kind, e.bus, e.time, e.clear, e.impedance) for e in fault.events] == [("fault", 9, 1.0, 1.1, 1e-4j)]
+    assert [(e.kind, e.bus, e.generator, e.time, e.status) for e in trip.events] == [("generator", 2, "2", 1.0, 0)]
+    assert any(u.generator == "2" for u in trip.units)
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("source, message", [
+    ("ieee14/ieee14_solar.xlsx", "the case uses the model REGCA1, which opfmu does not have"),
+    ("kundur/kundur_ieeeg1.xlsx", "IEEEG1 3 drives two machines"),
+    ("no_such_case.xlsx", "no case file no_such_case.xlsx"),
+])
+def test_a_case_the_converter_cannot_take_is_refused_in_one_line(source, message, tmp_path, capsys):
+    pytest.importorskip("andes")
+    from reference_models.grid.andes_case import main
+
+    assert main([source, str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and message in err
+    assert list(tmp_path.iterdir()) == []

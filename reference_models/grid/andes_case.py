@@ -364,7 +364,8 @@ def compare_starts(case, ss) -> dict:
 
 def compare_shipped(name: str) -> dict:
     """compare_starts of the shipped case `name` against ANDES' initialisation of its source, plus
-    "load_flow": the largest differences of V [pu], theta [rad], P, Q [pu] from ANDES' power flow."""
+    "load_flow": the largest differences of V [pu], theta [rad], P, Q [pu] from ANDES' power flow
+    and of the loads' admittances [pu] from ANDES' time-domain ones (Req - j Xeq)."""
     from .case import shipped_case
 
     case = shipped_case(name)
@@ -375,6 +376,13 @@ def compare_shipped(name: str) -> dict:
     flow = {"V": float(np.abs(lf.V - ss.Bus.v.v).max()), "theta": float(np.abs(lf.theta - ss.Bus.a.v).max()),
             "P": float(np.abs(lf.P_gen - P).max()), "Q": float(np.abs(lf.Q_gen - Q).max())}
     ss.TDS.init()
+    # ANDES' time-domain loads: conductance Req and susceptance -Xeq at each PQ's bus
+    Y = {}
+    for i in range(ss.PQ.n):
+        bus = list(ss.Bus.idx.v).index(ss.PQ.bus.v[i])
+        Y[bus] = Y.get(bus, 0j) + complex(float(ss.PQ.Req.v[i]), -float(ss.PQ.Xeq.v[i])) * ss.PQ.u.v[i]
+    ours = case.flow.load_admittances()
+    flow["load_admittance"] = float(max(abs(ours[b] - y) for b, y in Y.items()))
     return {"load_flow": flow, **compare_starts(case, ss)}
 
 
