@@ -73,6 +73,71 @@ static void observe(void *ctx, double t0, const double *x0, const double *f0, do
     seen->worst = fmax(seen->worst, fabs(mid - cos(t0 + 0.5 * h)));
 }
 
+/* a lag x' = u(t) - x (T = 1 s) of u(t) = 3 - t with a non-windup upper limit 1 (ANDES' LagAntiWindup),
+   its branches locked between events: mode[0] = (x >= 1), mode[1] = (rate > 0). Exact from x(0) = 0:
+   x = 4 - t - 4 e^-t up to t_hit (x = 1), held at 1 until t = 2 (the rate u - x turns negative), then
+   x = 4 - t - e^-(t - 2). */
+typedef struct {
+    int mode[2];
+    int locks;
+    double lock_time[8];
+} Limited;
+
+static const double T_HIT_GUESS = 0.45; /* s: near the root of 4 - t - 4 e^-t = 1, refined in main */
+
+static void limited_rhs_modes(const int mode[2], double t, const double *x, double *dx)
+{
+    const double rate = 3.0 - t - x[0];
+    dx[0] = mode[0] ? (mode[1] ? 0.0 : rate) : rate;
+}
+
+static void limited_modes(double t, const double *x, int mode[2])
+{
+    mode[0] = x[0] >= 1.0;
+    mode[1] = 3.0 - t - x[0] > 0.0;
+}
+
+static void limited_rhs(void *ctx, double t, const double *x, double *dx)
+{
+    limited_rhs_modes(((Limited *)ctx)->mode, t, x, dx);
+}
+
+static int limited_crossed(void *ctx, double t, const double *x)
+{
+    const Limited *l = (const Limited *)ctx;
+    int now[2];
+    double a, b;
+    limited_modes(t, x, now);
+    if (now[0] == l->mode[0] && now[1] == l->mode[1]) return 0;
+    limited_rhs_modes(l->mode, t, x, &a);
+    limited_rhs_modes(now, t, x, &b);
+    return a != b;
+}
+
+static void limited_lock(void *ctx, double t, const double *x)
+{
+    Limited *l = (Limited *)ctx;
+    limited_modes(t, x, l->mode);
+    if (l->locks < 8) l->lock_time[l->locks] = t;
+    l->locks++;
+}
+
+/* the same lag with its conditions evaluated as they are met (no locking, no event location) */
+static void limited_live(void *ctx, double t, const double *x, double *dx)
+{
+    int mode[2];
+    (void)ctx;
+    limited_modes(t, x, mode);
+    limited_rhs_modes(mode, t, x, dx);
+}
+
+static double limited_exact(double t, double t_hit)
+{
+    if (t <= t_hit) return 4.0 - t - 4.0 * exp(-t);
+    if (t <= 2.0) return 1.0;
+    return 4.0 - t - exp(-(t - 2.0));
+}
+
 int main(void)
 {
     DopriStats st;
@@ -140,6 +205,54 @@ int main(void)
     CHECK(st.accepted + st.rejected == DOPRI5_MAX_STEPS, "stopped after %ld steps", st.accepted + st.rejected);
     for (int code = 0; code >= -6; --code) CHECK(dopri5_message(code)[0] != '\0', "message %d", code);
 
+
+    /* a non-windup limit: the state stops at the limit at the located instant, is held without
+       chattering, leaves it when its rate turns back; two events, a bounded number of steps */
+    double t_hit = T_HIT_GUESS;
+    for (int k = 0; k < 50; ++k) /* Newton on 3 - t - 4 e^-t = 0 */
+        t_hit -= (3.0 - t_hit - 4.0 * exp(-t_hit)) / (-1.0 + 4.0 * exp(-t_hit));
+    Limited lim = {{0, 0}, 0, {0.0}};
+    const Dopri5Events ev = {limited_crossed, limited_lock, &lim};
+    double xl[1] = {0.0}, hl = 0.0;
+    rc = dopri5_events(limited_rhs, &lim, 1, 0.0, 4.0, xl, 1e-10, 1e-12, &hl, &st, &ev, NULL, NULL);
+    CHECK(rc == DOPRI5_OK && fabs(xl[0] - limited_exact(4.0, t_hit)) < 1e-9, "rc %d, x(4) error %g", rc,
+          xl[0] - limited_exact(4.0, t_hit));
+    CHECK(st.events == 2 && lim.locks == 3, "events %ld, locks %d", st.events, lim.locks);
+    CHECK(fabs(lim.lock_time[1] - t_hit) < 1e-11 && fabs(lim.lock_time[2] - 2.0) < 1e-11,
+          "located at %.15g (exact %.15g) and %.15g (exact 2)", lim.lock_time[1], t_hit, lim.lock_time[2]);
+    CHECK(st.accepted <= 120 && st.rejected <= 6, "%ld steps, %ld rejected", st.accepted, st.rejected);
+
+    /* in communication steps of 10 ms: held at the limit within 1e-11, the same two events */
+    Limited chunked = {{0, 0}, 0, {0.0}};
+    const Dopri5Events ev_chunked = {limited_crossed, limited_lock, &chunked};
+    double xc[1] = {0.0}, hc = 0.0, largest = 0.0, highest = 0.0;
+    long events = 0, accepted = 0, rejected = 0;
+    for (int k = 0; k < 400; ++k) {
+        rc = dopri5_events(limited_rhs, &chunked, 1, 0.01 * k, 0.01 * (k + 1), xc, 1e-10, 1e-12, &hc, &st,
+                           &ev_chunked, NULL, NULL);
+        CHECK(rc == DOPRI5_OK, "rc %d at chunk %d", rc, k);
+        events += st.events;
+        accepted += st.accepted;
+        rejected += st.rejected;
+        largest = fmax(largest, fabs(xc[0] - limited_exact(0.01 * (k + 1), t_hit)));
+        highest = fmax(highest, xc[0]);
+    }
+    CHECK(events == 2 && largest < 1e-9 && highest <= 1.0 + 1e-11, "events %ld, worst error %g, highest %.17g",
+          events, largest, highest);
+    CHECK(accepted <= 400 + 40 && rejected <= 4, "%ld steps, %ld rejected", accepted, rejected);
+
+    /* the same lag with its conditions evaluated as they are met (plain dopri5): it steps through the
+       kinks by rejections (31 here), event location needs none of them */
+    const long located_rejections = rejected;
+    double xv[1] = {0.0}, hv = 0.0;
+    rc = dopri5(limited_live, NULL, 1, 0.0, 4.0, xv, 1e-10, 1e-12, &hv, &st);
+    CHECK(rc == DOPRI5_OK && st.rejected > located_rejections + 10, "live: rc %d, %ld steps, %ld rejected", rc,
+          st.accepted, st.rejected);
+
+    /* a bad events structure is refused */
+    const Dopri5Events no_lock = {limited_crossed, NULL, &lim};
+    rc = dopri5_events(limited_rhs, &lim, 1, 0.0, 1.0, xl, 1e-10, 1e-12, NULL, NULL, &no_lock, NULL, NULL);
+    CHECK(rc == DOPRI5_BAD_ARGUMENT, "rc %d", rc);
     if (!failures) printf("ok\n");
     return failures ? 1 : 0;
 }
