@@ -200,3 +200,21 @@ def test_directional_derivatives_are_exact_on_either_side_of_a_limit(standard_fm
                     sides.add(J[0, 0] == 0.0)
     slave.close()
     assert compared >= len(run_inputs(component, RUNS["IEEEST"])) and sides == {True, False}
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_non_windup_valve_stops_at_its_limit_and_leaves_it_when_its_rate_turns_back(standard_fmus, version):
+    """TGOV1's valve LAG_y (non-windup within [VMIN, VMAX]) under an underspeed that demands more than
+    VMAX: it rises to VMAX and stays there (not beyond, no chattering below) while the speed is low;
+    an overspeed turns its rate back: it leaves VMAX at once and stops at VMIN."""
+    component, p = STANDARD_MODELS["TGOV1"], params("TGOV1")
+    slave = Slave(standard_fmus["TGOV1", version], component=component)
+    valve = np.array([slave.step(0.01, *u)[0] for u in np.repeat(run_inputs(component, SPEED_STEPS), 5, axis=0)])
+    slave.close()
+    low_speed, high_speed = valve[10:80], valve[80:]
+    at_max = low_speed[low_speed >= p.VMAX - 1e-9]
+    assert len(at_max) > 20 and np.all(at_max <= p.VMAX + 1e-11)
+    first = np.argmax(low_speed >= p.VMAX - 1e-9)
+    assert np.all(low_speed[first:] >= p.VMAX - 1e-11)  # held from the first step it reached the limit
+    assert high_speed[0] < p.VMAX - 1e-3 and np.all(np.diff(high_speed[high_speed > p.VMIN + 1e-9]) < 0)
+    assert abs(high_speed[-1] - p.VMIN) <= 1e-11

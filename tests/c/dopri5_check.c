@@ -205,7 +205,6 @@ int main(void)
     CHECK(st.accepted + st.rejected == DOPRI5_MAX_STEPS, "stopped after %ld steps", st.accepted + st.rejected);
     for (int code = 0; code >= -6; --code) CHECK(dopri5_message(code)[0] != '\0', "message %d", code);
 
-
     /* a non-windup limit: the state stops at the limit at the located instant, is held without
        chattering, leaves it when its rate turns back; two events, a bounded number of steps */
     double t_hit = T_HIT_GUESS;
