@@ -138,6 +138,23 @@ static double limited_exact(double t, double t_hit)
     return 4.0 - t - exp(-(t - 2.0));
 }
 
+/* the observer's record of the limited lag: as Seen, the Hermite error against limited_exact */
+typedef struct {
+    Seen seen;
+    double t_hit;
+} SeenLimited;
+
+static void observe_limited(void *ctx, double t0, const double *x0, const double *f0, double t1, const double *x1,
+                            const double *f1)
+{
+    SeenLimited *s = (SeenLimited *)ctx;
+    const double h = t1 - t0, mid = 0.5 * (x0[0] + x1[0]) + 0.125 * h * (f0[0] - f1[0]);
+    s->seen.gaps += t0 != s->seen.end;
+    s->seen.end = t1;
+    s->seen.steps++;
+    s->seen.worst = fmax(s->seen.worst, fabs(mid - limited_exact(t0 + 0.5 * h, s->t_hit)));
+}
+
 int main(void)
 {
     DopriStats st;
@@ -247,6 +264,19 @@ int main(void)
     rc = dopri5(limited_live, NULL, 1, 0.0, 4.0, xv, 1e-10, 1e-12, &hv, &st);
     CHECK(rc == DOPRI5_OK && st.rejected > located_rejections + 10, "live: rc %d, %ld steps, %ld rejected", rc,
           st.accepted, st.rejected);
+
+    /* every accepted step observed with events: the steps tile [0, 4], each ends at a located event
+       where there is one, with the rate of the branches it was taken on (Hermite error small) */
+    Limited observed = {{0, 0}, 0, {0.0}};
+    const Dopri5Events ev_observed = {limited_crossed, limited_lock, &observed};
+    SeenLimited seen_limited = {{0, 0.0, 0.0, 0}, t_hit};
+    double xo[1] = {0.0}, ho_lim = 0.0;
+    rc = dopri5_events(limited_rhs, &observed, 1, 0.0, 4.0, xo, 1e-10, 1e-12, &ho_lim, &st, &ev_observed,
+                       observe_limited, &seen_limited);
+    CHECK(rc == DOPRI5_OK && xo[0] == xl[0] && seen_limited.seen.steps == st.accepted && !seen_limited.seen.gaps &&
+          seen_limited.seen.end == 4.0 && seen_limited.seen.worst < 1e-6, "observed %ld of %ld, gaps %d, end %g, "
+          "Hermite error %g", seen_limited.seen.steps, st.accepted, seen_limited.seen.gaps, seen_limited.seen.end,
+          seen_limited.seen.worst);
 
     /* a bad events structure is refused */
     const Dopri5Events no_lock = {limited_crossed, NULL, &lim};
