@@ -4,13 +4,16 @@ their own equations through limit crossings (scipy's DOP853 with the same branch
 located crossings), give exact directional derivatives on either side of a limit, and their
 switching functions are those of the equations' conditions."""
 import math
+import subprocess
 
 import numpy as np
 import pytest
+from fmpy import extract, read_model_description
 from fmpy.validation import validate_fmu
 from scipy.integrate import solve_ivp
 
 from cosim.fmu import FMU as Slave
+from fmu_export.binaries import fmi_headers
 from fmu_export.build_cache import cached_native_reference_fmu
 from fmu_export.c_equations import switching_c_source, switching_conditions
 from reference_models.models import STANDARD_MODELS
@@ -218,3 +221,20 @@ def test_a_non_windup_valve_stops_at_its_limit_and_leaves_it_when_its_rate_turns
     assert np.all(low_speed[first:] >= p.VMAX - 1e-11)  # held from the first step it reached the limit
     assert high_speed[0] < p.VMAX - 1e-3 and np.all(np.diff(high_speed[high_speed > p.VMIN + 1e-9]) < 0)
     assert abs(high_speed[-1] - p.VMIN) <= 1e-11
+
+
+@pytest.mark.parametrize("name", ["ESST3A", "TGOV1"])
+def test_random_fmi_call_sequences_never_crash_a_model_with_limits(standard_fmus, name, tmp_path):
+    """The C importer's random FMI calls (tests/c/fuzz_harness.c: NaN, inf, h <= 0, corrupt states,
+    ...) on an FMI 2.0 FMU whose steps locate limit crossings: every call returns a valid status."""
+    harness = tmp_path / "fuzz_harness"
+    subprocess.run(["gcc", "-O1", "-I", str(fmi_headers()), __file__.rsplit("/", 1)[0] + "/c/fuzz_harness.c", "-o",
+                    str(harness), "-ldl", "-lm"], check=True)
+    directory = extract(str(standard_fmus[name, 2]), unzipdir=str(tmp_path / "fmu"))
+    md = read_model_description(directory)
+    n_reals = sum(v.type == "Real" for v in md.modelVariables)
+    result = subprocess.run([str(harness), f"{directory}/binaries/linux64/{md.coSimulation.modelIdentifier}.so",
+                             md.guid, "3000", "1", str(n_reals)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr[-2000:]
+    counts = dict(zip(result.stdout.split()[0::2], map(int, result.stdout.split()[1::2])))
+    assert counts["steps"] > 500 and counts["error"] > 300 and counts["invalid"] == counts["bad_messages"] == 0
