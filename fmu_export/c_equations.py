@@ -72,8 +72,8 @@ class Traced:
     def _compare(self, other, op):
         traced = isinstance(other, Traced)
         rhs = other.code if traced else _literal(other)
-        return Condition(f"{self.code} {op} {rhs}", self.recorder, self.inputs | (other.inputs if traced else frozenset()),
-                         f"{self.code} - {rhs}")
+        inputs = self.inputs | (other.inputs if traced else frozenset())
+        return Condition(f"{self.code} {op} {rhs}", self.recorder, inputs, f"{self.code} - {rhs}")
 
     __lt__ = lambda self, o: self._compare(o, "<")  # noqa: E731
     __le__ = lambda self, o: self._compare(o, "<=")  # noqa: E731

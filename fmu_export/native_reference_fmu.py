@@ -8,7 +8,8 @@ equations.c (the component's right-hand side and derived outputs, fmu_export.c_e
 C the surrogate FMU runs) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
 With the static sources in c/ (cosimulation.c: the FMI plumbing both versions share, with fmi2_cs.c
 or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; variables.c: the component's variables; reference_model.c and reference_state.h: the step and
-the state; dopri5.c: the integrator) they compile into one binary per platform (binaries.py: gcc for
+the state; dopri5.c: the integrator, which locates the instants the right-hand side's conditions change:
+docs/fmu.md, "limit crossings") they compile into one binary per platform (binaries.py: gcc for
 linux64, MinGW-w64 for win64, ...), which needs the C runtime only.
 The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;
 the binary has them compiled in).
