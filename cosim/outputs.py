@@ -1,7 +1,7 @@
-"""What a grid run leaves in its folder: result.csv (DESIGN section 8's columns, then the rest of
-GridResult.columns), a figure of rotor angles relative to machine 1, speeds, terminal voltages and
-field voltages with every compared run on the same axes, and a Markdown report. All written
-atomically."""
+"""What a grid run leaves in its folder: result.csv (the columns of docs/grid.md, "What a run
+leaves": time, delta, omega, Efd per generator and V per bus, then the rest of GridResult.columns),
+a figure of rotor angles relative to machine 1, speeds, terminal voltages and field voltages with
+every compared run on the same axes, and a Markdown report. All written atomically."""
 from __future__ import annotations
 
 import csv

@@ -3,8 +3,8 @@
 reference).
 
 A run is stable when no rotor-angle difference between two machines exceeds pi rad before the
-run's stop time (DESIGN section 8). The CCT of a fault and its clearing action is the longest fault
-duration after which the run is stable: bisection between a stable and an unstable clearing time
+run's stop time (docs/grid.md, "The coupling", Stability). The CCT of a fault and its clearing
+action is the longest fault duration after which the run is stable: bisection between a stable and an unstable clearing time
 to `resolution` (1 ms by default), the bracket found by doubling the fault duration from 50 ms.
 """
 from __future__ import annotations

@@ -14,14 +14,14 @@ linux64, MinGW-w64 for win64, ...), which needs the C runtime only.
 The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;
 the binary has them compiled in).
 
-What the FMU does (DESIGN section 5): inputs set before fmi2DoStep(t, h) hold over [t, t + h], or
-are linear over it where the master set their first derivatives (canInterpolateInputs); the
-states after the call are the ODE's solution at t + h to the parameters rtol and atol (defaults
-1e-10, 1e-12: SOLVER_STARTS), and the derived outputs are computed from them and the inputs whenever they are read.
-The solver's step size carries over from step to step. A step the solver cannot complete within the
-tolerance is refused with fmi2Error and a logged reason. fmi2GetDirectionalDerivative gives the
-outputs' exact derivatives with respect to the inputs. The default initial state is the machine's
-equilibrium at the inputs' start values.
+What the FMU does (docs/design.md, "The FMUs (FMI 2.0 and 3.0 co-simulation)"): inputs set before
+fmi2DoStep(t, h) hold over [t, t + h], or are linear over it where the master set their first
+derivatives (canInterpolateInputs); the states after the call are the ODE's solution at t + h to the
+parameters rtol and atol (defaults 1e-10, 1e-12: SOLVER_STARTS), and the derived outputs are
+computed from them and the inputs whenever they are read. The solver's step size carries over from
+step to step. A step the solver cannot complete within the tolerance is refused with fmi2Error and a
+logged reason. fmi2GetDirectionalDerivative gives the outputs' exact derivatives with respect to the
+inputs. The default initial state is the machine's equilibrium at the inputs' start values.
 
 The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
 """

@@ -20,10 +20,11 @@ logged under logStatusError and refuses exitInitializationMode and every step; i
 pythonfmu passes log messages to the importer only while logging is on (fmi2Instantiate's loggingOn,
 or fmi2SetDebugLogging): a refused step then comes with its reason under logStatusError.
 
-Step semantics (DESIGN section 5): the inputs set before do_step(t, h) hold over [t, t + h]; after
-it the states are those at t + h. The derived outputs are computed when read, from the states and
-the inputs as they are then, which is the direct feedthrough the model description declares. The
-default initial state is the machine's equilibrium at the inputs' start values.
+Step semantics (docs/design.md, "The FMUs (FMI 2.0 and 3.0 co-simulation)"): the inputs set before
+do_step(t, h) hold over [t, t + h]; after it the states are those at t + h. The derived outputs are
+computed when read, from the states and the inputs as they are then, which is the direct feedthrough
+the model description declares. The default initial state is the machine's equilibrium at the
+inputs' start values.
 """
 import importlib
 import json

@@ -18,7 +18,7 @@ shift = a + period floor((x_w's first angle state - a) / period + 1/2). In the f
 time tau are u - a R - c (R tau + T) and states x - (shift + c tau) A - c W (R: 1 for angle inputs, T:
 the torque coefficients, e.g. D on SM4's Pm, A: 1 for angle states, W: 1 for the speed state).
 
-Per communication step (h, u) [s, u in the component's input units] (DESIGN section 5), with the
+Per communication step (h, u) [s, u in the component's input units] (docs/fmu.md, "A step"), with the
 inputs' derivatives du over it (fmi2SetRealInputDerivatives; 0: held), u(s) = u + du (s - t):
 
 * an input change above restart_jump (in any input's unit) starts a new window at once, from the

@@ -1,4 +1,4 @@
-"""`opfmu grid run|cct|screen`: the design card's grid contract (result.csv columns, one row per
+"""`opfmu grid run|cct|screen`: the grid contract of docs/grid.md (result.csv columns, one row per
 communication point, cct --json with cct_s), the surrogate FMUs against the monolithic run and its
 critical clearing time, one-line errors with exit code 2 for what cannot run, decided before any
 work, a result set written whole or not at all, and no extracted FMU folder left behind."""
