@@ -80,7 +80,7 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
 
     Returns {"path", "size_bytes", "guid", "params", "binaries", "checks"} (params: every parameter
     of the machine built in; binaries: {platform: {"path", "size_bytes"}}; checks: {platform: what
-    running it found}). Raises NativeReferenceError (a ValueError, subclass of builder.BuildError)
+    running it found}). Raises NativeReferenceError (a ValueError, subclass of fmu_export.binaries.BuildError)
     with a one-line message for anything that stops the build."""
     out = Path(out)
     try:
