@@ -12,6 +12,23 @@ from opfmu.checks import MAX_COUNT, check_fields, json_object_file, output_file,
 from opfmu.errors import UserError
 
 
+class _ScenarioNames:
+    """The built-in scenarios' names as argparse choices, looked up when argparse first asks: the
+    scenarios module loads scipy, which a command other than compare does not need."""
+
+    @staticmethod
+    def _names() -> tuple:
+        from reference_models.scenarios import SCENARIOS
+
+        return tuple(SCENARIOS)
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+    def __iter__(self):
+        return iter(self._names())
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # one line instead of usage + message
         raise UserError(f"{self.prog}: {message}")
@@ -472,15 +489,13 @@ def build_parser() -> argparse.ArgumentParser:
     _build_options(ref)
     ref.set_defaults(func=cmd_build_reference_fmu)
 
-    from reference_models.scenarios import SCENARIOS
-
     cmp = sub.add_parser("compare", help="run the surrogate and the reference FMU on the same inputs",
                          description="fmpy simulates both FMUs on one input signal; prints MAE, RMSE and MaxAE "
                                      "per output, wall times and the speedup, and writes plots.")
     cmp.add_argument("--surrogate", required=True, help="surrogate FMU")
     cmp.add_argument("--reference", required=True, help="reference FMU")
     source = cmp.add_mutually_exclusive_group(required=True)
-    source.add_argument("--scenario", choices=SCENARIOS, help="built-in scenario")
+    source.add_argument("--scenario", choices=_ScenarioNames(), help="built-in scenario")
     source.add_argument("--inputs", help="CSV with columns time, Vs, theta_vs and optionally Pm, Efd (absent: held "
                                          "at their start values)")
     cmp.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
@@ -516,22 +531,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _run(args) -> None:
-    """args.func(args); a grid command's refusals (a bad contingency, an FMU that cannot play its
-    role, a build that fails) are user errors."""
-    if getattr(args, "command", None) != "grid":
-        args.func(args)
-        return
-    from cosim.fmu import CouplingError
-
-    try:
-        args.func(args)
-    except (ValueError, CouplingError) as exc:
-        raise UserError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
-    except OSError as exc:  # an output folder that cannot be written, a file that cannot be read
-        raise UserError(f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")) from None
-
-
 def _version() -> str:
     from reference_models.version import __version__
 
@@ -551,14 +550,24 @@ def interrupted_message(args) -> str:
     return "interrupted"
 
 
-def main(argv=None) -> int:
-    from surrogate.data import DatasetError
+def _dataset_error(exc: Exception) -> bool:
+    """True for surrogate.data's DatasetError (raised only by commands that imported that package,
+    so it is looked up, not imported: most commands never load it)."""
+    datasets = sys.modules.get("surrogate.data.datasets")
+    return datasets is not None and isinstance(exc, datasets.DatasetError)
 
+
+def main(argv=None) -> int:
     args = None
     try:
         args = build_parser().parse_args(argv)
-        _run(args)
-    except (UserError, DatasetError) as exc:
+        args.func(args)
+    except UserError as exc:
+        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        if not _dataset_error(exc):
+            raise
         print(f"error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # a failed reference solve: finished work is kept for the rerun

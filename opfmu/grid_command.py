@@ -165,13 +165,17 @@ def _contingency(case, bus, clear, trip, args):
         raise UserError(_one_line(exc)) from None
 
 
-def _check_fmus(case, kind) -> None:
-    """The FMU kinds, FMU files and operators of every unit, checked before any build."""
+def _check_fmus(case, kind, fmu_cache=None) -> None:
+    """The FMU kinds, FMU files and operators of every unit and the FMU cache folder, checked before
+    any build."""
     from cosim.fmu import CouplingError
+    from opfmu.checks import output_folder
     from cosim.fmus import check_unit_fmus
 
     if kind == "monolithic":
         return
+    if fmu_cache is not None:
+        output_folder(fmu_cache)
     try:
         check_unit_fmus(case, kind)
     except CouplingError as exc:
@@ -215,7 +219,7 @@ def cmd_run(args) -> None:
     main_kind = _main_kind(case, args.fmus)
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
     for kind in kinds:
-        _check_fmus(case, kind)
+        _check_fmus(case, kind, args.fmu_cache)
     try:
         outputs.check_output(args.out, outputs.RUN_FILES)
     except outputs.OutputError as exc:
@@ -281,7 +285,7 @@ def cmd_cct(args) -> None:
     _stop(args, settings)
     _resolution(args)
     contingency = _contingency(case, args.fault, args.fault_start + 0.05, args.trip, args)  # clearing: bisected
-    _check_fmus(case, args.fmus)
+    _check_fmus(case, args.fmus, args.fmu_cache)
     runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
     try:
         cct = critical_clearing_time(lambda c: runner.run(c, args.stop, stop_at_loss=True)[0].stable, contingency,
@@ -325,7 +329,7 @@ def cmd_screen(args) -> None:
     if args.clear >= args.stop:
         raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
     tasks_contingencies = [_contingency(case, bus, args.clear, trip, args) for bus, trip in pairs]
-    _check_fmus(case, args.fmus)
+    _check_fmus(case, args.fmus, args.fmu_cache)
     try:
         outputs.check_output(args.out, outputs.SCREENING_FILES)
     except outputs.OutputError as exc:
