@@ -5,6 +5,7 @@ Every native FMU the tests build goes through the content-keyed build cache (fmu
 of the run, so each distinct FMU is built once per run: the fixtures here, the tests' own builds, the
 grid tests and the commands the tests run (`opfmu demo`, `opfmu grid`), which find the cache through
 $OPFMU_FMU_CACHE."""
+import importlib.util
 import json
 import os
 import shutil
@@ -103,10 +104,13 @@ def optional_tools() -> dict:
 @pytest.hookimpl(tryfirst=True)
 def pytest_runtest_setup(item):
     """A test marked platform_tools("prog", ...) is skipped, before its fixtures are built, unless
-    every program named is on PATH; the reason names the Debian packages to install."""
+    every program named is on PATH; the reason names the Debian packages to install. A test marked
+    andes is skipped, saying how to install it, where ANDES is not installed."""
     marker = item.get_closest_marker("platform_tools")
     missing = [tool for tool in (marker.args if marker else ()) if shutil.which(tool) is None]
     if missing:
         packages = optional_tools()
         pytest.skip(f"no {', '.join(missing)}: install Debian's "
                     f"{', '.join(dict.fromkeys(packages.get(tool, tool) for tool in missing))}")
+    if item.get_closest_marker("andes") and importlib.util.find_spec("andes") is None:
+        pytest.skip("no ANDES (the optional reference, GPL-3.0-or-later): .venv/bin/pip install -e '.[andes]'")

@@ -104,6 +104,7 @@ ANDES_CASES = ["kundur/kundur_full.xlsx", "kundur/kundur_sexs.xlsx", "kundur/kun
                "ieee14/ieee14_full.xlsx", "ieee39/ieee39_full.xlsx", "npcc/npcc.xlsx"]
 
 
+@pytest.mark.andes
 @pytest.mark.parametrize("case", ANDES_CASES)
 def test_initial_states_and_set_points_match_andes_and_are_at_rest(case):
     pytest.importorskip("andes")
@@ -124,6 +125,7 @@ FAULTED_CASES = [("kundur/kundur_full.xlsx", 8), ("kundur/kundur_sexs.xlsx", 8),
                  ("ieee39/ieee39_full.xlsx", 16), ("npcc/npcc.xlsx", None)]
 
 
+@pytest.mark.andes
 @pytest.mark.parametrize("t", [1.05, 2.5])
 @pytest.mark.parametrize("case, fault_bus", FAULTED_CASES)
 def test_derivatives_and_outputs_match_andes_during_and_after_a_fault(case, fault_bus, t):
@@ -182,6 +184,7 @@ def test_an_out_of_range_parameter_is_refused_naming_it(name):
         component.params({first: 1e9})
 
 
+@pytest.mark.andes
 @pytest.mark.slow
 def test_device_trajectories_under_andes_inputs_follow_andes_through_a_fault():
     """Kundur with SEXS exciters, a fault at bus 8 for 100 ms, ANDES at h = 1 ms: each machine,
