@@ -119,6 +119,10 @@ def operator_machine(path):
 
     from surrogate.contract import ContractError, operator_metadata
 
+    if Path(path).is_dir():
+        raise CompareError(f"operator file {path} is a folder, not a file")
+    if not Path(path).exists():
+        raise CompareError(f"there is no operator file at {path}")
     try:
         meta = operator_metadata(onnx.load(str(path), load_external_data=False))
     except ContractError as exc:

@@ -182,7 +182,13 @@ class Component:
             if path.stat().st_size > MAX_PARAMETER_FILE_BYTES:
                 raise ParameterError(f"machine file {path} is larger than {MAX_PARAMETER_FILE_BYTES} bytes")
             values = json.loads(path.read_text(encoding="utf-8"), parse_constant=_refuse_constant)
-        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        except IsADirectoryError:
+            raise ParameterError(f"machine file {path} is a folder, not a file") from None
+        except FileNotFoundError:
+            raise ParameterError(f"cannot read machine file {path}: there is no such file") from None
+        except OSError as exc:
+            raise ParameterError(f"cannot read machine file {path}: {exc.strerror or _one_line(exc)}") from None
+        except (UnicodeDecodeError, ValueError, RecursionError) as exc:
             if isinstance(exc, ParameterError):
                 raise
             raise ParameterError(f"cannot read machine file {path}: {_one_line(exc)}") from None

@@ -327,3 +327,17 @@ def test_compare_names_an_fmu_that_carries_no_operator(tmp_path, capsys, look_al
                    "--scenario", "dip")
     assert line == f"error: {tmp_path / 'plain.fmu'} is not a surrogate FMU of opfmu (it has no resources/model.onnx)"
 
+
+
+def test_a_machine_file_that_is_a_folder_is_refused_as_a_folder_without_an_error_code(capsys, files):
+    line = refusal(capsys, "operator", "--machine", files / "a_folder", "--out", files / "out")
+    assert line == f"error: machine file {files / 'a_folder'} is a folder, not a file"
+    assert not (files / "out").exists()
+
+
+def test_an_operator_path_that_is_a_folder_is_refused_as_a_folder_without_an_error_code(files):
+    from opfmu.compare import CompareError, operator_machine
+
+    with pytest.raises(CompareError) as refused:
+        operator_machine(files / "a_folder")
+    assert str(refused.value) == f"operator file {files / 'a_folder'} is a folder, not a file"
