@@ -168,7 +168,7 @@ class FMU:
             try:
                 self.fmu = FMU3Slave(guid=md.guid, unzipDirectory=str(self.directory),
                                      modelIdentifier=cs.modelIdentifier, instanceName=self.name)
-                self.fmu.instantiate(loggingOn=logging_on, logMessage=self._log)
+                self.fmu.instantiate(loggingOn=logging_on, logMessage=self._log3)
             except Exception as exc:
                 self.fmu = None
                 raise CouplingError(f"{self.name}: cannot instantiate {md.modelName}: {self._said(exc)}") from None
@@ -209,6 +209,11 @@ class FMU:
     # what the FMU logs
 
     def _log(self, env, instance, status, category, message) -> None:
+        """fmi2CallbackLogger: keeps (status, text)."""
+        self._log3(env, status, category, message)
+
+    def _log3(self, env, status, category, message) -> None:
+        """fmi3LogMessageCallback (no instance argument): keeps (status, text)."""
         self.messages.append((int(status), message.decode(errors="replace") if message else ""))
         if len(self.messages) > LOG_KEPT:
             del self.messages[:-LOG_KEPT]

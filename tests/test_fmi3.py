@@ -9,11 +9,10 @@ from xml.etree import ElementTree
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description, simulate_fmu
-from fmpy.fmi2 import FMU2Slave
-from fmpy.fmi3 import FMU3Slave
+from fmpy import read_model_description, simulate_fmu
 from fmpy.validation import validate_fmu
 
+from cosim.fmu import FMU
 from fmu_export.native_reference_fmu import build_native_reference_fmu
 from fmu_export.platforms import PLATFORMS
 from surrogate.operator import DEFAULT_OPERATOR
@@ -24,60 +23,21 @@ INPUTS = ("Vs", "theta_vs", "Pm", "Efd")
 STATES = ("delta", "omega", "Ed_p", "Eq_p")
 
 
-class Instance:
-    """One FMI 2.0 or 3.0 instance under fmpy, with values by name and what it logs."""
-
-    def __init__(self, path, tmp_path, name="a"):
-        md = read_model_description(str(path))
-        self.version = 3 if md.fmiVersion.startswith("3") else 2
-        self.vr = {v.name: v.valueReference for v in md.modelVariables}
-        self.starts = {v.name: float(v.start) for v in md.modelVariables if v.causality == "input"}
-        self.messages = []
-        unzipped = extract(str(path), str(tmp_path / f"{name}-{self.version}"))
-        if self.version == 3:
-            self.fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=unzipped,
-                                 modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-            self.fmu.instantiate(logMessage=lambda env, status, category, message: self.messages.append(
-                (status, message.decode())))
-            self.fmu.enterInitializationMode(startTime=0.0)
-        else:
-            self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                                 instanceName=name)
-            self.fmu.instantiate()
-            self.fmu.setupExperiment(startTime=0.0)
-            self.fmu.enterInitializationMode()
-        self.fmu.exitInitializationMode()
-        self.t = 0.0
-
-    def set(self, values: dict):
-        refs, x = [self.vr[n] for n in values], [float(v) for v in values.values()]
-        (self.fmu.setFloat64 if self.version == 3 else self.fmu.setReal)(refs, x)
-
-    def get(self, *names):
-        refs = [self.vr[n] for n in names]
-        return np.array((self.fmu.getFloat64 if self.version == 3 else self.fmu.getReal)(refs))
-
-    def step(self, h):
-        self.fmu.doStep(self.t, h)
-        self.t += h
-
-    def derivatives(self, unknowns, knowns, seed):
-        u, k = [self.vr[n] for n in unknowns], [self.vr[n] for n in knowns]
-        return np.array(self.fmu.getDirectionalDerivative(u, k, list(seed)))
-
-    def free(self):
-        self.fmu.terminate()
-        self.fmu.freeInstance()
+def derivatives(instance, unknowns, knowns, seed):
+    """The directional derivative of the named outputs along `seed` over the named inputs."""
+    u, k = [instance.vr[n] for n in unknowns], [instance.vr[n] for n in knowns]
+    return np.array(instance.fmu.getDirectionalDerivative(u, k, list(seed)))
 
 
 def drive(instance, rng, n=120):
-    """Random held input levels at random step sizes (1-25 ms); returns the outputs after each step."""
+    """Random held input levels at random step sizes (1-25 ms) on a cosim.fmu.FMU; returns the outputs
+    after each step."""
     rows = []
     for k in range(n):
         if k % 9 == 0:
-            instance.set({name: start * (1 + rng.uniform(-0.04, 0.04)) if start else rng.uniform(-0.05, 0.05)
-                          for name, start in instance.starts.items()})
-        instance.step(float(rng.choice([0.001, 0.004, 0.01, 0.025])))
+            levels = {name: start * (1 + rng.uniform(-0.04, 0.04)) if start else rng.uniform(-0.05, 0.05)
+                      for name, start in ((name, instance.starts[name]) for name in instance.inputs)}
+        instance.step(float(rng.choice([0.001, 0.004, 0.01, 0.025])), **levels)
         rows.append(instance.get(*STATES, *DERIVED))
     return np.array(rows)
 
@@ -135,35 +95,36 @@ def test_the_fmi3_reference_validates_and_declares_what_it_does(reference_pair):
 
 def test_the_fmi3_reference_equals_the_fmi2_one_at_variable_steps(reference_pair, tmp_path):
     two, three, _ = reference_pair
-    a, b = Instance(two, tmp_path), Instance(three, tmp_path)
+    a, b = FMU(two, scratch=tmp_path), FMU(three, scratch=tmp_path)
     ya, yb = drive(a, np.random.default_rng(5)), drive(b, np.random.default_rng(5))
     np.testing.assert_allclose(yb, ya, rtol=0, atol=1e-12)
     assert np.ptp(ya[:, 1]) > 1e-3  # the machine moved
     assert b.get("time")[0] == pytest.approx(a.t)
-    a.free(), b.free()
+    a.close(), b.close()
 
 
 def test_fmi3_directional_and_adjoint_derivatives_equal_the_fmi2_ones(reference_pair, tmp_path):
     two, three, _ = reference_pair
-    a, b = Instance(two, tmp_path), Instance(three, tmp_path)
+    a, b = FMU(two, scratch=tmp_path), FMU(three, scratch=tmp_path)
     rng = np.random.default_rng(8)
     drive(a, np.random.default_rng(9), 30), drive(b, np.random.default_rng(9), 30)
     for _ in range(4):
         seed = rng.normal(size=len(INPUTS))
-        np.testing.assert_allclose(b.derivatives(DERIVED, INPUTS, seed), a.derivatives(DERIVED, INPUTS, seed),
+        np.testing.assert_allclose(derivatives(b, DERIVED, INPUTS, seed), derivatives(a, DERIVED, INPUTS, seed),
                                    rtol=0, atol=1e-12)
     # adjoint: seed over the unknowns, sensitivity over the knowns, = J^T seed
-    jacobian = np.array([a.derivatives(DERIVED, INPUTS, np.eye(len(INPUTS))[k]) for k in range(len(INPUTS))]).T
+    jacobian = np.array([derivatives(a, DERIVED, INPUTS, np.eye(len(INPUTS))[k]) for k in range(len(INPUTS))]).T
     weights = rng.normal(size=len(DERIVED))
     adjoint = b.fmu.getAdjointDerivative([b.vr[n] for n in DERIVED], [b.vr[n] for n in INPUTS], list(weights),
                                          nSensitivity=len(INPUTS))  # one per known (fmpy's default: per unknown)
     np.testing.assert_allclose(adjoint, jacobian.T @ weights, rtol=1e-14, atol=1e-14)
-    assert not np.any(b.derivatives(STATES, INPUTS, np.ones(len(INPUTS))))  # states: no direct dependence
+    assert not np.any(derivatives(b, STATES, INPUTS, np.ones(len(INPUTS))))  # states: no direct dependence
+    a.close(), b.close()
 
 
 def test_an_fmi3_state_restored_from_bytes_in_another_instance_repeats_the_run(reference_pair, tmp_path):
     _, three, _ = reference_pair
-    a = Instance(three, tmp_path, "a")
+    a = FMU(three, "a", scratch=tmp_path)
     drive(a, np.random.default_rng(1), 40)
     state = a.fmu.getFMUState()
     saved = a.fmu.serializeFMUState(state)
@@ -173,18 +134,18 @@ def test_an_fmi3_state_restored_from_bytes_in_another_instance_repeats_the_run(r
     a.t = t_saved
     np.testing.assert_array_equal(drive(a, np.random.default_rng(2), 30), first)
     a.fmu.freeFMUState(state)
-    b = Instance(three, tmp_path, "b")
+    b = FMU(three, "b", scratch=tmp_path)
     b.fmu.setFMUState(b.fmu.deserializeFMUState(saved))
     b.t = t_saved
     np.testing.assert_array_equal(drive(b, np.random.default_rng(2), 30), first)
-    a.free(), b.free()
+    a.close(), b.close()
 
 
 def test_bad_fmi3_values_and_calls_are_errors_with_a_logged_reason(reference_pair, tmp_path):
     _, three, _ = reference_pair
-    a = Instance(three, tmp_path)
+    a = FMU(three, scratch=tmp_path)
     with pytest.raises(Exception, match="fmi3SetFloat64"):
-        a.set({"Vs": float("nan")})
+        a.set(Vs=float("nan"))
     with pytest.raises(Exception, match="fmi3DoStep"):
         a.fmu.doStep(0.0, 0.0)
     with pytest.raises(Exception, match="fmi3DoStep"):
@@ -194,7 +155,7 @@ def test_bad_fmi3_values_and_calls_are_errors_with_a_logged_reason(reference_pai
     assert len(a.messages) >= 4 and all(status == 3 for status, _ in a.messages)
     assert any("not finite" in m or "finite" in m for _, m in a.messages)
     a.step(0.01)  # the FMU still works
-    a.free()
+    a.close()
 
 
 def test_fmpy_simulates_the_fmi3_reference_like_the_fmi2_one(reference_pair):
@@ -213,16 +174,16 @@ def test_the_fmi3_surrogate_equals_the_fmi2_one_on_the_same_inputs(surrogate_fmi
     assert validate_fmu(str(path)) == []
     if "win64" in info["checks"]:
         assert info["checks"]["win64"].startswith(("ran under wine", "not run here"))
-    a, b = Instance(surrogate_fmi2, tmp_path), Instance(path, tmp_path)
+    a, b = FMU(surrogate_fmi2, scratch=tmp_path), FMU(path, scratch=tmp_path)
     ya, yb = drive(a, np.random.default_rng(21), 150), drive(b, np.random.default_rng(21), 150)
     np.testing.assert_allclose(yb, ya, rtol=0, atol=1e-12)
     md = read_model_description(str(path))
     flag = next(v for v in md.modelVariables if v.name == "in_envelope")
     assert flag.type == "Boolean" and b.fmu.getBoolean([flag.valueReference]) == [True]
     seed = np.random.default_rng(3).normal(size=len(INPUTS))
-    np.testing.assert_allclose(b.derivatives(DERIVED, INPUTS, seed), a.derivatives(DERIVED, INPUTS, seed),
+    np.testing.assert_allclose(derivatives(b, DERIVED, INPUTS, seed), derivatives(a, DERIVED, INPUTS, seed),
                                rtol=0, atol=1e-12)
-    a.free(), b.free()
+    a.close(), b.close()
 
 
 @pytest.mark.platform_tools
@@ -358,15 +319,11 @@ def test_fmi3_state_calls_refuse_a_pointer_the_instance_did_not_hand_out(fmi3_st
 
 def test_fmi3_enter_initialization_mode_refuses_a_tolerance_that_is_not_positive_and_finite(fmi3_native, tmp_path):
     path, _, _ = fmi3_native
-    md = read_model_description(str(path))
-    messages = []
-    fmu = FMU3Slave(guid=md.instantiationToken, unzipDirectory=extract(str(path), str(tmp_path / "x")),
-                    modelIdentifier=md.coSimulation.modelIdentifier)
-    fmu.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+    instance = FMU(path, init=False, scratch=tmp_path)
     with pytest.raises(Exception):
-        fmu.enterInitializationMode(tolerance=-1.0, startTime=0.0)
-    assert messages == ["fmi3EnterInitializationMode: tolerance -1 must be positive and finite"]
-    fmu.enterInitializationMode(tolerance=1e-6, startTime=0.0)  # the instance is still usable
-    fmu.exitInitializationMode()
-    fmu.terminate()
-    fmu.freeInstance()
+        instance.fmu.enterInitializationMode(tolerance=-1.0, startTime=0.0)
+    assert [text for _, text in instance.messages] == [
+        "fmi3EnterInitializationMode: tolerance -1 must be positive and finite"]
+    instance.fmu.enterInitializationMode(tolerance=1e-6, startTime=0.0)  # the instance is still usable
+    instance.fmu.exitInitializationMode()
+    instance.close()
