@@ -14,14 +14,14 @@ from fmpy import extract, read_model_description
 
 from cosim.fmu import FMU as Slave
 from hand_made import operator_without_trunk
+from machines import wscc9_machine
 from opfmu.cli import main
 from reference_models.drift import frame_of
 from reference_models.sm4 import SM4, SM4Params
 from surrogate.operator import DEFAULT_OPERATOR
 
 INJECTION = '"); system("rm -rf /"); //'
-UNDAMPED = {"H": 3.01, "D": 0.0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
-            "Tq0_p": 0.6, "Xep": 0.0, "Re": 0.0}
+UNDAMPED = wscc9_machine(3)  # WSCC generator 3 as shipped: D = 0, no external reactance, 60 Hz
 
 
 @pytest.fixture(scope="module")

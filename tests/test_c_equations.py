@@ -8,6 +8,8 @@ import pytest
 from fmu_export.c_equations import equations_c_source, output_input_dependencies
 from reference_models.sm4 import SM4, SM4Params
 
+from machines import wscc9_machine
+
 WRAPPERS = """
 void derivatives(const double *x, const double *u, double *out) { model_derivatives(x, u, out); }
 void derived(const double *x, const double *u, double *out) { model_outputs(x, u, out); }
@@ -16,9 +18,8 @@ void derived(const double *x, const double *u, double *out) { model_outputs(x, u
 MACHINES = {
     "table I": SM4Params(),
     "resistive, light damping": SM4Params(Re=0.02, Rs=0.003, D=0.5),
-    # the DESIGN's example user machine: no damping, no external reactance, other reactances and times
-    "undamped, other reactances": SM4Params(H=3.01, D=0.0, Xd=1.3125, Xd_p=0.1813, Xq=1.2578, Xq_p=0.25,
-                                            Td0_p=5.89, Tq0_p=0.6, Xep=0.0, Re=0.0),
+    # WSCC generator 3: no damping, no external reactance, other reactances and times, 60 Hz
+    "undamped, other reactances": SM4Params(**wscc9_machine(3)),
 }
 
 

@@ -20,9 +20,10 @@ from cosim.fmu import FMU as Slave
 from reference_models.scenarios import scenario
 from reference_models.sm4 import SM4
 
-# a machine other than the default (docs/design.md, "The component: SM4"): no damping, no external reactance
-MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
-           "Tq0_p": 0.6, "Xep": 0, "Re": 0}
+from machines import wscc9_machine
+
+# WSCC generator 3 as shipped, a machine other than the default: no damping, no external reactance, 60 Hz
+MACHINE = wscc9_machine(3)
 DEFAULT, OTHER = SM4.params(), SM4.params(MACHINE)
 HARNESSES = __file__.rsplit("/", 1)[0] + "/c"
 

@@ -6,8 +6,9 @@ from fmpy.validation import validate_fmu
 
 from opfmu.cli import main
 
-MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
-           "Tq0_p": 0.6, "Xep": 0, "Re": 0}
+from machines import wscc9_machine
+
+MACHINE = wscc9_machine(3)  # WSCC generator 3 as shipped
 QUICK = ["--windows", "16", "--epochs", "10", "--horizon", "0.2", "--report-stop", "0.5", "--workers", "0", "--quiet",
          "--pm", "0.7", "1.0", "--efd", "1.2", "1.8", "--operating-point", "0.85", "1.403", "--name", "Gen3"]
 

@@ -17,12 +17,13 @@ from cosim.fmu import FMU as Slave
 from reference_models.component import ParameterError
 from reference_models.sm4 import SM4
 
+from machines import wscc9_machine
+
 # (h, Vs, theta_vs, Pm, Efd): a dip at the start operating point, then new bus, mechanical and field levels
 STEPS = ([(0.01, 1.0, 0.0, 0.7048, 1.08)] * 5 + [(0.02, 0.6, 0.1, 0.7048, 1.08)] * 10
          + [(0.005, 0.95, 0.25, 0.6, 1.3)] * 40 + [(0.05, 1.05, 0.2, 0.75, 1.0)] * 6)
-# a machine other than the default (docs/design.md, "The component: SM4"): no damping, no external reactance
-MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
-           "Tq0_p": 0.6, "Xep": 0, "Re": 0}
+# WSCC generator 3 as shipped, a machine other than the default: no damping, no external reactance, 60 Hz
+MACHINE = wscc9_machine(3)
 DEFAULT, OTHER = SM4.params(), SM4.params(MACHINE)
 
 

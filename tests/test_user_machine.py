@@ -20,9 +20,9 @@ from surrogate.data import load_metadata, load_split
 
 from conftest import preset_file, tiny
 from cosim.fmu import FMU as Slave
+from machines import wscc9_machine
 
-MACHINE = {"H": 3.01, "D": 0, "Xd": 1.3125, "Xd_p": 0.1813, "Xq": 1.2578, "Xq_p": 0.25, "Td0_p": 5.89,
-           "Tq0_p": 0.6, "Xep": 0, "Re": 0}
+MACHINE = wscc9_machine(3)  # WSCC generator 3 as shipped
 
 
 def opfmu(*args):
