@@ -42,6 +42,7 @@ from reference_models.sm4 import SM4
 from reference_models.version import __version__
 
 from .model_description import model_description, validation_problems
+from .pythonfmu_exit import ExitPatchError, without_exit_release
 from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, Variable, fmu_variables, start_state
 
 SLAVE = Path(__file__).with_name("python_reference_slave.py")
@@ -188,11 +189,18 @@ def _module_closure(path: Path) -> list[Path]:
 
 
 def _rewrite_model_description(fmu: Path, model_name: str, variables: list[Variable], description: str) -> str:
-    """Replace pythonfmu's modelDescription.xml with ours (same GUID); returns the GUID."""
+    """Replace pythonfmu's modelDescription.xml with ours (same GUID) and its linux64 binary with one
+    without the exit-time double release (pythonfmu_exit); returns the GUID."""
     with zipfile.ZipFile(fmu) as source:
         entries = {info.filename: source.read(info) for info in source.infolist()}
     guid = ET.fromstring(entries["modelDescription.xml"]).get("guid")
     entries["modelDescription.xml"] = model_description(model_name, guid, variables, description)
+    for name in entries:
+        if name.startswith("binaries/linux64/") and name.endswith(".so"):
+            try:
+                entries[name] = without_exit_release(entries[name])
+            except ExitPatchError as exc:
+                raise ReferenceBuildError(str(exc)) from None
     rewritten = fmu.with_suffix(".rewritten")
     with zipfile.ZipFile(rewritten, "w", zipfile.ZIP_DEFLATED) as target:
         for name, data in entries.items():

@@ -253,3 +253,19 @@ print(last)
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-2000:]
     assert abs(float(done.stdout.split()[-1]) - SM4.steady_state(None, OTHER)[0]) < 1e-9
+
+
+def test_the_linux64_binary_returns_at_once_from_pythonfmus_exit_release(reference_path):
+    """pythonfmu's finalizePythonInterpreter releases its state a second time at process exit (a
+    use-after-free); the builder makes it return at once, and a binary already changed, or any
+    function that does not start as the known build's, is refused rather than patched again."""
+    from fmu_export.pythonfmu_exit import KNOWN_PROLOGUE, SYMBOL, ExitPatchError, _symbol_offset, without_exit_release
+
+    with zipfile.ZipFile(reference_path) as fmu:
+        binary = fmu.read(next(n for n in fmu.namelist() if n.startswith("binaries/linux64/") and n.endswith(".so")))
+    offset = _symbol_offset(binary, SYMBOL)
+    assert offset is not None
+    assert binary[offset:offset + len(KNOWN_PROLOGUE)] == KNOWN_PROLOGUE[:-1] + b"\xc3"
+    with pytest.raises(ExitPatchError, match="not the known build"):
+        without_exit_release(binary)
+    assert without_exit_release(b"\x7fELF\x02\x01" + bytes(0x3A)) == b"\x7fELF\x02\x01" + bytes(0x3A)
