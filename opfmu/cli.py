@@ -302,6 +302,19 @@ def _operating_point(onnx_path):
     return operator_metadata(onnx.load(str(onnx_path))).get("operating_point")
 
 
+def _extract(extract, fmu, folder: str) -> str:
+    """fmpy's extract of `fmu` into `folder`; UserError naming the FMU for an archive that cannot be
+    unpacked (a damaged member, a file where a folder must be)."""
+    import zipfile
+    import zlib
+
+    try:
+        return extract(fmu, unzipdir=folder)
+    except (zipfile.BadZipFile, zlib.error, OSError, ValueError) as exc:
+        reason = getattr(exc, "strerror", None) or str(exc).replace(folder, "")
+        raise UserError(f"{fmu} cannot be unpacked as an FMU: {reason}") from None
+
+
 def cmd_compare(args) -> None:
     import tempfile
     import zipfile
@@ -332,8 +345,8 @@ def cmd_compare(args) -> None:
     tmp = None
     try:
         with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
-            surrogate_dir = extract(args.surrogate, unzipdir=f"{tmp}/surrogate")
-            reference_dir = extract(args.reference, unzipdir=f"{tmp}/reference")
+            surrogate_dir = _extract(extract, args.surrogate, f"{tmp}/surrogate")
+            reference_dir = _extract(extract, args.reference, f"{tmp}/reference")
             machine = fmu_machine(surrogate_dir)
             same_machine(surrogate_dir, reference_dir)
             if args.scenario:

@@ -1,4 +1,4 @@
-"""`opfmu grid`: network co-simulation of a grid case (the design card's grid section).
+"""`opfmu grid`: network co-simulation of a grid case (the contract of docs/grid.md).
 
     opfmu grid run    one contingency: DIR/result.csv, DIR/result.png, DIR/report.md, DIR/summary.json
     opfmu grid cct    the critical clearing time of a fault and its clearing action (--json: one object)

@@ -341,3 +341,17 @@ def test_an_operator_path_that_is_a_folder_is_refused_as_a_folder_without_an_err
     with pytest.raises(CompareError) as refused:
         operator_machine(files / "a_folder")
     assert str(refused.value) == f"operator file {files / 'a_folder'} is a folder, not a file"
+
+
+def test_compare_refuses_an_fmu_that_cannot_be_unpacked_in_one_line(tmp_path, capsys):
+    import zipfile
+
+    crafted = tmp_path / "crafted.fmu"
+    with zipfile.ZipFile(crafted, "w") as archive:  # a file where unpacking needs a folder
+        archive.writestr("modelDescription.xml", "<fmiModelDescription/>")
+        archive.writestr("resources/model.onnx", "a")
+        archive.writestr("resources/model.onnx/a", "b")
+    line = refusal(capsys, "compare", "--surrogate", crafted, "--reference", crafted, "--scenario", "dip",
+                   "--out", tmp_path / "out")
+    assert line.startswith(f"error: {crafted} cannot be unpacked as an FMU: ")
+    assert "opfmu_compare_" not in line and not (tmp_path / "out").exists()
