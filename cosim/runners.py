@@ -1,6 +1,6 @@
 """One interface over the ways a grid run is made: the co-simulation master with FMUs of a kind,
-or the monolithic reference. `open_runner(kind, case, ...)` gives an object with
-`run(contingency, stop, stop_at_loss=False) -> (GridResult, timing dict)` and `close()`.
+the monolithic reference, or ANDES' own simulation of a case converted from it (cosim.andes_runner).
+`open_runner(kind, case, ...)` gives an object with `run(contingency, stop, stop_at_loss=False) -> (GridResult, timing dict)` and `close()`.
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from dataclasses import replace
 from .fmus import FMU_KINDS, generator_files
 from .master import GridMaster, MasterSettings, check_steps
 
-RUN_KINDS = tuple(k for k in FMU_KINDS if k != "file") + ("monolithic",)  # what --fmus may name
+RUN_KINDS = tuple(k for k in FMU_KINDS if k != "file") + ("monolithic", "andes")  # what --fmus may name
 
 
 class MonolithicRunner:
@@ -62,5 +62,9 @@ def open_runner(kind: str | None, case, settings: MasterSettings = MasterSetting
     dynamic data). FMUs are built into `cache` as needed (progress(text) before each build)."""
     if kind == "monolithic":
         return MonolithicRunner(case, settings.step, monolithic_rtol)
+    if kind == "andes":
+        from .andes_runner import AndesRunner
+
+        return AndesRunner(case, settings.step)
     files = generator_files(case, kind, cache, progress, fmi_version)
     return MasterRunner(files, case, settings, scratch)

@@ -19,7 +19,10 @@ from pathlib import Path
 
 from opfmu.errors import UserError
 
-CASES = ("wscc9",)
+CASES = ("wscc9", "kundur", "ieee14", "ieee39", "npcc")  # reference_models.grid.case.SHIPPED_CASES
+CASE_TITLES = {"wscc9": "WSCC 9-bus", "kundur": "Kundur two-area", "ieee14": "IEEE 14-bus", "ieee39": "IEEE 39-bus",
+               "npcc": "NPCC 140-bus"}
+CASE_RUN_KINDS = ("monolithic", "andes")  # what runs the cases converted from ANDES so far
 MAX_STOP_S = 3600.0  # the longest run a grid command takes [s]
 
 
@@ -38,15 +41,18 @@ def _time(text: str) -> float:
 def _run_kinds() -> tuple:
     from cosim.fmus import FMU_KINDS
 
-    return tuple(k for k in FMU_KINDS if k != "file") + ("monolithic",)
+    return tuple(k for k in FMU_KINDS if k != "file") + ("monolithic", "andes")
 
 
 def _common(p, trip: bool = True) -> None:
-    p.add_argument("--case", default="wscc9", help="the network (only wscc9: the WSCC 9-bus system, Anderson & Fouad)")
+    p.add_argument("--case", default="wscc9",
+                   help="the shipped case: wscc9 (default; the WSCC 9-bus system, Anderson & Fouad), or one "
+                        "converted from ANDES (kundur, ieee14, ieee39, npcc: --fmus monolithic or andes)")
     p.add_argument("--dynamic-data", default=None, metavar="FILE",
                    help="the units' dynamic data (machines, exciters, FMU kinds; default: the shipped wscc9 file)")
     p.add_argument("--fmus", choices=_run_kinds(), default=None,
-                   help="the FMUs of every unit, or monolithic for the DAE reference "
+                   help="the FMUs of every unit, monolithic for the DAE reference, or andes for ANDES' own "
+                        "simulation at the step --step (where ANDES is installed) "
                         "(default: each unit's kind in the dynamic data: surrogate for the shipped file)")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
                    help="FMI version of the native FMUs built (default 2; FMI 3.0 inputs are held over each step)")
@@ -116,12 +122,21 @@ def _one_line(exc: BaseException) -> str:
 def _case(args):
     """The case of --case and --dynamic-data; UserError for what cannot be read."""
     from reference_models.grid import wscc9
-    from reference_models.grid.case import CaseError
+    from reference_models.grid.case import DATA_DIR, CaseError, load_case, shipped_case
 
     if args.case not in CASES:
         raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
+    if args.case != "wscc9":
+        kinds = [args.fmus] + ([k.strip() for k in args.compare.split(",") if k.strip() not in ("", "none")]
+                               if getattr(args, "compare", None) else [])
+        if any(k not in CASE_RUN_KINDS for k in kinds):
+            raise UserError(f"{args.case} runs with --fmus monolithic or andes (its FMU runs are not available yet)")
     try:
-        return wscc9.case(args.dynamic_data)
+        if args.case == "wscc9":
+            return wscc9.case(args.dynamic_data)
+        if args.dynamic_data is None:
+            return shipped_case(args.case)
+        return load_case(DATA_DIR / f"{args.case}_network.json", args.dynamic_data, args.case)
     except CaseError as exc:
         raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
 
@@ -174,6 +189,15 @@ def _check_fmus(case, kind, fmu_cache=None) -> None:
 
     if kind == "monolithic":
         return
+    if kind == "andes":
+        from cosim.andes_runner import ANDES_MISSING, andes_available
+
+        if not andes_available():
+            raise UserError(ANDES_MISSING)
+        if case.name not in CASES[1:]:
+            raise UserError(f"--fmus andes runs the cases converted from ANDES ({', '.join(CASES[1:])}), "
+                            f"not {case.name}")
+        return
     if fmu_cache is not None:
         output_folder(fmu_cache)
     try:
@@ -185,6 +209,8 @@ def _check_fmus(case, kind, fmu_cache=None) -> None:
 def _main_kind(case, fmus) -> str:
     from cosim.fmus import unit_fmus
 
+    if fmus in CASE_RUN_KINDS:
+        return fmus
     return fmus or "+".join(sorted({f.kind for f in unit_fmus(case)}))
 
 
@@ -229,12 +255,16 @@ def cmd_run(args) -> None:
         runner = _open(kind, case, settings, args, _progress)
         try:
             result, timing = runner.run(contingency, args.stop)
+        except RuntimeError as exc:
+            if kind != "andes":
+                raise
+            raise UserError(_one_line(exc)) from None
         finally:
             runner.close()
         label = kind or main_kind
         runs[label], timings[label] = result, timing
     main = runs[main_kind]
-    title = f"WSCC 9-bus: {contingency.label}"
+    title = f"{CASE_TITLES.get(args.case, args.case)}: {contingency.label}"
     messages = {k: t.pop("messages", {}) for k, t in timings.items()}
     logged = [f"{_label(kind)}, generator {bus}: {text}" for kind, per_bus in messages.items()
               for bus, texts in per_bus.items() for _, text in texts[:3]]
@@ -329,6 +359,8 @@ def cmd_screen(args) -> None:
     if args.clear >= args.stop:
         raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
     tasks_contingencies = [_contingency(case, bus, args.clear, trip, args) for bus, trip in pairs]
+    if args.fmus == "andes":
+        raise UserError("grid screen runs FMUs or the monolithic DAE, not andes")
     _check_fmus(case, args.fmus, args.fmu_cache)
     try:
         outputs.check_output(args.out, outputs.SCREENING_FILES)

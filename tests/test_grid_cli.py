@@ -84,7 +84,7 @@ def test_grid_screen_tabulates_ccts_verdicts_and_first_swing_peaks_on_dask(tmp_p
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["grid", "run", "--case", "ieee14", "--fault", "7", "--clear", "0.1", "--out", "x"], "unknown case"),
+    (["grid", "run", "--case", "ieee118", "--fault", "7", "--clear", "0.1", "--out", "x"], "unknown case"),
     (["grid", "run", "--fault", "12", "--clear", "0.1", "--out", "x"], "no bus 12"),
     (["grid", "run", "--fault", "7", "--clear", "0.1", "--trip", "2-7", "--out", "x"], "disconnects a generator"),
     (["grid", "run", "--fault", "7", "--clear", "0.1", "--trip", "seven", "--out", "x"], "FROM-TO"),

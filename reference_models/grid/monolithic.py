@@ -8,15 +8,22 @@ bus-port voltage inputs are its generator bus voltage; an input link takes the o
 same signal within the unit (a state, or an output of that device evaluated at its inputs); the
 terminal voltage is the bus voltage magnitude behind the machine's external impedance; set points
 are held at their start values (`controls=False`: every control signal a machine takes is held at
-its start value too, and the control devices stand still). Loads are constant impedances drawing
-their load-flow power at the load-flow voltages.
+its start value too, and the control devices stand still). Within a cycle of links (an exciter
+taking the machine's bus current, the machine its field voltage) the inputs of the device first
+reached are read at their start values except its bus voltage: exact where the links read back do
+not depend on them (the machines' bus currents do not depend on Pm or Efd). Loads are constant
+impedances drawing their load-flow power at the load-flow voltages. A machine's quantities are on
+its own base Sn, its bus port on the system base (the components convert).
 
 The network. With the machines' states given, each machine's bus current (its bus-port current
 outputs, network frame) is affine in its bus voltage (V_re, V_im) for the machines modelled here
-(SM4: the stator equations are linear in Vs sin(delta - theta_vs) and Vs cos(delta - theta_vs)).
-Its map I = c + A v is read off the component's own output equations at v = 0, (1, 0), (0, 1), so
-the equations are used as they are. The network, Kron-reduced to the generator buses for each
-topology (Case.reduced), gives I = Y_red V there; so every right-hand side is one linear solve
+(SM4, GENCLS, GENROU: the stator equations are linear in Vs sin(delta - theta_vs) and
+Vs cos(delta - theta_vs), GENROU's saturation a function of its states only), read at the machine's
+other inputs: their start values, or the state of the device of its unit that gives them (GENCLS'
+Efd enters its current: held, or an exciter state). Its map I = c + A v is read off the
+component's own output equations at v = 0, (1, 0), (0, 1), so the equations are used as they are.
+The network, Kron-reduced to the generator buses for each topology (Case.reduced; units at one bus
+inject into it together), gives I = Y_red V there; so every right-hand side is one linear solve
 (Y_red - A) v = c, exact. The other buses' voltages follow from the generator buses'.
 
 Events: a fault (a shunt of impedance `fault_impedance`, default 1e-6 pu: bolted) at a bus from
@@ -35,16 +42,17 @@ from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency
 from .result import ROTOR_ANGLE, GridResult
 
 
-def _current_map(component, x, p, m):
+def _current_map(component, x, p, m, u0=None):
     """(c [2], A [2][2]) with the machine's bus current (I_re, I_im) = c + A (V_re, V_im), read off the
-    component's output equations at three voltages (x: its states, scalars or arrays)."""
+    component's output equations at three voltages (x: its states, scalars or arrays; u0: its
+    other inputs, component order, the bus-port entries ignored; None: zeros)."""
     bus = component.ports.bus
     names = component.input_names
     i_v, i_a = names.index(bus.voltage[0]), names.index(bus.voltage[1])
     i_re, i_im = (component.output_names.index(n) for n in bus.current)
 
     def current(Vs, theta):
-        u = [0.0] * len(names)
+        u = [0.0] * len(names) if u0 is None else list(u0)
         u[i_v], u[i_a] = Vs, theta
         y = component.output_equations(x, tuple(u), p, m)
         return y[i_re], y[i_im]
@@ -88,8 +96,12 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
 
     def inputs_of(j):
         if inputs[j] is None:
-            inputs[j] = ()  # a cycle reads a held start value below
             d, wires = devices[j], wiring[j]
+            # within a cycle (an exciter taking the machine's current, the machine its field voltage)
+            # the device's inputs read their bus values and, for the rest, their start values
+            inputs[j] = tuple((Vs if wires[name].index == 0 else theta)
+                              if name in wires and wires[name].kind == "bus" else starts[j].inputs[name]
+                              for name in d.component.input_names)
             values = []
             for name in d.component.input_names:
                 source = wires.get(name)
@@ -185,6 +197,17 @@ class System:
         self.x0 = x0
         self.rotor_angles = [self.slices[k][0].start + u.machine.component.state_names.index(ROTOR_ANGLE)
                              for k, u in enumerate(case.units)]
+        # the machine inputs its bus current is read at: start values, or the state of the device giving them
+        self.machine_links = tuple(
+            tuple((i, self.slices[k][w[name].device].start
+                   + u.devices[w[name].device].component.state_names.index(w[name].variable))
+                  for i, name in enumerate(u.machine.component.input_names)
+                  if name in w and w[name].kind == "device"
+                  and w[name].variable in u.devices[w[name].device].component.state_names)
+            for k, (u, w) in enumerate(zip(case.units, (wi[0] for wi in self.wiring))))
+        buses = list(dict.fromkeys(u.bus for u in case.units))  # the reduced network's buses, in Case.reduced's order
+        self.bus_slot = tuple(buses.index(u.bus) for u in case.units)
+        self.first_unit = tuple(self.bus_slot.index(b) for b in range(len(buses)))
         self._networks = {}
 
     def network(self, fault_bus: int | None = None, fault_impedance: complex = BOLTED_FAULT_IMPEDANCE,
@@ -196,31 +219,43 @@ class System:
         return self._networks[key]
 
     def generator_voltages(self, y, network: Reduced, m=math):
-        """(V_re [g], V_im [g]) at the generator buses for the state y (m = math), or for states
-        y [n, n_states] (m = numpy: arrays [n, g])."""
-        g = len(self.units)
+        """(V_re [g], V_im [g]) at every unit's bus for the state y (m = math), or for states
+        y [n, n_states] (m = numpy: arrays [n, g]); units at one bus inject into it together."""
+        b = len(self.first_unit)
         if m is math:
             M = np.array(network.Y_real)
-            c = np.empty(2 * g)
+            c = np.zeros(2 * b)
             for k, u in enumerate(self.units):
-                d = u.machine
-                ck, A = _current_map(d.component, list(y[self.slices[k][0]]), d.params, math)
-                c[2 * k: 2 * k + 2] = ck
-                M[2 * k: 2 * k + 2, 2 * k: 2 * k + 2] -= A
+                d, i = u.machine, 2 * self.bus_slot[k]
+                ck, A = _current_map(d.component, list(y[self.slices[k][0]]), d.params, math, self._machine_u(k, y))
+                c[i: i + 2] += ck
+                M[i: i + 2, i: i + 2] -= A
             v = np.linalg.solve(M, c)
-            return v[0::2], v[1::2]
+            return v[0::2][list(self.bus_slot)], v[1::2][list(self.bus_slot)]
         y = np.asarray(y)
-        M = np.broadcast_to(network.Y_real, (y.shape[0], 2 * g, 2 * g)).copy()
-        c = np.empty((y.shape[0], 2 * g))
+        M = np.broadcast_to(network.Y_real, (y.shape[0], 2 * b, 2 * b)).copy()
+        c = np.zeros((y.shape[0], 2 * b))
         for k, u in enumerate(self.units):
-            d, s = u.machine, self.slices[k][0]
-            ck, A = _current_map(d.component, [y[:, j] for j in range(s.start, s.stop)], d.params, np)
-            c[:, 2 * k], c[:, 2 * k + 1] = ck
+            d, s, i = u.machine, self.slices[k][0], 2 * self.bus_slot[k]
+            ck, A = _current_map(d.component, [y[:, j] for j in range(s.start, s.stop)], d.params, np,
+                                 self._machine_u(k, y, np))
+            c[:, i] += ck[0]
+            c[:, i + 1] += ck[1]
             for r in range(2):
                 for q in range(2):
-                    M[:, 2 * k + r, 2 * k + q] -= A[r][q]
+                    M[:, i + r, i + q] -= A[r][q]
         v = np.linalg.solve(M, c[..., None])[..., 0]
-        return v[:, 0::2], v[:, 1::2]
+        return v[:, 0::2][:, list(self.bus_slot)], v[:, 1::2][:, list(self.bus_slot)]
+
+    def _machine_u(self, k: int, y, m=math) -> list:
+        """The inputs of unit k's machine (component order) that its bus current is read at: each
+        held at its start value, or the state of the device of its unit that gives it (y [n_states],
+        m = math; y [n, n_states], m = numpy)."""
+        start = self.case.starts[k][0].inputs
+        u = [start[name] for name in self.units[k].machine.component.input_names]
+        for i, at in self.machine_links[k]:
+            u[i] = y[at] if m is math else y[:, at]
+        return u
 
     def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math) -> list:
         """The inputs of every device of unit k (tuples in component order) at state y (scalars, m =
@@ -273,8 +308,10 @@ class System:
             for j, d in enumerate(unit.devices):
                 for i, name in enumerate(d.component.state_names):
                     states.setdefault(name, np.full((n, g), np.nan))[:, k] = y[:, self.slices[k][j].start + i]
+        if "Efd" not in states and "Efd" in machine_inputs:  # the field voltage where no device has it as a state
+            states["Efd"] = machine_inputs["Efd"]
         S = V_gen * np.conj(I)
-        return {"time": np.asarray(t, dtype=float), "V_gen": V_gen, "V_bus": V_gen @ network.recovery.T,
+        return {"time": np.asarray(t, dtype=float), "V_gen": V_gen, "V_bus": V_gen[:, list(self.first_unit)] @ network.recovery.T,
                 "Vs": np.abs(V_gen), "theta_vs": theta_vs, "P": S.real, "Q": S.imag, "states": states,
                 "machine_inputs": machine_inputs}
 
