@@ -192,11 +192,11 @@ def _check_fmus(case, kind, fmu_cache=None) -> None:
     if kind == "andes":
         from cosim.andes_runner import ANDES_MISSING, andes_available
 
-        if not andes_available():
-            raise UserError(ANDES_MISSING)
         if case.name not in CASES[1:]:
             raise UserError(f"--fmus andes runs the cases converted from ANDES ({', '.join(CASES[1:])}), "
                             f"not {case.name}")
+        if not andes_available():
+            raise UserError(ANDES_MISSING)
         return
     if fmu_cache is not None:
         output_folder(fmu_cache)

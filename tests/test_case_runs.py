@@ -69,3 +69,12 @@ def test_kundur_monolithic_rotor_angles_follow_andes_through_a_fault():
     error = np.max(np.abs((m - m[:, :1]) - (a - a[:, :1])))
     assert math.degrees(error) < 0.1
     assert np.ptp(a[:, 2] - a[:, 0]) > math.radians(5)  # the fault moves the angles
+
+
+def test_andes_runs_only_the_cases_converted_from_andes(capsys, tmp_path):
+    from opfmu.cli import main
+
+    out = tmp_path / "x"
+    assert main(["grid", "run", "--fmus", "andes", "--fault", "7", "--clear", "0.1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not wscc9" in err and not out.exists()
