@@ -17,6 +17,8 @@ import re
 
 from reference_models.component import Component
 
+from .c_equations import live_statements
+
 _NAME = re.compile(r"\bd\d+\b")
 
 
@@ -161,23 +163,10 @@ def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int
     for i, r in enumerate(results):
         grads = r.grads if isinstance(r, Dual) else {}
         stores += [f"    J[{i * cols + j}] = {grads.get(j, '0.0')};" for j in range(cols)]
-    body = _live(recorder.lines, stores) + stores
+    body = live_statements(recorder.lines, stores, _NAME) + stores  # a value whose only use was its own derivative is dropped
     return (f"/* {doc}: J[i * {cols} + j] = d out_i / d (x, u)_j */\n"
             f"static void {name}(const double x[{n_x}], const double u[{n_u}], double J[{n_rows * cols}])\n{{\n"
             f"    (void)x;\n    (void)u;\n" + "\n".join(body) + "\n}\n")
-
-
-def _live(lines: list[str], stores: list[str]) -> list[str]:
-    """The statements the stores need, in order (the values whose only use was their own
-    derivative are dropped)."""
-    needed = set(_NAME.findall(" ".join(stores)))
-    kept = []
-    for line in reversed(lines):
-        name, _, expression = line.partition(" = ")
-        if name.split()[-1] in needed:
-            kept.append(line)
-            needed.update(_NAME.findall(expression))
-    return kept[::-1]
 
 
 def jacobians_c_source(component: Component, params) -> str:

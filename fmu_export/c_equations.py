@@ -177,15 +177,16 @@ def switching_conditions(component: Component, params) -> list:
     return recorder.conditions
 
 
-def _live(lines: list[str], uses: list[str]) -> list[str]:
-    """The statements `uses` need, in order."""
-    needed = set(_NAME.findall(" ".join(uses)))
+def live_statements(lines: list[str], uses: list[str], names: re.Pattern = _NAME) -> list[str]:
+    """The traced statements `lines` ("type name = expression") that `uses` need, in order; `names`
+    matches the traced values' names."""
+    needed = set(names.findall(" ".join(uses)))
     kept = []
     for line in reversed(lines):
         name, _, expression = line.partition(" = ")
         if name.split()[-1] in needed:
             kept.append(line)
-            needed.update(_NAME.findall(expression))
+            needed.update(names.findall(expression))
     return kept[::-1]
 
 
@@ -208,7 +209,7 @@ def switching_c_source(component: Component, params, linkage: str = "static") ->
                  f"condition k (a op b), mode[k] = the condition's truth ({listing}) */\n"
                  f"{linkage} void model_switching(const double x[{n_x}], const double u[{n_u}], double g[{n}], "
                  f"int mode[{n}])\n{{\n    (void)x;\n    (void)u;\n"
-                 + "\n".join(_live(lines, stores) + stores) + "\n}\n")
+                 + "\n".join(live_statements(lines, stores) + stores) + "\n}\n")
     lines, results = _trace(component.derivatives, component, params, locked=True)
     body = lines + [f"    dx[{i}] = {r.code if isinstance(r, Traced) else _literal(r)};" for i, r in enumerate(results)]
     locked = (f"/* {_comment(component.name)} right-hand side dx/dt with condition k's branch locked to mode[k] */\n"
