@@ -163,7 +163,8 @@ def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int
     for i, r in enumerate(results):
         grads = r.grads if isinstance(r, Dual) else {}
         stores += [f"    J[{i * cols + j}] = {grads.get(j, '0.0')};" for j in range(cols)]
-    body = live_statements(recorder.lines, stores, _NAME) + stores  # a value whose only use was its own derivative is dropped
+    # a value whose only use was its own derivative is dropped
+    body = live_statements(recorder.lines, stores, _NAME) + stores
     return (f"/* {doc}: J[i * {cols} + j] = d out_i / d (x, u)_j */\n"
             f"static void {name}(const double x[{n_x}], const double u[{n_u}], double J[{n_rows * cols}])\n{{\n"
             f"    (void)x;\n    (void)u;\n" + "\n".join(body) + "\n}\n")
