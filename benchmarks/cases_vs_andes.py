@@ -1,7 +1,7 @@
 """The monolithic DAE of the cases converted from ANDES against ANDES' own simulation of the same
 fault (issue 26's goal: rotor-angle differences within 0.1 deg of ANDES at h = 1 ms).
 
-    python benchmarks/cases_vs_andes.py [--cases kundur ieee14 ieee39 npcc] [--stop 5] [--step 0.001]
+    python benchmarks/cases_vs_andes.py [--cases kundur ieee14] [--stop 5] [--step 0.001]
         [--fault-impedance 1e-4]
 
 Per case: a fault at its bus (kundur 8, ieee14 4, ieee39 16, npcc 30) from 1.0 to 1.1 s with the
@@ -10,7 +10,9 @@ no trip, until --stop. ANDES (cosim.andes_runner: its case file, implicit trapez
 step --step) and the monolithic DAE (scipy DOP853, rtol 1e-9, rows every --step) are run; printed:
 the largest error over ANDES' rows of any rotor-angle difference to the first machine [deg], of
 the bus-voltage magnitudes at the generators outside the fault [pu], and both wall times [s].
-Needs ANDES (pip install andes==2.0.0).
+Needs ANDES (pip install andes==2.0.0). The monolithic solves of ieee39 (bus 16) and npcc do not
+get through the fault yet (scipy's step size collapses where a limiter of a control device switches,
+ieee39 at t = 1.1066 s with DOP853), so the default runs kundur and ieee14.
 """
 from __future__ import annotations
 
@@ -51,7 +53,7 @@ def compare(name: str, stop: float, step: float, reactance: float) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", nargs="+", default=["kundur", "ieee14", "ieee39", "npcc"], choices=list(FAULT_BUS))
+    parser.add_argument("--cases", nargs="+", default=["kundur", "ieee14"], choices=list(FAULT_BUS))
     parser.add_argument("--stop", type=float, default=5.0)
     parser.add_argument("--step", type=float, default=0.001)
     parser.add_argument("--fault-impedance", type=float, default=1e-4)
