@@ -3,9 +3,9 @@ case file the shipped case was converted from (reference_models.grid.andes_case.
 case's own events switched off, the contingency added as ANDES devices (a Fault at the bus from
 fault_start to clear_s with the contingency's fault impedance, a Toggle of the tripped Line at
 clearing), ANDES' implicit trapezoid at the fixed step h, its result mapped onto a GridResult
-(ANDES' rows, every h, and just after each switching, without its rows at a switching time that hold
-the state before the switch: rotor angles [rad], speeds [pu, as the machines' components], field voltages Efd
-[pu, machine base], bus voltages).
+(ANDES' rows, every h, and just after each switching, without its rows in the half step up to a
+switching time, which hold the state before the switch: rotor angles [rad], speeds [pu, as the
+machines' components], field voltages Efd [pu, machine base], bus voltages).
 
 ANDES (GPL-3.0-or-later) is optional: `andes_available()` says whether it imports.
 """
@@ -103,8 +103,11 @@ class AndesRunner:
         x, y = np.asarray(ts.x), np.asarray(ts.y)
         c = contingency
         switched = [c.fault_start, c.clear_s] if c.fault_bus is not None else [c.clear_s] if c.trip else []
-        # ANDES' row at a switching time holds the state before the switch: left out (its next row is just after)
-        keep = ~np.any([np.abs(t - ts_) < 1e-9 for ts_ in switched], axis=0) if switched else np.ones(len(t), bool)
+        # ANDES' rows in the half step before a switching time, the one at it included, hold the state
+        # before the switch off the regular rows: left out (its next row is just after the switch)
+        keep = np.ones(len(t), bool)
+        for te in switched:
+            keep &= ~((t > te - 0.5 * self.step) & (t < te + 1e-9))
         keep[0] = True
         t, x, y = t[keep], x[keep], y[keep]
         units = self.case.units
