@@ -82,6 +82,10 @@ class Component:
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
     ports: how it connects (reference_models.ports): its bus port and its control links.
+    reset(x, u, p, m): the states after the resets of its moving non-windup limits (ANDES'
+        AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
+        placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
+        after inputs change and at located switchings. None: the component has no such reset.
     """
 
     name: str
@@ -98,6 +102,7 @@ class Component:
     rest: Callable | None = None
     drift: Drift | None = None
     ports: Ports = Ports()
+    reset: Callable | None = None
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -147,6 +152,14 @@ class Component:
         """Derived outputs [..., n_y] for x [..., n_x], u [..., n_u] (numpy or torch)."""
         m, stack = _namespace(x)
         return stack(self.output_equations(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+
+    def reset_states(self, x, u, p):
+        """The states [..., n_x] after the component's limit resets (`reset`) at inputs u [..., n_u]
+        (numpy or torch); x itself where it declares none."""
+        if self.reset is None:
+            return x
+        m, stack = _namespace(x)
+        return stack(self.reset(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
 
     def steady_state(self, u=None, p=None) -> np.ndarray:
         """The stable equilibrium [n_x] at constant inputs u [n_u] (default: the start inputs)."""
