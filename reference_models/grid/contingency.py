@@ -16,13 +16,16 @@ BOLTED_FAULT_IMPEDANCE = 1e-6  # pu
 
 @dataclass(frozen=True)
 class Topology:
-    """The network from `start` [s] on: a fault shunt at `fault_bus` (None: none) and the branches
-    `open` (names "a-b")."""
+    """The network from `start` [s] on: a fault shunt at `fault_bus` (None: none), the branches
+    `open` (names "a-b") and the units `tripped` (indices in the case's unit order: each injects no
+    current from `start` on, its devices stand still and its rotor angle leaves the stability
+    check)."""
 
     start: float
     fault_bus: int | None
     open: tuple
     description: str
+    tripped: tuple = ()
 
 
 @dataclass(frozen=True)
