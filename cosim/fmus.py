@@ -123,8 +123,10 @@ def _check_operator(path: Path, device, bus: int) -> None:
 
 
 def _build(kind: str, device, cache: Path, model_name: str, operator: Path | None = None, progress=None,
-           fmi_version: int = 2) -> Path:
-    """The FMU of `device` (component, parameters) of that kind, from the cache or built into it."""
+           fmi_version: int = 2, operating_point: dict | None = None) -> Path:
+    """The FMU of `device` (component, parameters) of that kind, from the cache or built into it; a
+    native reference FMU's inputs start at `operating_point` ({input: value}: the unit's start inputs,
+    so that its default start is the case's operating point, not the component's generic one)."""
     from fmu_export.build_cache import cached_fmu
 
     payload = operator.read_bytes() if operator is not None else b""
@@ -139,13 +141,16 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
                 build_surrogate_fmu(operator, out, model_name=model_name, fmi_version=fmi_version)
             elif kind == "reference":
                 build_native_reference_fmu(out, model_name=model_name, component=device.component,
-                                           params=device.params, fmi_version=fmi_version)
+                                           params=device.params, operating_point=operating_point,
+                                           fmi_version=fmi_version)
             else:
                 build_reference_fmu(out, model_name=model_name, component=device.component, params=device.params)
         except (BuildError, ValueError, RuntimeError) as exc:
             raise CouplingError(f"cannot build {model_name}: {str(exc)[:300]}") from None
 
     parts = (kind, device.component.name, device.params.to_dict(), payload)
+    if kind == "reference" and operating_point:
+        parts += (operating_point,)
     if fmi_version != 2:
         parts += (f"fmi{fmi_version}",)
     return cached_fmu(model_name, parts, build, cache, progress and (lambda name: progress(f"{name} ({kind})")))
@@ -177,19 +182,20 @@ def generator_files(case, kind: str | None = None, cache=None, progress=None, fm
 
     cache = Path(cache) if cache is not None else default_cache()
     files = []
-    for unit, fmu in zip(case.units, check_unit_fmus(case, kind)):
+    for unit, starts, fmu in zip(case.units, case.starts, check_unit_fmus(case, kind)):
         if fmu.kind == "file":
             by_name = dict(fmu.files)
             files.append(UnitFiles(unit.bus, fmu.kind, tuple(Path(by_name[d.name]) for d in unit.devices)))
             continue
         paths = []
-        for j, device in enumerate(unit.devices):
+        for j, (device, start) in enumerate(zip(unit.devices, starts)):
             if fmu.kind == "surrogate" and j == 0:
                 paths.append(_build("surrogate", device, cache, _model_name(device, j, unit.bus, "surrogate"),
                                     operator_path(fmu.operator), progress, fmi_version))
             else:
                 device_kind = "reference" if fmu.kind == "surrogate" else fmu.kind
                 paths.append(_build(device_kind, device, cache, _model_name(device, j, unit.bus, device_kind),
-                                    progress=progress, fmi_version=fmi_version))
+                                    progress=progress, fmi_version=fmi_version,
+                                    operating_point={n: float(v) for n, v in start.inputs.items()}))
         files.append(UnitFiles(unit.bus, fmu.kind, tuple(paths)))
     return files
