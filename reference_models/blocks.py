@@ -16,6 +16,13 @@ Limits (ANDES' terms, andes.core.discrete and andes.core.block):
 * non-windup (anti-windup) limit (`non_windup`, `lag_non_windup`, `integrator_non_windup`): the
   state itself stays within [low, high]: at a limit while its unlimited derivative pushes outward,
   the derivative is 0; it leaves as soon as the derivative turns back.
+* the reset of a non-windup limit (`non_windup_reset`, `lag_non_windup_reset`,
+  `integrator_non_windup_reset`; ANDES' AntiWindup.check_eq): a state at or beyond its upper limit
+  while its unlimited derivative is >= 0 is placed on the limit, likewise at the lower limit with a
+  derivative <= 0. A component's `reset` is written with these, and integrators apply it where they
+  (re)start (component.py): a state under a limit that moves with an input (IEEEX1's VRMAX Vt)
+  follows the limit when it moves inward, and a state beyond a constant limit (a start value, a
+  numerical overshoot) returns onto it.
 
 Saturation: `quadratic_saturation` (GENROU's S(x) = B (x - A)^2 / x above A, ANDES' ExcQuadSat
 coefficients from two points), `exponential_saturation` (ANDES' ExcExpSat: S(x) = A exp(B x)).
@@ -71,6 +78,26 @@ def non_windup_between(m, rate, x, low, high):
     return where(m, x <= low, where(m, rate < 0.0, 0.0 * rate, rate), rate)
 
 
+def non_windup_reset(m, rate, x, low, high):
+    """The state x after the reset of its non-windup limit [low, high] (ANDES' AntiWindup): high
+    where x >= high while the unlimited derivative `rate` >= 0, low where x <= low while rate <= 0,
+    else x. A limit is a Python float (beyond NO_LIMIT: absent) or a value of the namespace (a limit
+    that moves with an input)."""
+    if isinstance(high, (int, float)):
+        high = _upper(high)
+        if high < math.inf:
+            x = where(m, x >= high, where(m, rate >= 0.0, high + 0.0 * x, x), x)
+    else:
+        x = where(m, x >= high, where(m, rate >= 0.0, high, x), x)
+    if isinstance(low, (int, float)):
+        low = _lower(low)
+        if low > -math.inf:
+            x = where(m, x <= low, where(m, rate <= 0.0, low + 0.0 * x, x), x)
+    else:
+        x = where(m, x <= low, where(m, rate <= 0.0, low, x), x)
+    return x
+
+
 def lag(m, u, x, K: float, T: float):
     """First-order lag K / (1 + s T): (dx/dt, y). T > 0: T dx/dt = K u - x, y = x. T = 0: the
     state is held (dx/dt = 0) and y = K u."""
@@ -87,10 +114,23 @@ def lag_non_windup(m, u, x, K: float, T: float, low: float, high: float):
     return 0.0 * x, clip(m, K * u, low, high)
 
 
+def lag_non_windup_reset(m, u, x, K: float, T: float, low: float, high: float):
+    """The state of `lag_non_windup` after its limit's reset (`non_windup_reset`); T = 0: x (held,
+    unused)."""
+    if T > 0:
+        return non_windup_reset(m, (K * u - x) / T, x, low, high)
+    return x
+
+
 def integrator_non_windup(m, u, x, K: float, T: float, low: float, high: float):
     """Integrator K / (s T) with a non-windup limit [low, high] (ANDES' IntegratorAntiWindup):
     (dx/dt, y = x)."""
     return non_windup(m, K * u / T, x, low, high), x
+
+
+def integrator_non_windup_reset(m, u, x, K: float, T: float, low: float, high: float):
+    """The state of `integrator_non_windup` after its limit's reset (`non_windup_reset`)."""
+    return non_windup_reset(m, K * u / T, x, low, high)
 
 
 def lead_lag(m, u, x, K: float, T1: float, T2: float):

@@ -14,6 +14,7 @@ Equations (ANDES 2.0 model reference, Exciter: EXDC2):
     vi = Vref - LS_y - W_y + Vss
     lead-lag (1 + s TC) / (1 + s TB) of vi (TB = 0: a gain of 1)
     non-windup lag KA / (1 + s TA):  TA dLA_y/dt = KA LL_y - LA_y,  VRMIN <= LA_y <= VRMAX
+        (reset: LA_y at or beyond a limit while KA LL_y - LA_y pushes outward is placed on it)
     TE dvp/dt = LA_y - KE vp - Se vp,  Se vp = B (vp - A)^2 where Efd >= A, else 0
         (quadratic saturation through (E1, SE1), (E2, SE2), ANDES' ExcQuadSat)
     Efd = omega vp
@@ -24,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import (lag, lag_non_windup, lead_lag, non_windup_between, quadratic_saturation_coefficients,
-                      washout)
+from ..blocks import (lag, lag_non_windup, lag_non_windup_reset, lead_lag, non_windup_between,
+                      quadratic_saturation_coefficients, washout)
 from ..component import Component, Parameters, Quantity
 from ..piecewise import where
 from ..ports import Link, Ports
@@ -70,21 +71,43 @@ class EXDC2Params(Parameters):
         return quadratic_saturation_coefficients(self.E1, self.SE1, self.E2, self.SE2)
 
 
+def _regulator_input(x, Vt, Vref, Vss, p: EXDC2Params, m):
+    """(dLS_y, dLL_x, dW_x, LL_y): the sensing lag's, lead-lag's and washout's derivatives and the
+    regulator's input LL_y."""
+    LS_y, LL_x, LA_y, vp, W_x = x
+    d_LS, sensed = lag(m, Vt, LS_y, 1.0, p.TR)
+    d_W, W_y = washout(m, vp, W_x, p.KF1, p.TF1)
+    d_LL, LL_y = lead_lag(m, Vref - sensed - W_y + Vss, LL_x, 1.0, p.TC, p.TB)
+    return d_LS, d_LL, d_W, LL_y
+
+
+def regulator_limits(Vt, p: EXDC2Params, limits_scale_with_voltage: bool) -> tuple:
+    """(low, high): the regulator's limits, VRMIN, VRMAX or (IEEEX1) VRMIN Vt, VRMAX Vt [pu]."""
+    return (p.VRMIN * Vt, p.VRMAX * Vt) if limits_scale_with_voltage else (p.VRMIN, p.VRMAX)
+
+
 def dc_derivatives(x, Vt, Vref, Vss, omega, p: EXDC2Params, m, limits_scale_with_voltage: bool):
     """The DC exciter's derivatives; `limits_scale_with_voltage`: IEEEX1's limits VRMIN Vt, VRMAX Vt."""
     LS_y, LL_x, LA_y, vp, W_x = x
     A, B = p.saturation
-    d_LS, sensed = lag(m, Vt, LS_y, 1.0, p.TR)
-    d_W, W_y = washout(m, vp, W_x, p.KF1, p.TF1)
-    d_LL, LL_y = lead_lag(m, Vref - sensed - W_y + Vss, LL_x, 1.0, p.TC, p.TB)
+    d_LS, d_LL, d_W, LL_y = _regulator_input(x, Vt, Vref, Vss, p, m)
+    low, high = regulator_limits(Vt, p, limits_scale_with_voltage)
     if limits_scale_with_voltage:
-        d_LA = non_windup_between(m, (p.KA * LL_y - LA_y) / p.TA, LA_y, p.VRMIN * Vt, p.VRMAX * Vt)
+        d_LA = non_windup_between(m, (p.KA * LL_y - LA_y) / p.TA, LA_y, low, high)
     else:
-        d_LA, _ = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
+        d_LA, _ = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, low, high)
     out = vp if omega is None else omega * vp
     saturation = where(m, out >= A, B * (vp - A) * (vp - A), 0.0 * vp) if B != 0 else 0.0 * vp
     d_vp = (LA_y - p.KE * vp - saturation) / p.TE
     return d_LS, d_LL, d_LA, d_vp, d_W
+
+
+def dc_reset(x, Vt, Vref, Vss, p: EXDC2Params, m, limits_scale_with_voltage: bool) -> tuple:
+    """The DC exciter's states after the reset of the regulator's non-windup limit (LA_y placed on
+    a limit it is at or beyond while its unlimited rate pushes outward; blocks.lag_non_windup_reset)."""
+    LA_y = lag_non_windup_reset(m, _regulator_input(x, Vt, Vref, Vss, p, m)[3], x[2], p.KA, p.TA,
+                                *regulator_limits(Vt, p, limits_scale_with_voltage))
+    return x[0], x[1], LA_y, x[3], x[4]
 
 
 def dc_initialise(Efd: float, Vt: float, Vss: float, omega: float, p: EXDC2Params) -> tuple:
@@ -111,6 +134,12 @@ def derivatives(x, u, p: EXDC2Params, m):
     """(dLS_y, dLL_x, dLA_y, dvp, dW_x)/dt for x = (LS_y, LL_x, LA_y, vp, W_x), u = (Vt, Vref, Vss, omega)."""
     Vt, Vref, Vss, omega = u
     return dc_derivatives(x, Vt, Vref, Vss, omega, p, m, False)
+
+
+def reset(x, u, p: EXDC2Params, m):
+    """x after the regulator limit's reset (dc_reset), u = (Vt, Vref, Vss, omega)."""
+    Vt, Vref, Vss, _ = u
+    return dc_reset(x, Vt, Vref, Vss, p, m, False)
 
 
 def outputs(x, u, p: EXDC2Params, m):
@@ -153,6 +182,7 @@ EXDC2 = Component(
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.1, 0.05, 1.0, 0.5, 0.5),
+    reset=reset,
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss"), Link("rotor_speed", "omega")),
                 outputs=(Link("field_voltage", "Efd"),)),
