@@ -1,11 +1,15 @@
 """ANDES' own time-domain simulation of a shipped case as a grid runner (`--fmus andes`): the ANDES
-case file the shipped case was converted from (reference_models.grid.andes_case.ANDES_CASES), the
-case's own events switched off, the contingency added as ANDES devices (a Fault at the bus from
-fault_start to clear_s with the contingency's fault impedance, a Toggle of the tripped Line at
-clearing), ANDES' implicit trapezoid at the fixed step h, its result mapped onto a GridResult
-(ANDES' rows, every h, and just after each switching, without its rows in the half step up to a
-switching time, which hold the state before the switch: rotor angles [rad], speeds [pu, as the
-machines' components], field voltages Efd [pu, machine base], bus voltages).
+case file the shipped case was converted from (reference_models.grid.andes_case.ANDES_CASES), with
+the case's own events (its Toggle and Fault devices) as the file has them, or switched off where
+the contingency leaves them out (Contingency.events empty), the contingency added as ANDES devices
+(a Fault at the bus from fault_start to clear_s with the contingency's fault impedance, a Toggle of
+the tripped Line at clearing), ANDES' implicit trapezoid at the fixed step h, its result mapped
+onto a GridResult as the other runners give it (rows at the multiples of h, linear between
+ANDES' own rows within one topology, and ANDES' first row after each switching: `_on_grid`; the
+events as Contingency.topologies names them: rotor angles [rad], speeds [pu, 1 =
+synchronous, as the machines' components hold them], the machines' field-voltage inputs [pu,
+machine base] in `machine_inputs`, bus voltages). A unit tripped by an event leaves the stability
+check from its trip on.
 
 ANDES (GPL-3.0-or-later) is optional: `andes_available()` says whether it imports.
 """
@@ -42,11 +46,14 @@ class AndesRunner:
     def _system(self, contingency, stop: float):
         import andes
 
-        andes.config_logger(stream_level=40)
+        andes.config_logger(stream_level=50)  # ANDES' own messages off: a failed run is one line of ours
         ss = andes.load(andes.get_case(self.source), setup=False, no_output=True, default_config=True)
         number = {idx: int(idx) for idx in ss.Bus.idx.v}
         bus_idx = {n: idx for idx, n in number.items()}
         c = contingency
+        if c.events and tuple(c.events) != tuple(self.case.events):
+            raise ValueError("ANDES runs the case's own events as its file has them, all or none")
+        own = (ss.Fault.n, ss.Toggle.n)  # the case file's own events come first
         if c.fault_bus is not None:
             z = complex(c.fault_impedance)
             ss.add("Fault", {"bus": bus_idx[c.fault_bus], "tf": c.fault_start, "tc": c.clear_s, "rf": z.real,
@@ -54,10 +61,10 @@ class AndesRunner:
         if c.trip:
             ss.add("Toggle", {"model": "Line", "dev": self._line(ss, c.trip, number), "t": c.clear_s})
         ss.setup()
-        added = (1 if c.fault_bus is not None else 0, 1 if c.trip else 0)
-        for model, keep in ((ss.Fault, added[0]), (ss.Toggle, added[1])):
-            for i in range(model.n - keep):  # the case's own events: off
-                model.u.v[i] = 0
+        if not c.events:
+            for model, n in zip((ss.Fault, ss.Toggle), own):
+                for i in range(n):  # the case's own events left out
+                    model.u.v[i] = 0
         from reference_models.grid.andes_case import PFLOW_TOLERANCE
 
         ss.PFlow.config.tol = PFLOW_TOLERANCE
@@ -93,6 +100,7 @@ class AndesRunner:
         ss.TDS.init()
         if not ss.TDS.initialized:
             raise RuntimeError(f"ANDES cannot initialise {self.source}")
+        start = np.array(ss.dae.x, dtype=float), np.array(ss.dae.y, dtype=float)  # its rows begin after t = 0
         ss.TDS.run()
         total = time.perf_counter() - started
         ts = ss.dae.ts
@@ -101,49 +109,80 @@ class AndesRunner:
             raise RuntimeError(f"ANDES' simulation of {self.case.name} stopped at t = {t[-1]:.4f} s (its Newton "
                                "iteration did not converge; a bolted fault may need --fault-impedance 1e-4)")
         x, y = np.asarray(ts.x), np.asarray(ts.y)
-        c = contingency
-        switched = [c.fault_start, c.clear_s] if c.fault_bus is not None else [c.clear_s] if c.trip else []
-        # ANDES' rows in the half step before a switching time, the one at it included, hold the state
-        # before the switch off the regular rows: left out (its next row is just after the switch)
-        keep = np.ones(len(t), bool)
-        for te in switched:
-            keep &= ~((t > te - 0.5 * self.step) & (t < te + 1e-9))
-        keep[0] = True
-        t, x, y = t[keep], x[keep], y[keep]
+        if t[0] > 0.0:
+            t, x, y = np.r_[0.0, t], np.vstack([start[0], x]), np.vstack([start[1], y])
+        topologies = contingency.topologies(stop)
         units = self.case.units
-        delta = np.full((len(t), len(units)), np.nan)
-        omega = np.full_like(delta, np.nan)
-        Efd = np.full_like(delta, np.nan)
+        g = len(units)
+        cols = [None] * (3 * g)  # (x or y, column) of delta, omega, vf per unit
         where = {(u.bus, u.generator): k for k, u in enumerate(units)}
         for name in ("GENROU", "GENCLS"):
             model = getattr(ss, name)
             for i in range(model.n):
                 key = (number[model.bus.v[i]], str(model.gen.v[i]))
                 k = where.get(key, where.get((key[0], None)))
-                delta[:, k] = x[:, model.delta.a[i]]
-                omega[:, k] = x[:, model.omega.a[i]]
-                Efd[:, k] = y[:, model.vf.a[i]]
-        V = y[:, ss.Bus.v.a] * np.exp(1j * y[:, ss.Bus.a.a])
+                cols[k], cols[g + k], cols[2 * g + k] = (x, model.delta.a[i]), (x, model.omega.a[i]), (y, model.vf.a[i])
         order = [list(number.values()).index(b) for b in self.case.buses]
-        V = V[:, order]
+        v_cols, a_cols = np.asarray(ss.Bus.v.a)[order], np.asarray(ss.Bus.a.a)[order]
+        table = np.hstack([np.stack([src[:, j] for src, j in cols], axis=1), y[:, v_cols], y[:, a_cols]])
+        t, table = self._on_grid(t, table, sorted({tp.start for tp in topologies[1:]}), stop)
+        nb = len(self.case.buses)
+        delta, omega, Efd = table[:, :g], table[:, g:2 * g], table[:, 2 * g:3 * g]
+        V = table[:, 3 * g:3 * g + nb] * np.exp(1j * table[:, 3 * g + nb:])
         gen_cols = [self.case.network.bus_index(u.bus) for u in units]
         V_gen = V[:, gen_cols]
         theta_bus = np.unwrap(np.angle(V), axis=0)
         lost = None
         for i in range(len(t)):
-            if np.ptp(delta[i]) >= math.pi:
+            in_service = [k for k in range(len(units)) if k not in
+                          [tp for tp in topologies if tp.start <= t[i] + 1e-12][-1].tripped]
+            if np.ptp(delta[i, in_service]) >= math.pi:
                 lost = float(t[i])
                 break
-        events = []
-        if c.fault_bus is not None:
-            events += [(c.fault_start, f"fault at bus {c.fault_bus}"),
-                       (c.clear_s, f"fault at bus {c.fault_bus} cleared" + (f", {c.trip} opened" if c.trip else ""))]
         nan = np.full_like(delta, np.nan)
-        result = GridResult(time=t, states={"delta": delta, "omega": omega, "Efd": Efd}, Vs=np.abs(V_gen),
+        field = {}
+        for k, u in enumerate(units):
+            name = u.machine.component.ports.input("field_voltage")
+            field.setdefault(name, nan.copy())[:, k] = Efd[:, k]
+        result = GridResult(time=t, states={"delta": delta, "omega": omega}, Vs=np.abs(V_gen),
                             theta_vs=theta_bus[:, gen_cols], P=nan, Q=nan, V_bus=np.abs(V), theta_bus=theta_bus,
-                            stable=lost is None, loss_of_synchronism_s=lost, events=tuple(events),
-                            gen_buses=self.case.generator_buses, buses=self.case.buses)
+                            stable=lost is None, loss_of_synchronism_s=lost,
+                            events=tuple((tp.start, tp.description) for tp in topologies[1:]),
+                            gen_buses=self.case.generator_buses, buses=self.case.buses, machine_inputs=field)
         return result, {"total_s": total, "steps": len(t) - 1}
+
+    def _on_grid(self, t, table, switches, stop) -> tuple:
+        """ANDES' rows (times t [n], values table [n, m]) as the other runners give theirs: a row at
+        every multiple of the step up to `stop` (the last one `stop`), linear between ANDES' own
+        rows of the same topology (never across a switching), and ANDES' first row after each
+        switching at its own time. ANDES steps to a switching time te - 1e-4, te, te + 1e-4 and on
+        from there, off the multiples of its step; its rows up to te hold the state before the switch
+        (so a multiple at te itself has no row: it is an event time, where runs are not compared)."""
+        n = int(math.ceil(stop / self.step - 1e-9))
+        grid = np.minimum(np.arange(n + 1) * self.step, stop)
+        bounds = [0.0] + list(switches) + [math.inf]
+        times, rows = [], []
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            inside = ((t > a + 1e-9) | ((a == 0.0) & (t >= 0.0))) & (t < b - 1e-9)
+            ts, part = t[inside], table[inside]
+            if not len(ts):
+                continue
+            if a > 0.0:
+                times.append(ts[:1])
+                rows.append(part[:1])
+            points = grid[(grid >= ts[0] - 1e-9) & (grid <= ts[-1] + 1e-9) & (grid >= a - 1e-9) & (grid < b)]
+            points = points[np.abs(points - a) > 1e-9] if a > 0.0 else points
+            j = np.clip(np.searchsorted(ts, points), 1, max(len(ts) - 1, 1))
+            if len(ts) == 1:
+                values = np.repeat(part, len(points), axis=0)
+            else:
+                w = np.clip((points - ts[j - 1]) / (ts[j] - ts[j - 1]), 0.0, 1.0)[:, None]
+                values = (1.0 - w) * part[j - 1] + w * part[j]
+            times.append(points)
+            rows.append(values)
+        t_out, table_out = np.concatenate(times), np.concatenate(rows)
+        sort = np.argsort(t_out, kind="stable")
+        return t_out[sort], table_out[sort]
 
     def close(self):
         pass

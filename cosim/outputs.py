@@ -1,5 +1,6 @@
 """What a grid run leaves in its folder: result.csv (the columns of docs/grid.md, "What a run
-leaves": time, delta, omega, Efd per generator and V per bus, then the rest of GridResult.columns),
+leaves": time, delta, omega [rad/s deviation], Efd per unit and V per bus, then the rest of
+GridResult.columns),
 a figure of rotor angles relative to machine 1, speeds, terminal voltages and field voltages with
 every compared run on the same axes, and a Markdown report. All written atomically."""
 from __future__ import annotations
@@ -77,9 +78,10 @@ def _figure(figsize):
     return fig
 
 
-def write_csv(path, result) -> None:
-    """result.csv: one row per communication point (17 significant digits)."""
-    columns = result.columns()
+def write_csv(path, result, case=None) -> None:
+    """result.csv: one row per communication point (17 significant digits); `case`: the Case the
+    result is of (speeds as deviations in rad/s, every unit's field voltage: GridResult.columns)."""
+    columns = result.columns(case)
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     text = io.StringIO()
@@ -102,28 +104,75 @@ def on_times(result, times: np.ndarray, column: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(times, t[keep], column[keep, j]) for j in range(column.shape[1])], axis=1)
 
 
-def errors(result, reference, fault=None) -> dict:
-    """Largest differences from `reference` over the rows of `result`: rotor angles relative to
-    machine 1 [deg], speeds [rad/s], terminal voltages outside the fault's own steps [pu] (the rows
-    with the fault on, times in [fault_start, clear), are left out: fault = (start, clear) or
-    None), Efd [pu]."""
-    t = result.time
+EVENT_TOLERANCE = 1e-9  # s: rows this close to an event time are at it; times this close are one
+
+
+def common_rows(result, reference) -> tuple:
+    """(rows of `result`, rows of `reference`) at the times both have (within EVENT_TOLERANCE),
+    leaving out every time either run holds twice and every event time of either run (where a
+    run switches, its row holds one side of the switch: the two runs need not hold the same)."""
+    def single(t):
+        t = np.asarray(t, dtype=float)
+        once = np.ones(len(t), bool)
+        same = np.diff(t) <= EVENT_TOLERANCE
+        once[1:] &= ~same
+        once[:-1] &= ~same
+        return np.flatnonzero(once)
+
+    mine, theirs = single(result.time), single(reference.time)
+    if not len(mine) or not len(theirs):
+        return mine[:0], theirs[:0]
+    t, t_ref = result.time[mine], reference.time[theirs]
+    j = np.searchsorted(t_ref, t)
+    lo, hi = np.clip(j - 1, 0, len(t_ref) - 1), np.clip(j, 0, len(t_ref) - 1)
+    nearest = np.where(np.abs(t_ref[lo] - t) <= np.abs(t_ref[hi] - t), lo, hi)
+    match = np.abs(t_ref[nearest] - t) <= EVENT_TOLERANCE
+    events = np.array([te for te, _ in tuple(result.events) + tuple(reference.events)], dtype=float)
+    if len(events):
+        match &= np.min(np.abs(t[:, None] - events[None, :]), axis=1) > EVENT_TOLERANCE
+    return mine[match], theirs[nearest[match]]
+
+
+def errors(result, reference, fault=None, case=None) -> dict:
+    """Largest differences from `reference`, compared at the rows both runs have outside their event
+    times (`common_rows`; no value is interpolated, none is taken across a switching): rotor angles
+    relative to machine 1 [deg], speeds [rad/s deviation where `case` is given, else the speed
+    states as stored], bus voltages at the machines outside the fault's own steps [pu] (the rows
+    with a fault on, times in [start, clear), are left out: fault = (start, clear), a sequence of
+    such pairs, or None), field voltages [pu] (with `case`: every unit's, GridResult's
+    field_voltage). ValueError where the runs share no such row."""
+    from reference_models.grid.result import field_voltage, speed_deviation
+
+    mine, theirs = common_rows(result, reference)
+    if not len(mine):
+        raise ValueError("the two runs have no row at a common time outside their events")
+    t = result.time[mine]
     out = {}
-    angle = max(float(np.max(np.abs(result.angle_difference(b) - on_times(reference, t, reference.angle_difference(b)))))
-                for b in result.gen_buses[1:])
+    angle = max((float(np.max(np.abs(result.angle_difference(b)[mine] - reference.angle_difference(b)[theirs])))
+                 for b in result.gen_buses[1:]), default=0.0)
     out["angle_deg"] = math.degrees(angle)
-    out["omega"] = float(np.max(np.abs(result.omega - on_times(reference, t, reference.omega))))
+    if case is not None:
+        pairs = {"omega": (speed_deviation(result, case), speed_deviation(reference, case)),
+                 "Efd": (field_voltage(result, case), field_voltage(reference, case))}
+    else:
+        pairs = {name: (result.states.get(name), reference.states.get(name)) for name in ("omega", "Efd")}
     rows = np.ones(len(t), bool)
-    if fault is not None:
-        rows &= ~((t >= fault[0] - 1e-12) & (t < fault[1] - 1e-12))
-    out["V"] = float(np.max(np.abs(result.Vs - on_times(reference, t, reference.Vs))[rows]))
-    out["Efd"] = float(np.max(np.abs(result.Efd - on_times(reference, t, reference.Efd))))
-    return out
+    intervals = [] if fault is None or not len(fault) else [fault] if np.isscalar(fault[0]) else list(fault)
+    for start, clear in intervals:
+        rows &= ~((t >= start - EVENT_TOLERANCE) & (t < clear - EVENT_TOLERANCE))
+    out["V"] = float(np.max(np.abs(result.Vs[mine] - reference.Vs[theirs])[rows])) if rows.any() else math.nan
+    for name, (a, b) in pairs.items():
+        out[name] = math.nan if a is None or b is None else float(np.nanmax(np.abs(a[mine] - b[theirs])))
+    return {key: out[key] for key in ("angle_deg", "omega", "V", "Efd")}
 
 
-def plot(path, runs: dict, title: str) -> None:
-    """The figure: runs {kind: GridResult}, 2 x 2 panels."""
+def plot(path, runs: dict, title: str, case=None) -> None:
+    """The figure: runs {kind: GridResult}, 2 x 2 panels; with the `case` they are of, speeds as
+    deviations [rad/s] and every unit's field voltage (GridResult's speed_deviation,
+    field_voltage), else the states of those names as stored."""
     from matplotlib import rcParams
+
+    from reference_models.grid.result import field_voltage, speed_deviation
 
     fig = _figure((12, 7.5))
     axes = fig.subplots(2, 2, sharex=True)
@@ -131,15 +180,18 @@ def plot(path, runs: dict, title: str) -> None:
     colors = rcParams["axes.prop_cycle"].by_key()["color"]
     for kind, result in runs.items():
         style = STYLES.get(kind, {})
+        nan = np.full(result.Vs.shape, np.nan)
+        omega = speed_deviation(result, case) if case is not None else result.states.get("omega", nan)
+        Efd = field_voltage(result, case) if case is not None else result.states.get("Efd", nan)
         for k, bus in enumerate(result.gen_buses):
             color = style.get("color", colors[k % len(colors)])
             kw = {key: v for key, v in style.items() if key != "color"}
             label = f"{LABELS.get(kind, kind)}, machine {bus}"
             if k > 0:
                 axes[0, 0].plot(result.time, np.degrees(result.angle_difference(bus)), color=color, label=label, **kw)
-            axes[0, 1].plot(result.time, result.omega[:, k], color=color, label=label, **kw)
+            axes[0, 1].plot(result.time, omega[:, k], color=color, label=label, **kw)
             axes[1, 0].plot(result.time, result.Vs[:, k], color=color, label=label, **kw)
-            axes[1, 1].plot(result.time, result.Efd[:, k], color=color, label=label, **kw)
+            axes[1, 1].plot(result.time, Efd[:, k], color=color, label=label, **kw)
     axes[0, 0].set_ylabel(f"rotor angle - machine {first.gen_buses[0]} [deg]")
     axes[0, 1].set_ylabel("speed deviation [rad/s]")
     axes[1, 0].set_ylabel("terminal voltage [pu]")
@@ -159,12 +211,16 @@ def _number(value, digits=4) -> str:
     return "-" if value is None else f"{value:.{digits}g}"
 
 
-def report(path, title: str, runs: dict, timings: dict, contingency, notes=()) -> None:
-    """report.md: the contingency, per run its verdict, first-swing peak and time split, and each
-    FMU run's largest differences from the monolithic run (when there is one)."""
+def report(path, title: str, runs: dict, timings: dict, contingency, case=None, notes=()) -> None:
+    """report.md: the contingency and the case's own events applied with it, per run its verdict,
+    first-swing peak and time split, and each FMU run's largest differences from the monolithic
+    run (when there is one; `case`: the Case the runs are of, see `errors`)."""
     from .stability import first_swing_peak
 
     lines = [f"# {title}", "", f"Contingency: {contingency.label}.", ""]
+    stop = max(float(r.time[-1]) for r in runs.values())
+    if contingency.case_event_labels(stop + 1e-9):
+        lines += ["The case's own events: " + "; ".join(contingency.case_event_labels(stop + 1e-9)) + ".", ""]
     lines += ["| run | stable | loss of synchronism [s] | first-swing peak [deg] | wall time [s] |",
               "| --- | --- | --- | --- | --- |"]
     for kind, result in runs.items():
@@ -182,14 +238,15 @@ def report(path, title: str, runs: dict, timings: dict, contingency, notes=()) -
                          f"{tm['network_s']:.3f} | {tm['rollback_s']:.3f} | {tm['overhead_s']:.3f} | "
                          f"{tm['passes'] / max(tm['steps'], 1):.2f} |")
     if "monolithic" in runs and len(runs) > 1:
-        fault = (contingency.fault_start, contingency.clear_s) if contingency.fault_bus is not None else None
-        lines += ["", "Largest differences from the monolithic run (terminal voltages outside the fault's own steps):", "",
+        fault = contingency.fault_intervals(math.inf)
+        lines += ["", "Largest differences from the monolithic run, at the rows both runs have outside the event "
+                  "times (terminal voltages also outside the steps with a fault on):", "",
                   "| run | rotor angle rel. machine 1 [deg] | speed [rad/s] | terminal voltage [pu] | Efd [pu] |",
                   "| --- | --- | --- | --- | --- |"]
         for kind, result in runs.items():
             if kind == "monolithic":
                 continue
-            e = errors(result, runs["monolithic"], fault)
+            e = errors(result, runs["monolithic"], fault, case)
             lines.append(f"| {LABELS.get(kind, kind)} | {e['angle_deg']:.3f} | {e['omega']:.3g} | {e['V']:.3g} | "
                          f"{e['Efd']:.3g} |")
     if notes:

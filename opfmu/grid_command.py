@@ -22,7 +22,7 @@ from opfmu.errors import UserError
 CASES = ("wscc9", "kundur", "ieee14", "ieee39", "npcc")  # reference_models.grid.case.SHIPPED_CASES
 CASE_TITLES = {"wscc9": "WSCC 9-bus", "kundur": "Kundur two-area", "ieee14": "IEEE 14-bus", "ieee39": "IEEE 39-bus",
                "npcc": "NPCC 140-bus"}
-CASE_RUN_KINDS = ("monolithic", "andes")  # what runs the cases converted from ANDES so far
+REFERENCE_KINDS = ("monolithic", "andes")  # the runs without FMUs
 MAX_STOP_S = 3600.0  # the longest run a grid command takes [s]
 
 
@@ -47,9 +47,12 @@ def _run_kinds() -> tuple:
 def _common(p, trip: bool = True) -> None:
     p.add_argument("--case", default="wscc9",
                    help="the shipped case: wscc9 (default; the WSCC 9-bus system, Anderson & Fouad), or one "
-                        "converted from ANDES (kundur, ieee14, ieee39, npcc: --fmus monolithic or andes)")
+                        "converted from ANDES (kundur, ieee14, ieee39, npcc)")
+    p.add_argument("--no-case-events", action="store_true",
+                   help="leave the case's own events (line toggles, faults, generator trips) out (default: they "
+                        "apply as in the case file, with the contingency)")
     p.add_argument("--dynamic-data", default=None, metavar="FILE",
-                   help="the units' dynamic data (machines, exciters, FMU kinds; default: the shipped wscc9 file)")
+                   help="the units' dynamic data (machines, exciters, FMU kinds; default: the case's shipped file)")
     p.add_argument("--fmus", choices=_run_kinds(), default=None,
                    help="the FMUs of every unit, monolithic for the DAE reference, or andes for ANDES' own "
                         "simulation at the step --step (where ANDES is installed) "
@@ -60,7 +63,9 @@ def _common(p, trip: bool = True) -> None:
         p.add_argument("--trip", default=None, metavar="FROM-TO", help="the branch opened at clearing, e.g. 5-7")
     p.add_argument("--fault-start", type=_time, default=0.0, help="fault start in s (default 0)")
     p.add_argument("--fault-impedance", type=float, default=None, metavar="PU",
-                   help="fault reactance in pu, > 0 (default 1e-6: bolted)")
+                   help="fault reactance in pu, > 0 (default 1e-6, bolted, for wscc9; 1e-4, ANDES' Fault "
+                        "default, for the cases converted from ANDES, where ANDES' Newton fails on a bolted "
+                        "fault)")
     p.add_argument("--step", type=float, default=0.01, help="communication step in s (default 0.01)")
     p.add_argument("--coupling", choices=("iterated", "extrapolated", "held"), default="iterated",
                    help="iterated: inputs linear over each step to a consistent end voltage, the step redone "
@@ -71,7 +76,7 @@ def _common(p, trip: bool = True) -> None:
 
 
 def add_grid_parser(sub) -> None:
-    grid = sub.add_parser("grid", help="network co-simulation (WSCC 9-bus): run, cct, screen",
+    grid = sub.add_parser("grid", help="network co-simulation of a shipped case: run, cct, screen",
                           description="A grid case with one FMU per device (machine, exciter) of each unit, the "
                                       "network solved at every communication point (Newton on the FMUs' directional "
                                       "derivatives), inputs linear over each step and the step iterated with "
@@ -126,11 +131,6 @@ def _case(args):
 
     if args.case not in CASES:
         raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
-    if args.case != "wscc9":
-        kinds = [args.fmus] + ([k.strip() for k in args.compare.split(",") if k.strip() not in ("", "none")]
-                               if getattr(args, "compare", None) else [])
-        if any(k not in CASE_RUN_KINDS for k in kinds):
-            raise UserError(f"{args.case} runs with --fmus monolithic or andes (its FMU runs are not available yet)")
     try:
         if args.case == "wscc9":
             return wscc9.case(args.dynamic_data)
@@ -162,10 +162,10 @@ def _stop(args, settings) -> None:
 
 
 def _fault_impedance(args) -> complex:
-    from reference_models.grid.contingency import BOLTED_FAULT_IMPEDANCE
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, BOLTED_FAULT_IMPEDANCE
 
     if args.fault_impedance is None:
-        return BOLTED_FAULT_IMPEDANCE
+        return BOLTED_FAULT_IMPEDANCE if args.case == "wscc9" else ANDES_FAULT_IMPEDANCE
     if not (math.isfinite(args.fault_impedance) and args.fault_impedance > 0):
         raise UserError(f"--fault-impedance must be a finite reactance > 0 pu, got {args.fault_impedance:g}")
     return complex(0.0, args.fault_impedance)
@@ -175,7 +175,8 @@ def _contingency(case, bus, clear, trip, args):
     from reference_models.grid.contingency import Contingency
 
     try:
-        return Contingency(bus, clear, trip, args.fault_start, _fault_impedance(args), case.network)
+        return Contingency(bus, clear, trip, args.fault_start, _fault_impedance(args), case.network,
+                           () if args.no_case_events else case.events)
     except ValueError as exc:
         raise UserError(_one_line(exc)) from None
 
@@ -209,7 +210,7 @@ def _check_fmus(case, kind, fmu_cache=None) -> None:
 def _main_kind(case, fmus) -> str:
     from cosim.fmus import unit_fmus
 
-    if fmus in CASE_RUN_KINDS:
+    if fmus in REFERENCE_KINDS:
         return fmus
     return fmus or "+".join(sorted({f.kind for f in unit_fmus(case)}))
 
@@ -269,19 +270,20 @@ def cmd_run(args) -> None:
     logged = [f"{_label(kind)}, generator {bus}: {text}" for kind, per_bus in messages.items()
               for bus, texts in per_bus.items() for _, text in texts[:3]]
     notes = [f"{_label(kind)}: {note}" for kind, t in timings.items() for note in t.pop("notes", [])]
-    summary = {"contingency": contingency.label, "fmus": main_kind, "stable": main.stable,
+    summary = {"contingency": contingency.label, "case_events": list(contingency.case_event_labels(args.stop + 1e-9)),
+               "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
                "passes": settings.passes, "fmi_version": args.fmi_version}
     if "monolithic" in runs and main_kind != "monolithic":
-        fault = (contingency.fault_start, contingency.clear_s)
-        summary["difference_from_monolithic"] = {k: outputs.errors(r, runs["monolithic"], fault)
+        fault = contingency.fault_intervals(args.stop)
+        summary["difference_from_monolithic"] = {k: outputs.errors(r, runs["monolithic"], fault, case)
                                                  for k, r in runs.items() if k != "monolithic"}
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.RUN_FILES) as staging:
-            outputs.write_csv(staging / "result.csv", main)
-            outputs.plot(staging / "result.png", runs, title)
-            outputs.report(staging / "report.md", title, runs, timings, contingency,
+            outputs.write_csv(staging / "result.csv", main, case)
+            outputs.plot(staging / "result.png", runs, title, case)
+            outputs.report(staging / "report.md", title, runs, timings, contingency, case,
                            [f"Note: {n}" for n in notes]
                            + ((["", "FMU log (first messages per generator):", ""] + [f"- {n}" for n in logged])
                               if logged else []))
@@ -379,8 +381,8 @@ def cmd_screen(args) -> None:
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.SCREENING_FILES) as staging:
-            outputs.write_screening(staging, rows, f"WSCC 9-bus contingency screening ({_label(kind)}, verdicts at "
-                                                   f"{args.clear:g} s clearing)")
+            outputs.write_screening(staging, rows, f"{CASE_TITLES.get(args.case, args.case)} contingency screening "
+                                                   f"({_label(kind)}, verdicts at {args.clear:g} s clearing)")
     except (outputs.OutputError, OSError) as exc:
         raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     print(outputs.screening_table(rows))

@@ -31,8 +31,11 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   machine base Sn, as reference_models.models take them, docs/standard-models.md), plus Sn, Sb,
   fn where the component takes them. A model opfmu does not have is refused with one line naming
   it; measurement-only models (BusFreq, ACEc, Area) are left out.
-* the case's own events: Toggle of a Line (a branch event), of a machine (a generator event),
-  Fault (bus, tf, tc, rf, xf); a disabled one (u = 0) is left out.
+* the case's own events: Toggle of a Line (a branch event: status 0 open, 1 closed again, each
+  toggle flipping the status it finds, all in service at the start), of a machine (GENROU, GENCLS)
+  or of its load-flow generator (PV, Slack; a group name such as SynGen or StaticGen resolves to its
+  model) (a generator event: its unit tripped), Fault (bus, tf, tc, rf, xf); a disabled one (u = 0)
+  is left out; a Toggle of any other model is refused in one line.
 """
 from __future__ import annotations
 
@@ -52,6 +55,7 @@ ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_ful
 NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault")
 IGNORED_MODELS = ("Area", "BusFreq", "ACEc")  # measurements nothing here reads
 MACHINES = ("GENROU", "GENCLS")
+STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS")
 GOVERNORS = ("TGOV1", "TGOV1N", "IEEEG1")
 STABILISERS = ("IEEEST",)
@@ -177,15 +181,19 @@ def events(ss, number) -> list:
         if ss.Toggle.u.v[i] == 0:
             continue
         target, dev, t = ss.Toggle.model.v[i], ss.Toggle.dev.v[i], float(ss.Toggle.t.v[i])
+        if target in ss.groups:  # a group name (SynGen, StaticGen, ...): the model holding the device
+            target = ss.groups[target].idx2model(dev).class_name
         if target == "Line":
             out.append({"kind": "branch", "time": t, "branch": _branch_name(ss, dev, number), "status": "toggle"})
-        elif target in MACHINES:
+        elif target in MACHINES + STATIC_GENERATORS:
             model = getattr(ss, target)
             j = list(model.idx.v).index(dev)
-            out.append({"kind": "generator", "time": t, "bus": number[model.bus.v[j]], "generator": str(model.gen.v[j]),
+            generator = str(model.gen.v[j]) if target in MACHINES else str(model.idx.v[j])
+            out.append({"kind": "generator", "time": t, "bus": number[model.bus.v[j]], "generator": generator,
                         "status": "toggle"})
         else:
-            raise CaseError(f"a Toggle of a {target} is not converted (Line, {', '.join(MACHINES)} are)")
+            raise CaseError(f"a Toggle of a {target} is not converted (Line, {', '.join(MACHINES + STATIC_GENERATORS)} "
+                            "are)")
     for i in range(ss.Fault.n):
         if ss.Fault.u.v[i] == 0:
             continue
