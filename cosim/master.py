@@ -291,6 +291,9 @@ class GridMaster:
         self.kinds = tuple(f.kind for f in self.files)
         self.units = []
         self._networks = {}
+        buses = list(dict.fromkeys(case.generator_buses))  # the reduced network's buses (Case.reduced's order)
+        self._slot = [buses.index(b) for b in case.generator_buses]  # unit -> its bus in the reduced network
+        self._first = [self._slot.index(i) for i in range(len(buses))]  # bus -> the first unit on it
         try:
             for k, f in enumerate(self.files):
                 self.units.append(_Unit(case.units[k], case.starts[k], f, scratch))
@@ -320,7 +323,9 @@ class GridMaster:
         self.units, self.fmus = [], []
 
     def network(self, topology):
-        key = (topology.fault_bus, topology.open)
+        """Case.reduced of a topology, kept per topology and fault impedance."""
+        impedance = complex(self._fault_impedance) if topology.fault_bus is not None else None
+        key = (topology.fault_bus, impedance, topology.open)
         if key not in self._networks:
             self._networks[key] = self.case.reduced(topology.fault_bus, self._fault_impedance, topology.open)
         return self._networks[key]
@@ -332,51 +337,69 @@ class GridMaster:
         return [Vs if code == 0 else theta if code == 1 else links[key] if code == 4 else held
                 for code, key, held in unit.plan[0]]
 
-    def _solve(self, network, V, theta_ref, timing: Timing):
-        """The generator-bus voltages [g] (complex) at which the machines' currents I(V) and the
-        network agree, Newton from V; the machines are left at those inputs. Returns (V, I, theta,
-        each machine's outputs as read)."""
+    def _solve(self, network, V, theta_ref, active, timing: Timing):
+        """The unit-bus voltages [g] (complex, per unit) at which the network and the currents I(V) of
+        the `active` units' machines agree, Newton from V on the reduced network's buses (units at
+        one bus inject into it together: their currents are summed and their Jacobians accumulated);
+        the machines are left at those inputs. A unit not active injects nothing. Returns (V, I,
+        theta [g], each active unit's machine outputs as read (None for the others))."""
         started = time.perf_counter()
         s = self.settings
-        n = len(self.units)
-        v = np.empty(2 * n)
-        v[0::2], v[1::2] = V.real, V.imag
+        slot, units = self._slot, self.units
+        b = len(self._first)
+        v = np.empty(2 * b)
+        Vb = V[self._first]
+        v[0::2], v[1::2] = Vb.real, Vb.imag
         Y = network.Y_real
-        i_vec = np.empty(2 * n)
-        theta = np.empty(n)
-        machine = [None] * n
+        g = len(units)
+        theta = [0.0] * g
+        current = [0.0] * (2 * g)
+        machine = [None] * g
+        refs = theta_ref.tolist()
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
-            for k, u in enumerate(self.units):
-                re, im = values[2 * k], values[2 * k + 1]
-                theta[k] = theta_ref[k] + _wrap(math.atan2(im, re) - theta_ref[k])
+            i_bus = [0.0] * (2 * b)
+            for k in active:
+                u = units[k]
+                r = 2 * slot[k]
+                re, im = values[r], values[r + 1]
+                theta[k] = angle = refs[k] + _wrap(math.atan2(im, re) - refs[k])
                 m = u.fmus[0]
-                m.set_inputs(self._machine_inputs(u, math.hypot(re, im), theta[k]))
+                m.set_inputs(self._machine_inputs(u, math.hypot(re, im), angle))
                 out = m.outputs()
                 machine[k] = out
-                i_vec[2 * k], i_vec[2 * k + 1] = out[u.current_rows[0]], out[u.current_rows[1]]
-            F = Y @ v - i_vec
-            mismatch = max(map(abs, F.tolist()))
+                current[2 * k], current[2 * k + 1] = i_re, i_im = out[u.current_rows[0]], out[u.current_rows[1]]
+                i_bus[r] += i_re
+                i_bus[r + 1] += i_im
+            F = Y @ v - i_bus
+            mismatch = float(np.max(np.abs(F)))
             if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
                 break
             M = Y.copy()
-            for k, u in enumerate(self.units):
-                re, im = values[2 * k], values[2 * k + 1]
+            for k in active:
+                u = units[k]
+                r = 2 * slot[k]
+                re, im = values[r], values[r + 1]
                 Vs = math.hypot(re, im)
                 c, sn = re / Vs, im / Vs
-                (a, b), (d, e) = u.fmus[0].output_jacobian(u.current_rows, u.voltage_columns)  # d(I_re, I_im) / d(Vs, theta)
+                (a, bb), (d, e) = u.fmus[0].output_jacobian(u.current_rows, u.voltage_columns)  # d(I_re, I_im) / d(Vs, theta)
                 # chain rule with d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
-                r = 2 * k
-                M[r, r] -= a * c - b * sn / Vs
-                M[r, r + 1] -= a * sn + b * c / Vs
+                M[r, r] -= a * c - bb * sn / Vs
+                M[r, r + 1] -= a * sn + bb * c / Vs
                 M[r + 1, r] -= d * c - e * sn / Vs
                 M[r + 1, r + 1] -= d * sn + e * c / Vs
             v -= np.linalg.solve(M, F)
             timing.newton_iterations += 1
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")
+        values = v.tolist()
+        for k in range(g):
+            if machine[k] is None:  # not active: the bus angle, continuous with its reference
+                r = 2 * slot[k]
+                theta[k] = refs[k] + _wrap(math.atan2(values[r + 1], values[r]) - refs[k])
         timing.network_s += time.perf_counter() - started
-        return v[0::2] + 1j * v[1::2], i_vec[0::2] + 1j * i_vec[1::2], theta, machine
+        Vb = v[0::2] + 1j * v[1::2]
+        return Vb[slot], np.array(current[0::2]) + 1j * np.array(current[1::2]), np.array(theta), machine
 
     def _terminal(self, V, I, theta):
         """The terminal voltage behind each machine's external impedance: (magnitudes [g], angles [g],
@@ -387,18 +410,19 @@ class GridMaster:
             angles = [t + _wrap(cmath.phase(v) - t) for v, t in zip(Vt, theta.tolist())]
         return [abs(v) for v in Vt], angles
 
-    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, timing):
-        """One pass over [t0, t0 + h]: every unit's devices stepped in their order, each input linear
+    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, active, timing):
+        """One pass over [t0, t0 + h]: every `active` unit's devices stepped in their order, each input linear
         from its start value to its end value (bus voltage and terminal voltage: V0, Vt0 to V1, Vt1;
         a link from a device stepped before in this pass: to its new output; held otherwise), or
-        held at the start values with coupling "held". Returns every unit's outputs per device at
-        t0 + h, and sets the units' links to their new values."""
+        held at the start values with coupling "held". Returns every active unit's outputs per device
+        at t0 + h (None for the others), and sets the units' links to their new values."""
         started = time.perf_counter()
         held_coupling = self.settings.coupling == "held"
         ends = (([abs(v) for v in V0.tolist()], [abs(v) for v in V1.tolist()]), (theta0.tolist(), theta1.tolist()),
                 (Vt0[0], Vt1[0]), (Vt0[1], Vt1[1]))
-        outputs = []
-        for k, u in enumerate(self.units):
+        outputs = [None] * len(self.units)
+        for k in active:
+            u = self.units[k]
             links, new_links = u.links, {}
             unit_out = [None] * len(u.fmus)
             for j in u.order:
@@ -430,12 +454,15 @@ class GridMaster:
                 for name, row in u.link_rows[j].items():
                     new_links[(j, name)] = out[row]
             u.links.update(new_links)
-            outputs.append(unit_out)
+            outputs[k] = unit_out
         timing.fmu_step_s += time.perf_counter() - started
         return outputs
 
     def run(self, contingency: Contingency, stop: float = 5.0) -> CosimResult:
-        """The system from its load-flow equilibrium through `contingency` until `stop` [s]."""
+        """The system from its load-flow equilibrium through `contingency` until `stop` [s]. A unit
+        its topology trips (Topology.tripped) injects nothing from then on, its FMUs are no longer
+        stepped (its states stand at their values at the trip) and its rotor angle leaves the
+        loss-of-synchronism spread."""
         if not (isinstance(stop, (int, float)) and math.isfinite(stop) and stop > 0):
             raise ValueError(f"stop must be a positive time, got {stop!r}")
         s = self.settings
@@ -452,12 +479,14 @@ class GridMaster:
         topologies = contingency.topologies(stop)
         topology = topologies[0]
         n = len(self.units)
-        state = [u.fmus[0].outputs() for u in self.units]
-        theta_ref = np.array([float(x[u.angle_row]) for x, u in zip(state, self.units)])  # continuous angles
+        standing = [[f.outputs() for f in u.fmus] for u in self.units]  # every device's outputs now
+        theta_ref = np.array([float(x[0][u.angle_row]) for x, u in zip(standing, self.units)])  # continuous angles
+        active = self._active(topology)
         V = self.case.flow.V_complex[self._gen_rows].copy()
-        V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, timing)
-        devices = [[list(m)] + [f.outputs() for f in u.fmus[1:]] for m, u in zip(machine, self.units)]
-        rows = [self._row(0.0, V, I, theta, devices)]
+        V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, active, timing)
+        for k in active:
+            standing[k][0] = list(machine[k])
+        rows = [self._row(0.0, V, I, theta, standing, active)]
         lost = None
         V_prev, h_prev = None, None
         t0 = 0.0
@@ -470,45 +499,50 @@ class GridMaster:
                 V1 = V.copy()
             theta1 = np.array([theta[k] + _wrap(cmath.phase(V1[k]) - theta[k]) for k in range(n)])
             I1 = I
+            live = [f for k in active for f in self.units[k].fmus]
             saved = None
             passes = s.passes if s.coupling == "iterated" else 1
             if passes > 1 and self.rolls_back:
                 t_save = time.perf_counter()
-                saved = [fmu.save() for fmu in self.fmus]
+                saved = [fmu.save() for fmu in live]
                 links = [dict(u.links) for u in self.units]
                 timing.rollback_s += time.perf_counter() - t_save
             try:
                 for p in range(passes if saved is not None else 1):
                     if p > 0:
                         t_save = time.perf_counter()
-                        for fmu, snap in zip(self.fmus, saved):
+                        for fmu, snap in zip(live, saved):
                             fmu.restore(snap)
                         for u, kept in zip(self.units, links):
                             u.links = dict(kept)
                         timing.rollback_s += time.perf_counter() - t_save
                     Vt1 = self._terminal(V1, I1, theta1)
-                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, timing)
+                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing)
                     timing.passes += 1
-                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, timing)
+                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
                     change = float(np.max(np.abs(new_V - V1)))
                     V1, theta1 = new_V, new_theta
                     if change < s.tolerance:
                         break
             finally:
                 if saved is not None:
-                    for fmu, snap in zip(self.fmus, saved):
+                    for fmu, snap in zip(live, saved):
                         fmu.free(snap)
             timing.steps += 1
             V_prev, h_prev = V, h
             V, I, theta = V1, I1, theta1
+            for k in active:
+                standing[k] = [list(machine[k])] + [list(o) for o in outputs[k][1:]]
             if new_topology is not None:
                 topology = new_topology
-                V, I, theta, machine = self._solve(self.network(topology), V, theta, timing)
+                active = self._active(topology)
+                V, I, theta, machine = self._solve(self.network(topology), V, theta, active, timing)
+                for k in active:
+                    standing[k] = [list(machine[k])] + standing[k][1:]
                 V_prev = None  # no extrapolation across the jump
-            devices = [[list(m)] + [list(o) for o in out[1:]] for m, out in zip(machine, outputs)]
-            rows.append(self._row(t1, V, I, theta, devices))
+            rows.append(self._row(t1, V, I, theta, standing, active))
             if lost is None:
-                lost = self._loss_time(rows)
+                lost = self._loss_time(rows, active)
                 if lost is not None and s.stop_at_loss:
                     break
             t0 = t1
@@ -517,15 +551,29 @@ class GridMaster:
         messages = {u.bus: list(dict.fromkeys(m for f in u.fmus for m in f.messages)) for u in self.units}
         return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages, notes=self.notes)
 
-    def _row(self, t, V, I, theta, devices) -> dict:
-        return {"time": t, "devices": devices, "V": V.copy(), "I": I.copy(), "theta": theta.copy(),
-                "inputs": [list(u.fmus[0]._in) for u in self.units]}
+    def _active(self, topology) -> list:
+        """The indices of the units in service in `topology` (not among its tripped ones)."""
+        out = set(topology.tripped)
+        unknown = [k for k in out if not (isinstance(k, int) and 0 <= k < len(self.units))]
+        if unknown:
+            raise ValueError(f"{topology.description}: no unit {unknown[0]!r} to trip (units 0 to {len(self.units) - 1})")
+        return [k for k in range(len(self.units)) if k not in out]
 
-    def _loss_time(self, rows) -> float | None:
-        """The time two rotor angles first got pi apart, linear between the last two rows; None if not."""
+    def _row(self, t, V, I, theta, devices, active) -> dict:
+        """A result row: every unit's device outputs (a tripped unit's as they stood at its trip), bus
+        voltages, currents (0 where tripped), angles and machine inputs."""
+        I = I.copy()
+        off = [k for k in range(len(self.units)) if k not in active]
+        I[off] = 0.0
+        return {"time": t, "devices": list(devices), "V": V.copy(), "I": I,
+                "theta": theta.copy(), "inputs": [list(u.fmus[0]._in) for u in self.units]}
+
+    def _loss_time(self, rows, active) -> float | None:
+        """The time two rotor angles of the `active` units first got pi apart, linear between the last
+        two rows; None if not."""
         def spread(row):
-            d = [row["devices"][k][0][u.angle_row] for k, u in enumerate(self.units)]
-            return float(max(d) - min(d))
+            d = [row["devices"][k][0][self.units[k].angle_row] for k in active]
+            return float(max(d) - min(d)) if d else 0.0
 
         now = spread(rows[-1])
         if now <= math.pi:
@@ -555,7 +603,7 @@ class GridMaster:
         V_bus = np.empty((len(rows), len(self.case.buses)), dtype=complex)
         for i, t in enumerate(time_):
             tp = [tp for tp in topologies if tp.start <= t + 1e-12][-1]
-            V_bus[i] = self.network(tp).recovery @ V_gen[i]
+            V_bus[i] = self.network(tp).recovery @ V_gen[i][self._first]
         theta_vs = np.stack([r["theta"] for r in rows])
         theta_bus = np.unwrap(np.angle(V_bus), axis=0)
         theta_bus[:, self._gen_rows] = theta_vs
