@@ -13,10 +13,11 @@ else the component's defaults, as the FMU's generated equations are.
 The window frame (reference_models/drift.py): the state stays raw; the network sees the window in its
 frame. A window starting at time t_w from state x_w under the input u_w (the input the FMU holds
 then: at a rollover, that of the step that just ended; at initialisation, the start values or what
-the master set in initialization mode) has a = u_w's first angle input, c = x_w's speed state and
+the master set in initialization mode) has a = u_w's first angle input, c = x_w's speed state (its offset from rest) and
 shift = a + period floor((x_w's first angle state - a) / period + 1/2). In the frame, inputs at window
-time tau are u - a R - c (R tau + T) and states x - (shift + c tau) A - c W (R: 1 for angle inputs, T:
-the torque coefficients, e.g. D on SM4's Pm, A: 1 for angle states, W: 1 for the speed state).
+time tau are u - a R - c (R s tau + T) and states x - (shift + c s tau) A - c W (R: 1 for angle inputs, T:
+the torque coefficients, e.g. D on SM4's Pm, A: 1 for angle states, W: 1 for the speed state, s: the
+frame's speed scale, 1 for SM4's rad/s, 2 pi fn for a per-unit speed whose c is its offset from 1).
 
 Per communication step (h, u) [s, u in the component's input units] (docs/fmu.md, "A step"), with the
 inputs' derivatives du over it (fmi2SetRealInputDerivatives; 0: held), u(s) = u + du (s - t):
@@ -212,6 +213,7 @@ class StepMirror:
         self.frame = frame = getattr(operator, "frame", None)
         # the frame tables of config.h: R (angle inputs), T (torque inputs), A (angle states), W (speed)
         self.rates = frame.input_rates(n_u) if frame else np.zeros(n_u)
+        self.scale = frame.speed_scale if frame else 1.0  # rad/s: the angle rate of one speed unit
         self.torques = frame.input_torques(n_u) if frame else np.zeros(n_u)
         self.angles, self.speed = np.zeros(n_x), np.zeros(n_x)
         if frame:
@@ -233,7 +235,7 @@ class StepMirror:
     def input_in_frame(self, window: dict, u, tau) -> np.ndarray:
         """u [n_u] at window time tau [s] (a number, or [k, 1] for k slots) in the window's frame:
         u - a R - c (R tau + T)."""
-        return u - window["a"] * self.rates - window["c"] * (self.rates * tau + self.torques)
+        return u - window["a"] * self.rates - window["c"] * (self.rates * self.scale * tau + self.torques)
 
     def network(self, x0_f, sensors_f, tau: float) -> np.ndarray:
         """The operator's network [n_x] at window time tau [s] from x0_f [n_x] and the sensor buffer
@@ -301,7 +303,7 @@ class StepMirror:
         out = []
         for (h, u_step), du in zip(steps, rates):
             if restart_jump > 0 and t > window["t"] + TIME_EPS:
-                turned = np.where(end_du != 0, 0.0, window["c"] * self.rates * (t - input_time))  # a held angle
+                turned = np.where(end_du != 0, 0.0, window["c"] * self.rates * self.scale * (t - input_time))  # a held angle
                 if np.max(np.abs(u_step - end_u - turned)) > restart_jump:  # turning with the frame is no jump
                     window = self.start_window(t, x, u_step)
             if t < window["t"] + TIME_EPS and not np.array_equal(u_step, last_u):
@@ -337,7 +339,7 @@ class StepMirror:
                 if fix["rest"] is not None:
                     weight, rest = fix["rest"]
                     x_f = x_f - weight * (self.network(rest, fix["rest_sensors"], tau) - rest)
-                x = x_f + (window["shift"] + window["c"] * tau) * self.angles + window["c"] * self.speed
+                x = x_f + (window["shift"] + window["c"] * self.scale * tau) * self.angles + window["c"] * self.speed
                 if slow:
                     l, r = slow
                     fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u_end))

@@ -183,6 +183,8 @@ def frame_config(frame, n_x: int, n_u: int) -> list[str]:
         f"#define OPFMU_FRAME_ANGLE_STATE {frame.angle_states[0] if frame and frame.angle_states else -1}",
         f"#define OPFMU_FRAME_PERIOD {_c_double(frame.period if frame else 1.0)}",
         f"#define OPFMU_FRAME_SPEED_STEP {_c_double(frame.speed_step if frame else 0.0)} /* 0: c = the start speed */",
+        f"#define OPFMU_FRAME_SPEED_SCALE {_c_double(frame.speed_scale if frame else 1.0)} /* rad/s: angle rate of one speed unit */",
+        f"#define OPFMU_FRAME_SPEED_REST {_c_double(frame.speed_rest if frame else 0.0)} /* the speed at which angles stand still */",
         f"static const double OPFMU_FRAME_INPUT_RATES[{n_u}] = {_c_array(rates)}; /* R */",
         f"static const double OPFMU_FRAME_INPUT_TORQUES[{n_u}] = {_c_array(torques)}; /* T */",
         f"static const double OPFMU_FRAME_ANGLES[{n_x}] = {_c_array(angles)}; /* A */",
@@ -375,11 +377,12 @@ def sensor_suffix_sums(library: Path, n_sensors: int, width: int, n_states: int,
 
 def ramp_suffix_sums(suffix, frame, horizon: float) -> np.ndarray:
     """[S + 1, H]: sum over slots j >= k of s_j R . slope_j, with slope_j = suffix[j] - suffix[j + 1]
-    and R the frame's input rates (zeros without a frame): how the frame's ramp reaches z."""
+    and R the frame's input ramps (its angle inputs' rate per speed unit; zeros without a frame): how
+    the frame's ramp reaches z."""
     n_sensors, n_inputs, width = suffix.shape[0] - 1, suffix.shape[1], suffix.shape[2]
     if frame is None:
         return np.zeros((n_sensors + 1, width))
-    per_slot = np.einsum("jch,c->jh", suffix[:-1] - suffix[1:], frame.input_rates(n_inputs))
+    per_slot = np.einsum("jch,c->jh", suffix[:-1] - suffix[1:], frame.input_ramps(n_inputs))
     s = np.linspace(0.0, horizon, n_sensors)
     ramp = np.zeros((n_sensors + 1, width))
     ramp[:-1] = np.cumsum((s[:, None] * per_slot)[::-1], axis=0)[::-1]
@@ -420,7 +423,7 @@ def sensor_sums_source(suffix, n_sensors: int, width: int, frame=None, horizon: 
 def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> float:
     """Max abs difference against onnxruntime of the compiled kernel (inside the FMU binary) on the
     network's graph and, for an operator with a frame, of the kernel with the engine's frame on the
-    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (up to 12 rad/s);
+    whole graph, under inputs turned by random angles (up to 30 rad) and speeds (angle rates up to 12 rad/s);
     relative to contract.check_scale, as the export's check (onnxruntime computes in float32)."""
     import onnxruntime as ort
 
@@ -433,7 +436,8 @@ def check_kernel(binary: Path, proto, meta: dict, n: int, seed: int = 0) -> floa
     cases = [(network_graph(proto), library.opfmu_operator, x0, u)]
     if meta.get("frame") is not None:
         cases.append((proto, library.opfmu_framed_operator,
-                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n), rng.uniform(-12, 12, n))))
+                      *drifted(meta["frame"], x0, u, t_grid, rng.uniform(-30, 30, n),
+                               rng.uniform(-12, 12, n) / meta["frame"].speed_scale)))
     worst = 0.0
     for graph, fn, x0_, u_ in cases:
         try:

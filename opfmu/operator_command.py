@@ -1,19 +1,23 @@
 """`opfmu operator`: a user's machine from data to FMU in one command, with the shipped recipe.
 
-    opfmu operator --machine m.json --out DIR [--pm LOW HIGH] [--efd LOW HIGH] [--operating-point PM EFD]
+    opfmu operator --machine m.json --out DIR [--component sm4|genrou] [--recipe machine|grid|case]
+                   [--case NAME] [--pm LOW HIGH] [--efd LOW HIGH] [--operating-point PM EFD]
                    [--horizon S] [--epochs N] [--workers N] [--threads N] [--name NAME]
 
 Stages, each resumed where an interrupted run left it (rerun the same command):
 1. DIR/data: the recipe's dataset for this machine (`machine`: every co-simulation family of the
    `cosim` preset and the `network` family recorded from the machine itself in a closed loop;
    `grid`: `network` windows only, for a machine in a network with D = 0), with Pm and Efd drawn
-   from the given level ranges;
+   from the given level ranges; `case`: windows recorded from a shipped grid case (--case) run
+   through faults at each of its buses, of the units whose machine this is (families.case_family),
+   the recipe of any machine component with a drift symmetry (GENROU);
 2. DIR/run: the PI-DeepONet of the shipped operator (anchored Unstacked, 3 x 128 tanh, 96 basis
    functions per state, causal training, physics losses), resumed from its last checkpoint;
 3. DIR/operator.onnx (export, checked against torch) and the FMUs DIR/<NAME>Surrogate.fmu (checked
    against onnxruntime) and DIR/<NAME>Reference.fmu (native Dormand-Prince 5(4) of the same machine);
-4. DIR/report.md: the single-window metrics on the test split and 60 s co-simulations of both FMUs
-   under fmpy at h = 10 ms on the built-in scenarios at the machine's operating point, with plots.
+4. DIR/report.md: the single-window metrics on the test split and (SM4 recipes) 60 s
+   co-simulations of both FMUs under fmpy at h = 10 ms on the built-in scenarios at the machine's
+   operating point, with plots; the `case` recipe's operator is checked in its case instead.
 """
 from __future__ import annotations
 
@@ -32,7 +36,11 @@ RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the `machine` recipe: the famili
 # drift, governor and avr windows had those at validation MSE 0.3-0.7 against 0.014 for network,
 # and selecting by a validation error they dominated chose operators undertrained for the network)
 GRID_FAMILIES = (("network", 1.0),)
-GRID_TRAINING = {"patience": 10**9}  # no early stopping: the best validation epoch is kept all the same
+GRID_TRAINING = {"patience": 10**9}
+RECIPES = ("machine", "grid", "case")
+SM4_RECIPES = ("machine", "grid")  # their input families drive SM4
+RECIPE_WORDS = {"machine": "the cosim families and `network`", "grid": "`network` windows",
+                "case": "windows recorded from the case's units through faults at its buses"}  # no early stopping: the best validation epoch is kept all the same
 RECIPE_COUNTS = {"train": 3000, "collocation": 1500, "val": 150, "test": 150}
 RECIPE_TRAINING = {"physics": True, "epochs": 1500, "time_points": 200, "causal": True, "state_weights": [5, 1, 1, 5],
                    "model": {"anchored": True, "width": 128, "latent": 96}}
@@ -45,7 +53,12 @@ def add_operator_parser(sub) -> None:
     op = sub.add_parser("operator", help="your machine from data to FMU: data, training, export, FMUs, report",
                         description=__doc__.split("\n\n")[0] + " Resumable: rerun the same command after an "
                         "interruption. Takes about 20-30 minutes on 2 cores.")
-    op.add_argument("--machine", required=True, metavar="FILE", help="JSON file of machine parameters (SM4Params)")
+    op.add_argument("--machine", required=True, metavar="FILE",
+                    help="JSON file of machine parameters (of --component: SM4Params, GENROUParams)")
+    op.add_argument("--component", default="sm4", help="the machine's component: sm4 (default) or genrou "
+                    "(with --recipe case)")
+    op.add_argument("--case", default=None, metavar="NAME", help="the shipped grid case whose windows the case "
+                    "recipe records (e.g. kundur); the machine must be one of its units'")
     op.add_argument("--out", required=True, help="run directory")
     op.add_argument("--pm", nargs=2, type=float, default=None, metavar=("LOW", "HIGH"),
                     help="Pm levels [pu] the windows draw from (default: the component's operating range)")
@@ -55,10 +68,11 @@ def add_operator_parser(sub) -> None:
                     help="bus voltage levels [pu] (default: the component's operating range)")
     op.add_argument("--operating-point", nargs=2, type=float, default=None, metavar=("PM", "EFD"),
                     help="Pm and Efd [pu] the report's scenarios hold or move from (default: the middle of the levels)")
-    op.add_argument("--recipe", choices=("machine", "grid"), default="machine",
+    op.add_argument("--recipe", choices=RECIPES, default="machine",
                     help="machine: every co-simulation family and network (a machine on a bus of given "
-                         "voltage); grid: network windows only, for a machine in a network with D = 0 "
-                         "(default machine)")
+                         "voltage); grid: network windows only, for a machine in a network with D = 0; "
+                         "case: windows of the machine's units in the shipped case --case through faults "
+                         "at each bus (default machine)")
     op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.3 for a machine "
                     "in a network with D = 0, whose swings within a window are large)")
     op.add_argument("--epochs", type=int, default=RECIPE_TRAINING["epochs"], help="training epochs (default 1500)")
@@ -79,17 +93,24 @@ class OperatorError(ValueError):
     """A request `opfmu operator` cannot run."""
 
 
-def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"], name: str = "machine"):
-    """The dataset preset of recipe `name`: `machine`, the cosim families and `network`, or `grid`
-    (GRID_FAMILIES), with input levels `levels` [input -> (low, high)] over windows of `horizon`
-    seconds (1 ms sensor spacing), `windows` training windows (the other splits in the recipe's
-    proportions)."""
+def recipe(levels: dict, horizon: float, windows: int = RECIPE_COUNTS["train"], name: str = "machine",
+           component: str = "sm4", case: str | None = None):
+    """The dataset preset of recipe `name`: `machine`, the cosim families and `network`, `grid`
+    (GRID_FAMILIES), or `case` (the `case-<case>` family only, for `component`), with input levels
+    `levels` [input -> (low, high)] over windows of `horizon` seconds (1 ms sensor spacing),
+    `windows` training windows (the other splits in the recipe's proportions)."""
+    from reference_models.components import component as find_component
     from surrogate.data.presets import preset
 
     cosim = preset("cosim")
     n_points = int(round(horizon / 0.001)) + 1
     counts = {split: max(4, int(round(n * windows / RECIPE_COUNTS["train"]))) for split, n in RECIPE_COUNTS.items()}
     probes = max(2, int(round(cosim.probes_per_family * windows / cosim.counts["train"])))
+    if name == "case":  # every window brings its own initial state: the box only names the states
+        model = find_component(component)
+        return replace(cosim, name=name, counts=counts, families=((f"case-{case}", 1.0),), horizon=float(horizon),
+                       n_points=n_points, levels=levels, component=model.name, ic="box", reachable_fraction=0.0,
+                       probes_per_family=0, ic_box={s: (0.0, 0.0) for s in model.state_names})
     families = cosim.families + RECIPE_FAMILIES_EXTRA if name == "machine" else GRID_FAMILIES
     return replace(cosim, name=name, counts=counts, probes_per_family=probes,
                    families=families, horizon=float(horizon), n_points=n_points, levels=levels)
@@ -168,6 +189,27 @@ def _check_resumable(out: Path, preset, seed: int, params, config) -> None:
             raise OperatorError(f"{out} holds a training run with other settings; choose another --out")
 
 
+def _check_case(name: str, model, params) -> None:
+    """OperatorError unless `name` is a shipped case with a unit whose machine this is."""
+    from reference_models.families import case_units
+    from reference_models.grid.case import CaseError, shipped_case
+
+    try:
+        case = shipped_case(name)
+    except CaseError as exc:
+        raise OperatorError(f"--case: {exc}") from None
+    if not case_units(case, model, params):
+        raise OperatorError(f"no unit of case {name} has this {model.name} machine (the case recipe learns from its "
+                            "units' windows): give the parameters of one of its machines")
+
+
+def _state_weights(model) -> list:
+    """Data-loss weights of a non-SM4 machine's states: its rotor angle 5, its speed 2, the rest 1
+    (the rotor angle is what a grid study reads; SM4's recipe weighs delta and Eq_p 5)."""
+    speed = model.state_names.index(model.ports.output("rotor_speed"))
+    return [5.0 if i == model.drift.angle_states[0] else 2.0 if i == speed else 1.0 for i in range(model.n_states)]
+
+
 def _json_object(path: Path) -> dict:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
@@ -192,17 +234,28 @@ def _run(args) -> None:
         raise OperatorError("--report-stop must lie in (0, 3600] s")
     if not 0 <= args.seed <= MAX_COUNT or (args.threads is not None and args.threads < 1):
         raise OperatorError(f"--seed must lie in [0, {MAX_COUNT}] and --threads be >= 1")
-    model = component("sm4")
+    try:
+        model = component(args.component)
+    except ValueError as exc:
+        raise OperatorError(f"--component: {exc}") from None
+    if model.name != "sm4" and args.recipe in SM4_RECIPES:
+        raise OperatorError(f"the {args.recipe} recipe's input families drive SM4; a {model.name} machine takes "
+                            "--recipe case --case NAME (windows of its units in a shipped grid case)")
+    if (args.recipe == "case") != (args.case is not None):
+        raise OperatorError("--case NAME goes with --recipe case, and --recipe case needs it")
     params = model.load_params(args.machine)
+    if args.recipe == "case":
+        _check_case(args.case, model, params)
     levels = _levels(args, model)
     operating = _operating_point(args, model, params, levels)
     try:
-        preset = recipe(levels, args.horizon, args.windows, args.recipe)
+        preset = recipe(levels, args.horizon, args.windows, args.recipe, model.name, args.case)
     except ValueError as exc:
         raise OperatorError(str(exc)) from None
     from surrogate.training import TrainConfig
 
-    config = TrainConfig.from_dict({**RECIPE_TRAINING, **(GRID_TRAINING if args.recipe == "grid" else {}),
+    config = TrainConfig.from_dict({**RECIPE_TRAINING, **(GRID_TRAINING if args.recipe != "machine" else {}),
+                                    **({} if model.name == "sm4" else {"state_weights": _state_weights(model)}),
                                     "epochs": args.epochs, "seed": args.seed})
     out = output_folder(args.out)
     _check_resumable(out, preset, args.seed, params, config)
@@ -245,9 +298,11 @@ def _run(args) -> None:
     timings["export_and_fmus"] = time.perf_counter() - t
     say(f"built {surrogate_fmu} (kernel within {info['max_abs_diff']:.1e} of onnxruntime) and {reference_fmu}")
 
-    t = time.perf_counter()
-    results = long_runs(surrogate_fmu, reference_fmu, out, operating, args.report_stop, say)
-    timings["long_runs"] = time.perf_counter() - t
+    results = {}
+    if args.recipe in SM4_RECIPES:
+        t = time.perf_counter()
+        results = long_runs(surrogate_fmu, reference_fmu, out, operating, args.report_stop, say)
+        timings["long_runs"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - started
     report = write_report(out, onnx_path, args, operating, results, timings)
     say(f"report: {report}")
@@ -297,7 +352,7 @@ def write_report(out: Path, onnx_path: Path, args, operating: tuple, results: di
     phys = metrics["physical"]
     lines = [f"# opfmu operator: {Path(args.machine).name}", "",
              f"Machine `{args.machine}`: {meta['params']}.", "",
-             f"Recipe: the `{args.recipe}` preset ({'the cosim families and `network`' if args.recipe == 'machine' else 'mostly `network`'}; {args.windows} training "
+             f"Recipe: the `{args.recipe}` preset ({RECIPE_WORDS[args.recipe]}; {args.windows} training "
              f"windows of {args.horizon:g} s), an anchored Unstacked PI-DeepONet trained causally for "
              f"{args.epochs} epochs (seed {args.seed}); windows in their own frame (reference_models/drift.py).", "",
              "| stage | wall time [s] |", "| --- | --- |"]

@@ -23,6 +23,13 @@ longer depends on the absolute angle or speed, so a machine whose angle has drif
 trained envelope as one at rest at theta_vs = 0 (for D = 0; with D > 0 a drifted speed is a torque
 D c, which stays an input). The transformation is exact: the operator's error does not change.
 
+A component whose speed is in per unit (GENROU: omega = 1 at synchronous speed, d delta/dt =
+2 pi fn (omega - 1)) declares the speed's rest value (`speed_rest`, 1) and the angle rate one speed
+unit gives (`speed_scale`, 2 pi fn rad/s: a factor times parameters). The frame speed c is then
+taken from the speed's offset from rest (c = omega(0) - 1 where the speed carries no torque, so
+omega_f starts at 1), the angles ramp at speed_scale c, and the torque inputs drop by k c. With
+the defaults (scale 1, rest 0) this is the frame above, number for number.
+
 Arrays: x0 [N, n_x], u [N, S, n_u] at window times s [S] (s[0] = 0), x [N, M, n_x] at times t [M].
 """
 from __future__ import annotations
@@ -35,16 +42,21 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Drift:
-    """Which states and inputs are angles [rad], which state is their speed [rad/s] (d angle/dt),
-    which inputs carry a torque k c under a speed offset c (input index, name of the parameter k),
-    and the period of the equations in the angle differences."""
+    """Which states and inputs are angles [rad], which state is their speed (d angle/dt =
+    speed_scale (speed - speed_rest)), which inputs carry a torque k c under a speed offset c
+    (input index, name of the parameter k), and the period of the equations in the angle
+    differences. speed_scale: a number followed by parameter names whose product is the angle rate
+    [rad/s] of one speed unit ((1.0,): the speed is in rad/s); speed_rest: the speed at which the
+    angles stand still (0 for a deviation, 1 for a per-unit speed)."""
 
     angle_states: tuple
     angle_inputs: tuple
     speed_state: int
     torque_inputs: tuple = ()
     period: float = 2.0 * math.pi
-    speed_step: float = 0.0  # rad/s: the frame's speed in whole steps where it carries a torque (0: exact)
+    speed_step: float = 0.0  # speed units: the frame's speed in whole steps where it carries a torque (0: exact)
+    speed_scale: tuple = (1.0,)
+    speed_rest: float = 0.0
 
     def check(self, n_states: int, n_inputs: int) -> None:
         if not self.angle_inputs or not all(0 <= i < n_inputs for i in self.angle_inputs):
@@ -55,6 +67,9 @@ class Drift:
             raise ValueError("drift: torque_inputs must index inputs, and the period be positive")
         if not self.speed_step >= 0:
             raise ValueError("drift: speed_step must be >= 0")
+        if not (self.speed_scale and isinstance(self.speed_scale[0], (int, float))
+                and all(isinstance(n, str) for n in self.speed_scale[1:])):
+            raise ValueError("drift: speed_scale must be a number followed by parameter names")
 
 
 @dataclass(frozen=True)
@@ -67,18 +82,29 @@ class Frame:
     speed_state: int
     torque: tuple  # (input index, coefficient k): input_f = input - k c
     period: float
-    speed_step: float = 0.0  # rad/s: c = the start speed rounded to whole steps (0: c = the start speed)
+    speed_step: float = 0.0  # speed units: c = the start offset rounded to whole steps (0: c = the offset)
+    speed_scale: float = 1.0  # rad/s: the angle rate of one speed unit
+    speed_rest: float = 0.0  # the speed at which the angles stand still
 
     def to_dict(self) -> dict:
-        return {"angle_states": list(self.angle_states), "angle_inputs": list(self.angle_inputs),
+        """The frame's numbers; scale and rest only where they are not the defaults (1 and 0)."""
+        data = {"angle_states": list(self.angle_states), "angle_inputs": list(self.angle_inputs),
                 "speed_state": self.speed_state, "torque": [[int(i), float(k)] for i, k in self.torque],
                 "period": self.period, "speed_step": self.speed_step}
+        if self.speed_scale != 1.0 or self.speed_rest != 0.0:
+            data.update(speed_scale=self.speed_scale, speed_rest=self.speed_rest)
+        return data
 
     @classmethod
     def from_dict(cls, data: dict) -> "Frame":
         return cls(tuple(int(i) for i in data["angle_states"]), tuple(int(i) for i in data["angle_inputs"]),
                    int(data["speed_state"]), tuple((int(i), float(k)) for i, k in data["torque"]),
-                   float(data["period"]), float(data.get("speed_step", 0.0)))
+                   float(data["period"]), float(data.get("speed_step", 0.0)),
+                   float(data.get("speed_scale", 1.0)), float(data.get("speed_rest", 0.0)))
+
+    def input_ramps(self, n_inputs: int) -> np.ndarray:
+        """[n_u]: speed_scale for an angle input (what c t turns it by per second), else 0."""
+        return self.speed_scale * self.input_rates(n_inputs)
 
     def input_rates(self, n_inputs: int) -> np.ndarray:
         """[n_u]: 1 for an angle input (it turns with the frame), else 0."""
@@ -96,18 +122,21 @@ class Frame:
 
 def frame_of(drift: Drift, params) -> Frame:
     """The frame numbers of `drift` for the parameters `params` (the torque coefficients' values;
-    the speed step only where one of them is nonzero)."""
+    the speed step only where one of them is nonzero; the speed scale's parameters' values)."""
     torque = tuple((int(i), float(getattr(params, name))) for i, name in drift.torque_inputs)
     step = float(drift.speed_step) if any(k != 0.0 for _, k in torque) else 0.0
+    scale = float(drift.speed_scale[0])
+    for name in drift.speed_scale[1:]:
+        scale *= float(getattr(params, name))
     return Frame(tuple(drift.angle_states), tuple(drift.angle_inputs), int(drift.speed_state), torque,
-                 float(drift.period), step)
+                 float(drift.period), step, scale, float(drift.speed_rest))
 
 
 def window_frame(frame: Frame, x0: np.ndarray, u0: np.ndarray):
     """(input shift a [N], state shift [N], speed c [N]) of windows starting at x0 [N, n_x] under
     inputs u0 [N, n_u] (the first sensor values): a = the first angle input; the angle states shift
-    by a plus the whole periods that bring them nearest to it; c = the start speed (in whole
-    speed steps where the frame has one)."""
+    by a plus the whole periods that bring them nearest to it; c = the start speed's offset from
+    rest (in whole speed steps where the frame has one)."""
     a = u0[:, frame.angle_inputs[0]]
     c = frame_speed(frame, x0[:, frame.speed_state])
     lead = x0[:, frame.angle_states[0]] - a if frame.angle_states else np.zeros_like(a)
@@ -115,10 +144,12 @@ def window_frame(frame: Frame, x0: np.ndarray, u0: np.ndarray):
 
 
 def frame_speed(frame: Frame, speed: np.ndarray) -> np.ndarray:
-    """The frame's speed c [rad/s] for window start speeds `speed` [N]."""
+    """The frame's speed c [speed units] for window start speeds `speed` [N]: their offset from
+    rest, in whole speed steps where the frame has them."""
+    offset = speed - frame.speed_rest if frame.speed_rest else speed
     if frame.speed_step == 0.0:
-        return speed
-    return frame.speed_step * np.floor(speed / frame.speed_step + 0.5)
+        return offset
+    return frame.speed_step * np.floor(offset / frame.speed_step + 0.5)
 
 
 def to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, s: np.ndarray):
@@ -127,7 +158,7 @@ def to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, s: np.ndarray):
     n_x, n_u = x0.shape[-1], u.shape[-1]
     x0_f = x0 - shift[:, None] * _mask(n_x, frame.angle_states) - c[:, None] * _mask(n_x, (frame.speed_state,))
     u_f = (u - a[:, None, None] * frame.input_rates(n_u)
-           - c[:, None, None] * (s[None, :, None] * frame.input_rates(n_u) + frame.input_torques(n_u)))
+           - c[:, None, None] * (s[None, :, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)))
     return x0_f, u_f, shift, c
 
 
@@ -136,7 +167,7 @@ def from_frame(frame: Frame, x_f: np.ndarray, t: np.ndarray, shift: np.ndarray, 
     n_x = x_f.shape[-1]
     angles = _mask(n_x, frame.angle_states)
     return (x_f + shift[:, None, None] * angles
-            + c[:, None, None] * (t[None, :, None] * angles + _mask(n_x, (frame.speed_state,))))
+            + c[:, None, None] * (t[None, :, None] * frame.speed_scale * angles + _mask(n_x, (frame.speed_state,))))
 
 
 def trajectories_to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, x: np.ndarray, s: np.ndarray):
@@ -145,7 +176,7 @@ def trajectories_to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, x: np.nda
     n_x = x0.shape[-1]
     angles = _mask(n_x, frame.angle_states)
     x_f = (x - shift[:, None, None] * angles
-           - c[:, None, None] * (s[None, :, None] * angles + _mask(n_x, (frame.speed_state,))))
+           - c[:, None, None] * (s[None, :, None] * frame.speed_scale * angles + _mask(n_x, (frame.speed_state,))))
     return x0_f, u_f, x_f
 
 

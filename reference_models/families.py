@@ -32,7 +32,7 @@ import numpy as np
 
 from . import smib
 from .ports import machine_inputs
-from .signals import Dip, FirstOrder, Forcing, Piecewise, Ramp, Sawtooth, SecondOrder, Signal, held
+from .signals import Dip, FirstOrder, Forcing, Piecewise, Ramp, Sawtooth, SecondOrder, Signal, Table, held
 from .sm4 import SM4
 
 Ranges = dict  # parameter name -> (low, high), or the name of the input whose level range it takes
@@ -315,6 +315,85 @@ NETWORK = Family(
     needs_machine=True,
 )
 
+# The `case-<name>` families: windows recorded from a shipped grid case (reference_models/grid) run
+# monolithically through faults at each of its buses. A run per (bus, clearing time, fault
+# impedance), the fault from CASE_FAULT_START_S to that plus the clearing time, CASE_STOP_S long
+# (cut where two rotor angles get pi apart), rows every CASE_SAMPLE_S s and both sides of each event;
+# the window starts at one of the events (as a surrogate FMU's window does at an input jump) a
+# share CASE_EVENT_SHARE of the time, else anywhere in the run; its initial state is the unit's state
+# there, moved by up to CASE_JITTER times the component's state scales (a co-simulation starts
+# each window from its own last state); its inputs are the unit's machine inputs as recorded.
+CASE_CLEARING_S = (0.05, 0.1, 0.15, 0.2)
+CASE_FAULT_IMPEDANCES = (1e-4j, 0.05j)  # pu: bolted, and a fault that leaves some voltage
+CASE_FAULT_START_S, CASE_STOP_S, CASE_SAMPLE_S = 0.5, 4.0, 0.005
+CASE_EVENT_SHARE, CASE_JITTER = 0.3, 0.1
+
+
+def case_contingencies(case) -> list:
+    """The contingencies (reference_models.grid.contingency) the `case-` family of `case` records."""
+    from .grid.contingency import Contingency
+
+    return [Contingency(bus, CASE_FAULT_START_S + clearing, None, CASE_FAULT_START_S, z, case.network)
+            for bus in case.network.buses for clearing in CASE_CLEARING_S for z in CASE_FAULT_IMPEDANCES]
+
+
+_CASE_RUNS: dict = {}  # (case name, contingency index) -> GridResult: each run serves many windows
+
+
+def _case_run(name: str, index: int):
+    if (name, index) not in _CASE_RUNS:
+        from .grid.case import shipped_case
+        from .grid.monolithic import System, simulate
+
+        case = shipped_case(name)
+        contingency = case_contingencies(case)[index]
+        _CASE_RUNS[name, index] = simulate(System(case), contingency, stop=CASE_STOP_S, step=CASE_SAMPLE_S,
+                                           rtol=1e-8, atol=1e-10, event_rows=True, stop_at_loss=True)
+    return _CASE_RUNS[name, index]
+
+
+def case_units(case, component, machine) -> list:
+    """Indices of the units of `case` whose machine is `component` with the parameters `machine`."""
+    return [k for k, u in enumerate(case.units) if u.machine.component is component and u.machine.params == machine]
+
+
+def case_family(name: str) -> Family:
+    """The `case-<name>` family of the shipped case `name` (see CASE_CLEARING_S): windows of the
+    units whose machine has the dataset's component parameters."""
+    from .grid.case import shipped_case
+
+    case = shipped_case(name)
+    component = case.units[0].machine.component
+    runs = len(case_contingencies(case))
+
+    def build(p, horizon, machine):
+        units = case_units(case, component, machine)
+        if not units:
+            raise ValueError(f"no unit of case {name} has this machine's parameters")
+        k = units[min(int(p["unit"] * len(units)), len(units) - 1)]
+        result = _case_run(name, min(int(p["run"] * runs), runs - 1))
+        t = result.time
+        last = float(t[-1]) - horizon
+        events = [e for e, _ in result.events if e <= last]
+        if p["t0"] < CASE_EVENT_SHARE and events:
+            t0 = events[min(int(p["t0"] / CASE_EVENT_SHARE * len(events)), len(events) - 1)]
+        else:
+            t0 = max(last, 0.0) * (p["t0"] - CASE_EVENT_SHARE) / (1.0 - CASE_EVENT_SHARE) if events else max(last, 0.0) * p["t0"]
+        start = int(np.nonzero(t <= t0 + 1e-12)[0][-1])  # the row after an event at t0
+        stop = int(np.searchsorted(t, t0 + horizon, side="right"))
+        rows = slice(start, min(stop + 1, len(t)))
+        times = tuple(float(v) for v in np.maximum(t[rows] - t[start], 0.0))
+        channels = {q.name: Table(times, tuple(float(v) for v in result.machine_inputs[q.name][rows, k]))
+                    for q in component.inputs}
+        rng = np.random.default_rng(int(p["jitter"] * 2**31))
+        x0 = np.array([result.states[n][start, k] for n in component.state_names])
+        x0 = x0 + CASE_JITTER * np.asarray(component.state_scales) * rng.uniform(-1.0, 1.0, x0.shape)
+        return Signal(channels, 0.0, tuple(float(v) for v in x0))
+
+    return Family(f"case-{name}", {"run": (0.0, 1.0), "unit": (0.0, 1.0), "t0": (0.0, 1.0), "jitter": (0.0, 1.0)},
+                  build, component, needs_machine=True)
+
+
 BASE_FAMILIES = {f.name: f for f in (SLOW, FAST, STEP, DIP, RAMP, MIX, JUMP, GOVERNOR, EXCITER, AVR, DRIFT, NETWORK)}
 HOLD_RANGE = (0.001, 0.05)  # s, communication steps a ZOH family holds at (log-uniform)
 
@@ -335,8 +414,15 @@ def family(name: str) -> Family:
     """A family by name (BASE_FAMILIES), or zoh-<base> (e.g. zoh-fast)."""
     if name.startswith("zoh-"):
         return zoh(name[4:])
+    if name.startswith("case-"):
+        from .grid.case import CaseError
+
+        try:
+            return case_family(name[5:])
+        except CaseError as exc:
+            raise ValueError(f"unknown input family {name!r}: {exc}") from None
     try:
         return BASE_FAMILIES[name]
     except KeyError:
-        known = ", ".join([*BASE_FAMILIES, "zoh-<family>"])
+        known = ", ".join([*BASE_FAMILIES, "zoh-<family>", "case-<shipped case>"])
         raise ValueError(f"unknown input family {name!r} (known: {known})") from None

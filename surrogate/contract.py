@@ -47,7 +47,7 @@ def drifted(frame, x0_f: np.ndarray, u_f: np.ndarray, s: np.ndarray, a: np.ndarr
     speed[frame.speed_state] = 1.0
     x0 = x0_f + a[:, None] * angles + c[:, None] * speed
     u = (u_f + a[:, None, None] * frame.input_rates(n_u)
-         + c[:, None, None] * (s[None, :, None] * frame.input_rates(n_u) + frame.input_torques(n_u)))
+         + c[:, None, None] * (s[None, :, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)))
     return x0.astype(np.float32), u.astype(np.float32)
 
 

@@ -47,10 +47,12 @@ def wrap_in_frame(proto, frame: Frame, sensor_times: np.ndarray):
     speed = np.zeros(n_x, np.float32)
     speed[frame.speed_state] = 1.0
     s = np.asarray(sensor_times, dtype=np.float64)
-    ramp = s[:, None] * frame.input_rates(n_u) + frame.input_torques(n_u)  # [S, n_u]: what c multiplies
+    ramp = s[:, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)  # [S, n_u]: what c multiplies
     u0 = op("Gather", ["u", const("first", 0, np.int64)], "u0", axis=1)  # [N, n_u]
     a = op("Gather", [u0, const("angle_input", frame.angle_inputs[0], np.int64)], "a", axis=1)  # [N]
     c = op("Gather", ["x0", const("speed_state", frame.speed_state, np.int64)], "speed0", axis=1)  # [N]
+    if frame.speed_rest:  # a per-unit speed: its offset from rest (drift.frame_speed)
+        c = op("Sub", [c, const("speed_rest", frame.speed_rest)], "speed_offset")
     if frame.speed_step:  # whole speed steps (drift.frame_speed)
         steps = op("Floor", [op("Add", [op("Mul", [c, const("per_step", 1.0 / frame.speed_step)], "speed_steps"),
                                         const("half_step", 0.5)], "rounded_steps")], "whole_steps")
@@ -75,7 +77,8 @@ def wrap_in_frame(proto, frame: Frame, sensor_times: np.ndarray):
     head = list(nodes)
     nodes.clear()
     t_col = op("Unsqueeze", ["t", col], "t_col")  # [M, 1]
-    turning = op("Add", [op("Mul", [t_col, const("angles_out", angles)], "t_angles"), const("speed_out", speed)],
+    turning = op("Add", [op("Mul", [t_col, const("angles_out", angles * np.float32(frame.speed_scale))], "t_angles"),
+                         const("speed_out", speed)],
                  "turning")  # [M, n_x]
     x_off = op("Add", [op("Mul", [op("Unsqueeze", [shift, cube], "shift_cube"), const("angles_cube", angles)],
                           "x_angles"), op("Mul", [c_cube, turning], "x_turning")], "x_offset")

@@ -12,19 +12,19 @@ void input_in_frame(const WindowFrame *f, const double u[N_U], double tau, doubl
 {
     for (int c = 0; c < N_U; ++c)
         u_f[c] = u[c] - f->a * OPFMU_FRAME_INPUT_RATES[c]
-                 - f->c * (OPFMU_FRAME_INPUT_RATES[c] * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
+                 - f->c * (OPFMU_FRAME_INPUT_RATES[c] * OPFMU_FRAME_SPEED_SCALE * tau + OPFMU_FRAME_INPUT_TORQUES[c]);
 }
 
 void state_in_frame(const WindowFrame *f, const double x[N_X], double tau, double x_f[N_X])
 {
     for (int i = 0; i < N_X; ++i)
-        x_f[i] = x[i] - (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] - f->c * OPFMU_FRAME_SPEED[i];
+        x_f[i] = x[i] - (f->shift + f->c * OPFMU_FRAME_SPEED_SCALE * tau) * OPFMU_FRAME_ANGLES[i] - f->c * OPFMU_FRAME_SPEED[i];
 }
 
 void state_from_frame(const WindowFrame *f, const double x_f[N_X], double tau, double x[N_X])
 {
     for (int i = 0; i < N_X; ++i)
-        x[i] = x_f[i] + (f->shift + f->c * tau) * OPFMU_FRAME_ANGLES[i] + f->c * OPFMU_FRAME_SPEED[i];
+        x[i] = x_f[i] + (f->shift + f->c * OPFMU_FRAME_SPEED_SCALE * tau) * OPFMU_FRAME_ANGLES[i] + f->c * OPFMU_FRAME_SPEED[i];
 }
 
 WindowFrame window_frame(const double x[N_X], const double u[N_U])
@@ -32,7 +32,7 @@ WindowFrame window_frame(const double x[N_X], const double u[N_U])
     WindowFrame f = {0.0, 0.0, 0.0};
 #if OPFMU_FRAME
     f.a = u[OPFMU_FRAME_ANGLE_INPUT];
-    f.c = x[OPFMU_FRAME_SPEED_STATE];
+    f.c = x[OPFMU_FRAME_SPEED_STATE] - OPFMU_FRAME_SPEED_REST; /* the speed's offset from rest */
     if (OPFMU_FRAME_SPEED_STEP > 0.0) f.c = OPFMU_FRAME_SPEED_STEP * floor(f.c / OPFMU_FRAME_SPEED_STEP + 0.5);
 #if OPFMU_FRAME_ANGLE_STATE >= 0
     f.shift = f.a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - f.a) / OPFMU_FRAME_PERIOD + 0.5);

@@ -63,7 +63,7 @@ static void ramp_sum(int k0, int k1, double tau, double out[OPFMU_FIRST_LAYER])
         double flat = 0.0; /* slots from `mid` on see tau itself */
         for (int c = 0; c < N_U; ++c)
             if (OPFMU_FRAME_INPUT_RATES[c] != 0.0)
-                flat += OPFMU_FRAME_INPUT_RATES[c] * (SUFFIX(mid, c, h) - SUFFIX(k1, c, h));
+                flat += OPFMU_FRAME_INPUT_RATES[c] * OPFMU_FRAME_SPEED_SCALE * (SUFFIX(mid, c, h) - SUFFIX(k1, c, h));
         out[h] = RAMP_SUFFIX(k0, h) - RAMP_SUFFIX(mid, h) + tau * flat;
     }
 }
@@ -133,7 +133,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     const double *basis_lo = trunk_seen(m, lo, scratch_lo), *basis_hi = trunk_seen(m, hi, scratch_hi);
     opfmu_head(m->coef, basis_lo, a);
     opfmu_head(m->coef, basis_hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_ANGLES[i];
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_SPEED_SCALE * OPFMU_FRAME_ANGLES[i];
     if (m->rest_weight > 0.0) /* the rest correction moves with window time too */
         rest_correct_rate(m, basis_lo, basis_hi, hi - lo, rate);
 }
@@ -147,7 +147,7 @@ static void operator_rate(const ModelState *m, double tau, double rate[N_X])
     double a[N_X], b[N_X];
     opfmu_operator(m->x_window_f, m->sensors, lo, a);
     opfmu_operator(m->x_window_f, m->sensors, hi, b);
-    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_ANGLES[i];
+    for (int i = 0; i < N_X; ++i) rate[i] = (b[i] - a[i]) / (hi - lo) + m->frame.c * OPFMU_FRAME_SPEED_SCALE * OPFMU_FRAME_ANGLES[i];
 }
 #endif
 
@@ -355,7 +355,8 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 static int input_jumped(const ModelState *m)
 {
     for (int c = 0; c < N_U; ++c) {
-        double turned = m->prev_du[c] != 0.0 ? 0.0 : m->frame.c * OPFMU_FRAME_INPUT_RATES[c] * (m->time - m->input_time);
+        double turned = m->prev_du[c] != 0.0 ? 0.0
+                        : m->frame.c * OPFMU_FRAME_INPUT_RATES[c] * OPFMU_FRAME_SPEED_SCALE * (m->time - m->input_time);
         if (fabs(m->u[c] - m->prev_end_u[c] - turned) > m->restart_jump) return 1;
     }
     return 0;

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..blocks import quadratic_saturation_coefficients, quadratic_saturation_product
 from ..component import Component, Parameters, Quantity
+from ..drift import Drift
 from ..ports import BusPort, Link, Ports
 from .common import check_ranges, dq_voltage, finite_inputs, network_current, stator_currents
 
@@ -220,4 +221,8 @@ GENROU = Component(
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
                 outputs=(Link("rotor_speed", "omega"), Link("electrical_power", "Pe"),
                          Link("field_current", "XadIfd"))),
+    # the equations see delta and theta_vs only through delta - theta_vs, and omega through
+    # d delta/dt = 2 pi fn (omega - 1) and the damping torque D (omega - 1) (reference_models/drift.py)
+    drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=0.005,
+                speed_scale=(2.0 * math.pi, "fn"), speed_rest=1.0),
 )

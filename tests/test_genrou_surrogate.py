@@ -1,0 +1,94 @@
+"""GENROU's surrogate: the per-unit window frame (speed in pu, 1 at rest, angles turning at
+2 pi fn (omega - 1)) is exact, the shipped Kundur operators carry it in their ONNX graphs, and the
+surrogate FMU of a Kundur machine follows the native reference FMU through a fault."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from reference_models.drift import Frame, frame_of, from_frame, to_frame, trajectories_to_frame
+from reference_models.grid.case import shipped_case
+from reference_models.models.genrou import GENROU
+from reference_models.signals import Piecewise, Ramp, Signal
+from reference_models.simulate import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
+KUNDUR_OPERATORS = {"kundur_gen12.onnx": (0, 1), "kundur_gen34.onnx": (2, 3)}  # file: the units it is for
+
+
+@pytest.fixture(scope="module")
+def kundur():
+    return shipped_case("kundur")
+
+
+def test_the_genrou_frame_turns_angles_at_2_pi_fn_per_pu_of_speed_above_1():
+    frame = frame_of(GENROU.drift, GENROU.params({"fn": 50.0, "D": 0.0}))
+    assert frame == Frame((0,), (1,), 1, ((2, 0.0),), 2 * math.pi, 0.0, 2 * math.pi * 50.0, 1.0)
+    assert Frame.from_dict(frame.to_dict()) == frame
+    np.testing.assert_array_equal(frame.input_ramps(4), [0, 2 * math.pi * 50.0, 0, 0])
+
+
+@pytest.mark.parametrize("D", [0.0, 2.0])
+def test_a_genrou_frame_round_trip_gives_the_states_back(D):
+    frame = frame_of(GENROU.drift, GENROU.params({"D": D}))
+    rng = np.random.default_rng(3)
+    x0 = rng.uniform(-40, 40, (50, 6))
+    x0[:, 1] = rng.uniform(0.97, 1.03, 50)
+    u = rng.uniform(-40, 40, (50, 11, 4))
+    s = np.linspace(0, 0.2, 11)
+    x0_f, u_f, shift, c = to_frame(frame, x0, u, s)
+    if D:  # whole steps of 0.005 pu: the speed left lies within half a step of 1
+        assert np.all(np.abs(x0_f[:, 1] - 1.0) <= 0.0025 + 1e-12)
+    else:  # the frame turns at the start speed: omega_f starts at rest
+        np.testing.assert_allclose(x0_f[:, 1], 1.0, atol=1e-15)
+    assert np.all((-np.pi <= x0_f[:, 0]) & (x0_f[:, 0] < np.pi))
+    np.testing.assert_array_equal(x0_f[:, 2:], x0[:, 2:])  # the fluxes are no angles
+    np.testing.assert_allclose(u_f[:, :, 1], u[:, :, 1] - u[:, :1, 1] - c[:, None] * frame.speed_scale * s, atol=1e-12)
+    np.testing.assert_allclose(u_f[:, :, 2], u[:, :, 2] - D * c[:, None], atol=1e-12)
+    np.testing.assert_allclose(from_frame(frame, x0_f[:, None], np.zeros(1), shift, c)[:, 0], x0, atol=1e-12)
+
+
+def test_genrou_solved_in_a_turning_frame_is_the_same_window(kundur):
+    """The symmetry the frame rests on, on the component's own equations: a Kundur machine through a
+    fault, once as recorded and once with its speed 0.004 pu above and its bus angle turning with it
+    (from 7 rad on), gives the same window in the frame, to the solver's tolerance."""
+    unit = kundur.units[0]
+    params = unit.machine.params
+    x0 = np.array(kundur.starts[0][0].states)
+    inputs = kundur.starts[0][0].inputs
+    t = np.linspace(0.0, 0.2, 201)
+    vs = Piecewise((inputs["Vs"], 0.1, inputs["Vs"]), (0.02, 0.1))
+    base = Signal({"Vs": vs, "theta_vs": Piecewise((inputs["theta_vs"],), ()), "Pm": Piecewise((inputs["Pm"],), ()),
+                   "Efd": Piecewise((inputs["Efd"],), ())})
+    frame = frame_of(GENROU.drift, params)
+    c, a = 0.004, 7.0
+    theta = inputs["theta_vs"] + a
+    turned = Signal({**base.channels, "theta_vs": Ramp(theta, theta + frame.speed_scale * c * 0.2, 0.0, 0.2)})
+    x = simulate(x0, base, t, params, component=GENROU)
+    x_turned = simulate(x0 + [a, c, 0, 0, 0, 0], turned, t, params, component=GENROU)
+    u, u_turned = base(t)[None], turned(t)[None]
+    _, _, in_frame = trajectories_to_frame(frame, x0[None], u, x[None], t)
+    _, _, turned_in_frame = trajectories_to_frame(frame, (x0 + [a, c, 0, 0, 0, 0])[None], u_turned, x_turned[None], t)
+    np.testing.assert_allclose(turned_in_frame, in_frame, atol=1e-6)
+
+
+
+@pytest.mark.parametrize("extra, message", [
+    ([], "--recipe case"),  # the SM4 recipes' families drive SM4
+    (["--recipe", "case", "--case", "nowhere"], "no shipped case"),
+    (["--recipe", "case", "--case", "wscc9"], "no unit of case wscc9"),
+    (["--recipe", "case"], "--recipe case needs it"),
+])
+def test_a_genrou_operator_request_outside_the_case_recipe_ends_in_one_line_and_exit_code_2(
+        tmp_path, capsys, kundur, extra, message):
+    from opfmu.cli import main
+
+    machine = tmp_path / "g.json"
+    machine.write_text(json.dumps(kundur.units[0].machine.params.to_dict()))
+    code = main(["operator", "--component", "genrou", "--machine", str(machine), "--out", str(tmp_path / "o"),
+                 "--operating-point", "0.78", "1.9", "--quiet", *extra])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "o").exists()
