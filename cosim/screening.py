@@ -3,7 +3,11 @@
 report (a bar on a terminal, a line every few seconds otherwise: reference_models.progress).
 
 Each task is one contingency: its critical clearing time by bisection (stability.py), its verdict
-when cleared at the screening's clearing time, and the first-swing peak of that run. FMUs are built
+when cleared at the screening's clearing time, and the first-swing peak of that run; a task runs
+FMUs through the master, the monolithic DAE or ANDES' own simulation (kind "andes", where installed).
+The default faults of a case (`default_fault_buses`) are its buses without a generator: wscc9's
+4-9, Kundur's 5-10 (the two areas and the tie), and for ieee14, ieee39 and npcc every load and
+transmission bus; a fault at a generator's own terminal is left out (a screening names it if wanted). FMUs are built
 once, before any task is sent; a worker opens them once and reuses them for every task it gets
 (the master rewinds them between runs). They are extracted under one scratch folder of the
 screening (also the local workers' own folder), removed at its end whatever happened (also on an
@@ -22,22 +26,31 @@ from dataclasses import dataclass
 from reference_models.grid.contingency import Contingency
 
 from .master import MasterSettings
-from .stability import critical_clearing_time, first_swing_peak
+from .stability import critical_clearing_time, default_stop, first_swing_peak, run_verdict, runner_stable
 
 @dataclass(frozen=True)
 class ScreeningTask:
     """What a worker needs: the case, the contingency (its clearing time is the screening's), the run
-    kind and FMU files (cosim.fmus.UnitFiles), the master's settings, the CCT's stop and
-    resolution, and the scratch folder FMUs are extracted under."""
+    kind ("monolithic", "andes" or an FMU kind) and FMU files (cosim.fmus.UnitFiles; () for the
+    others), the master's settings (its step is also ANDES' step), the runs' stop [s] (None:
+    stability.default_stop of the contingency) and the CCT's resolution [s], and the scratch folder
+    FMUs are extracted under."""
 
     case: object
     contingency: Contingency
     kind: str
     files: tuple
     settings: MasterSettings
-    stop: float
+    stop: float | None
     resolution: float
     scratch: str | None = None
+
+
+def default_fault_buses(network) -> list:
+    """The buses a screening faults unless told otherwise: every bus of `network` (case.Network)
+    without a generator, in file order (wscc9: 4-9)."""
+    generators = set(network.generator_buses)
+    return [b for b in network.buses if b not in generators]
 
 
 def contingencies(network, buses, trips: str = "each") -> list:
@@ -62,8 +75,14 @@ def _runner(task: ScreeningTask):
 
     key = (task.kind, task.files, task.settings, task.scratch)
     if key not in _RUNNERS:
-        _RUNNERS[key] = (MonolithicRunner(task.case, task.settings.step, 1e-9) if task.kind == "monolithic"
-                         else MasterRunner(task.files, task.case, task.settings, task.scratch))
+        if task.kind == "monolithic":
+            _RUNNERS[key] = MonolithicRunner(task.case, task.settings.step, 1e-9)
+        elif task.kind == "andes":
+            from .andes_runner import AndesRunner
+
+            _RUNNERS[key] = AndesRunner(task.case, task.settings.step)
+        else:
+            _RUNNERS[key] = MasterRunner(task.files, task.case, task.settings, task.scratch)
     return _RUNNERS[key]
 
 
@@ -79,15 +98,11 @@ def screen_one(task: ScreeningTask) -> dict:
     bounded, runs."""
     runner = _runner(task)
     c = task.contingency
-    result, _ = runner.run(c, task.stop, stop_at_loss=True)
+    stable, _, result = run_verdict(runner, c, task.stop if task.stop is not None else default_stop(c))
     peak = math.degrees(first_swing_peak(result, c.clear_s))
-
-    def stable(contingency):
-        return runner.run(contingency, task.stop, stop_at_loss=True)[0].stable
-
-    cct = critical_clearing_time(stable, c, task.resolution)
+    cct = critical_clearing_time(runner_stable(runner, task.stop), c, task.resolution)
     return {"label": c.label, "bus": c.fault_bus, "trip": c.trip or "", "clear_s": c.clear_s,
-            "stable": bool(result.stable), "first_swing_peak_deg": peak if result.stable else None,
+            "stable": stable, "first_swing_peak_deg": peak if stable else None,
             "cct_s": cct.cct_s, "bounded": cct.bounded, "runs": len(cct.runs) + 1}
 
 
