@@ -24,6 +24,18 @@ import numpy as np
 ANDES_MISSING = "--fmus andes needs ANDES: pip install andes==2.0.0"
 
 
+SWITCH_MARGIN = 1e-4  # s: ANDES steps to each switching time from this far before it
+
+
+def check_contingency(contingency) -> None:
+    """ValueError (one line) for a contingency ANDES cannot run: a fault from t <= SWITCH_MARGIN
+    (ANDES keeps no state from before it and fails at its clearing)."""
+    c = contingency
+    if c.fault_bus is not None and c.fault_start <= SWITCH_MARGIN:
+        raise ValueError(f"ANDES applies a fault after its first steps: give --fault-start later than "
+                         f"{SWITCH_MARGIN:g} s (e.g. 1, as the ANDES cases' own events)")
+
+
 def andes_available() -> bool:
     """Whether ANDES can be imported here."""
     return importlib.util.find_spec("andes") is not None
@@ -95,6 +107,7 @@ class AndesRunner:
         """(GridResult, timing dict) of ANDES' run through `contingency` until `stop` [s]."""
         from reference_models.grid.result import GridResult
 
+        check_contingency(contingency)
         started = time.perf_counter()
         ss, number = self._system(contingency, stop)
         ss.TDS.init()

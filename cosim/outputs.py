@@ -22,9 +22,10 @@ RUN_FILES = ("result.csv", "result.png", "report.md", "summary.json")
 SCREENING_FILES = ("screening.csv", "screening.json", "screening.md", "screening.png")
 
 LABELS = {"surrogate": "surrogate FMUs", "reference": "native reference FMUs", "python": "pythonfmu reference FMUs",
-          "file": "user FMUs", "monolithic": "monolithic DAE"}
+          "file": "user FMUs", "monolithic": "monolithic DAE", "andes": "ANDES' own simulation"}
 STYLES = {"monolithic": dict(color="k", lw=2.2, alpha=0.35), "reference": dict(ls="--", lw=1.2),
-          "surrogate": dict(lw=1.0), "python": dict(ls=":", lw=1.2), "file": dict(ls="-.", lw=1.0)}
+          "surrogate": dict(lw=1.0), "python": dict(ls=":", lw=1.2), "file": dict(ls="-.", lw=1.0),
+          "andes": dict(ls=(0, (5, 1, 1, 1)), lw=1.2)}
 
 
 class OutputError(ValueError):

@@ -181,9 +181,9 @@ def _contingency(case, bus, clear, trip, args):
         raise UserError(_one_line(exc)) from None
 
 
-def _check_fmus(case, kind, fmu_cache=None) -> None:
+def _check_fmus(case, kind, fmu_cache=None, contingency=None) -> None:
     """The FMU kinds, FMU files and operators of every unit and the FMU cache folder, checked before
-    any build."""
+    any build; for andes, that ANDES is there and can run `contingency`."""
     from cosim.fmu import CouplingError
     from opfmu.checks import output_folder
     from cosim.fmus import check_unit_fmus
@@ -198,6 +198,13 @@ def _check_fmus(case, kind, fmu_cache=None) -> None:
                             f"not {case.name}")
         if not andes_available():
             raise UserError(ANDES_MISSING)
+        if contingency is not None:
+            from cosim.andes_runner import check_contingency
+
+            try:
+                check_contingency(contingency)
+            except ValueError as exc:
+                raise UserError(_one_line(exc)) from None
         return
     if fmu_cache is not None:
         output_folder(fmu_cache)
@@ -246,7 +253,7 @@ def cmd_run(args) -> None:
     main_kind = _main_kind(case, args.fmus)
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
     for kind in kinds:
-        _check_fmus(case, kind, args.fmu_cache)
+        _check_fmus(case, kind, args.fmu_cache, contingency)
     try:
         outputs.check_output(args.out, outputs.RUN_FILES)
     except outputs.OutputError as exc:
@@ -317,7 +324,7 @@ def cmd_cct(args) -> None:
     _stop(args, settings)
     _resolution(args)
     contingency = _contingency(case, args.fault, args.fault_start + 0.05, args.trip, args)  # clearing: bisected
-    _check_fmus(case, args.fmus, args.fmu_cache)
+    _check_fmus(case, args.fmus, args.fmu_cache, contingency)
     runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
     try:
         cct = critical_clearing_time(lambda c: runner.run(c, args.stop, stop_at_loss=True)[0].stable, contingency,

@@ -192,3 +192,46 @@ def test_ctrl_c_during_a_screening_on_dask_workers_ends_in_one_interrupted_line(
     assert lines[-1] == "interrupted" and rest.count("interrupted") == 1  # no "rerun to resume": a rerun starts over
     assert all(line.startswith("contingencies: ") for line in lines[:-1]), rest  # no worker traceback
     assert not list(scratch.iterdir())
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["grid", "run", "--case", "kundur", "--fault", "99", "--clear", "0.1", "--out", "x"], "kundur has no bus 99"),
+    (["grid", "run", "--case", "kundur", "--fault", "7", "--clear", "0.1", "--trip", "1-5", "--out", "x"],
+     "opening branch 1-5 disconnects a generator"),
+    (["grid", "cct", "--case", "ieee14", "--fault", "4", "--trip", "4-7:2", "--fmus", "monolithic"], "no branch 4-7"),
+    (["grid", "screen", "--case", "kundur", "--fmus", "andes", "--faults", "7", "--out", "x"], "not andes"),
+])
+def test_mistakes_with_the_andes_cases_end_in_one_line_before_any_work(argv, message, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("OPFMU_FMU_CACHE", str(tmp_path / "cache"))
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and message in err and err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "x").exists()
+
+
+@pytest.mark.andes
+def test_andes_is_refused_a_fault_from_t_0_before_any_work(capsys, tmp_path):
+    pytest.importorskip("andes")
+    out = tmp_path / "x"
+    assert main(["grid", "run", "--case", "kundur", "--fmus", "andes", "--fault", "7", "--clear", "0.1",
+                 "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == "" and err.count("\n") == 1 and "--fault-start later than" in err and not out.exists()
+
+
+def test_kundur_runs_with_native_fmus_beside_the_monolithic_dae(tmp_path, capsys):
+    out = tmp_path / "kundur"
+    assert main(["grid", "run", "--case", "kundur", "--fmus", "reference", "--fault", "8", "--fault-start", "0.1",
+                 "--clear", "0.2", "--stop", "0.6", "--out", str(out)]) == 0
+    names, data = read_csv(out / "result.csv")
+    expected = (["time"] + [f"{q}_{b}" for q in ("delta", "omega", "Efd") for b in (1, 2, 3, 4)]
+                + [f"V_{b}" for b in range(1, 11)])
+    assert names[:len(expected)] == expected
+    omega = data[:, names.index("omega_1")]
+    assert omega[0] == 0.0 and 0.1 < np.max(np.abs(omega)) < 10  # a deviation in rad/s, not a speed in pu
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stable"] and summary["case_events"] == []  # its line toggle at 2 s is after the stop
+    difference = summary["difference_from_monolithic"]["reference"]
+    assert difference["angle_deg"] < 0.1 and difference["V"] < 0.01
+    assert "Kundur two-area: fault at bus 8" in capsys.readouterr().out
