@@ -183,3 +183,24 @@ def test_a_case_the_converter_cannot_take_is_refused_in_one_line(source, message
     out, err = capsys.readouterr()
     assert out == "" and err.count("\n") == 1 and message in err
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("model, dev", [("PV", 2), ("StaticGen", 2), ("GENROU", "GENROU_2"), ("SynGen", "GENROU_2")])
+def test_a_toggle_of_a_machine_or_its_load_flow_generator_is_a_generator_event(model, dev):
+    pytest.importorskip("andes")
+    import andes
+
+    from reference_models.grid.andes_case import events
+
+    andes.config_logger(stream_level=50)
+    ss = andes.load(andes.get_case("ieee14/ieee14_full.xlsx"), setup=False, no_output=True, default_config=True)
+    ss.add("Toggle", {"model": model, "dev": dev, "t": 1.0})
+    ss.add("Toggle", {"model": "Line", "dev": "Line_3", "t": 1.2})
+    ss.add("Toggle", {"model": "Line", "dev": "Line_3", "t": 1.3})
+    ss.setup()
+    number = {idx: int(idx) for idx in ss.Bus.idx.v}
+    found = events(ss, number)
+    assert [(e["kind"], e["time"], e.get("generator"), e["status"]) for e in found] == [
+        ("generator", 1.0, "2", 0), ("branch", 1.2, None, 0), ("branch", 1.3, None, 1)]
+    assert found[0]["bus"] == 2
