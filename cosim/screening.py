@@ -33,8 +33,8 @@ class ScreeningTask:
     """What a worker needs: the case, the contingency (its clearing time is the screening's), the run
     kind ("monolithic", "andes" or an FMU kind) and FMU files (cosim.fmus.UnitFiles; () for the
     others), the master's settings (its step is also ANDES' step), the runs' stop [s] (None:
-    stability.default_stop of the contingency) and the CCT's resolution [s], and the scratch folder
-    FMUs are extracted under."""
+    stability.default_stop of the contingency) and the CCT's resolution [s], the scratch folder
+    FMUs are extracted under, and `cct` (False: the verdict run only, no bisection)."""
 
     case: object
     contingency: Contingency
@@ -44,6 +44,7 @@ class ScreeningTask:
     stop: float | None
     resolution: float
     scratch: str | None = None
+    cct: bool = True
 
 
 def default_fault_buses(network) -> list:
@@ -95,15 +96,18 @@ def close_runners() -> None:
 
 def screen_one(task: ScreeningTask) -> dict:
     """The row of one contingency: label, bus, trip, clear_s, stable, first_swing_peak_deg, cct_s,
-    bounded, runs."""
+    bounded, runs (cct_s and bounded None where the task asks for no CCT)."""
     runner = _runner(task)
     c = task.contingency
     stable, _, result = run_verdict(runner, c, task.stop if task.stop is not None else default_stop(c))
     peak = math.degrees(first_swing_peak(result, c.clear_s))
-    cct = critical_clearing_time(runner_stable(runner, task.stop), c, task.resolution)
-    return {"label": c.label, "bus": c.fault_bus, "trip": c.trip or "", "clear_s": c.clear_s,
-            "stable": stable, "first_swing_peak_deg": peak if stable else None,
-            "cct_s": cct.cct_s, "bounded": cct.bounded, "runs": len(cct.runs) + 1}
+    row = {"label": c.label, "bus": c.fault_bus, "trip": c.trip or "", "clear_s": c.clear_s,
+           "stable": stable, "first_swing_peak_deg": peak if stable else None, "cct_s": None, "bounded": None,
+           "runs": 1}
+    if task.cct:
+        cct = critical_clearing_time(runner_stable(runner, task.stop), c, task.resolution)
+        row.update(cct_s=cct.cct_s, bounded=cct.bounded, runs=len(cct.runs) + 1)
+    return row
 
 
 def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
