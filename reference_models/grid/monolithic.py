@@ -42,6 +42,38 @@ from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency
 from .result import ROTOR_ANGLE, GridResult
 
 
+class _Branches:
+    """A math namespace for the equations' scalars (the `math` module's functions) whose `where`
+    (reference_models.piecewise) either records the branch each condition takes (`locked` None:
+    `modes`, in call order) or returns the branch locked for that call (`locked`: the modes of a
+    recording pass, taken in the same call order; the order of the calls is fixed by the case and the
+    topology, as both branches are always evaluated). `owner` (unit, device) is set by the caller
+    before each device's equations; a recording pass keeps it per condition (`owners`)."""
+
+    __slots__ = ("modes", "locked", "at", "owner", "owners")
+
+    def __init__(self, locked=None):
+        self.modes, self.locked, self.at, self.owner, self.owners = [], locked, 0, None, []
+
+    def __getattr__(self, name):
+        return getattr(math, name)
+
+    def where(self, condition, a, b):
+        if self.locked is None:
+            taken = bool(condition)
+            self.modes.append(taken)
+            self.owners.append(self.owner)
+        else:
+            taken = self.locked[self.at]
+            self.at += 1
+        return a if taken else b
+
+
+def _scalar(m) -> bool:
+    """True for the namespaces of scalar equations (math, _Branches), False for numpy's arrays."""
+    return m is math or isinstance(m, _Branches)
+
+
 def _current_map(component, x, p, m, u0=None):
     """(c [2], A [2][2]) with the machine's bus current (I_re, I_im) = c + A (V_re, V_im), read off the
     component's output equations at three voltages (x: its states, scalars or arrays; u0: its
@@ -70,7 +102,7 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
     devices' states `state(j)` (lists in component order), the terminal voltage behind `impedance`,
     set points at their start values in `starts` (or `held` {variable: value} of the machine where
     given). controls=False: the machine's links from other devices held at their start values."""
-    if m is math:
+    if _scalar(m):
         Vs, theta = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
     else:
         Vs, theta = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
@@ -88,7 +120,7 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
             return Vs if index == 0 else theta
         bus = devices[0].component.ports.bus
         I_re, I_im = (value(0, n) for n in bus.current)
-        if m is math:
+        if _scalar(m):
             Vt = complex(V_re, V_im) + impedance * complex(I_re, I_im)
             return abs(Vt) if index == 0 else theta + math.remainder(math.atan2(Vt.imag, Vt.real) - theta, 2 * math.pi)
         Vt = (V_re + 1j * V_im) + impedance * (I_re + 1j * I_im)
@@ -218,16 +250,21 @@ class System:
             self._networks[key] = self.case.reduced(fault_bus, fault_impedance, out_of_service)
         return self._networks[key]
 
-    def generator_voltages(self, y, network: Reduced, m=math):
-        """(V_re [g], V_im [g]) at every unit's bus for the state y (m = math), or for states
-        y [n, n_states] (m = numpy: arrays [n, g]); units at one bus inject into it together."""
+    def generator_voltages(self, y, network: Reduced, m=math, tripped=()):
+        """(V_re [g], V_im [g]) at every unit's bus for the state y (m = math or a _Branches namespace),
+        or for states y [n, n_states] (m = numpy: arrays [n, g]); units at one bus inject into it
+        together; the units `tripped` (indices) inject nothing."""
         b = len(self.first_unit)
-        if m is math:
+        if _scalar(m):
             M = np.array(network.Y_real)
             c = np.zeros(2 * b)
             for k, u in enumerate(self.units):
+                if k in tripped:
+                    continue
+                if m is not math:
+                    m.owner = (k, 0)
                 d, i = u.machine, 2 * self.bus_slot[k]
-                ck, A = _current_map(d.component, list(y[self.slices[k][0]]), d.params, math, self._machine_u(k, y))
+                ck, A = _current_map(d.component, list(y[self.slices[k][0]]), d.params, m, self._machine_u(k, y))
                 c[i: i + 2] += ck
                 M[i: i + 2, i: i + 2] -= A
             v = np.linalg.solve(M, c)
@@ -236,6 +273,8 @@ class System:
         M = np.broadcast_to(network.Y_real, (y.shape[0], 2 * b, 2 * b)).copy()
         c = np.zeros((y.shape[0], 2 * b))
         for k, u in enumerate(self.units):
+            if k in tripped:
+                continue
             d, s, i = u.machine, self.slices[k][0], 2 * self.bus_slot[k]
             ck, A = _current_map(d.component, [y[:, j] for j in range(s.start, s.stop)], d.params, np,
                                  self._machine_u(k, y, np))
@@ -254,14 +293,14 @@ class System:
         start = self.case.starts[k][0].inputs
         u = [start[name] for name in self.units[k].machine.component.input_names]
         for i, at in self.machine_links[k]:
-            u[i] = y[at] if m is math else y[:, at]
+            u[i] = y[at] if _scalar(m) else y[:, at]
         return u
 
     def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math) -> list:
         """The inputs of every device of unit k (tuples in component order) at state y (scalars, m =
         math; or arrays over rows, m = numpy) and bus voltage V_re + j V_im."""
         slices = self.slices[k]
-        if m is math:
+        if _scalar(m):
             def state(j):
                 return [y[i] for i in range(slices[j].start, slices[j].stop)]
         else:
@@ -270,25 +309,50 @@ class System:
         return unit_inputs(self.units[k].devices, self.wiring[k], self.case.starts[k], self.impedance[k], state,
                            V_re, V_im, controls, m)
 
-    def rhs(self, t, y, network: Reduced, controls: bool = True) -> np.ndarray:
-        """dy/dt [n_states] with the network voltages solved for the state y."""
-        V_re, V_im = self.generator_voltages(y, network)
+    def rhs(self, t, y, network: Reduced, controls: bool = True, m=math, tripped=()) -> np.ndarray:
+        """dy/dt [n_states] with the network voltages solved for the state y; m: the math namespace
+        the equations run on (math: their conditions as they hold at y; a _Branches namespace: its
+        locked branches); the devices of the units `tripped` (indices) stand still."""
+        V_re, V_im = self.generator_voltages(y, network, m, tripped)
         out = np.zeros(self.n_states)
         for k, unit in enumerate(self.units):
+            if k in tripped:
+                continue
+            if m is not math:
+                m.owner = (k, None)
+            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, m)
+            for j, d in enumerate(unit.devices):
+                if j > 0 and not controls:
+                    continue
+                if m is not math:
+                    m.owner = (k, j)
+                s = self.slices[k][j]
+                out[s] = d.component.derivatives(list(y[s]), inputs[j], d.params, m)
+        return out
+
+    def reset(self, y, network: Reduced, controls: bool = True, tripped=()) -> np.ndarray:
+        """The state [n_states] after every device's limit resets (Component.reset_states) at its
+        inputs at y; the devices that stand still (tripped units, controls=False) are left as they are."""
+        y = np.array(y, dtype=float)
+        V_re, V_im = self.generator_voltages(y, network, math, tripped)
+        for k, unit in enumerate(self.units):
+            if k in tripped:
+                continue
             inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls)
             for j, d in enumerate(unit.devices):
                 if j > 0 and not controls:
                     continue
                 s = self.slices[k][j]
-                out[s] = d.component.derivatives(list(y[s]), inputs[j], d.params, math)
-        return out
+                y[s] = d.component.reset_states(np.array(y[s]), np.array(inputs[j], dtype=float), d.params)
+        return y
 
-    def observe(self, t, y, network: Reduced, controls: bool = True) -> dict:
+    def observe(self, t, y, network: Reduced, controls: bool = True, tripped=()) -> dict:
         """The result rows for states y [n, n_states] at times t [n] in one topology: time, V_gen,
-        V_bus, Vs, theta_vs, P, Q [n, g] / [n, buses], states {name: [n, g]} and machine_inputs."""
+        V_bus, Vs, theta_vs, P, Q [n, g] / [n, buses], states {name: [n, g]} and machine_inputs
+        (the units `tripped` inject no current: P = Q = 0)."""
         y = np.atleast_2d(y)
         n, g = len(y), len(self.units)
-        V_re, V_im = self.generator_voltages(y, network, np)
+        V_re, V_im = self.generator_voltages(y, network, np, tripped)
         V_gen = V_re + 1j * V_im
         delta = y[:, self.rotor_angles]
         theta_vs = delta + np.angle(V_gen * np.exp(-1j * delta))
@@ -301,8 +365,8 @@ class System:
             u = np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in inputs[0]], -1)
             u[:, machine.component.input_names.index(bus.voltage[1])] = theta_vs[:, k]
             outputs = machine.component.output_values(y[:, self.slices[k][0]], u, machine.params)
-            I[:, k] = (outputs[:, machine.component.output_names.index(bus.current[0])]
-                       + 1j * outputs[:, machine.component.output_names.index(bus.current[1])])
+            I[:, k] = 0.0 if k in tripped else (outputs[:, machine.component.output_names.index(bus.current[0])]
+                                                + 1j * outputs[:, machine.component.output_names.index(bus.current[1])])
             for name, column in zip(machine.component.input_names, u.T):
                 machine_inputs.setdefault(name, np.full((n, g), np.nan))[:, k] = column
             for j, d in enumerate(unit.devices):
@@ -316,29 +380,24 @@ class System:
                 "machine_inputs": machine_inputs}
 
 
-def _pair_events(system: System, terminal: bool = False):
-    """solve_ivp event functions (delta_i - delta_j)^2 - pi^2 for every pair of machines (terminal:
-    the solve stops at the first)."""
-    events = []
-    angles = system.rotor_angles
-    for i in range(len(angles)):
-        for j in range(i + 1, len(angles)):
-            events.append(_pair_event(angles[i], angles[j], terminal))
-    return events
-
-
-def _pair_event(a: int, b: int, terminal: bool):
-    def event(t, y, *args):
-        return (y[a] - y[b]) ** 2 - math.pi ** 2
-
-    event.direction = 1.0
-    event.terminal = terminal
-    return event
-
-
 # A healthy solve of a shipped case takes 2,000-6,000 evaluations of the right-hand side for 5 s with
-# a fault; one whose step collapses (a limiter switching back and forth) is stopped at this budget.
+# a fault; one whose step collapses is stopped at this budget.
 RHS_BUDGET_BASE, RHS_BUDGET_PER_SECOND = 10_000, 4_000
+# the width of the bracket a switching is located to [s], relative to max(1, |t|) (as the native
+# reference FMU's DOPRI5_EVENT_RESOLUTION)
+SWITCHING_RESOLUTION = 1e-12
+# Sliding on a moving limit. A state on a limit that moves away from it while its rate keeps pushing
+# on it (IEEEX1's VRMAX Vt rising) switches infinitely often (Zeno): a condition that changed at a
+# restart and changes back within ZENO_GAP [s] of it slides. While it is locked to the branch it
+# slides on, its switchings are not located; the solve restarts every ZENO_DWELL [s] (resets
+# applied, branches re-locked), and from the other branch its return is located as any switching
+# (the state catches up with its limit and is placed on it); a sample that leaves its lock unchanged
+# ends the sliding. A state beyond a limit that moves towards it (the limit falling under a state
+# held on it) is placed back on it by the resets: the solve restarts after any step whose end the
+# resets move (by more than the tolerance), and every ZENO_DWELL while they do. So a state follows
+# a moving limit sampled every ZENO_DWELL at most, as ANDES' fixed step of that size does (off the
+# limit by at most the limit's motion over ZENO_DWELL), instead of stalling.
+ZENO_GAP, ZENO_DWELL = 1e-6, 1e-3
 
 
 class _Stalled(Exception):
@@ -349,15 +408,91 @@ class _Stalled(Exception):
         self.t = t
 
 
+class _Locked:
+    """The right-hand side of one topology with its branches locked, and the checks around it.
+
+    `natural(t, y)`: (modes, dy/dt) with every condition as it holds at y; `rhs(t, y)`: dy/dt on the
+    locked branches `modes`; `crossed(t, y, held)`: the branches holding at y (those of the conditions
+    `held` kept as locked) differ from the locked ones and give another dy/dt there (the native
+    reference FMU's test); `spread(y)`: the largest rotor-angle difference of the units in service
+    less pi [rad]; `owners[i]`: (unit, device or None for the unit's input links) of condition i.
+    Every evaluation counts against the budget (`count(t)`)."""
+
+    def __init__(self, system: System, network: Reduced, controls: bool, tripped: tuple, count):
+        self.system, self.network, self.controls, self.tripped, self.count = system, network, controls, tripped, count
+        self.modes, self.owners = (), ()
+        self.angles = [a for k, a in enumerate(system.rotor_angles) if k not in tripped]
+
+    def natural(self, t, y):
+        self.count(t)
+        m = _Branches()
+        dy = self.system.rhs(t, y, self.network, self.controls, m, self.tripped)
+        self.owners = m.owners
+        return tuple(m.modes), dy
+
+    def on(self, t, y, modes):
+        self.count(t)
+        return self.system.rhs(t, y, self.network, self.controls, _Branches(modes), self.tripped)
+
+    def rhs(self, t, y):
+        return self.on(t, y, self.modes)
+
+    def differing(self, t, y, held=frozenset()) -> frozenset:
+        """The conditions whose branch at y (not one `held`) differs from its lock, where the
+        branches at y give another dy/dt than the locked ones (else none)."""
+        modes, natural = self.natural(t, y)
+        if held:
+            modes = tuple(self.modes[i] if i in held else q for i, q in enumerate(modes))
+        if modes == self.modes:
+            return frozenset()
+        if held:
+            natural = self.on(t, y, modes)
+        if np.array_equal(self.rhs(t, y), natural):
+            return frozenset()
+        return frozenset(i for i, (p, q) in enumerate(zip(self.modes, modes)) if p != q)
+
+    def reset(self, y, rtol: float, atol: float):
+        """(the state after the limit resets at y, whether they moved it by more than the tolerance
+        atol + rtol |y|)."""
+        reset = self.system.reset(y, self.network, self.controls, self.tripped)
+        return reset, bool(np.any(np.abs(reset - y) > atol + rtol * np.abs(y)))
+
+    def lock(self, t, y) -> frozenset:
+        """Lock the branches holding at y; the conditions whose lock changed."""
+        old, self.modes = self.modes, self.natural(t, y)[0]
+        return frozenset(i for i, (p, q) in enumerate(zip(old, self.modes)) if p != q)
+
+    def spread(self, y) -> float:
+        if len(self.angles) < 2:
+            return -math.pi
+        angles = y[self.angles]
+        return float(np.max(angles) - np.min(angles)) - math.pi
+
+
 def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval=None, *, step: float = 0.01,
              controls: bool = True, method: str = "DOP853", rtol: float = 1e-10, atol: float = 1e-12,
-             event_rows: bool = False, stop_at_loss: bool = False) -> GridResult:
+             event_rows: bool = False, stop_at_loss: bool = False, resets: bool = True) -> GridResult:
     """The case from its load-flow equilibrium through `contingency` until `stop` [s].
 
     Rows at t_eval (default: every `step` s from 0 to stop); `event_rows`: the state just before
     each event too. `controls=False`: every control signal a machine takes held at its start value.
-    `stop_at_loss`: the solve ends where two rotor angles get pi apart (the rows stop there)."""
-    from scipy.integrate import solve_ivp
+    `stop_at_loss`: the solve ends where two rotor angles of units in service get pi apart (the rows
+    stop there).
+
+    Each topology of the contingency (Contingency.topologies: fault, clearing, opened branches,
+    tripped units, whose devices stand still and inject nothing) is integrated by scipy's `method`
+    with the conditions of every device's equations locked to the branches they take at its start
+    (the native reference FMU's scheme, fmu_export/c/dopri5.c), so the right-hand side is smooth
+    within each step; after each accepted step the branches holding at its end are compared with
+    the locked ones, and where they differ (and give another right-hand side) the first instant they
+    do is bracketed by bisection on the step's dense output to SWITCHING_RESOLUTION, and the solve
+    restarts from the bracket's right end. At every (re)start (t = 0, each topology change, each
+    located switching) every device's limit resets (Component.reset_states; `resets=False`: not
+    applied) are applied and the branches locked afresh. Chattering: see ZENO_GAP. RuntimeError
+    where the right-hand side is evaluated more than RHS_BUDGET_BASE + RHS_BUDGET_PER_SECOND * stop
+    times (naming the device whose conditions switched most) or the solver fails."""
+    import scipy.integrate
+    from scipy.optimize import brentq
 
     if not (math.isfinite(stop) and stop > 0):
         raise ValueError(f"stop must be a positive time, got {stop!r}")
@@ -366,72 +501,123 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
     t_eval = np.asarray(t_eval, dtype=float)
     if t_eval.ndim != 1 or np.any(np.diff(t_eval) < 0) or t_eval[0] < 0 or t_eval[-1] > stop:
         raise ValueError("t_eval must be increasing times within [0, stop]")
-    c = contingency
-    intact = system.network()
-    trip = (c.trip,) if c.trip else ()
-    # segments (start, end, network, what happens at start)
-    if c.fault_bus is None:
-        segments = [(0.0, stop, intact, "start")]
-        if c.trip and c.clear_s < stop:
-            segments = [(0.0, c.clear_s, intact, "start"),
-                        (c.clear_s, stop, system.network(out_of_service=trip), f"open {c.trip}")]
-    else:
-        fault = system.network(c.fault_bus, c.fault_impedance)
-        after = system.network(out_of_service=trip)
-        t_f, t_c = min(c.fault_start, stop), min(c.clear_s, stop)
-        clearing = f"fault at bus {c.fault_bus} cleared" + (f", {c.trip} opened" if c.trip else "")
-        segments = [(0.0, t_f, intact, "start"), (t_f, t_c, fault, f"fault at bus {c.fault_bus}"),
-                    (t_c, stop, after, clearing)]
-        segments = [s for s in segments if s[0] < stop or s is segments[0]]
-
-    events = _pair_events(system, stop_at_loss)
+    solver_type = getattr(scipy.integrate, method)
+    topologies = contingency.topologies(stop)
     budget = RHS_BUDGET_BASE + RHS_BUDGET_PER_SECOND * stop
     calls = [0]
 
-    def rhs(t, y, network, controls):
+    def count(t):
         calls[0] += 1
         if calls[0] > budget:
             raise _Stalled(t)
-        return system.rhs(t, y, network, controls)
 
     y = np.array(system.x0)
-    pieces, event_log, lost, n_rhs = [], [], None, 0
-    for n, (a, b, network, what) in enumerate(segments):
-        last = n == len(segments) - 1
-        if n > 0:
-            event_log.append((a, what))
+    pieces, lost, switched_by = [], None, {}
+    for n, tp in enumerate(topologies):
+        a = tp.start
+        b = topologies[n + 1].start if n + 1 < len(topologies) else stop
+        last = n == len(topologies) - 1
+        network = system.network(tp.fault_bus, contingency.fault_impedance, tp.open)
         inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
         times = list(t_eval[inside])
         if event_rows and n > 0 and (not times or times[0] != a):
             times.insert(0, a)
         if event_rows and not last:
             times.append(b)
-        sol = None
-        if b > a:
-            try:
-                sol = solve_ivp(rhs, (a, b), y, method=method, rtol=rtol, atol=atol, dense_output=True,
-                                events=events, args=(network, controls))
-            except _Stalled as stalled:
-                raise RuntimeError(f"the monolithic solve stalled at t = {stalled.t:.4f} s ({network.description}): "
-                                   f"{budget:.0f} evaluations of its right-hand side without reaching {b:g} s (its "
-                                   "step collapses at a limiter switching it does not locate)") from None
-            if sol.status < 0:
-                raise RuntimeError(f"solve_ivp failed on [{a}, {b}] s ({network.description}): {sol.message}")
-            n_rhs += sol.nfev
-            crossings = [float(te[0]) for te in sol.t_events if len(te)]
-            if crossings and lost is None:
-                lost = min(crossings)
-            if sol.status == 1:  # stopped at the loss of synchronism
-                times = [t for t in times if t <= sol.t[-1]]
-            states = sol.sol(np.array(times)).T if times else np.empty((0, system.n_states))
-            if times and times[0] == a:
-                states[0] = y
-            y = sol.y[:, -1]
-        else:
-            states = np.tile(y, (len(times), 1))
-        if times:
-            pieces.append(system.observe(np.array(times), states, network, controls))
-        if sol is not None and sol.status == 1:
+        rows_t, rows_y = [], []
+        f = _Locked(system, network, controls, tuple(tp.tripped), count)
+        if not resets:
+            f.system = _NoResets(system)
+        try:
+            y, moved = f.reset(y, rtol, atol)
+            changed = f.lock(a, y)
+            t, restarted, sliding, held, at, ended, h = a, a, {}, frozenset(), 0, False, None
+            sample = a + ZENO_DWELL if moved else math.inf
+            while at < len(times) and times[at] <= a:
+                rows_t.append(times[at])
+                rows_y.append(y)
+                at += 1
+            spread = f.spread(y)
+            while t < b and not ended:
+                bound = min(b, sample)
+                solver = solver_type(f.rhs, t, y, bound, rtol=rtol, atol=atol,
+                                     **({"first_step": min(h, bound - t)} if h else {}))
+                while True:
+                    message = solver.step()
+                    if solver.status == "failed":
+                        raise RuntimeError(f"the monolithic solve failed at t = {solver.t:.6g} s "
+                                           f"({network.description}): {message}")
+                    t0, t1, y1 = solver.t_old, solver.t, solver.y
+                    h = getattr(solver, "h_abs", None) or solver.step_size
+                    dense = None
+                    flips = f.differing(t1, y1, held)
+                    if flips:
+                        dense = solver.dense_output()
+                        lo, hi = t0, t1
+                        # a sliding condition's return onto its limit is located to ZENO_GAP (the resets
+                        # place the state on the limit there), any other switching to SWITCHING_RESOLUTION
+                        resolution = ZENO_GAP if flips <= sliding.keys() else SWITCHING_RESOLUTION * max(1.0, abs(hi))
+                        while hi - lo > resolution:
+                            mid = lo + 0.5 * (hi - lo)
+                            if not lo < mid < hi:
+                                break
+                            if f.differing(mid, dense(mid), held):
+                                hi = mid
+                            else:
+                                lo = mid
+                        if hi < t1:
+                            t1, y1 = hi, dense(hi)
+                            flips = f.differing(t1, y1, held)
+                        back = flips & changed
+                        if back and t1 - restarted < ZENO_GAP:
+                            # chattering: those conditions slide; the step is taken again from its start
+                            # with them held on the branches they were locked to
+                            sliding.update((i, f.modes[i]) for i in back)
+                            held = frozenset(i for i, v in sliding.items() if f.modes[i] == v)
+                            sample = min(sample, restarted + ZENO_DWELL)
+                            t, y = t0, dense(t0)
+                            break
+                    s1 = f.spread(y1)
+                    if spread < 0 <= s1 and lost is None:
+                        dense = dense if dense is not None else solver.dense_output()
+                        lost = brentq(lambda s: f.spread(dense(s)), t0, t1, xtol=1e-12)
+                    spread = s1
+                    end = lost if (stop_at_loss and lost is not None) else t1
+                    if at < len(times) and times[at] <= end:
+                        dense = dense if dense is not None else solver.dense_output()
+                        k = at
+                        while k < len(times) and times[k] <= end:
+                            k += 1
+                        rows_t.extend(times[at:k])
+                        rows_y.extend(np.atleast_2d(dense(np.array(times[at:k])).T))
+                        at = k
+                    if stop_at_loss and lost is not None:
+                        ended = True
+                        break
+                    t, y = t1, np.array(y1)
+                    sampled = sample <= t < b
+                    y, moved = f.reset(y, rtol, atol) if t < b else (y, False)
+                    if flips or sampled or moved:
+                        for i in flips:
+                            switched_by[f.owners[i]] = switched_by.get(f.owners[i], 0) + 1
+                        changed = f.lock(t, y)
+                        restarted = t
+                        if sampled:  # a sliding condition whose lock did not change at this sample stops sliding
+                            sliding = {i: v for i, v in sliding.items() if i in changed}
+                            sample = t + ZENO_DWELL if (sliding or moved) else math.inf
+                        elif moved:
+                            sample = min(sample, t + ZENO_DWELL)
+                        held = frozenset(i for i, v in sliding.items() if f.modes[i] == v)
+                        break
+                    if solver.status == "finished":
+                        break
+        except _Stalled as stalled:
+            raise RuntimeError(f"the monolithic solve stalled at t = {stalled.t:.4f} s ({network.description}): "
+                               f"{budget:.0f} evaluations of its right-hand side without reaching {b:g} s"
+                               f"{_switching_summary(system, switched_by)}") from None
+        if rows_t:
+            pieces.append(system.observe(np.array(rows_t), np.array(rows_y), network, controls, tuple(tp.tripped)))
+        if stop_at_loss and lost is not None:
             break
     rows = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0] if key not in ("states", "machine_inputs")}
     states = {name: np.concatenate([p["states"][name] for p in pieces]) for name in pieces[0]["states"]}
@@ -441,5 +627,30 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
     theta_bus[:, gen_rows] = rows["theta_vs"]
     return GridResult(time=rows["time"], states=states, Vs=rows["Vs"], theta_vs=rows["theta_vs"], P=rows["P"],
                       Q=rows["Q"], V_bus=np.abs(rows["V_bus"]), theta_bus=theta_bus, stable=lost is None,
-                      loss_of_synchronism_s=lost, events=tuple(event_log), gen_buses=system.case.generator_buses,
-                      buses=system.case.buses, controls=controls, n_rhs=n_rhs, machine_inputs=inputs)
+                      loss_of_synchronism_s=lost, events=tuple((tp.start, tp.description) for tp in topologies[1:]),
+                      gen_buses=system.case.generator_buses, buses=system.case.buses, controls=controls,
+                      n_rhs=calls[0], machine_inputs=inputs)
+
+
+class _NoResets:
+    """A System whose `reset` leaves the state as it is (simulate's resets=False)."""
+
+    def __init__(self, system: System):
+        self._system = system
+
+    def __getattr__(self, name):
+        return getattr(self._system, name)
+
+    def reset(self, y, network, controls=True, tripped=()):
+        return np.array(y, dtype=float)
+
+
+def _switching_summary(system: System, switched_by: dict) -> str:
+    """', N switchings located, most by the DEVICE of the unit at bus B (M)' (or ', no switching located')."""
+    total = sum(switched_by.values())
+    if not total:
+        return ", no switching located"
+    (k, j), most = max(switched_by.items(), key=lambda item: item[1])
+    unit = system.units[k]
+    what = "the input links" if j is None else unit.devices[j].component.name.upper()
+    return f", {total} switchings located, most by {what} of the unit at bus {unit.bus} ({most})"
