@@ -20,9 +20,10 @@ Limits (ANDES' terms, andes.core.discrete and andes.core.block):
   `integrator_non_windup_reset`; ANDES' AntiWindup.check_eq): a state at or beyond its upper limit
   while its unlimited derivative is >= 0 is placed on the limit, likewise at the lower limit with a
   derivative <= 0. A component's `reset` is written with these, and integrators apply it where they
-  (re)start (component.py): a state under a limit that moves with an input (IEEEX1's VRMAX Vt)
-  follows the limit when it moves inward, and a state beyond a constant limit (a start value, a
-  numerical overshoot) returns onto it.
+  (re)start (component.py): a state beyond a constant limit (a start value, a numerical overshoot,
+  a limit crossed between two restarts) returns onto it, and a state under a limit that moves with
+  an input (`non_windup_between`) follows the limit when it moves inward. The standard models'
+  limits are all constant (IEEEX1's too, as ANDES 2.0.0 computes it: models/ieeex1.py).
 
 Saturation: `quadratic_saturation` (GENROU's S(x) = B (x - A)^2 / x above A, ANDES' ExcQuadSat
 coefficients from two points), `exponential_saturation` (ANDES' ExcExpSat: S(x) = A exp(B x)).

@@ -1,6 +1,8 @@
 """The standard dynamic models (reference_models.models): at rest at their equilibrium, the same
-derivatives on every math namespace, limiters that hold and release, lead-lags that degenerate to
-gains, and ANDES' initial states of its shipped cases (where ANDES is installed)."""
+derivatives on every math namespace, limiters that hold and release, the resets of non-windup
+limits (ANDES' anti-windup: a state pushed outward at or beyond a limit is placed on it), lead-lags
+that degenerate to gains, and ANDES' initial states and trajectories of its shipped cases (where
+ANDES is installed)."""
 from __future__ import annotations
 
 import math
@@ -10,7 +12,7 @@ import pytest
 
 from reference_models import blocks
 from reference_models.models import STANDARD_MODELS
-from reference_models.models import genrou, sexs
+from reference_models.models import genrou, ieeex1, sexs
 
 MODELS = sorted(STANDARD_MODELS)
 
@@ -53,6 +55,87 @@ def test_non_windup_holds_a_state_pushed_outward_at_its_limit_and_releases_it_in
     assert blocks.non_windup(math, -2.0, -1.0, -1.0, 1.0) == 0.0
     assert blocks.non_windup(math, 2.0, -1.0, -1.0, 1.0) == 2.0
     assert blocks.non_windup(math, 2.0, 0.5, -1.0, 1.0) == 2.0
+
+
+def test_non_windup_reset_places_a_state_pushed_outward_at_or_beyond_its_limit_on_it():
+    reset = blocks.non_windup_reset
+    assert reset(math, 0.0, 1.3, -1.0, 1.0) == 1.0  # beyond the upper limit, rate 0 counts as outward
+    assert reset(math, 2.0, 1.0, -1.0, 1.0) == 1.0
+    assert reset(math, -2.0, 1.3, -1.0, 1.0) == 1.3  # pushed back inward: left to leave on its own
+    assert reset(math, -0.5, -1.2, -1.0, 1.0) == -1.0
+    assert reset(math, 0.5, -1.2, -1.0, 1.0) == -1.2
+    assert reset(math, 2.0, 0.4, -1.0, 1.0) == 0.4  # within the limits: unchanged
+    assert reset(math, 2.0, 3e7, -blocks.NO_LIMIT, blocks.NO_LIMIT) == 3e7  # no limit beyond the marker
+    # limits of the namespace (moving with an input): each element against its own limits
+    high = np.array([1.0, 0.5, 0.5, 0.5])
+    placed = reset(np, np.array([1.0, 1.0, -1.0, 0.0]), np.array([1.0, 1.0, 1.0, 0.2]), -high, high)
+    np.testing.assert_array_equal(placed, [1.0, 0.5, 1.0, 0.2])
+    # its derivative counterpart holds the same states there while pushed outward
+    rates = blocks.non_windup_between(np, np.array([1.0, 1.0, -1.0, 1.0]), np.array([1.0, 1.0, 1.0, 0.2]), -high, high)
+    np.testing.assert_array_equal(rates, [0.0, 0.0, -1.0, 1.0])
+
+
+def test_a_lag_with_zero_time_constant_keeps_its_held_state_on_reset():
+    assert blocks.lag_non_windup_reset(math, 5.0, 7.0, 1.0, 0.0, -1.0, 1.0) == 7.0
+    assert blocks.lag_non_windup_reset(math, 9.0, 7.0, 1.0, 0.1, -1.0, 1.0) == 1.0
+    assert blocks.lag_non_windup_reset(math, 5.0, 7.0, 1.0, 0.1, -1.0, 1.0) == 7.0
+
+
+def test_ieeex1_regulator_beyond_its_ceiling_is_placed_on_it_while_pushed_up_whatever_the_voltage():
+    """IEEEX1's LA_y beyond VRMAX while its regulator pushes up: the reset puts it on VRMAX, at a
+    terminal voltage of 1 or 0.5 pu alike (ANDES 2.0.0's limits are constant, ieeex1.py); pushed
+    down, it stays where it is and falls on its own; the floor VRMIN likewise."""
+    component, p = ieeex1.IEEEX1, ieeex1.IEEEX1Params()
+    rest = component.steady_state(None, p)
+    above = np.array([*rest[:2], p.VRMAX + 0.4, *rest[3:]])
+    for Vt in (1.0, 0.5):
+        pushed_up, pushed_down = np.array([Vt, 2.0, 0.0]), np.array([Vt, 0.0, 0.0])
+        assert component.reset_states(above, pushed_up, p)[2] == p.VRMAX
+        assert component.reset_states(above, pushed_down, p)[2] == p.VRMAX + 0.4
+        below = np.array([*rest[:2], p.VRMIN - 0.4, *rest[3:]])
+        assert component.reset_states(below, pushed_down, p)[2] == p.VRMIN
+        assert component.reset_states(below, pushed_up, p)[2] == p.VRMIN - 0.4
+    np.testing.assert_array_equal(np.delete(component.reset_states(above, pushed_up, p), 2), np.delete(above, 2))
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_reset_is_the_same_on_every_namespace_and_leaves_states_within_their_limits_alone(name):
+    """Random points near rest (within the limits): the reset changes nothing; points driven far
+    beyond (each state 0.1 to 1000 of its scales from rest, inputs anywhere in their operating
+    ranges): numpy, torch and math place them alike. A model without non-windup limits (GENCLS,
+    GENROU, EXST1, IEEEST) declares no reset: reset_states is x itself."""
+    torch = pytest.importorskip("torch")
+    component, _, u, _ = _rest(name)
+    p = component.params({"EMAX": 3.0, "EMIN": 0.0} if name == "SEXS" else None)  # SEXS's limits within reach
+    x = component.steady_state(u, p)
+    rng = np.random.default_rng(11)
+    near = x + 0.01 * np.array(component.state_scales) * rng.standard_normal((5, component.n_states))
+    us = u + 0.01 * rng.standard_normal((5, component.n_inputs))
+    if component.reset is None:
+        assert component.reset_states(near, us, p) is near
+        return
+    np.testing.assert_array_equal(component.reset_states(near, us, p), near)
+    size = (1000, component.n_states)  # each state 0.1 to 1000 of its scales from rest
+    far = x + np.array(component.state_scales) * rng.standard_normal(size) * 10.0 ** rng.uniform(-1.0, 3.0, size)
+    low, high = np.array([q.operating_range for q in component.inputs]).T
+    us = low + (high - low) * rng.random((1000, component.n_inputs))
+    by_numpy = component.reset_states(far, us, p)
+    by_torch = component.reset_states(torch.tensor(far), torch.tensor(us), p).numpy()
+    by_math = np.array([component.reset(list(a), list(b), p, math) for a, b in zip(far, us)], dtype=float)
+    np.testing.assert_array_equal(by_torch, by_numpy)
+    np.testing.assert_array_equal(by_math, by_numpy)
+    assert np.any(by_numpy != far)  # some were placed on a limit
+
+
+def test_components_without_non_windup_limits_declare_no_reset_and_reset_to_themselves():
+    from reference_models.components import COMPONENTS
+
+    assert {n for n, c in COMPONENTS.items() if c.reset is None} == {"sm4", "ieee1", "gencls", "genrou", "exst1",
+                                                                     "ieeest"}
+    for name in ("sm4", "ieee1"):
+        component = COMPONENTS[name]
+        x = component.steady_state()
+        assert component.reset_states(x, component.start_inputs, component.params_type()) is x
 
 
 def test_windup_limiter_clips_and_no_limit_beyond_the_marker():

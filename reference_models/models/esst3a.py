@@ -20,6 +20,8 @@ Equations (ANDES 2.0 model reference, Exciter: ESST3A):
     IN = KC XadIfd / VE,  FEX = FEX(IN) (reference_models.blocks.rectifier_loading)
     VB = min(VE FEX, VBMAX),  Efd = VB VM,  VG = min(KG Efd, VGMAX)
     non-windup lag KM / (1 + s TM):  TM dVM/dt = KM (VR - VG) - VM,  VMMIN <= VM <= VMMAX
+    reset (both non-windup lags, at the same state): VR or VM at or beyond a limit while its
+        unlimited rate pushes outward is placed on it
 
 Bases: I is on the system base and KI, XL multiply it unconverted, as ANDES 2.0 does (its Id, Iq
 are on the system base); for a machine whose Sn differs from Sb this is ANDES' choice, kept.
@@ -31,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import clip, lag, lag_non_windup, lead_lag, rectifier_loading
+from ..blocks import clip, lag, lag_non_windup, lag_non_windup_reset, lead_lag, rectifier_loading
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs, set_point
@@ -86,19 +88,34 @@ def bridge_voltage(Vt, theta_vs, I_re, I_im, XadIfd, p: ESST3AParams, m):
     return clip(m, VE * rectifier_loading(m, p.KC * XadIfd / VE), -math.inf, p.VBMAX)
 
 
-def derivatives(x, u, p: ESST3AParams, m):
-    """(dLG_y, dLL_x, dVR, dVM)/dt for x = (LG_y, LL_x, VR, VM),
-    u = (Vt, theta_vs, I_re, I_im, Vref, Vss, XadIfd)."""
+def _signals(x, u, p: ESST3AParams, m):
+    """(dLG_y/dt, dLL_x/dt, LL_y, VG): the sensing lag's and lead-lag's derivatives, the
+    regulator's input and the field voltage feedback."""
     LG_y, LL_x, VR, VM = x
     Vt, theta_vs, I_re, I_im, Vref, Vss, XadIfd = u
     d_LG, sensed = lag(m, Vt, LG_y, 1.0, p.TR)
     vil = clip(m, Vref - sensed + Vss, p.VIMIN, p.VIMAX)
     d_LL, LL_y = lead_lag(m, vil, LL_x, 1.0, p.TC, p.TB)
-    d_VR, VR = lag_non_windup(m, LL_y, VR, p.KA, p.TA, p.VRMIN, p.VRMAX)
     Efd = bridge_voltage(Vt, theta_vs, I_re, I_im, XadIfd, p, m) * VM
-    VG = clip(m, p.KG * Efd, -math.inf, p.VGMAX)
-    d_VM, _ = lag_non_windup(m, VR - VG, VM, p.KM, p.TM, p.VMMIN, p.VMMAX)
+    return d_LG, d_LL, LL_y, clip(m, p.KG * Efd, -math.inf, p.VGMAX)
+
+
+def derivatives(x, u, p: ESST3AParams, m):
+    """(dLG_y, dLL_x, dVR, dVM)/dt for x = (LG_y, LL_x, VR, VM),
+    u = (Vt, theta_vs, I_re, I_im, Vref, Vss, XadIfd)."""
+    d_LG, d_LL, LL_y, VG = _signals(x, u, p, m)
+    d_VR, VR = lag_non_windup(m, LL_y, x[2], p.KA, p.TA, p.VRMIN, p.VRMAX)
+    d_VM, _ = lag_non_windup(m, VR - VG, x[3], p.KM, p.TM, p.VMMIN, p.VMMAX)
     return d_LG, d_LL, d_VR, d_VM
+
+
+def reset(x, u, p: ESST3AParams, m):
+    """x after the resets of VR's and VM's non-windup limits, both at x (blocks.lag_non_windup_reset);
+    TA = 0: VR held, VM's input KA LL_y clipped as in the derivatives."""
+    _, _, LL_y, VG = _signals(x, u, p, m)
+    VR = lag_non_windup(m, LL_y, x[2], p.KA, p.TA, p.VRMIN, p.VRMAX)[1]
+    return (x[0], x[1], lag_non_windup_reset(m, LL_y, x[2], p.KA, p.TA, p.VRMIN, p.VRMAX),
+            lag_non_windup_reset(m, VR - VG, x[3], p.KM, p.TM, p.VMMIN, p.VMMAX))
 
 
 def outputs(x, u, p: ESST3AParams, m):
@@ -149,6 +166,7 @@ ESST3A = Component(
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.1, 0.01, 0.5, 0.1),
+    reset=reset,
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("terminal_voltage_angle", "theta_vs"),
                         Link("terminal_current_real", "I_re"), Link("terminal_current_imaginary", "I_im"),
                         Link("voltage_reference", "Vref"), Link("stabiliser_signal", "Vss"),

@@ -25,8 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import (lag, lag_non_windup, lag_non_windup_reset, lead_lag, non_windup_between,
-                      quadratic_saturation_coefficients, washout)
+from ..blocks import lag, lag_non_windup, lag_non_windup_reset, lead_lag, quadratic_saturation_coefficients, washout
 from ..component import Component, Parameters, Quantity
 from ..piecewise import where
 from ..ports import Link, Ports
@@ -42,7 +41,7 @@ PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "TA": (0.001, 10.0, "s"), "TC": (0.0
 @dataclass(frozen=True)
 class EXDC2Params(Parameters):
     """ANDES/PSS/E EXDC2 (and IEEEX1) data: time constants [s], gains [pu], regulator limits [pu]
-    (IEEEX1: per unit of the terminal voltage), saturation points E1, E2 [pu] with SE1, SE2 [pu]."""
+    (IEEEX1 alike), saturation points E1, E2 [pu] with SE1, SE2 [pu]."""
 
     TR: float = 0.01
     TA: float = 0.04
@@ -81,32 +80,22 @@ def _regulator_input(x, Vt, Vref, Vss, p: EXDC2Params, m):
     return d_LS, d_LL, d_W, LL_y
 
 
-def regulator_limits(Vt, p: EXDC2Params, limits_scale_with_voltage: bool) -> tuple:
-    """(low, high): the regulator's limits, VRMIN, VRMAX or (IEEEX1) VRMIN Vt, VRMAX Vt [pu]."""
-    return (p.VRMIN * Vt, p.VRMAX * Vt) if limits_scale_with_voltage else (p.VRMIN, p.VRMAX)
-
-
-def dc_derivatives(x, Vt, Vref, Vss, omega, p: EXDC2Params, m, limits_scale_with_voltage: bool):
-    """The DC exciter's derivatives; `limits_scale_with_voltage`: IEEEX1's limits VRMIN Vt, VRMAX Vt."""
+def dc_derivatives(x, Vt, Vref, Vss, omega, p: EXDC2Params, m):
+    """The DC exciter's derivatives; omega None: no speed term (IEEEX1)."""
     LS_y, LL_x, LA_y, vp, W_x = x
     A, B = p.saturation
     d_LS, d_LL, d_W, LL_y = _regulator_input(x, Vt, Vref, Vss, p, m)
-    low, high = regulator_limits(Vt, p, limits_scale_with_voltage)
-    if limits_scale_with_voltage:
-        d_LA = non_windup_between(m, (p.KA * LL_y - LA_y) / p.TA, LA_y, low, high)
-    else:
-        d_LA, _ = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, low, high)
+    d_LA, _ = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
     out = vp if omega is None else omega * vp
     saturation = where(m, out >= A, B * (vp - A) * (vp - A), 0.0 * vp) if B != 0 else 0.0 * vp
     d_vp = (LA_y - p.KE * vp - saturation) / p.TE
     return d_LS, d_LL, d_LA, d_vp, d_W
 
 
-def dc_reset(x, Vt, Vref, Vss, p: EXDC2Params, m, limits_scale_with_voltage: bool) -> tuple:
+def dc_reset(x, Vt, Vref, Vss, p: EXDC2Params, m) -> tuple:
     """The DC exciter's states after the reset of the regulator's non-windup limit (LA_y placed on
     a limit it is at or beyond while its unlimited rate pushes outward; blocks.lag_non_windup_reset)."""
-    LA_y = lag_non_windup_reset(m, _regulator_input(x, Vt, Vref, Vss, p, m)[3], x[2], p.KA, p.TA,
-                                *regulator_limits(Vt, p, limits_scale_with_voltage))
+    LA_y = lag_non_windup_reset(m, _regulator_input(x, Vt, Vref, Vss, p, m)[3], x[2], p.KA, p.TA, p.VRMIN, p.VRMAX)
     return x[0], x[1], LA_y, x[3], x[4]
 
 
@@ -133,13 +122,13 @@ def dc_equilibrium(initialise, Vref: float, limits: tuple, name: str) -> np.ndar
 def derivatives(x, u, p: EXDC2Params, m):
     """(dLS_y, dLL_x, dLA_y, dvp, dW_x)/dt for x = (LS_y, LL_x, LA_y, vp, W_x), u = (Vt, Vref, Vss, omega)."""
     Vt, Vref, Vss, omega = u
-    return dc_derivatives(x, Vt, Vref, Vss, omega, p, m, False)
+    return dc_derivatives(x, Vt, Vref, Vss, omega, p, m)
 
 
 def reset(x, u, p: EXDC2Params, m):
     """x after the regulator limit's reset (dc_reset), u = (Vt, Vref, Vss, omega)."""
     Vt, Vref, Vss, _ = u
-    return dc_reset(x, Vt, Vref, Vss, p, m, False)
+    return dc_reset(x, Vt, Vref, Vss, p, m)
 
 
 def outputs(x, u, p: EXDC2Params, m):

@@ -12,6 +12,7 @@ Equations (ANDES 2.0 model reference, TurbineGov: IEEEG1):
     lead-lag K (1 + s T2) / (1 + s T1) of wd (T1 = 0: the gain K) -> LL_y
     vs = (LL_y + Pref - IAW_y) / T3,  vsl = vs clipped to [UC, UO] Sb / Sn (windup limiter)
     non-windup integrator:  dIAW_y/dt = vsl,  PMIN <= IAW_y <= PMAX
+        (reset: IAW_y at or beyond a limit while vsl pushes outward is placed on it)
     lags 1 / (1 + s T4..T7) in series: L4 of IAW_y, L5 of L4_y, L6 of L5_y, L7 of L6_y (T = 0:
         the stage passes its input)
     Pm = K1n L4 + K3n L5 + K5n L6 + K7n L7,  Kin = Ki / (K1 + ... + K8)
@@ -26,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import clip, integrator_non_windup, lag, lead_lag
+from ..blocks import clip, integrator_non_windup, integrator_non_windup_reset, lag, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs
@@ -92,15 +93,25 @@ def _stages(x, p: IEEEG1Params, m):
     return rates, outs
 
 
+def _valve_speed(x, u, p: IEEEG1Params, m):
+    """(dLL_x/dt, vsl): the lead-lag's derivative and the valve speed after its windup limiter."""
+    omega, Pref = u
+    d_LL, LL_y = lead_lag(m, p.wref0 - omega, x[0], p.K, p.T2, p.T1)
+    return d_LL, clip(m, (LL_y + Pref - x[1]) / p.T3, p.UC * p.Sb / p.Sn, p.UO * p.Sb / p.Sn)
+
+
 def derivatives(x, u, p: IEEEG1Params, m):
     """(dLL_x, dIAW_y, dL4_y, dL5_y, dL6_y, dL7_y)/dt for x as the states, u = (omega, Pref)."""
-    LL_x, IAW_y = x[0], x[1]
-    omega, Pref = u
-    d_LL, LL_y = lead_lag(m, p.wref0 - omega, LL_x, p.K, p.T2, p.T1)
-    vsl = clip(m, (LL_y + Pref - IAW_y) / p.T3, p.UC * p.Sb / p.Sn, p.UO * p.Sb / p.Sn)
-    d_IAW, _ = integrator_non_windup(m, vsl, IAW_y, 1.0, 1.0, p.PMIN, p.PMAX)
+    d_LL, vsl = _valve_speed(x, u, p, m)
+    d_IAW, _ = integrator_non_windup(m, vsl, x[1], 1.0, 1.0, p.PMIN, p.PMAX)
     rates, _ = _stages(x, p, m)
     return (d_LL, d_IAW, *rates)
+
+
+def reset(x, u, p: IEEEG1Params, m):
+    """x after the reset of the valve position's non-windup limit (blocks.integrator_non_windup_reset)."""
+    IAW_y = integrator_non_windup_reset(m, _valve_speed(x, u, p, m)[1], x[1], 1.0, 1.0, p.PMIN, p.PMAX)
+    return (x[0], IAW_y, *x[2:])
 
 
 def outputs(x, u, p: IEEEG1Params, m):
@@ -142,6 +153,7 @@ IEEEG1 = Component(
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.01, 0.2, 0.2, 0.2, 0.2, 0.2),
+    reset=reset,
     ports=Ports(inputs=(Link("rotor_speed", "omega"), Link("power_reference", "Pref")),
                 outputs=(Link("mechanical_power", "Pm"),)),
 )

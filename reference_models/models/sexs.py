@@ -10,6 +10,7 @@ Equations (ANDES 2.0 model reference, Exciter: SEXS):
     lead-lag (1 + s TA) / (1 + s TB), TA = TATB TB:  TB dLL_x/dt = vi - LL_x,
         LL_y = TATB (vi - LL_x) + LL_x  (TB = 0: LL_y = vi)
     non-windup lag K / (1 + s TE):  TE dLAW_y/dt = K LL_y - LAW_y,  EMIN <= LAW_y <= EMAX
+        (reset: LAW_y at or beyond a limit while K LL_y - LAW_y pushes outward is placed on it)
     Efd = LAW_y
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import lag_non_windup, lead_lag
+from ..blocks import lag_non_windup, lag_non_windup_reset, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs
@@ -43,13 +44,22 @@ class SEXSParams(Parameters):
         check_limits(self, "EMIN", "EMAX")
 
 
+def _lead_lag(x, u, p: SEXSParams, m):
+    """(dLL_x/dt, LL_y)."""
+    Vt, Vref, Vss = u
+    return lead_lag(m, Vref - Vt + Vss, x[0], 1.0, p.TATB * p.TB, p.TB)
+
+
 def derivatives(x, u, p: SEXSParams, m):
     """(dLL_x, dLAW_y)/dt for x = (LL_x, LAW_y), u = (Vt, Vref, Vss)."""
-    LL_x, LAW_y = x
-    Vt, Vref, Vss = u
-    d_LL, LL_y = lead_lag(m, Vref - Vt + Vss, LL_x, 1.0, p.TATB * p.TB, p.TB)
-    d_LAW, _ = lag_non_windup(m, LL_y, LAW_y, p.K, p.TE, p.EMIN, p.EMAX)
+    d_LL, LL_y = _lead_lag(x, u, p, m)
+    d_LAW, _ = lag_non_windup(m, LL_y, x[1], p.K, p.TE, p.EMIN, p.EMAX)
     return d_LL, d_LAW
+
+
+def reset(x, u, p: SEXSParams, m):
+    """x after the reset of LAW_y's non-windup limit (blocks.lag_non_windup_reset)."""
+    return x[0], lag_non_windup_reset(m, _lead_lag(x, u, p, m)[1], x[1], p.K, p.TE, p.EMIN, p.EMAX)
 
 
 def outputs(x, u, p: SEXSParams, m):
@@ -89,6 +99,7 @@ SEXS = Component(
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.05, 0.5),
+    reset=reset,
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss")),
                 outputs=(Link("field_voltage", "Efd"),)),

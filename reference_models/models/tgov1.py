@@ -10,6 +10,7 @@ Equations (ANDES 2.0 model reference, TurbineGov: TGOV1, TGOV1N):
     wd = omega - wref0
     TGOV1: pd = (Pref - wd) / R;   TGOV1N: pd = Pref - wd / R
     non-windup lag 1 / (1 + s T1):  T1 dLAG_y/dt = pd - LAG_y,  VMIN <= LAG_y <= VMAX
+        (reset: LAG_y at or beyond a limit while pd - LAG_y pushes outward is placed on it)
     lead-lag (1 + s T2) / (1 + s T3) of LAG_y (T3 = 0: a gain of 1) -> LL_y
     Pm = LL_y - Dt wd
 
@@ -22,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import lag_non_windup, lead_lag
+from ..blocks import lag_non_windup, lag_non_windup_reset, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs
@@ -57,6 +58,11 @@ def governor_derivatives(x, omega, pd, p: TGOV1Params, m):
     return d_LAG, d_LL
 
 
+def governor_reset(x, pd, p: TGOV1Params, m) -> tuple:
+    """x after the reset of LAG_y's non-windup limit at valve demand pd (blocks.lag_non_windup_reset)."""
+    return lag_non_windup_reset(m, pd, x[0], 1.0, p.T1, p.VMIN, p.VMAX), x[1]
+
+
 def governor_power(x, omega, p: TGOV1Params, m):
     """Pm = LL_y - Dt (omega - wref0) [pu]."""
     LAG_y, LL_x = x
@@ -64,10 +70,20 @@ def governor_power(x, omega, p: TGOV1Params, m):
     return LL_y - p.Dt * (omega - p.wref0)
 
 
+def _demand(u, p: TGOV1Params):
+    """pd = (Pref - (omega - wref0)) / R [pu]."""
+    omega, Pref = u
+    return (Pref - (omega - p.wref0)) / p.R
+
+
 def derivatives(x, u, p: TGOV1Params, m):
     """(dLAG_y, dLL_x)/dt for x = (LAG_y, LL_x), u = (omega, Pref)."""
-    omega, Pref = u
-    return governor_derivatives(x, omega, (Pref - (omega - p.wref0)) / p.R, p, m)
+    return governor_derivatives(x, u[0], _demand(u, p), p, m)
+
+
+def reset(x, u, p: TGOV1Params, m):
+    """x after the reset of the valve's non-windup limit (governor_reset)."""
+    return governor_reset(x, _demand(u, p), p, m)
 
 
 def outputs(x, u, p: TGOV1Params, m):
@@ -116,4 +132,5 @@ TGOV1 = Component(
     equilibrium=equilibrium,
     state_scales=(0.2, 0.2),
     ports=PORTS,
+    reset=reset,
 )

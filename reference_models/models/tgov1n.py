@@ -11,15 +11,26 @@ import numpy as np
 
 from ..component import Component, Quantity
 from .common import finite_inputs
-from .tgov1 import OUTPUTS, PORTS, STATES, TGOV1Params, governor_derivatives, governor_power, rest_valve
+from .tgov1 import (OUTPUTS, PORTS, STATES, TGOV1Params, governor_derivatives, governor_power, governor_reset,
+                    rest_valve)
 
 TGOV1NParams = TGOV1Params
 
 
+def _demand(u, p: TGOV1Params):
+    """pd = Pref - (omega - wref0) / R [pu]."""
+    omega, Pref = u
+    return Pref - (omega - p.wref0) / p.R
+
+
 def derivatives(x, u, p: TGOV1Params, m):
     """(dLAG_y, dLL_x)/dt for x = (LAG_y, LL_x), u = (omega, Pref)."""
-    omega, Pref = u
-    return governor_derivatives(x, omega, Pref - (omega - p.wref0) / p.R, p, m)
+    return governor_derivatives(x, u[0], _demand(u, p), p, m)
+
+
+def reset(x, u, p: TGOV1Params, m):
+    """x after the reset of the valve's non-windup limit (tgov1.governor_reset)."""
+    return governor_reset(x, _demand(u, p), p, m)
 
 
 def outputs(x, u, p: TGOV1Params, m):
@@ -54,4 +65,5 @@ TGOV1N = Component(
     equilibrium=equilibrium,
     state_scales=(0.2, 0.2),
     ports=PORTS,
+    reset=reset,
 )
