@@ -4,7 +4,7 @@ the case's own events (its Toggle and Fault devices) as the file has them, or sw
 the contingency leaves them out (Contingency.events empty), the contingency added as ANDES devices
 (a Fault at the bus from fault_start to clear_s with the contingency's fault impedance, a Toggle of
 the tripped Line at clearing), ANDES' implicit trapezoid at the fixed step h, its result mapped
-onto a GridResult as the other runners give it (rows at the multiples of h, linear between
+onto a GridResult as the other runners give it (rows at the multiples of the row spacing, linear between
 ANDES' own rows within one topology, and ANDES' first row after each switching: `_on_grid`; the
 events as Contingency.topologies names them: rotor angles [rad], speeds [pu, 1 =
 synchronous, as the machines' components hold them], the machines' field-voltage inputs [pu,
@@ -24,6 +24,7 @@ import numpy as np
 ANDES_MISSING = "--fmus andes needs ANDES: pip install andes==2.0.0"
 
 
+REFERENCE_STEP = 1e-3  # s: ANDES' step as a reference (its trapezoid at 1 ms is within 0.07 deg of 0.5 ms)
 SWITCH_MARGIN = 1e-4  # s: ANDES steps to each switching time from this far before it
 
 
@@ -43,9 +44,9 @@ def andes_available() -> bool:
 
 class AndesRunner:
     """ANDES' time-domain simulation of the shipped case `case` (its name one of ANDES_CASES) at
-    the fixed step `step` [s]."""
+    the fixed step `step` [s], its result rows every `rows` [s] (default: `step`)."""
 
-    def __init__(self, case, step: float = 0.001):
+    def __init__(self, case, step: float = 0.001, rows: float | None = None):
         from reference_models.grid.andes_case import ANDES_CASES
 
         if case.name not in ANDES_CASES:
@@ -54,6 +55,7 @@ class AndesRunner:
         if not andes_available():
             raise ValueError(ANDES_MISSING)
         self.case, self.step, self.source = case, step, ANDES_CASES[case.name]
+        self.rows = step if rows is None else rows
 
     def _system(self, contingency, stop: float):
         import andes
@@ -166,13 +168,13 @@ class AndesRunner:
 
     def _on_grid(self, t, table, switches, stop) -> tuple:
         """ANDES' rows (times t [n], values table [n, m]) as the other runners give theirs: a row at
-        every multiple of the step up to `stop` (the last one `stop`), linear between ANDES' own
+        every multiple of `rows` up to `stop` (the last one `stop`), linear between ANDES' own
         rows of the same topology (never across a switching), and ANDES' first row after each
         switching at its own time. ANDES steps to a switching time te - 1e-4, te, te + 1e-4 and on
         from there, off the multiples of its step; its rows up to te hold the state before the switch
         (so a multiple at te itself has no row: it is an event time, where runs are not compared)."""
-        n = int(math.ceil(stop / self.step - 1e-9))
-        grid = np.minimum(np.arange(n + 1) * self.step, stop)
+        n = int(math.ceil(stop / self.rows - 1e-9))
+        grid = np.minimum(np.arange(n + 1) * self.rows, stop)
         bounds = [0.0] + list(switches) + [math.inf]
         times, rows = [], []
         for a, b in zip(bounds[:-1], bounds[1:]):

@@ -22,10 +22,13 @@ RUN_FILES = ("result.csv", "result.png", "report.md", "summary.json")
 SCREENING_FILES = ("screening.csv", "screening.json", "screening.md", "screening.png")
 
 LABELS = {"surrogate": "surrogate FMUs", "reference": "native reference FMUs", "python": "pythonfmu reference FMUs",
-          "file": "user FMUs", "monolithic": "monolithic DAE", "andes": "ANDES' own simulation"}
+          "file": "user FMUs", "monolithic": "monolithic DAE", "andes": "ANDES"}
 STYLES = {"monolithic": dict(color="k", lw=2.2, alpha=0.35), "reference": dict(ls="--", lw=1.2),
           "surrogate": dict(lw=1.0), "python": dict(ls=":", lw=1.2), "file": dict(ls="-.", lw=1.0),
           "andes": dict(ls=(0, (5, 1, 1, 1)), lw=1.2)}
+
+
+REFERENCES = {"monolithic": "monolithic", "andes": "ANDES"}  # the runs others are compared with, where present
 
 
 class OutputError(ValueError):
@@ -214,8 +217,9 @@ def _number(value, digits=4) -> str:
 
 def report(path, title: str, runs: dict, timings: dict, contingency, case=None, notes=()) -> None:
     """report.md: the contingency and the case's own events applied with it, per run its verdict,
-    first-swing peak and time split, and each FMU run's largest differences from the monolithic
-    run (when there is one; `case`: the Case the runs are of, see `errors`)."""
+    first-swing peak and time split, and every other run's largest differences from the monolithic
+    run and from ANDES' (REFERENCES, where the report has them; `case`: the Case the runs are of,
+    see `errors`)."""
     from .stability import first_swing_peak
 
     lines = [f"# {title}", "", f"Contingency: {contingency.label}.", ""]
@@ -238,16 +242,18 @@ def report(path, title: str, runs: dict, timings: dict, contingency, case=None, 
             lines.append(f"| {LABELS.get(kind, kind)} | {tm['total_s']:.3f} | {tm['fmu_step_s']:.3f} | "
                          f"{tm['network_s']:.3f} | {tm['rollback_s']:.3f} | {tm['overhead_s']:.3f} | "
                          f"{tm['passes'] / max(tm['steps'], 1):.2f} |")
-    if "monolithic" in runs and len(runs) > 1:
-        fault = contingency.fault_intervals(math.inf)
-        lines += ["", "Largest differences from the monolithic run, at the rows both runs have outside the event "
-                  "times (terminal voltages also outside the steps with a fault on):", "",
+    fault = contingency.fault_intervals(math.inf)
+    for reference in REFERENCES:
+        if reference not in runs or len(runs) < 2:
+            continue
+        lines += ["", f"Largest differences from the {REFERENCES[reference]} run, at the rows both runs have outside "
+                  "the event times (terminal voltages also outside the steps with a fault on):", "",
                   "| run | rotor angle rel. machine 1 [deg] | speed [rad/s] | terminal voltage [pu] | Efd [pu] |",
                   "| --- | --- | --- | --- | --- |"]
         for kind, result in runs.items():
-            if kind == "monolithic":
+            if kind == reference:
                 continue
-            e = errors(result, runs["monolithic"], fault, case)
+            e = errors(result, runs[reference], fault, case)
             lines.append(f"| {LABELS.get(kind, kind)} | {e['angle_deg']:.3f} | {e['omega']:.3g} | {e['V']:.3g} | "
                          f"{e['Efd']:.3g} |")
     if notes:

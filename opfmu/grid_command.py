@@ -55,7 +55,8 @@ def _common(p, trip: bool = True) -> None:
                    help="the units' dynamic data (machines, exciters, FMU kinds; default: the case's shipped file)")
     p.add_argument("--fmus", choices=_run_kinds(), default=None,
                    help="the FMUs of every unit, monolithic for the DAE reference, or andes for ANDES' own "
-                        "simulation at the step --step (where ANDES is installed) "
+                        "simulation (where ANDES is installed; its trapezoid at the smaller of --step and 1 ms, "
+                        "its rows every --step) "
                         "(default: each unit's kind in the dynamic data: surrogate for the shipped file)")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
                    help="FMI version of the native FMUs built (default 2; FMI 3.0 inputs are held over each step)")
@@ -89,7 +90,8 @@ def add_grid_parser(sub) -> None:
     run.add_argument("--stop", type=_time, default=5.0, help=f"end time in s (default 5, at most {MAX_STOP_S:g})")
     run.add_argument("--compare", default="monolithic",
                      help="runs drawn on the same figure and compared in the report: a comma list of "
-                          "surrogate, reference, python, monolithic, or none (default monolithic)")
+                          "surrogate, reference, python, monolithic, andes, or none (default monolithic); every run "
+                          "is compared with the monolithic and the ANDES run among them")
     run.add_argument("--out", required=True, metavar="DIR", help="output folder")
     _common(run)
     run.set_defaults(func=cmd_run)
@@ -227,9 +229,14 @@ def _progress(text: str) -> None:
 
 
 def _open(kind, case, settings, args, progress, **options):
+    """The runner of `kind`; ANDES integrates at min(--step, REFERENCE_STEP), its rows every --step."""
     from cosim.fmu import CouplingError
     from cosim.runners import open_runner
 
+    if kind == "andes":
+        from cosim.andes_runner import REFERENCE_STEP, AndesRunner
+
+        return AndesRunner(case, min(settings.step, REFERENCE_STEP), rows=settings.step)
     try:
         return open_runner(kind, case, settings, args.fmu_cache, progress, fmi_version=args.fmi_version, **options)
     except CouplingError as exc:
@@ -281,10 +288,11 @@ def cmd_run(args) -> None:
                "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
                "passes": settings.passes, "fmi_version": args.fmi_version}
-    if "monolithic" in runs and main_kind != "monolithic":
-        fault = contingency.fault_intervals(args.stop)
-        summary["difference_from_monolithic"] = {k: outputs.errors(r, runs["monolithic"], fault, case)
-                                                 for k, r in runs.items() if k != "monolithic"}
+    fault = contingency.fault_intervals(args.stop)
+    for reference in outputs.REFERENCES:
+        if reference in runs and len(runs) > 1:
+            summary[f"difference_from_{reference}"] = {k: outputs.errors(r, runs[reference], fault, case)
+                                                       for k, r in runs.items() if k != reference}
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.RUN_FILES) as staging:
@@ -299,9 +307,11 @@ def cmd_run(args) -> None:
         raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     verdict = "stable" if main.stable else f"unstable (loss of synchronism at {main.loss_of_synchronism_s:.3f} s)"
     print(f"{title}: {verdict}; {_label(main_kind)} in {timings[main_kind]['total_s']:.2f} s")
-    for kind, e in summary.get("difference_from_monolithic", {}).items():
-        print(f"  {_label(kind)} against the monolithic run: rotor angles {e['angle_deg']:.3f} deg, "
-              f"terminal voltages {e['V']:.2g} pu")
+    for reference in outputs.REFERENCES:
+        for kind, e in summary.get(f"difference_from_{reference}", {}).items():
+            print(f"  {_label(kind)} against the {outputs.REFERENCES[reference]} run: rotor angles "
+                  f"{e['angle_deg']:.3f} deg, "
+                  f"terminal voltages {e['V']:.2g} pu")
     print(f"written: {out / 'result.csv'}, {out / 'result.png'}, {out / 'report.md'}")
 
 

@@ -235,3 +235,16 @@ def test_kundur_runs_with_native_fmus_beside_the_monolithic_dae(tmp_path, capsys
     difference = summary["difference_from_monolithic"]["reference"]
     assert difference["angle_deg"] < 0.1 and difference["V"] < 0.01
     assert "Kundur two-area: fault at bus 8" in capsys.readouterr().out
+
+
+@pytest.mark.andes
+def test_grid_run_compares_with_andes_at_its_reference_step_on_the_runs_rows(tmp_path, capsys):
+    pytest.importorskip("andes")
+    out = tmp_path / "andes"
+    assert main(["grid", "run", "--case", "kundur", "--fmus", "monolithic", "--compare", "andes", "--fault", "8",
+                 "--fault-start", "1.0", "--clear", "1.1", "--stop", "1.3", "--out", str(out)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["difference_from_andes"]["monolithic"]["angle_deg"] < 0.1  # ANDES at 1 ms, not at --step
+    assert summary["difference_from_andes"]["monolithic"]["V"] < 0.01
+    assert "Largest differences from the ANDES run" in (out / "report.md").read_text()
+    assert "monolithic DAE against the ANDES run" in capsys.readouterr().out
