@@ -310,8 +310,7 @@ def cmd_run(args) -> None:
     for reference in outputs.REFERENCES:
         for kind, e in summary.get(f"difference_from_{reference}", {}).items():
             print(f"  {_label(kind)} against the {outputs.REFERENCES[reference]} run: rotor angles "
-                  f"{e['angle_deg']:.3f} deg, "
-                  f"terminal voltages {e['V']:.2g} pu")
+                  f"{e['angle_deg']:.3f} deg, terminal voltages {e['V']:.2g} pu")
     print(f"written: {out / 'result.csv'}, {out / 'result.png'}, {out / 'report.md'}")
 
 
