@@ -4,8 +4,11 @@
     opfmu grid cct    the critical clearing time of a fault and its clearing action (--json: one object)
     opfmu grid screen many contingencies on dask: CCTs, stable/unstable verdicts, first-swing peaks
 
-The FMUs of every unit are built from its dynamic data (--dynamic-data, default the shipped wscc9
-file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed.
+The FMUs of every unit are built from its dynamic data (--dynamic-data, default the case's shipped
+file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed. A
+case's own events (line toggles, faults, generator trips) apply with the contingency unless
+--no-case-events leaves them out; the cases converted from ANDES take ANDES' default fault
+impedance (1e-4 pu) where --fault-impedance is not given, wscc9 a bolted fault (1e-6 pu).
 Everything a command is asked is checked before any work (one line, exit code 2); a result set is
 written whole or not at all.
 """
