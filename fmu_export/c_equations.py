@@ -11,7 +11,9 @@ Python truth value, so an equation that branches with `if` on a traced value fai
 The conditions of the right-hand side are its switching functions (`switching_c_source`): for the
 comparison `a op b`, g = a - b, and the branch each `where` takes is its mode (the comparison's
 truth). The native reference FMU integrates with the modes locked (the right-hand side smooth within
-a solver step) and locates the instant a mode changes (fmu_export/c/dopri5.c, docs/fmu.md).
+a solver step) and locates the instant a mode changes (fmu_export/c/dopri5.c, docs/fmu.md). A
+component's reset (`reset_c_source`: states placed on the non-windup limits they are pushed beyond)
+is applied where it (re)locks the modes.
 """
 from __future__ import annotations
 
@@ -167,6 +169,22 @@ def equations_c_source(component: Component, params, linkage: str = "static") ->
     outs = c_function("model_outputs", component.output_equations, component, params,
                       list(component.output_names), f"{component.name} derived outputs", linkage)
     return header + deriv + "\n" + outs
+
+
+def reset_c_source(component: Component, params, linkage: str = "static") -> str:
+    """C source of `model_reset(x, u, out)`: the states after the component's limit resets
+    (Component.reset: a state at or beyond a non-windup limit while its unlimited rate pushes
+    outward placed on the limit), its conditions compared directly (not switching functions of the
+    right-hand side); "" for a component without a reset."""
+    if component.reset is None:
+        return ""
+    lines, results = _trace(component.reset, component, params)
+    stores = [f"    out[{i}] = {r.code if isinstance(r, Traced) else _literal(r)};" for i, r in enumerate(results)]
+    n_x, n_u = component.n_states, component.n_inputs
+    return (f"/* {_comment(component.name)} states after the resets of its non-windup limits: out = "
+            f"({_comment(', '.join(component.state_names))}) */\n"
+            f"{linkage} void model_reset(const double x[{n_x}], const double u[{n_u}], double out[{n_x}])\n{{\n"
+            "    (void)u;\n" + "\n".join(live_statements(lines, stores) + stores) + "\n}\n")
 
 
 def switching_conditions(component: Component, params) -> list:

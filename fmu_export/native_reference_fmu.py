@@ -5,7 +5,8 @@ From the component and its parameters, generated at build time: config.h (sizes,
 solver's default tolerances, GUID), variables.h (the value references of the model description,
 fmu_export.variables: the same table as the surrogate's, less its own variables, plus rtol and atol),
 equations.c (the component's right-hand side and derived outputs, fmu_export.c_equations: the same
-C the surrogate FMU runs) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
+C the surrogate FMU runs; with its switching functions and, where the component declares one, its
+reset: model_reset) and derivatives.c (their exact partial derivatives, fmu_export.c_derivatives).
 With the static sources in c/ (cosimulation.c: the FMI plumbing both versions share, with fmi2_cs.c
 or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; variables.c: the component's variables; reference_model.c and reference_state.h: the step and
 the state; dopri5.c: the integrator, which locates the instants the right-hand side's conditions change:
@@ -19,9 +20,12 @@ fmi2DoStep(t, h) hold over [t, t + h], or are linear over it where the master se
 derivatives (canInterpolateInputs); the states after the call are the ODE's solution at t + h to the
 parameters rtol and atol (defaults 1e-10, 1e-12: SOLVER_STARTS), and the derived outputs are
 computed from them and the inputs whenever they are read. The solver's step size carries over from
-step to step. A step the solver cannot complete within the tolerance is refused with fmi2Error and a
-logged reason. fmi2GetDirectionalDerivative gives the outputs' exact derivatives with respect to the
-inputs. The default initial state is the machine's equilibrium at the inputs' start values.
+step to step. A component with a reset (Component.reset: a state at or beyond a non-windup limit
+while its rate pushes outward is placed on the limit, ANDES' anti-windup) has it applied where the
+solver (re)locks the branches of the right-hand side: at the start of each step, at the step's
+inputs, and at each located switching. A step the solver cannot complete within the tolerance is
+refused with fmi2Error and a logged reason. fmi2GetDirectionalDerivative gives the outputs' exact
+derivatives with respect to the inputs. The default initial state is the machine's equilibrium at the inputs' start values.
 
 The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
 """
@@ -40,7 +44,7 @@ from reference_models.sm4 import SM4
 
 from .binaries import PLUMBING, check_fmi_version, compile_binaries, targets
 from .surrogate_fmu import BuildError, _c_double, check_model_name, component_config, derivatives_source
-from .c_equations import equations_c_source, switching_c_source
+from .c_equations import equations_c_source, reset_c_source, switching_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
@@ -92,14 +96,16 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     x_start = _start_state(component, params, operating_point)
     variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point)
     n_switching, switching = switching_c_source(component, params, linkage="OPFMU_INTERNAL")
+    reset = reset_c_source(component, params, linkage="OPFMU_INTERNAL")
     generated = {
         "variables.h": vr_header(variables, component),
         "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
-                       + ("\n" + switching if switching else ""),
+                       + ("\n" + switching if switching else "") + ("\n" + reset if reset else ""),
         "derivatives.c": derivatives_source(component, params),
     }
     guid = _guid(model_name, component, params, generated, operating_point, version)
-    generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching)
+    generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching,
+                                          bool(reset))
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
                             interpolates_inputs=True, fmi_version=version)
@@ -122,10 +128,12 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
 
 
 def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None,
-                  n_switching: int = 0) -> str:
+                  n_switching: int = 0, reset: bool = False) -> str:
     """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
     escaped names; n_switching: the number of switching functions of the right-hand side
-    (c_equations.switching_c_source)."""
+    (c_equations.switching_c_source); reset: whether equations.c has the component's model_reset
+    (c_equations.reset_c_source; only then is OPFMU_HAS_RESET defined, so the header of a component
+    without one is as before)."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
                                        x_start, operating_point)
     lines = opening + [
@@ -133,6 +141,8 @@ def config_header(model_name: str, guid: str, component: Component, x_start, ope
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
         f"#define OPFMU_RTOL_MIN {_c_double(RTOL_MIN)} /* the smallest rtol accepted */",
         f"#define OPFMU_N_SWITCHING {int(n_switching)} /* switching functions of the right-hand side */",
+        *(["#define OPFMU_HAS_RESET 1 /* model_reset: states placed on the non-windup limits they are pushed beyond */"]
+          if reset else []),
         *tables,
         "#endif", "",
     ]

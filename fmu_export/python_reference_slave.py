@@ -21,7 +21,9 @@ pythonfmu passes log messages to the importer only while logging is on (fmi2Inst
 or fmi2SetDebugLogging): a refused step then comes with its reason under logStatusError.
 
 Step semantics (docs/design.md, "The FMUs (FMI 2.0 and 3.0 co-simulation)"): the inputs set before
-do_step(t, h) hold over [t, t + h]; after it the states are those at t + h. The derived outputs are
+do_step(t, h) hold over [t, t + h]; the step starts from the states after the component's limit
+resets at those inputs (Component.reset_states: a state at or beyond a non-windup limit while its
+rate pushes outward is placed on the limit); after it the states are those at t + h. The derived outputs are
 computed when read, from the states and the inputs as they are then, which is the direct feedthrough
 the model description declares. The default initial state is the machine's equilibrium at the
 inputs' start values.
@@ -210,8 +212,9 @@ class ReferenceSlave(Fmi2Slave):
             self.log(problem, Fmi2Status.error)
             return False
         u = self._inputs()
+        start = self.component.reset_states(self._state(), u, self.params)  # states placed on their limits
         solution = solve_ivp(lambda _t, x: self.component.rhs(x, u, self.params),
-                             (current_time, current_time + step_size), self._state(), method="RK45",
+                             (current_time, current_time + step_size), start, method="RK45",
                              rtol=self._values["rtol"], atol=self._values["atol"])
         if not solution.success or not np.all(np.isfinite(solution.y[:, -1])):
             self.log(f"RK45 failed over [{current_time}, {current_time + step_size}]: {solution.message}",

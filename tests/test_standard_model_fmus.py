@@ -1,8 +1,9 @@
 """The native reference FMUs (FMI 2.0, 3.0) of the standard dynamic models (reference_models.models):
 they build, validate, carry their ports, rest at their equilibrium, follow an independent solver of
 their own equations through limit crossings (scipy's DOP853 with the same branches locked between
-located crossings), give exact directional derivatives on either side of a limit, and their
-switching functions are those of the equations' conditions."""
+located crossings), give exact directional derivatives on either side of a limit, place a state
+pushed beyond a non-windup limit on it (the component's reset, at each step's start and at each
+located crossing), and their switching functions are those of the equations' conditions."""
 import math
 import subprocess
 
@@ -90,9 +91,11 @@ def locked_solution(component, p, x, u, h):
     """(state after h [s] with inputs u held, crossings located): scipy's DOP853 (rtol = atol = 1e-12)
     on the component's equations with their branches locked, the first crossing among its steps
     bracketed by bisection on its dense output to 1e-13 s, restarted there with the branches then
-    holding: an independent solver of the same piecewise equations."""
+    holding, the component's reset applied at each (re)start: an independent solver of the same
+    piecewise equations."""
     t, x, events = 0.0, np.array(x, dtype=float), 0
     while True:
+        x = component.reset_states(x, np.array(u), p)
         modes = live_modes(component, p, x, u)
         sol = solve_ivp(lambda _t, y: rhs(component, p, y, u, modes), (t, h), x, method="DOP853", rtol=1e-12,
                         atol=1e-12, dense_output=True)
@@ -221,6 +224,31 @@ def test_a_non_windup_valve_stops_at_its_limit_and_leaves_it_when_its_rate_turns
     assert np.all(low_speed[first:] >= p.VMAX - 1e-11)  # held from the first step it reached the limit
     assert high_speed[0] < p.VMAX - 1e-3 and np.all(np.diff(high_speed[high_speed > p.VMIN + 1e-9]) < 0)
     assert abs(high_speed[-1] - p.VMIN) <= 1e-11
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_an_exciter_regulator_pushed_beyond_its_ceiling_is_placed_exactly_on_it(standard_fmus, version):
+    """IEEEX1's LA_y (non-windup within [VRMIN, VRMAX], constant as ANDES computes it) started 0.5 pu
+    above VRMAX while its regulator pushes up: after the first step it is VRMAX to the last bit (the
+    reset at the step's start) and stays there; from rest with the set point raised it reaches VRMAX
+    within a step and ends that step and every later one exactly on it (the reset at the located
+    crossing, not the crossing's bracket beyond it), also when the terminal voltage then drops to
+    0.5 pu; a set point back at rest brings it down."""
+    component, p = STANDARD_MODELS["IEEEX1"], params("IEEEX1")
+    slave = Slave(standard_fmus["IEEEX1", version], component=component, LA_y0=p.VRMAX + 0.5)
+    assert slave.state()[2] == p.VRMAX + 0.5
+    placed = [slave.step(H, 1.0, 2.0, 0.0)[2] for _ in range(3)]
+    slave.close()
+    assert placed == [p.VRMAX] * 3
+    slave = Slave(standard_fmus["IEEEX1", version], component=component)
+    rising = [slave.step(0.002, 1.0, 2.0, 0.0)[2] for _ in range(10)]  # steps shorter than the rise (~7 ms)
+    dipped = [slave.step(H, 0.5, 2.0, 0.0)[2] for _ in range(4)]
+    released = [slave.step(H, 1.0, component.start_inputs[1], 0.0)[2] for _ in range(4)]
+    slave.close()
+    reached = rising.index(p.VRMAX)
+    assert 1 < reached < 8 and max(rising[:reached]) < p.VRMAX and rising[reached:] == [p.VRMAX] * (10 - reached)
+    assert dipped == [p.VRMAX] * 4
+    assert released[-1] < p.VRMAX - 1.0
 
 
 @pytest.mark.parametrize("name", ["ESST3A", "TGOV1"])

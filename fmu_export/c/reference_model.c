@@ -12,7 +12,13 @@
    within each solver step, and Dormand-Prince locates the instant a condition's truth changes in a way
    that changes the right-hand side, ends its step there and restarts with the branches that then
    hold (dopri5_events). The branches are locked afresh from the state and inputs at the start of
-   each communication step, so they are no part of the FMU state. */
+   each communication step, so they are no part of the FMU state.
+
+   A component with a reset (OPFMU_HAS_RESET: the generated model_reset, from Component.reset: a
+   state at or beyond a non-windup limit while its unlimited rate pushes outward is placed on the
+   limit, ANDES' anti-windup) has it applied wherever the branches are locked: at the start of each
+   communication step (at the inputs set for it) and at each located switching, before the branches
+   are chosen, so a state under a limit that moves with an input (IEEEX1's VRMAX Vt) follows it. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -31,6 +37,14 @@ OPFMU_INTERNAL void model_switching(const double x[N_X], const double u[N_U], do
 /* dx/dt with condition k's branch locked to mode[k] (equations.c) */
 OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u[N_U], const int mode[N_G],
                                              double dx[N_X]);
+#endif
+
+#ifdef OPFMU_HAS_RESET
+#if N_G == 0
+#error "a component with a reset has switching functions (its non-windup limits)"
+#endif
+/* the states after the component's limit resets at inputs u (equations.c) */
+OPFMU_INTERNAL void model_reset(const double x[N_X], const double u[N_U], double out[N_X]);
 #endif
 
 void model_defaults(ModelState *m)
@@ -96,6 +110,13 @@ static void lock(void *ctx, double t, const double *x)
     StepInputs *in = (StepInputs *)ctx;
     double u[N_U], g[N_G];
     inputs_at(in, t, u);
+#ifdef OPFMU_HAS_RESET
+    /* x is dopri5_events' own working state (the step's start, the located switching), from which it
+       integrates on after this call: the reset places it on its limits before the branches are chosen */
+    double placed[N_X];
+    model_reset(x, u, placed);
+    memcpy((double *)x, placed, sizeof placed);
+#endif
     model_switching(x, u, g, in->mode);
 }
 #endif
