@@ -26,10 +26,14 @@ The network, Kron-reduced to the generator buses for each topology (Case.reduced
 inject into it together), gives I = Y_red V there; so every right-hand side is one linear solve
 (Y_red - A) v = c, exact. The other buses' voltages follow from the generator buses'.
 
-Events: a fault (a shunt of impedance `fault_impedance`, default 1e-6 pu: bolted) at a bus from
-`fault_start` to `clear_s` (absolute times in s), optionally a branch opened at clearing; scipy's
-solve_ivp (DOP853 at rtol 1e-10 by default) is restarted at every event. A run is stable when no
-rotor-angle difference between two machines exceeds pi before `stop` (located by solve_ivp events).
+Events: the topologies of the contingency (Contingency.topologies: a fault, a shunt of impedance
+`fault_impedance`, default 1e-6 pu: bolted, at a bus from `fault_start` to `clear_s`, absolute
+times in s; branches opened; units tripped: they inject no current, their devices stand still and
+their rotor angles leave the stability check); scipy's DOP853 (rtol 1e-10 by default) restarts at
+every topology change. Limiters, switches and saturations (reference_models.piecewise.where) run on
+locked branches, their switchings located and the solve restarted there with the components' limit
+resets applied (`simulate`). A run is stable when no rotor-angle difference between two units in
+service exceeds pi before `stop` (located on the solver's dense output).
 """
 from __future__ import annotations
 
@@ -55,9 +59,6 @@ class _Branches:
     def __init__(self, locked=None):
         self.modes, self.locked, self.at, self.owner, self.owners = [], locked, 0, None, []
 
-    def __getattr__(self, name):
-        return getattr(math, name)
-
     def where(self, condition, a, b):
         if self.locked is None:
             taken = bool(condition)
@@ -67,6 +68,11 @@ class _Branches:
             taken = self.locked[self.at]
             self.at += 1
         return a if taken else b
+
+
+for _name, _value in vars(math).items():  # the math module's functions and constants
+    if not _name.startswith("_"):
+        setattr(_Branches, _name, staticmethod(_value) if callable(_value) else _value)
 
 
 def _scalar(m) -> bool:
@@ -411,15 +417,17 @@ class _Stalled(Exception):
 class _Locked:
     """The right-hand side of one topology with its branches locked, and the checks around it.
 
-    `natural(t, y)`: (modes, dy/dt) with every condition as it holds at y; `rhs(t, y)`: dy/dt on the
-    locked branches `modes`; `crossed(t, y, held)`: the branches holding at y (those of the conditions
-    `held` kept as locked) differ from the locked ones and give another dy/dt there (the native
-    reference FMU's test); `spread(y)`: the largest rotor-angle difference of the units in service
-    less pi [rad]; `owners[i]`: (unit, device or None for the unit's input links) of condition i.
-    Every evaluation counts against the budget (`count(t)`)."""
+    `natural(t, y)`: (modes, dy/dt) with every condition as it holds at y; `on(t, y, modes)`: dy/dt
+    with the branches `modes`; `rhs(t, y)`: dy/dt on the locked branches `modes`; `differing(t, y,
+    held)`: the conditions whose branches at y differ from their locks where that gives another dy/dt
+    (the native reference FMU's test); `reset(y)` and `lock(t, y)`: a restart's two parts;
+    `spread(y)`: the largest rotor-angle difference of the units in service less pi [rad];
+    `owners[i]`: (unit, device or None for the unit's input links) of condition i. Every evaluation
+    counts against the budget (`count(t)`); `resets`: whether restarts apply the limit resets."""
 
-    def __init__(self, system: System, network: Reduced, controls: bool, tripped: tuple, count):
+    def __init__(self, system: System, network: Reduced, controls: bool, tripped: tuple, count, resets: bool = True):
         self.system, self.network, self.controls, self.tripped, self.count = system, network, controls, tripped, count
+        self.resets = resets
         self.modes, self.owners = (), ()
         self.angles = [a for k, a in enumerate(system.rotor_angles) if k not in tripped]
 
@@ -453,7 +461,9 @@ class _Locked:
 
     def reset(self, y, rtol: float, atol: float):
         """(the state after the limit resets at y, whether they moved it by more than the tolerance
-        atol + rtol |y|)."""
+        atol + rtol |y|); y itself where `resets` is off."""
+        if not self.resets:
+            return np.array(y, dtype=float), False
         reset = self.system.reset(y, self.network, self.controls, self.tripped)
         return reset, bool(np.any(np.abs(reset - y) > atol + rtol * np.abs(y)))
 
@@ -525,9 +535,7 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
         if event_rows and not last:
             times.append(b)
         rows_t, rows_y = [], []
-        f = _Locked(system, network, controls, tuple(tp.tripped), count)
-        if not resets:
-            f.system = _NoResets(system)
+        f = _Locked(system, network, controls, tuple(tp.tripped), count, resets)
         try:
             y, moved = f.reset(y, rtol, atol)
             changed = f.lock(a, y)
@@ -630,19 +638,6 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
                       loss_of_synchronism_s=lost, events=tuple((tp.start, tp.description) for tp in topologies[1:]),
                       gen_buses=system.case.generator_buses, buses=system.case.buses, controls=controls,
                       n_rhs=calls[0], machine_inputs=inputs)
-
-
-class _NoResets:
-    """A System whose `reset` leaves the state as it is (simulate's resets=False)."""
-
-    def __init__(self, system: System):
-        self._system = system
-
-    def __getattr__(self, name):
-        return getattr(self._system, name)
-
-    def reset(self, y, network, controls=True, tripped=()):
-        return np.array(y, dtype=float)
 
 
 def _switching_summary(system: System, switched_by: dict) -> str:
