@@ -11,26 +11,31 @@ Coupling, over each communication step [t0, t1] (h = t1 - t0):
    last. Every input is linear over the step from its value at t0 to its value at t1: the bus
    voltage (magnitude, angle) to the guess V(t1); the terminal voltage |V + (Re + jXep) I| to its
    value at the guess; a link from a device stepped before in this pass to that device's new output
-   (the exciter's field voltage for the machine); a link from a device not yet stepped, and a set
-   point, held. "Linear" is fmi2SetRealInputDerivatives where the FMU can interpolate its inputs
+   (the exciter's field voltage for the machine); a link from a device stepped after it (the
+   machine's speed for a governor) to that device's output at t1 from the pass before, or, on the
+   first pass, extrapolated linearly from the last two communication points (held after an event);
+   a set point held. "Linear" is fmi2SetRealInputDerivatives where the FMU can interpolate its inputs
    (FMI 2.0 canInterpolateInputs); an FMU that cannot, and every FMI 3.0 FMU (FMI 3.0
    co-simulation takes no input derivatives), gets the mean of the start and end values held over
    the step (the midpoint rule: the same second order in h for what the step integrates).
 3. The network is solved at t1 with the machines' new states: each machine's bus current I(V)
    (its bus-port current outputs), and Y_red V = I(V) at the generator buses is solved by Newton
    with the FMUs' directional derivatives dI/d(voltage magnitude, angle) (central differences for
-   an FMU without them). A machine whose current is affine in V for given states is solved by
+   an FMU without them). Units sharing a bus inject into it together: their currents are summed
+   and their Jacobians accumulated at that bus; the results stay per unit. A machine whose current is affine in V for given states is solved by
    one Newton step; the next confirms.
 4. If V(t1) moved by more than `tolerance` from the guess, the FMUs are set back to t0
    (fmi2SetFMUstate) and the step is done again from 2 with V(t1) as the guess: at most `passes`
-   passes. Converged, the inputs over the step are linear between two consistent network solutions:
-   the coupling error is second order in h (held voltages are first order: degrees of rotor angle
-   at h = 10 ms after a fault; see docs/grid.md for the measured numbers).
+   passes. Converged, every input over the step is linear between two consistent ends: the
+   coupling error is second order in h (held inputs are first order: degrees of rotor angle at
+   h = 10 ms after a fault; see docs/grid.md for the measured numbers).
 
-Events (a fault, its clearing, a branch opening: reference_models.grid.contingency) happen at
-communication points: the step before an event is shortened to end there. At an event time the
+Events (a fault, its clearing, a branch opening or closing, a unit tripped:
+reference_models.grid.contingency) happen at communication points: the step before an event is shortened to end there. At an event time the
 network is solved twice: in the old topology (the end of the step before) and in the new one (the
 start of the step after; the inputs jump there). The row recorded at an event time is the one after.
+A tripped unit (Topology.tripped) injects nothing from its trip on; its FMUs are no longer stepped
+(its row values stand at the trip) and its rotor angle leaves the loss-of-synchronism spread.
 
 The master runs FMI 2.0 and 3.0 FMUs over fmpy (cosim.fmu.FMU). Every FMU is rewound to its initial
 state between runs (set FMU state), so one master serves the many runs of a critical-clearing-time
@@ -263,13 +268,31 @@ class _Unit:
         self.voltage_columns = tuple(self.inputs[0].index(n) for n in bus.voltage)
         self.angle_row = unit.machine.component.state_names.index(ROTOR_ANGLE)
         self.impedance = external_impedance(unit.machine)
-        # link values at the start of the coming step: the consumers' start values
-        self.links = {}
+        # link values at the start of the coming step (first: the consumers' start values), at the
+        # start of the step before (None: none to extrapolate from) and at its end (guessed, then
+        # each pass's outputs)
+        self.initial_links = {}
         for j, sources in enumerate(self.sources):
             for source, held in zip(sources, self.held[j]):
                 if source.kind == "device":
-                    self.links[(source.device, source.variable)] = held
-        self.initial_links = dict(self.links)
+                    self.initial_links[(source.device, source.variable)] = held
+        self.rewind()
+
+    def rewind(self) -> None:
+        """The links back to their start values."""
+        self.links, self.before, self.ends = dict(self.initial_links), None, dict(self.initial_links)
+
+    def advance(self) -> None:
+        """The step done: its end values start the next."""
+        self.before, self.links = self.links, dict(self.ends)
+
+    def guess_ends(self, ratio: float | None) -> None:
+        """The coming step's end values guessed: extrapolated linearly from the step before (`ratio`:
+        the coming step's length over that one's), or held (None)."""
+        if ratio is None or self.before is None:
+            self.ends = dict(self.links)
+        else:
+            self.ends = {key: value + (value - self.before[key]) * ratio for key, value in self.links.items()}
 
     def close(self) -> None:
         for f in self.fmus:
@@ -323,17 +346,18 @@ class GridMaster:
         self.units, self.fmus = [], []
 
     def network(self, topology):
-        """Case.reduced of a topology, kept per topology and fault impedance."""
-        impedance = complex(self._fault_impedance) if topology.fault_bus is not None else None
+        """Case.reduced of a topology (its fault shunt with its own impedance), kept per topology."""
+        impedance = complex(topology.fault_impedance) if topology.fault_bus is not None else None
         key = (topology.fault_bus, impedance, topology.open)
         if key not in self._networks:
-            self._networks[key] = self.case.reduced(topology.fault_bus, self._fault_impedance, topology.open)
+            self._networks[key] = self.case.reduced(topology.fault_bus, impedance, topology.open)
         return self._networks[key]
 
     @staticmethod
     def _machine_inputs(unit, Vs, theta):
-        """The machine's bound inputs now: the bus voltage (Vs, theta) and its links at their latest values."""
-        links = unit.links
+        """The machine's bound inputs at the step's end: the bus voltage (Vs, theta) and its links at
+        their end values."""
+        links = unit.ends
         return [Vs if code == 0 else theta if code == 1 else links[key] if code == 4 else held
                 for code, key, held in unit.plan[0]]
 
@@ -413,9 +437,11 @@ class GridMaster:
     def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, active, timing):
         """One pass over [t0, t0 + h]: every `active` unit's devices stepped in their order, each input linear
         from its start value to its end value (bus voltage and terminal voltage: V0, Vt0 to V1, Vt1;
-        a link from a device stepped before in this pass: to its new output; held otherwise), or
-        held at the start values with coupling "held". Returns every active unit's outputs per device
-        at t0 + h (None for the others), and sets the units' links to their new values."""
+        a link from a device stepped before in this pass: to its new output; from a device stepped
+        after it: to that device's end value from the pass before, or its extrapolation on the first
+        pass), or held at the start values with coupling "held". Returns every active unit's
+        outputs per device at t0 + h (None for the others), and sets the units' link end values to
+        this pass's outputs."""
         started = time.perf_counter()
         held_coupling = self.settings.coupling == "held"
         ends = (([abs(v) for v in V0.tolist()], [abs(v) for v in V1.tolist()]), (theta0.tolist(), theta1.tolist()),
@@ -423,7 +449,7 @@ class GridMaster:
         outputs = [None] * len(self.units)
         for k in active:
             u = self.units[k]
-            links, new_links = u.links, {}
+            links, new_links = u.links, u.ends
             unit_out = [None] * len(u.fmus)
             for j in u.order:
                 fmu = u.fmus[j]
@@ -435,7 +461,7 @@ class GridMaster:
                         b.append(end[k])
                     elif code == 4:
                         a.append(links[key])
-                        b.append(new_links.get(key, links[key]))
+                        b.append(new_links[key])
                     else:
                         a.append(held)
                         b.append(held)
@@ -453,7 +479,6 @@ class GridMaster:
                 unit_out[j] = out
                 for name, row in u.link_rows[j].items():
                     new_links[(j, name)] = out[row]
-            u.links.update(new_links)
             outputs[k] = unit_out
         timing.fmu_step_s += time.perf_counter() - started
         return outputs
@@ -473,9 +498,8 @@ class GridMaster:
             for fmu in self.fmus:
                 fmu.rewind()
             for u in self.units:
-                u.links = dict(u.initial_links)
+                u.rewind()
         self._runs += 1
-        self._fault_impedance = contingency.fault_impedance
         topologies = contingency.topologies(stop)
         topology = topologies[0]
         n = len(self.units)
@@ -497,6 +521,8 @@ class GridMaster:
                 V1 = V + (V - V_prev) * (h / h_prev)
             else:
                 V1 = V.copy()
+            for k in active:
+                self.units[k].guess_ends(h / h_prev if V_prev is not None and s.coupling != "held" else None)
             theta1 = np.array([theta[k] + _wrap(cmath.phase(V1[k]) - theta[k]) for k in range(n)])
             I1 = I
             live = [f for k in active for f in self.units[k].fmus]
@@ -505,7 +531,6 @@ class GridMaster:
             if passes > 1 and self.rolls_back:
                 t_save = time.perf_counter()
                 saved = [fmu.save() for fmu in live]
-                links = [dict(u.links) for u in self.units]
                 timing.rollback_s += time.perf_counter() - t_save
             try:
                 for p in range(passes if saved is not None else 1):
@@ -513,8 +538,6 @@ class GridMaster:
                         t_save = time.perf_counter()
                         for fmu, snap in zip(live, saved):
                             fmu.restore(snap)
-                        for u, kept in zip(self.units, links):
-                            u.links = dict(kept)
                         timing.rollback_s += time.perf_counter() - t_save
                     Vt1 = self._terminal(V1, I1, theta1)
                     outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing)
@@ -532,6 +555,7 @@ class GridMaster:
             V_prev, h_prev = V, h
             V, I, theta = V1, I1, theta1
             for k in active:
+                self.units[k].advance()
                 standing[k] = [list(machine[k])] + [list(o) for o in outputs[k][1:]]
             if new_topology is not None:
                 topology = new_topology
