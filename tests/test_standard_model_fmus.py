@@ -4,6 +4,7 @@ their own equations through limit crossings (scipy's DOP853 with the same branch
 located crossings), give exact directional derivatives on either side of a limit, place a state
 pushed beyond a non-windup limit on it (the component's reset, at each step's start and at each
 located crossing), and their switching functions are those of the equations' conditions."""
+import ctypes
 import math
 import subprocess
 
@@ -16,7 +17,7 @@ from scipy.integrate import solve_ivp
 from cosim.fmu import FMU as Slave
 from fmu_export.binaries import fmi_headers
 from fmu_export.build_cache import cached_native_reference_fmu
-from fmu_export.c_equations import switching_c_source, switching_conditions
+from fmu_export.c_equations import reset_c_source, switching_c_source, switching_conditions
 from reference_models.models import STANDARD_MODELS
 from reference_models.ports import ports_of_fmu
 
@@ -173,6 +174,35 @@ def test_the_switching_functions_are_the_conditions_of_the_right_hand_side():
     assert "mode[1] ? " in source  # the locked right-hand side selects on the modes
     gencls = STANDARD_MODELS["GENCLS"]
     assert switching_c_source(gencls, gencls.params_type()) == (0, "")
+
+
+@pytest.mark.parametrize("name", sorted(STANDARD_MODELS))
+def test_the_generated_reset_places_states_as_the_component_does(name, tmp_path):
+    """model_reset compiled from the component's reset (gcc -Wall -Werror) gives numpy's
+    reset_states (to rounding) at points far from rest (limited states beyond their limits, pushed
+    either way); a model without a reset generates no source."""
+    component, p = STANDARD_MODELS[name], params(name)
+    source = reset_c_source(component, p)
+    if component.reset is None:
+        assert source == ""
+        return
+    path, library = tmp_path / "reset.c", tmp_path / "reset.so"
+    path.write_text("#include <math.h>\n" + source.replace("static void model_reset", "void model_reset"))
+    subprocess.run(["gcc", "-O2", "-Wall", "-Werror", "-shared", "-fPIC", str(path), "-o", str(library), "-lm"],
+                   check=True)
+    reset = ctypes.CDLL(str(library)).model_reset
+    rng = np.random.default_rng(5)
+    x0 = component.steady_state(None, p)
+    low, high = np.array([q.operating_range for q in component.inputs]).T
+    xs = x0 + np.array(component.state_scales) * rng.standard_normal((300, component.n_states)) * 30.0
+    us = low + (high - low) * rng.random((300, component.n_inputs))
+    expected = component.reset_states(xs, us, p)
+    pointer = ctypes.POINTER(ctypes.c_double)
+    for x, u, want in zip(xs, us, expected):
+        x, u, out = np.ascontiguousarray(x), np.ascontiguousarray(u), np.empty(component.n_states)
+        reset(x.ctypes.data_as(pointer), u.ctypes.data_as(pointer), out.ctypes.data_as(pointer))
+        np.testing.assert_allclose(out, want, rtol=1e-13, atol=1e-13)
+    assert np.any(expected != xs)
 
 
 @pytest.mark.parametrize("version", [2, 3])
