@@ -82,7 +82,7 @@ class Component:
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
     ports: how it connects (reference_models.ports): its bus port and its control links.
-    reset(x, u, p, m): the states after the resets of its moving non-windup limits (ANDES'
+    reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
         after inputs change and at located switchings. None: the component has no such reset.

@@ -18,7 +18,8 @@
    state at or beyond a non-windup limit while its unlimited rate pushes outward is placed on the
    limit, ANDES' anti-windup) has it applied wherever the branches are locked: at the start of each
    communication step (at the inputs set for it) and at each located switching, before the branches
-   are chosen, so a state under a limit that moves with an input (IEEEX1's VRMAX Vt) follows it. */
+   are chosen: a state that starts beyond a limit, or that the located crossing's bracket leaves just
+   beyond it, goes on exactly from the limit, and one under a limit that moves with an input follows it. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
