@@ -43,16 +43,6 @@ def test_grid_run_of_kundur_writes_the_monolithic_result(tmp_path, capsys):
     assert "Kundur two-area: fault at bus 8" in capsys.readouterr().out
 
 
-def test_grid_run_of_kundur_with_fmus_is_refused_in_one_line(capsys, tmp_path):
-    from opfmu.cli import main
-
-    out = tmp_path / "x"
-    assert main(["grid", "run", "--case", "kundur", "--fmus", "python", "--fault", "8", "--clear", "0.1",
-                 "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "--fmus monolithic or andes" in err and not out.exists()
-
-
 @pytest.mark.andes
 def test_kundur_monolithic_rotor_angles_follow_andes_through_a_fault():
     """Kundur, fault at bus 8 (1e-4j pu) 1.0-1.1 s, 3 s, ANDES at h = 1 ms: every rotor-angle
