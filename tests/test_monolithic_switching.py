@@ -97,16 +97,15 @@ def test_a_tripped_unit_leaves_the_voltages_as_a_network_without_its_injection()
 
 
 @pytest.mark.andes
-@pytest.mark.parametrize("bus", [39, 16])
-def test_ieee39_rotor_angles_follow_andes_through_exciter_ceilings(bus):
-    """ieee39, fault (1e-4j pu) at a generator bus (39) or mid-network (16) 0.2-0.3 s, 1 s, ANDES at
-    h = 1 ms: the exciters of the units near the fault go to their moving ceilings and back, and
-    every rotor-angle difference stays within 0.1 deg of ANDES'."""
+def test_ieee39_rotor_angles_follow_andes_through_exciter_ceilings():
+    """ieee39, fault (1e-4j pu) at bus 16 0.2-0.3 s, 1 s, ANDES at h = 1 ms: the exciters of the
+    units near the fault go to their ceilings and back, and every rotor-angle difference stays
+    within 0.1 deg of ANDES' (measured 0.0225 deg over 3 s for the fault at 1.0-1.1 s)."""
     from cosim.andes_runner import AndesRunner
     from cosim.outputs import on_times
 
     case = shipped_case("ieee39")
-    contingency = Contingency(bus, 0.3, None, 0.2, 1e-4j, case.network)
+    contingency = Contingency(16, 0.3, None, 0.2, 1e-4j, case.network)
     andes, _ = AndesRunner(case, 0.001).run(contingency, 1.0)
     mono = simulate(System(case), contingency, 1.0, step=0.001, rtol=1e-9, atol=1e-11)
     a = andes.states["delta"]
