@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from .case import Case, Reduced, external_impedance, held_inputs, unit_wiring
-from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency
+from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency, Topology
 from .result import ROTOR_ANGLE, GridResult
 
 
@@ -513,6 +513,9 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
         raise ValueError("t_eval must be increasing times within [0, stop]")
     solver_type = getattr(scipy.integrate, method)
     topologies = contingency.topologies(stop)
+    if topologies[0].fault_bus is not None or topologies[0].open or topologies[0].tripped:
+        # a change at t = 0: the intact network for no time before it (its event and rows at 0)
+        topologies = [Topology(0.0, None, (), "intact")] + list(topologies)
     budget = RHS_BUDGET_BASE + RHS_BUDGET_PER_SECOND * stop
     calls = [0]
 
