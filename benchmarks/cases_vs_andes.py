@@ -2,7 +2,7 @@
 fault (issue 26's goal: rotor-angle differences within 0.1 deg of ANDES at h = 1 ms).
 
     python benchmarks/cases_vs_andes.py [--cases kundur ieee14 ieee39 npcc] [--stop 10] [--step 0.001]
-        [--fault-impedance 1e-4] [--defaults] [--no-resets]
+        [--fault-impedance 1e-4] [--defaults] [--no-resets] [--half-step]
 
 Per case, the scenarios of SCENARIOS (--defaults: only the first, the case's default fault): a
 fault at a bus (mid-network buses and generator buses, whose faults drive the exciters to their
@@ -14,7 +14,10 @@ its limiters' branches locked and their switchings located, rtol 1e-9, rows ever
 --no-resets: without the components' limit resets) are run; printed: the largest error over
 ANDES' rows of any rotor-angle difference to the first machine [deg], of the bus-voltage
 magnitudes at the generators outside the fault [pu], the swing, both wall times [s], the
-monolithic solve's right-hand-side evaluations and its verdict. Needs ANDES (pip install
+monolithic solve's right-hand-side evaluations and its verdict. --half-step: ANDES also at half
+the step, printing the largest rotor-angle difference error of ANDES at --step against ANDES at
+half of it (ANDES' own integration error; its implicit trapezoid's error falls about fourfold per
+halving) and of the monolithic DAE against ANDES at half the step. Needs ANDES (pip install
 andes==2.0.0).
 """
 from __future__ import annotations
@@ -35,8 +38,16 @@ SCENARIOS = {
 }
 
 
+def _angle_error(result, reference, times) -> np.ndarray:
+    """|error| [rad] of every rotor-angle difference to the first machine at `times` [n, g]."""
+    from cosim.outputs import on_times
+
+    m, a = on_times(result, times, result.states["delta"]), on_times(reference, times, reference.states["delta"])
+    return np.abs((m - m[:, :1]) - (a - a[:, :1]))
+
+
 def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: float, reactance: float,
-            resets: bool = True) -> dict:
+            resets: bool = True, half_step: bool = False) -> dict:
     """The errors and wall times of one scenario (see the module docstring)."""
     from cosim.andes_runner import AndesRunner
     from cosim.outputs import on_times
@@ -54,8 +65,12 @@ def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: fl
     mono = simulate(System(case), contingency, stop, step=step, rtol=1e-9, atol=1e-11, resets=resets)
     mono_s = time.perf_counter() - started
     a = andes.states["delta"]
-    m = on_times(mono, andes.time, mono.states["delta"])
-    angle_error = np.abs((m - m[:, :1]) - (a - a[:, :1]))
+    angle_error = _angle_error(mono, andes, andes.time)
+    half = {}
+    if half_step:
+        fine, _ = AndesRunner(case, step / 2).run(contingency, stop)
+        half = {"andes_vs_half_deg": math.degrees(float(np.max(_angle_error(andes, fine, andes.time)))),
+                "mono_vs_half_deg": math.degrees(float(np.max(_angle_error(mono, fine, andes.time))))}
     worst = np.unravel_index(np.argmax(angle_error), angle_error.shape)
     outside = (andes.time < FAULT_START) | (andes.time > FAULT_START + clear)
     V = np.max(np.abs(on_times(mono, andes.time, mono.Vs) - andes.Vs)[outside])
@@ -63,7 +78,7 @@ def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: fl
             "angle_deg": math.degrees(float(angle_error[worst])), "at_s": float(andes.time[worst[0]]),
             "machine_bus": case.generator_buses[worst[1]], "V_pu": float(V),
             "swing_deg": math.degrees(float(np.max(np.ptp(a - a[:, :1], axis=0)))), "andes_s": andes_s,
-            "monolithic_s": mono_s, "n_rhs": mono.n_rhs, "stable": mono.stable}
+            "monolithic_s": mono_s, "n_rhs": mono.n_rhs, "stable": mono.stable, **half}
 
 
 def main(argv=None) -> None:
@@ -74,6 +89,7 @@ def main(argv=None) -> None:
     parser.add_argument("--fault-impedance", type=float, default=1e-4)
     parser.add_argument("--defaults", action="store_true", help="only each case's default fault")
     parser.add_argument("--no-resets", action="store_true", help="the monolithic solve without the limit resets")
+    parser.add_argument("--half-step", action="store_true", help="ANDES at half the step too (its own error)")
     args = parser.parse_args(argv)
     print(f"faults from {FAULT_START:g} s (x = {args.fault_impedance:g} pu), {args.stop:g} s, ANDES at "
           f"h = {args.step * 1e3:g} ms, monolithic {'without' if args.no_resets else 'with'} limit resets")
@@ -81,11 +97,14 @@ def main(argv=None) -> None:
           f"{'V err [pu]':>11} {'swing [deg]':>12} {'ANDES [s]':>10} {'monolithic [s]':>15} {'rhs':>7} stable")
     for name in args.cases:
         for bus, clear, trip in SCENARIOS[name][:1] if args.defaults else SCENARIOS[name]:
-            r = compare(name, bus, clear, trip, args.stop, args.step, args.fault_impedance, not args.no_resets)
+            r = compare(name, bus, clear, trip, args.stop, args.step, args.fault_impedance, not args.no_resets,
+                        args.half_step)
             where = f"({r['at_s']:.2f}, {r['machine_bus']})"
             print(f"{r['case']:8} {r['fault_bus']:>4} {r['clear_ms']:>4.0f}ms {r['trip']:>8} {r['angle_deg']:>16.4f} "
                   f"{where:>16} {r['V_pu']:>11.2e} {r['swing_deg']:>12.1f} {r['andes_s']:>10.1f} "
-                  f"{r['monolithic_s']:>15.1f} {r['n_rhs']:>7} {r['stable']}", flush=True)
+                  f"{r['monolithic_s']:>15.1f} {r['n_rhs']:>7} {r['stable']}"
+                  + (f" {r['andes_vs_half_deg']:>21.4f} {r['mono_vs_half_deg']:>24.4f}" if args.half_step else ""),
+                  flush=True)
 
 
 if __name__ == "__main__":
