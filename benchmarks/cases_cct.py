@@ -4,9 +4,9 @@ same resolution (issue 26's goal: the native FMUs at h = 10 ms within 5 ms of AN
 
     python benchmarks/cases_cct.py [--cases kundur ieee14] [--kinds reference monolithic andes]
         [--fmu-step 0.01] [--andes-step 0.001] [--resolution 0.001] [--fault-impedance 1e-4]
-        [--out runs/benchmarks/cases_cct.png]
+        [--faults 7,5:5-6] [--out runs/benchmarks/cases_cct.png]
 
-Per case a few faults from FAULTS, with and without a line opened at clearing, each from 1.0 s (the
+Per case a few faults from FAULTS (or --faults: BUS or BUS:TRIP, for every case given), with and without a line opened at clearing, each from 1.0 s (the
 cases' own events start at 1 s or later; they are not applied here) with the reactance
 --fault-impedance [pu] (ANDES' Newton stalls at a bolted fault). Every run lasts until
 cosim.stability.default_stop (the fault start + 4 s: a second-swing loss is seen); a run is stable
@@ -25,7 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-FAULTS = {"kundur": [(6, None), (5, "5-6")],
+FAULTS = {"kundur": [(7, None), (5, "5-6")],
           "ieee14": [(4, None), (4, "4-5")],
           "ieee39": [(16, None), (16, "16-17")],
           "npcc": [(30, None), (30, "29-30")]}
@@ -169,15 +169,20 @@ def main(argv=None) -> None:
     parser.add_argument("--andes-step", type=float, default=0.001)
     parser.add_argument("--resolution", type=float, default=0.001)
     parser.add_argument("--fault-impedance", type=float, default=1e-4)
+    parser.add_argument("--faults", default=None, help="BUS or BUS:TRIP, comma separated (default: FAULTS)")
     parser.add_argument("--out", default="runs/benchmarks/cases_cct.png")
     args = parser.parse_args(argv)
+    faults = None
+    if args.faults:
+        faults = [(int(f.split(":")[0]), f.split(":")[1] if ":" in f else None) for f in args.faults.split(",")]
     print(f"faults from {FAULT_START_S:g} s (x = {args.fault_impedance:g} pu), resolution "
           f"{args.resolution * 1e3:g} ms; FMUs and monolithic rows every {args.fmu_step * 1e3:g} ms, ANDES at "
           f"h = {args.andes_step * 1e3:g} ms ('+': stable up to 1 s of fault)")
     print(header(args.kinds), flush=True)
     rows = []
     for name in args.cases:
-        rows += measure(name, args.kinds, args.fmu_step, args.andes_step, args.resolution, args.fault_impedance)
+        rows += measure(name, args.kinds, args.fmu_step, args.andes_step, args.resolution, args.fault_impedance,
+                        faults)
     plot(rows, args.kinds, Path(args.out))
     print(f"written: {args.out}")
 
