@@ -16,7 +16,7 @@ from reference_models.signals import Piecewise, Ramp, Signal
 from reference_models.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
-KUNDUR_OPERATORS = {"kundur_gen12.onnx": (0, 1)}  # file: the units it is for
+KUNDUR_OPERATORS = {"kundur_gen12.onnx": (0, 1), "kundur_gen34.onnx": (2, 3)}  # file: the units it is for
 # deg: G1's surrogate FMU against its native FMU through the bus-8 fault below (measured 0.17 deg)
 SURROGATE_FMU_BOUND_DEG = 0.5
 
