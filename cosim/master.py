@@ -286,6 +286,13 @@ class _Unit:
         """The step done: its end values start the next."""
         self.before, self.links = self.links, dict(self.ends)
 
+    def machine_links(self, outputs) -> None:
+        """The machine's link outputs (its electrical power, which jumps with the network at an
+        event) set to `outputs` (its bound outputs now), as the start and end values of the coming
+        step."""
+        for name, row in self.link_rows[0].items():
+            self.links[(0, name)] = self.ends[(0, name)] = outputs[row]
+
     def guess_ends(self, ratio: float | None) -> None:
         """The coming step's end values guessed: extrapolated linearly from the step before (`ratio`:
         the coming step's length over that one's), or held (None)."""
@@ -563,6 +570,7 @@ class GridMaster:
                 V, I, theta, machine = self._solve(self.network(topology), V, theta, active, timing)
                 for k in active:
                     standing[k] = [list(machine[k])] + standing[k][1:]
+                    self.units[k].machine_links(machine[k])
                 V_prev = None  # no extrapolation across the jump
             rows.append(self._row(t1, V, I, theta, standing, active))
             if lost is None:
