@@ -38,21 +38,28 @@ def stator_currents(psi2d, psi2q, vd, vq, ra: float, xd2: float, xq2: float):
 
 
 def set_point(output_of, target: float, guess: float, name: str, scale: float = 1.0) -> float:
-    """The set point s with output_of(s) = target (1-D root of a function increasing or decreasing
-    in s, bracketed outward from `guess`); ValueError naming the component where there is none."""
+    """The set point s with output_of(s) = target nearest to `guess` (1-D root, searched in segments
+    of doubling length outward from `guess` on both sides, so two roots within one symmetric
+    bracket are not missed); ValueError naming the component where there is none."""
     from scipy.optimize import brentq
 
     def miss(s):
         return output_of(s) - target
 
+    f_guess = miss(guess)
+    if f_guess == 0:
+        return float(guess)
+    inner, f_inner = {1: guess, -1: guess}, {1: f_guess, -1: f_guess}
     step = scale
-    low, high = guess - step, guess + step
     for _ in range(60):
-        f_low, f_high = miss(low), miss(high)
-        if np.isfinite(f_low) and np.isfinite(f_high) and f_low * f_high <= 0:
-            return brentq(miss, low, high, xtol=1e-14, rtol=1e-15)
+        for side in (1, -1):
+            outer = guess + side * step
+            f_outer = miss(outer)
+            if np.isfinite(f_inner[side]) and np.isfinite(f_outer) and f_inner[side] * f_outer <= 0:
+                low, high = sorted((inner[side], outer))
+                return brentq(miss, low, high, xtol=1e-14, rtol=1e-15)
+            inner[side], f_inner[side] = outer, f_outer
         step *= 2.0
-        low, high = guess - step, guess + step
     raise ValueError(f"{name}: no steady state at these inputs")
 
 
