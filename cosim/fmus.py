@@ -123,10 +123,11 @@ def _check_operator(path: Path, device, bus: int) -> None:
 
 
 def _build(kind: str, device, cache: Path, model_name: str, operator: Path | None = None, progress=None,
-           fmi_version: int = 2, operating_point: dict | None = None) -> Path:
+           fmi_version: int = 2, operating_point: dict | None = None, start_state=None) -> Path:
     """The FMU of `device` (component, parameters) of that kind, from the cache or built into it; a
-    native reference FMU's inputs start at `operating_point` ({input: value}: the unit's start inputs,
-    so that its default start is the case's operating point, not the component's generic one)."""
+    native reference FMU's inputs start at `operating_point` ({input: value}: the unit's start inputs)
+    and its state at `start_state` (the unit's start states), so that its default start is the
+    case's operating point, not the component's generic one."""
     from fmu_export.build_cache import cached_fmu
 
     payload = operator.read_bytes() if operator is not None else b""
@@ -142,7 +143,7 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
             elif kind == "reference":
                 build_native_reference_fmu(out, model_name=model_name, component=device.component,
                                            params=device.params, operating_point=operating_point,
-                                           fmi_version=fmi_version)
+                                           fmi_version=fmi_version, start_state=start_state)
             else:
                 build_reference_fmu(out, model_name=model_name, component=device.component, params=device.params)
         except (BuildError, ValueError, RuntimeError) as exc:
@@ -151,6 +152,8 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
     parts = (kind, device.component.name, device.params.to_dict(), payload)
     if kind == "reference" and operating_point:
         parts += (operating_point,)
+    if kind == "reference" and start_state is not None:
+        parts += (list(start_state),)
     if fmi_version != 2:
         parts += (f"fmi{fmi_version}",)
     return cached_fmu(model_name, parts, build, cache, progress and (lambda name: progress(f"{name} ({kind})")))
@@ -196,6 +199,7 @@ def generator_files(case, kind: str | None = None, cache=None, progress=None, fm
                 device_kind = "reference" if fmu.kind == "surrogate" else fmu.kind
                 paths.append(_build(device_kind, device, cache, _model_name(device, j, unit.bus, device_kind),
                                     progress=progress, fmi_version=fmi_version,
-                                    operating_point={n: float(v) for n, v in start.inputs.items()}))
+                                    operating_point={n: float(v) for n, v in start.inputs.items()},
+                                    start_state=[float(v) for v in start.states]))
         files.append(UnitFiles(unit.bus, fmu.kind, tuple(paths)))
     return files

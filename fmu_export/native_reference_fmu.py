@@ -73,11 +73,13 @@ def native_reference_variables(component: Component = SM4, params=None):
 
 def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
                                params=None, operating_point: dict | None = None, platforms=None,
-                               fmi_version: int = 2) -> dict:
+                               fmi_version: int = 2, start_state=None) -> dict:
     """Write the native reference FMU of `component` with parameters `params` (None: its defaults; a
     mapping of some of them; or a parameter object) to `out`, atomically; its inputs start at
     `operating_point` ({input: value}, the rest at the component's start values) and its initial
-    state at the equilibrium there. platforms: the binaries it carries (platforms.Platform objects or
+    state at the equilibrium there, or at `start_state` [n_x] where given (a state at rest known from
+    elsewhere, e.g. a grid case's load flow, where the equilibrium search could find another of
+    several). platforms: the binaries it carries (platforms.Platform objects or
     names; None: the host's only); fmi_version: the FMI version, 2 or 3 (the same model code, another
     plumbing). Binaries of other platforms are run here, and compared with the host's, where an
     emulator is installed (cross_check).
@@ -93,7 +95,12 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         version, chosen = check_fmi_version(fmi_version), targets(platforms)
     except (BuildError, ParameterError) as exc:
         raise NativeReferenceError(str(exc)) from None
-    x_start = _start_state(component, params, operating_point)
+    if start_state is None:
+        x_start = _start_state(component, params, operating_point)
+    else:
+        x_start = np.asarray(start_state, dtype=float)
+        if x_start.shape != (component.n_states,) or not np.all(np.isfinite(x_start)):
+            raise NativeReferenceError(f"the start state must be {component.n_states} finite values")
     variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point)
     n_switching, switching = switching_c_source(component, params, linkage="OPFMU_INTERNAL")
     reset = reset_c_source(component, params, linkage="OPFMU_INTERNAL")
@@ -103,7 +110,8 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
                        + ("\n" + switching if switching else "") + ("\n" + reset if reset else ""),
         "derivatives.c": derivatives_source(component, params),
     }
-    guid = _guid(model_name, component, params, generated, operating_point, version)
+    guid = _guid(model_name, component, params, generated, operating_point, version,
+                 None if start_state is None else x_start.tolist())
     generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching,
                                           bool(reset))
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
@@ -158,13 +166,14 @@ def _start_state(component: Component, params, operating_point=None) -> np.ndarr
 
 
 def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None,
-          version: int = 2) -> str:
+          version: int = 2, start_state=None) -> str:
     """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary:
     name, machine, operating point, FMI version and C sources."""
     digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
                             + json.dumps(params.to_dict(), sort_keys=True).encode() + b"\0"
                             + json.dumps(operating_point or {}, sort_keys=True).encode()
-                            + (b"" if version == 2 else b"\0fmi3"))
+                            + (b"" if version == 2 else b"\0fmi3")
+                            + (b"" if start_state is None else json.dumps(start_state).encode()))
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())
     for name in (PLUMBING[version], *MODEL_SOURCES):

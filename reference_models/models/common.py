@@ -37,28 +37,36 @@ def stator_currents(psi2d, psi2q, vd, vq, ra: float, xd2: float, xq2: float):
     return (-xq2 * a - ra * b) / det, (xd2 * b - ra * a) / det
 
 
-def set_point(output_of, target: float, guess: float, name: str, scale: float = 1.0) -> float:
+SUBDIVISIONS = 16  # pieces of each outward segment of set_point's search
+
+
+def set_point(output_of, target: float, guess: float, name: str, scale: float = 1.0, accept=None) -> float:
     """The set point s with output_of(s) = target nearest to `guess` (1-D root, searched in segments
     of doubling length outward from `guess` on both sides, so two roots within one symmetric
-    bracket are not missed); ValueError naming the component where there is none."""
+    bracket are not missed) that `accept(s)` takes (None: any); ValueError naming the component
+    where there is none."""
     from scipy.optimize import brentq
 
     def miss(s):
         return output_of(s) - target
 
     f_guess = miss(guess)
-    if f_guess == 0:
+    if f_guess == 0 and (accept is None or accept(guess)):
         return float(guess)
     inner, f_inner = {1: guess, -1: guess}, {1: f_guess, -1: f_guess}
     step = scale
     for _ in range(60):
         for side in (1, -1):
-            outer = guess + side * step
-            f_outer = miss(outer)
-            if np.isfinite(f_inner[side]) and np.isfinite(f_outer) and f_inner[side] * f_outer <= 0:
-                low, high = sorted((inner[side], outer))
-                return brentq(miss, low, high, xtol=1e-14, rtol=1e-15)
-            inner[side], f_inner[side] = outer, f_outer
+            reach = abs(inner[side] - guess)
+            for k in range(1, SUBDIVISIONS + 1):  # the segment in pieces: a root pair close together is seen
+                outer = guess + side * (reach + (step - reach) * k / SUBDIVISIONS)
+                f_outer = miss(outer)
+                if np.isfinite(f_inner[side]) and np.isfinite(f_outer) and f_inner[side] * f_outer <= 0:
+                    low, high = sorted((inner[side], outer))
+                    root = brentq(miss, low, high, xtol=1e-14, rtol=1e-15)
+                    if accept is None or accept(root):
+                        return root
+                inner[side], f_inner[side] = outer, f_outer
         step *= 2.0
     raise ValueError(f"{name}: no steady state at these inputs")
 

@@ -110,9 +110,10 @@ def dc_initialise(Efd: float, Vt: float, Vss: float, omega: float, p: EXDC2Param
 
 
 def dc_equilibrium(initialise, Vref: float, limits: tuple, name: str) -> np.ndarray:
-    """The state at rest at set point Vref: the field voltage whose initialise gives Vref; ValueError
-    where the regulator would rest outside `limits` (low, high)."""
-    Efd = set_point(lambda e: initialise(e)[1], Vref, 1.0, name)
+    """The state at rest at set point Vref: the field voltage nearest 1 pu whose initialise gives Vref
+    with the regulator at rest within `limits` (low, high); ValueError where there is none."""
+    Efd = set_point(lambda e: initialise(e)[1], Vref, 1.0, name,
+                    accept=lambda e: limits[0] <= initialise(e)[0][2] <= limits[1])
     x = initialise(Efd)[0]
     if not limits[0] <= x[2] <= limits[1]:
         raise ValueError(f"{name}: the regulator output {x[2]:.6g} pu at rest lies outside its limits")
