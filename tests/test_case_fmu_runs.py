@@ -120,3 +120,16 @@ def test_kundur_with_reference_fmus_follows_andes(kundur_fmu_run):
     found = errors(kundur_fmu_run, andes, fault=(FAULT.fault_start, FAULT.clear_s))
     assert found["angle_deg"] < 0.5
     assert found["V"] < 0.01
+
+
+def test_steps_right_after_a_topology_change_are_cut_and_only_the_grid_is_recorded():
+    from cosim.master import refined_points
+
+    points = [(0.01, None), (0.02, "fault"), (0.03, None), (0.04, None), (0.05, None)]
+    out = list(refined_points(points, 4, 0.02))
+    recorded = [(t, tp) for t, tp, keep in out if keep]
+    assert recorded == points
+    added = [t for t, _, keep in out if not keep]
+    # the two steps starting within 0.02 s of the change at 0.02 s are quartered, no other
+    assert np.allclose(added, [0.0225, 0.025, 0.0275, 0.0325, 0.035, 0.0375])
+    assert [t for t, _, _ in refined_points(points, 1, 0.02)] == [t for t, _ in points]
