@@ -8,6 +8,10 @@ case, a network file and a dynamic-data file (reference_models.grid.case), that 
 
 CASE: a file path, or a case ANDES ships (e.g. ieee39/ieee39_full.xlsx).
 
+`case_from_file(path, dyr)` is the Case of a user's file in one call: converted once, kept in a
+cache keyed by the files' bytes (case_cache_dir()), loaded from there (without ANDES) afterwards;
+Case.source names the file so that ANDES can run the very file as the reference.
+
 What is stored, all on the system base (ANDES' `config.mva`) unless said otherwise:
 * buses (ANDES' Bus idx, which must be integers; Vn [kV]); branches from ANDES' Line with its
   series impedance as ANDES uses it (r + 1e-8, x + 1e-8: ANDES adds 1e-8 to both), total charging
@@ -30,7 +34,7 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   input data before its own conversion to the system base: machine and turbine data on the
   machine base Sn, as reference_models.models take them, docs/standard-models.md), plus Sn, Sb,
   fn where the component takes them. A model opfmu does not have is refused with one line naming
-  it; measurement-only models (BusFreq, ACEc, Area) are left out.
+  it; measurement-only models (BusFreq, ACEc, Area) and the case's description (Summary) are left out.
 * the case's own events: Toggle of a Line (a branch event: status 0 open, 1 closed again, each
   toggle flipping the status it finds, all in service at the start), of a machine (GENROU, GENCLS)
   or of its load-flow generator (PV, Slack; a group name such as SynGen or StaticGen resolves to its
@@ -40,25 +44,33 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
 from __future__ import annotations
 
 import argparse
+import hashlib
+import io
+import logging
+import os
+import shutil
 import sys
+import tempfile
+from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from pathlib import Path
 
 import numpy as np
 
 from ..files import write_json
 from ..models import STANDARD_MODELS
-from .case import DATA_DIR, CaseError, load_case
+from .case import DATA_DIR, Case, CaseError, load_case
 
 #: The shipped cases converted from ANDES' own files: name -> ANDES case.
 ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_full.xlsx",
                "ieee39": "ieee39/ieee39_full.xlsx", "npcc": "npcc/npcc.xlsx"}
 NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault")
-IGNORED_MODELS = ("Area", "BusFreq", "ACEc")  # measurements nothing here reads
+IGNORED_MODELS = ("Area", "BusFreq", "ACEc", "Summary")  # measurements and the case's description
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS")
 GOVERNORS = ("TGOV1", "TGOV1N", "IEEEG1")
 STABILISERS = ("IEEEST",)
+CACHE_FORMAT = 1  # version of what convert writes: a new one keys new cache entries
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow
 # our state name -> ANDES variable where they differ
@@ -67,12 +79,12 @@ ANDES_STATE_NAMES = {"ESST3A": {"VR": "LAW1_y", "VM": "LAW2_y"}}
 
 def load_andes(source, dyr=None):
     """ANDES' System of `source` (a file or a case ANDES ships) after its power flow (Newton
-    tolerance PFLOW_TOLERANCE)."""
+    tolerance PFLOW_TOLERANCE), ANDES' own log output silenced. CaseError (one line) where ANDES is
+    missing, cannot read the file or its power flow does not converge."""
     try:
         import andes
     except ImportError:
-        raise CaseError("reading a case file needs ANDES (pip install andes; GPL-3.0-or-later)") from None
-    andes.config_logger(stream_level=40)
+        raise CaseError("reading case files needs ANDES: pip install -e '.[andes]'") from None
     path = Path(source)
     if not path.is_file():
         try:
@@ -82,14 +94,103 @@ def load_andes(source, dyr=None):
         if path is None or not path.is_file():
             raise CaseError(f"no case file {source}")
     kwargs = {"addfile": str(dyr)} if dyr else {}
-    ss = andes.load(str(path), setup=True, no_output=True, default_config=True, **kwargs)
-    if ss is None:
-        raise CaseError(f"ANDES cannot read {path}")
-    ss.PFlow.config.tol = PFLOW_TOLERANCE
-    ss.PFlow.config.max_iter = 50
-    if not ss.PFlow.run() or not ss.PFlow.converged:
-        raise CaseError(f"{path}: ANDES' power flow does not converge")
+    with _silenced(andes):
+        try:
+            ss = andes.load(str(path), setup=True, no_output=True, default_config=True, **kwargs)
+        except Exception as exc:  # ANDES' parsers raise anything on a file that is not theirs
+            raise CaseError(f"ANDES cannot read {path}{' with ' + str(dyr) if dyr else ''} "
+                            f"({type(exc).__name__}: {' '.join(str(exc).split())[:80]})") from None
+        if ss is None:
+            raise CaseError(f"ANDES cannot read {path}{' with ' + str(dyr) if dyr else ''} (not a case file "
+                            "ANDES reads: xlsx, json, PSS/E raw with its dyr)")
+        ss.PFlow.config.tol = PFLOW_TOLERANCE
+        ss.PFlow.config.max_iter = 50
+        if not ss.PFlow.run() or not ss.PFlow.converged:
+            raise CaseError(f"{path}: ANDES' power flow does not converge")
     return ss
+
+
+@contextmanager
+def _silenced(andes):
+    """ANDES' log output and whatever it prints off for the block."""
+    andes.config_logger(stream_level=logging.CRITICAL + 1)
+    sink = io.StringIO()
+    with redirect_stdout(sink), redirect_stderr(sink):
+        yield
+
+
+def case_cache_dir() -> Path:
+    """$OPFMU_CASE_CACHE, else ~/.cache/opfmu/cases: where case_from_file keeps its conversions."""
+    return Path(os.environ.get("OPFMU_CASE_CACHE") or Path.home() / ".cache" / "opfmu" / "cases")
+
+
+def _cache_key(path: Path, dyr: Path | None) -> str:
+    """sha256 of the converter's format version, the case file's suffix (ANDES picks its parser by it)
+    and bytes and the dyr file's bytes."""
+    digest = hashlib.sha256(f"{CACHE_FORMAT}\0{path.suffix.lower()}\0".encode())
+    digest.update(path.read_bytes())
+    if dyr is not None:
+        digest.update(b"\0dyr\0")
+        digest.update(dyr.read_bytes())
+    return digest.hexdigest()[:32]
+
+
+def case_from_file(path, dyr=None, cache_dir=None) -> Case:
+    """The Case of a file ANDES reads (xlsx, json, a PSS/E raw with its dyr `dyr`), named by the file's
+    stem, with Case.source = (the case file, the dyr file or None) as absolute paths. The file is
+    converted once (`convert`): the network and dynamic-data files are kept in cache_dir (default
+    case_cache_dir()) under a hash of the file's and the dyr's bytes, written to a folder of their own
+    that is renamed into place; a cached entry that does not load is converted again. A cached case
+    loads without ANDES. CaseError (one line) for a missing file, a file ANDES cannot read, a model
+    opfmu does not have, or ANDES missing."""
+    path = Path(path)
+    dyr = None if dyr is None else Path(dyr)
+    for f, what in ((path, "case file"), (dyr, "dyr file")):
+        if f is not None and not f.is_file():
+            raise CaseError(f"no {what} {f}")
+    if path.suffix.lower() == ".raw" and dyr is None:
+        raise CaseError(f"{path} is a PSS/E raw file: its machines come from its dyr file (--dyr FILE)")
+    try:
+        key = _cache_key(path, dyr)
+    except OSError as exc:
+        raise CaseError(f"cannot read {exc.filename}: {exc.strerror}") from None
+    source = (str(path.resolve()), None if dyr is None else str(dyr.resolve()))
+    name = path.stem
+    root = Path(cache_dir) if cache_dir is not None else case_cache_dir()
+    entry = root / key
+    files = entry / f"{name}_network.json", entry / f"{name}.json"
+    if entry.is_dir():
+        try:
+            return load_case(*files, name, source)
+        except CaseError:  # a damaged or stale entry: converted again below
+            _remove(entry)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=root, prefix=f".{key}.", suffix=".tmp"))
+    except OSError as exc:
+        raise CaseError(f"cannot write the case cache {root}: {exc.strerror}") from None
+    try:
+        convert(path, tmp, name, dyr)
+        try:
+            os.rename(tmp, entry)
+        except OSError:  # another process put the same conversion in place first
+            if not entry.is_dir():
+                raise CaseError(f"cannot write the case cache {root}") from None
+    finally:
+        _remove(tmp)
+    return load_case(*files, name, source)
+
+
+def _remove(folder: Path) -> None:
+    """Removes a cache folder: renamed aside first, so no reader finds it half removed."""
+    if not folder.exists():
+        return
+    aside = folder.with_name(f".{folder.name}.{os.getpid()}.removed")
+    try:
+        os.rename(folder, aside)
+    except OSError:
+        return
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 def _values(model, name) -> list:
@@ -282,6 +383,12 @@ def dynamic_data(ss, name: str) -> dict:
     for unit in units.values():
         unit["fmu"] = {"kind": "reference"}
     generators = [str(g) for m in (ss.Slack, ss.PV) for g in m.idx.v]
+    in_service = [str(g) for m in (ss.Slack, ss.PV) for g, u in zip(m.idx.v, m.u.v) if u != 0]
+    bare = [g for g in in_service if g not in {u["generator"] for u in units.values()}]
+    if bare:
+        raise CaseError(f"the generator{'s' if len(bare) > 1 else ''} {', '.join(bare[:5])}"
+                        f"{' ...' if len(bare) > 5 else ''} {'have' if len(bare) > 1 else 'has'} no machine "
+                        "(GENROU, GENCLS) in the case")
     order = sorted(units.values(), key=lambda u: generators.index(u["generator"]))
     return {"case": name, "description": "converted from ANDES' case by reference_models.grid.andes_case: one unit per "
             "machine (machine, exciter, governor, stabiliser), parameters as the case file gives them (machine "

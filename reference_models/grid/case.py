@@ -291,7 +291,9 @@ class Reduced:
 @dataclass(frozen=True)
 class Case:
     """A grid case (see the module docstring): network, load flow, units (generator order) with their
-    start values (starts[k][j]: unit k, device j), the case's own events, and the dynamic-data file."""
+    start values (starts[k][j]: unit k, device j), the case's own events, the dynamic-data file and,
+    for a case converted from a file ANDES reads, that file (`source`: (case file, dyr file or None),
+    absolute paths) so that ANDES can run the very file as the reference."""
 
     name: str
     network: Network
@@ -300,6 +302,7 @@ class Case:
     starts: tuple
     events: tuple = ()
     dynamic_data: Path | None = None
+    source: tuple | None = None  # (case file, dyr file or None) of a case converted from a file ANDES reads
 
     @property
     def generator_buses(self) -> tuple:
@@ -616,12 +619,14 @@ def _standard_controls_at_rest(devices, x0, y, Vt: float, V: complex, machine_in
     return tuple(starts[j] for j in range(1, len(devices)))
 
 
-def load_case(network_file, dynamic_data, name: str | None = None) -> Case:
-    """The Case of a network file and a dynamic-data file."""
+def load_case(network_file, dynamic_data, name: str | None = None, source: tuple | None = None) -> Case:
+    """The Case of a network file and a dynamic-data file; `source`: (case file, dyr file or None)
+    where they were converted from a file ANDES reads (Case.source)."""
     network, flow = load_network(network_file)
     units = load_units(dynamic_data, network.generator_buses, [g.name for g in network.generators])
     starts = tuple(unit_start(u, flow.generator_at(k)) for k, u in enumerate(units))
-    return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data))
+    return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data),
+                source)
 
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
