@@ -87,7 +87,7 @@ def test_a_damaged_cache_entry_is_converted_again(tmp_path):
 
 
 @pytest.mark.andes
-def test_a_copy_of_a_case_file_with_other_bytes_is_converted_on_its_own(tmp_path):
+def test_a_copy_of_a_case_file_elsewhere_shares_its_cache_entry_and_records_its_own_path(tmp_path):
     source = andes_case("kundur/kundur_full.xlsx")
     copy = tmp_path / "files" / "kundur_full.xlsx"
     copy.parent.mkdir()
@@ -95,8 +95,18 @@ def test_a_copy_of_a_case_file_with_other_bytes_is_converted_on_its_own(tmp_path
     cache = tmp_path / "cache"
     case_from_file(source, cache_dir=cache)
     case = case_from_file(copy, cache_dir=cache)
-    assert len(list(cache.iterdir())) == 1  # same bytes, same entry
+    assert len(list(cache.iterdir())) == 1  # same name and bytes, same entry
     assert case.source == (str(copy.resolve()), None)
+
+
+@pytest.mark.andes
+def test_the_same_raw_with_another_dyr_is_another_conversion(tmp_path):
+    raw = andes_case("kundur/kundur.raw")
+    full = case_from_file(raw, andes_case("kundur/kundur_full.dyr"), tmp_path)
+    classical = case_from_file(raw, andes_case("kundur/kundur_gencls.dyr"), tmp_path)
+    assert len(list(tmp_path.iterdir())) == 2
+    assert {u.machine.component.name for u in full.units} == {"genrou"}
+    assert {u.machine.component.name for u in classical.units} == {"gencls"}
 
 
 def test_a_missing_case_file_is_one_line(tmp_path):

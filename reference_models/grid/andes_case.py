@@ -125,9 +125,9 @@ def case_cache_dir() -> Path:
 
 
 def _cache_key(path: Path, dyr: Path | None) -> str:
-    """sha256 of the converter's format version, the case file's suffix (ANDES picks its parser by it)
-    and bytes and the dyr file's bytes."""
-    digest = hashlib.sha256(f"{CACHE_FORMAT}\0{path.suffix.lower()}\0".encode())
+    """sha256 of the converter's format version, the case file's name (the case's name; ANDES picks
+    its parser by the suffix) and bytes and the dyr file's bytes."""
+    digest = hashlib.sha256(f"{CACHE_FORMAT}\0{path.name}\0".encode())
     digest.update(path.read_bytes())
     if dyr is not None:
         digest.update(b"\0dyr\0")
