@@ -26,6 +26,7 @@ ANDES_MISSING = "--fmus andes needs ANDES: pip install andes==2.0.0"
 
 REFERENCE_STEP = 1e-3  # s: ANDES' step as a reference (its trapezoid at 1 ms is within 0.07 deg of 0.5 ms)
 SWITCH_MARGIN = 1e-4  # s: ANDES steps to each switching time from this far before it
+LOSS_LIMIT_DEG = 180.0  # deg: the rotor-angle spread at which ANDES' TDS criteria end a run (stop_at_loss)
 
 
 def check_contingency(contingency) -> None:
@@ -57,7 +58,7 @@ class AndesRunner:
         self.case, self.step, self.source = case, step, ANDES_CASES[case.name]
         self.rows = step if rows is None else rows
 
-    def _system(self, contingency, stop: float):
+    def _system(self, contingency, stop: float, stop_at_loss: bool):
         import andes
 
         andes.config_logger(stream_level=50)  # ANDES' own messages off: a failed run is one line of ours
@@ -89,7 +90,8 @@ class AndesRunner:
         ss.TDS.config.tstep = self.step
         ss.TDS.config.fixt = 1
         ss.TDS.config.shrinkt = 0
-        ss.TDS.config.criteria = 0
+        ss.TDS.config.criteria = int(stop_at_loss)
+        ss.TDS.config.ddelta_limit = LOSS_LIMIT_DEG
         ss.TDS.config.no_tqdm = 1
         return ss, number
 
@@ -106,12 +108,15 @@ class AndesRunner:
         raise ValueError(f"ANDES' {self.source} has no line {br.name}")
 
     def run(self, contingency, stop: float, stop_at_loss: bool = False):
-        """(GridResult, timing dict) of ANDES' run through `contingency` until `stop` [s]."""
+        """(GridResult, timing dict) of ANDES' run through `contingency` until `stop` [s]. With
+        `stop_at_loss`, ANDES' TDS criteria end the run at the first step where the spread of the
+        rotor angles of all its synchronous machines exceeds LOSS_LIMIT_DEG: the result then ends
+        with ANDES' row of that step (off the row grid), unstable, its loss time that row's time."""
         from reference_models.grid.result import GridResult
 
         check_contingency(contingency)
         started = time.perf_counter()
-        ss, number = self._system(contingency, stop)
+        ss, number = self._system(contingency, stop, stop_at_loss)
         ss.TDS.init()
         if not ss.TDS.initialized:
             raise RuntimeError(f"ANDES cannot initialise {self.source}")
@@ -120,7 +125,9 @@ class AndesRunner:
         total = time.perf_counter() - started
         ts = ss.dae.ts
         t = np.asarray(ts.t, dtype=float)
-        if t[-1] < stop - 0.5 * self.step:
+        lost_early = stop_at_loss and t[-1] < stop - 0.5 * self.step and bool(ss.TDS.busted) \
+            and ss.TDS.check_criteria() is False
+        if t[-1] < stop - 0.5 * self.step and not lost_early:
             raise RuntimeError(f"ANDES' simulation of {self.case.name} stopped at t = {t[-1]:.4f} s (its Newton "
                                "iteration did not converge; a bolted fault may need --fault-impedance 1e-4)")
         x, y = np.asarray(ts.x), np.asarray(ts.y)
@@ -140,7 +147,11 @@ class AndesRunner:
         order = [list(number.values()).index(b) for b in self.case.buses]
         v_cols, a_cols = np.asarray(ss.Bus.v.a)[order], np.asarray(ss.Bus.a.a)[order]
         table = np.hstack([np.stack([src[:, j] for src, j in cols], axis=1), y[:, v_cols], y[:, a_cols]])
-        t, table = self._on_grid(t, table, sorted({tp.start for tp in topologies[1:]}), stop)
+        end = float(t[-1])
+        t_grid, table_grid = self._on_grid(t, table, sorted({tp.start for tp in topologies[1:]}), stop)
+        if lost_early and t_grid[-1] < end - 1e-9:
+            t_grid, table_grid = np.r_[t_grid, end], np.vstack([table_grid, table[-1:]])
+        t, table = t_grid, table_grid
         nb = len(self.case.buses)
         delta, omega, Efd = table[:, :g], table[:, g:2 * g], table[:, 2 * g:3 * g]
         V = table[:, 3 * g:3 * g + nb] * np.exp(1j * table[:, 3 * g + nb:])

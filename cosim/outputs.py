@@ -277,8 +277,9 @@ def screening_table(rows) -> str:
     return "\n".join(lines)
 
 
-def write_screening(out, rows, title: str) -> None:
-    """screening.csv, screening.json, screening.md and screening.png (CCT per contingency) in `out`."""
+def write_screening(out, rows, title: str, notes=()) -> None:
+    """screening.csv, screening.json, screening.md (with `notes`, lines of text, after the table) and
+    screening.png (CCT per contingency) in `out`."""
     import json
 
     out = Path(out)
@@ -293,7 +294,8 @@ def write_screening(out, rows, title: str) -> None:
         tmp.write_text(json.dumps(rows, indent=1) + "\n")
     with atomic_path(out / "screening.md") as tmp:
         tmp.write_text(f"# {title}\n\n{screening_table(rows)}\n\nCCT: critical clearing time by bisection "
-                       "(stable: no two rotor angles pi apart before the run's stop); '> x': stable up to x.\n")
+                       "(stable: no two rotor angles pi apart before the run's stop); '> x': stable up to x.\n"
+                       + "".join(f"\n{n}\n" for n in notes))
     fig = _figure((max(6.0, 0.45 * len(rows)), 4.0))
     ax = fig.subplots()
     labels = [f"{r['bus']}" + (f"\n{r['trip']}" if r["trip"] else "") for r in rows]

@@ -8,7 +8,10 @@ The FMUs of every unit are built from its dynamic data (--dynamic-data, default 
 file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed. A
 case's own events (line toggles, faults, generator trips) apply with the contingency unless
 --no-case-events leaves them out; the cases converted from ANDES take ANDES' default fault
-impedance (1e-4 pu) where --fault-impedance is not given, wscc9 a bolted fault (1e-6 pu).
+impedance (1e-4 pu) where --fault-impedance is not given, wscc9 a bolted fault (1e-6 pu), and their
+faults start at 1 s where --fault-start is not given (wscc9's at 0). cct and screen run each
+contingency to 4 s after its fault start unless --stop is given; screen faults every bus without a
+generator unless --faults names them.
 Everything a command is asked is checked before any work (one line, exit code 2); a result set is
 written whole or not at all.
 """
@@ -27,6 +30,9 @@ CASE_TITLES = {"wscc9": "WSCC 9-bus", "kundur": "Kundur two-area", "ieee14": "IE
                "npcc": "NPCC 140-bus"}
 REFERENCE_KINDS = ("monolithic", "andes")  # the runs without FMUs
 MAX_STOP_S = 3600.0  # the longest run a grid command takes [s]
+ANDES_CASE_FAULT_START_S = 1.0  # s: the default fault start of the cases converted from ANDES (their events start
+# at >= 1 s; ANDES applies no fault at t = 0); wscc9's is 0
+SCREEN_CLEARING_S = 0.1  # s after the fault start: the default clearing of a screening's verdict runs
 
 
 def _time(text: str) -> float:
@@ -65,7 +71,9 @@ def _common(p, trip: bool = True) -> None:
                    help="FMI version of the native FMUs built (default 2; FMI 3.0 inputs are held over each step)")
     if trip:
         p.add_argument("--trip", default=None, metavar="FROM-TO", help="the branch opened at clearing, e.g. 5-7")
-    p.add_argument("--fault-start", type=_time, default=0.0, help="fault start in s (default 0)")
+    p.add_argument("--fault-start", type=_time, default=None,
+                   help=f"fault start in s (default {ANDES_CASE_FAULT_START_S:g} for the cases converted from ANDES, "
+                        "where their own events start at >= 1 s and ANDES applies no fault at t = 0; 0 for wscc9)")
     p.add_argument("--fault-impedance", type=float, default=None, metavar="PU",
                    help="fault reactance in pu, > 0 (default 1e-6, bolted, for wscc9; 1e-4, ANDES' Fault "
                         "default, for the cases converted from ANDES, where ANDES' Newton fails on a bolted "
@@ -102,7 +110,9 @@ def add_grid_parser(sub) -> None:
     cct = gsub.add_parser("cct", help="critical clearing time", description="Critical clearing time of a fault and "
                           "its clearing action by bisection (stable: no two rotor angles pi apart before --stop).")
     cct.add_argument("--fault", type=int, required=True, metavar="BUS", help="faulted bus")
-    cct.add_argument("--stop", type=_time, default=3.0, help="end of each run in s (default 3)")
+    cct.add_argument("--stop", type=_time, default=None,
+                     help="end of each run in s (default: 4 s after the fault start, so that a loss on the second "
+                          "swing of an inter-area mode is seen)")
     cct.add_argument("--resolution", type=float, default=1e-3, help="bisection resolution in s (default 0.001)")
     cct.add_argument("--json", action="store_true", help="print one JSON object (with cct_s)")
     _common(cct)
@@ -111,11 +121,16 @@ def add_grid_parser(sub) -> None:
     scr = gsub.add_parser("screen", help="contingency screening on dask",
                           description="Faults at many buses, with and without each line trip, as independent runs "
                                       "on dask: CCT, verdict at --clear and first-swing peak per contingency.")
-    scr.add_argument("--faults", default="4,5,6,7,8,9", help="faulted buses, comma separated (default 4-9)")
+    scr.add_argument("--faults", default=None,
+                     help="faulted buses, comma separated (default: every bus without a generator; wscc9: 4-9)")
     scr.add_argument("--trips", choices=("each", "none"), default="each",
                      help="each: also every trip at the faulted bus that keeps the generators connected (default)")
-    scr.add_argument("--clear", type=_time, default=0.1, help="clearing time of the verdict runs (default 0.1 s)")
-    scr.add_argument("--stop", type=_time, default=3.0, help="end of each run in s (default 3)")
+    scr.add_argument("--clear", type=_time, default=None,
+                     help=f"clearing time of the verdict runs in s (default: {SCREEN_CLEARING_S:g} s after the fault "
+                          "start)")
+    scr.add_argument("--stop", type=_time, default=None,
+                     help="end of each run in s (default: 4 s after the fault start, so that a loss on the second "
+                          "swing of an inter-area mode is seen)")
     scr.add_argument("--resolution", type=float, default=1e-3, help="CCT resolution in s (default 0.001)")
     scr.add_argument("--workers", type=int, default=2, help="local dask worker processes (0: no dask; default 2)")
     scr.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing dask scheduler instead")
@@ -155,13 +170,21 @@ def _settings(args):
         raise UserError(_one_line(exc)) from None
 
 
-def _stop(args, settings) -> None:
+def _fault_start(args) -> None:
+    """Sets args.fault_start [s] where --fault-start is not given: ANDES_CASE_FAULT_START_S for the
+    cases converted from ANDES, 0 for wscc9."""
+    if args.fault_start is None:
+        args.fault_start = 0.0 if args.case == "wscc9" else ANDES_CASE_FAULT_START_S
+
+
+def _stop(stop: float, settings) -> None:
+    """UserError for a stop time [s] out of (0, MAX_STOP_S] or with too many steps of `settings`."""
     from cosim.master import check_steps
 
-    if not 0 < args.stop <= MAX_STOP_S:
-        raise UserError(f"--stop must be a time in (0, {MAX_STOP_S:g}] s, got {args.stop:g}")
+    if not 0 < stop <= MAX_STOP_S:
+        raise UserError(f"--stop must be a time in (0, {MAX_STOP_S:g}] s, got {stop:g}")
     try:
-        check_steps(args.stop, settings.step)
+        check_steps(stop, settings.step)
     except ValueError as exc:
         raise UserError(_one_line(exc)) from None
 
@@ -250,8 +273,9 @@ def cmd_run(args) -> None:
     from cosim import outputs
 
     case = _case(args)
+    _fault_start(args)
     settings = _settings(args)
-    _stop(args, settings)
+    _stop(args.stop, settings)
     contingency = _contingency(case, args.fault, args.clear, args.trip, args)
     if contingency.clear_s >= args.stop:
         raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
@@ -328,25 +352,33 @@ def _resolution(args) -> None:
         raise UserError(f"--resolution must be a time in (0, 0.1] s, got {args.resolution:g}")
 
 
+def _stop_after_fault(stop: float, contingency) -> None:
+    """UserError where the runs end [s] no later than the fault start of `contingency`."""
+    if stop <= contingency.fault_start:
+        raise UserError(f"--stop ({stop:g} s) must come after the fault start at {contingency.fault_start:g} s")
+
+
 def cmd_cct(args) -> None:
-    from cosim.stability import critical_clearing_time
+    from cosim.stability import critical_clearing_time, default_stop, runner_stable
 
     case = _case(args)
+    _fault_start(args)
     settings = _settings(args)
-    _stop(args, settings)
     _resolution(args)
     contingency = _contingency(case, args.fault, args.fault_start + 0.05, args.trip, args)  # clearing: bisected
+    stop = args.stop if args.stop is not None else default_stop(contingency)
+    _stop(stop, settings)
+    _stop_after_fault(stop, contingency)
     _check_fmus(case, args.fmus, args.fmu_cache, contingency)
     runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
     try:
-        cct = critical_clearing_time(lambda c: runner.run(c, args.stop, stop_at_loss=True)[0].stable, contingency,
-                                     args.resolution)
+        cct = critical_clearing_time(runner_stable(runner, stop), contingency, args.resolution)
     finally:
         runner.close()
     kind = _main_kind(case, args.fmus)
     if args.json:
         print(json.dumps({"case": args.case, "fault": args.fault, "trip": contingency.trip,
-                          "fault_start_s": args.fault_start, "fmus": kind, **cct.to_dict()}))
+                          "fault_start_s": args.fault_start, "stop_s": stop, "fmus": kind, **cct.to_dict()}))
         return
     label = contingency.label.split(", cleared")[0]
     if cct.cct_s is None:
@@ -362,48 +394,71 @@ def cmd_screen(args) -> None:
     from cosim import outputs
     from cosim.fmu import CouplingError
     from cosim.fmus import generator_files
-    from cosim.screening import ScreeningTask, contingencies, screen
+    from cosim.screening import ScreeningTask, contingencies, default_fault_buses, screen
+    from cosim.stability import default_stop
 
     case = _case(args)
+    _fault_start(args)
     settings = _settings(args)
-    _stop(args, settings)
     _resolution(args)
-    parts = [b.strip() for b in args.faults.split(",")]
-    if not all(parts) or not all(p.lstrip("-").isdigit() for p in parts):
-        raise UserError(f"--faults must be bus numbers separated by commas, got {args.faults!r}")
+    if args.faults is None:
+        buses = default_fault_buses(case.network)
+    else:
+        parts = [b.strip() for b in args.faults.split(",")]
+        if not all(parts) or not all(p.lstrip("-").isdigit() for p in parts):
+            raise UserError(f"--faults must be bus numbers separated by commas, got {args.faults!r}")
+        buses = [int(b) for b in parts]
     if args.workers < 0:
         raise UserError("--workers must be >= 0")
     try:
-        pairs = contingencies(case.network, [int(b) for b in parts], args.trips)
+        pairs = contingencies(case.network, buses, args.trips)
     except ValueError as exc:
         raise UserError(_one_line(exc)) from None
-    if args.clear >= args.stop:
-        raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
-    tasks_contingencies = [_contingency(case, bus, args.clear, trip, args) for bus, trip in pairs]
-    if args.fmus == "andes":
-        raise UserError("grid screen runs FMUs or the monolithic DAE, not andes")
-    _check_fmus(case, args.fmus, args.fmu_cache)
+    clear = args.clear if args.clear is not None else round(args.fault_start + SCREEN_CLEARING_S, 9)
+    tasks_contingencies, left_out = [], []
+    for bus, trip in pairs:
+        try:
+            tasks_contingencies.append(_contingency(case, bus, clear, trip, args))
+        except UserError as exc:
+            if trip is None:
+                raise
+            left_out.append(f"fault at bus {bus}, {trip} opened: {exc}")  # a trip the case's own events forbid
+    stop = args.stop if args.stop is not None else default_stop(tasks_contingencies[0])  # one fault start for all
+    _stop(stop, settings)
+    if clear >= stop:
+        raise UserError(f"the clearing at {clear:g} s must come before the stop at {stop:g} s")
+    for c in tasks_contingencies if args.fmus == "andes" else tasks_contingencies[:1]:
+        _check_fmus(case, args.fmus, args.fmu_cache, c)
     try:
         outputs.check_output(args.out, outputs.SCREENING_FILES)
     except outputs.OutputError as exc:
         raise UserError(str(exc)) from None
     try:
-        files = () if args.fmus == "monolithic" else tuple(generator_files(case, args.fmus, args.fmu_cache, _progress,
-                                                                            args.fmi_version))
+        files = () if args.fmus in REFERENCE_KINDS else tuple(generator_files(case, args.fmus, args.fmu_cache,
+                                                                               _progress, args.fmi_version))
     except CouplingError as exc:
         raise UserError(_one_line(exc)) from None
     kind = _main_kind(case, args.fmus)
-    tasks = [ScreeningTask(case, c, "monolithic" if args.fmus == "monolithic" else kind, files, settings, args.stop,
-                           args.resolution) for c in tasks_contingencies]
+    if kind == "andes":  # ANDES integrates at min(--step, REFERENCE_STEP), as in grid run and cct
+        from dataclasses import replace
+
+        from cosim.andes_runner import REFERENCE_STEP
+
+        settings = replace(settings, step=min(settings.step, REFERENCE_STEP))
+    tasks = [ScreeningTask(case, c, kind, files, settings, stop, args.resolution) for c in tasks_contingencies]
     started = time.perf_counter()
     rows = screen(tasks, args.workers, args.scheduler, progress=not args.quiet)
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.SCREENING_FILES) as staging:
             outputs.write_screening(staging, rows, f"{CASE_TITLES.get(args.case, args.case)} contingency screening "
-                                                   f"({_label(kind)}, verdicts at {args.clear:g} s clearing)")
+                                                   f"({_label(kind)}, faults from {args.fault_start:g} s, verdicts "
+                                                   f"at {clear:g} s clearing)",
+                                    [f"Left out: {n}." for n in left_out])
     except (outputs.OutputError, OSError) as exc:
         raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     print(outputs.screening_table(rows))
+    for note in left_out:
+        print(f"left out: {note}")
     print(f"{len(rows)} contingencies in {time.perf_counter() - started:.1f} s; written: {out / 'screening.csv'}, "
           f"{out / 'screening.md'}, {out / 'screening.png'}")

@@ -199,7 +199,14 @@ def test_ctrl_c_during_a_screening_on_dask_workers_ends_in_one_interrupted_line(
     (["grid", "run", "--case", "kundur", "--fault", "7", "--clear", "0.1", "--trip", "1-5", "--out", "x"],
      "opening branch 1-5 disconnects a generator"),
     (["grid", "cct", "--case", "ieee14", "--fault", "4", "--trip", "4-7:2", "--fmus", "monolithic"], "no branch 4-7"),
-    (["grid", "screen", "--case", "kundur", "--fmus", "andes", "--faults", "7", "--out", "x"], "not andes"),
+    (["grid", "screen", "--fmus", "andes", "--faults", "7", "--out", "x"], "converted from ANDES"),
+    (["grid", "run", "--case", "kundur", "--fault", "7", "--clear", "0.5", "--out", "x"],
+     "after the fault start (1.0 s)"),  # the ANDES cases' faults start at 1 s by default
+    (["grid", "cct", "--case", "ieee14", "--fault", "4", "--stop", "0.5", "--fmus", "monolithic"],
+     "--stop (0.5 s) must come after the fault start at 1 s"),
+    (["grid", "screen", "--case", "kundur", "--clear", "5.5", "--out", "x"],
+     "the clearing at 5.5 s must come before the stop at 5 s"),  # default stop: fault start 1 s + 4 s
+    (["grid", "screen", "--clear", "4.5", "--out", "x"], "before the stop at 4 s"),  # wscc9: faults from 0 s
 ])
 def test_mistakes_with_the_andes_cases_end_in_one_line_before_any_work(argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -214,8 +221,8 @@ def test_mistakes_with_the_andes_cases_end_in_one_line_before_any_work(argv, mes
 def test_andes_is_refused_a_fault_from_t_0_before_any_work(capsys, tmp_path):
     pytest.importorskip("andes")
     out = tmp_path / "x"
-    assert main(["grid", "run", "--case", "kundur", "--fmus", "andes", "--fault", "7", "--clear", "0.1",
-                 "--out", str(out)]) == 2
+    assert main(["grid", "run", "--case", "kundur", "--fmus", "andes", "--fault", "7", "--fault-start", "0",
+                 "--clear", "0.1", "--out", str(out)]) == 2
     stdout, err = capsys.readouterr()
     assert stdout == "" and err.count("\n") == 1 and "--fault-start later than" in err and not out.exists()
 
@@ -248,3 +255,37 @@ def test_grid_run_compares_with_andes_at_its_reference_step_on_the_runs_rows(tmp
     assert summary["difference_from_andes"]["monolithic"]["V"] < 0.01
     assert "Largest differences from the ANDES run" in (out / "report.md").read_text()
     assert "monolithic DAE against the ANDES run" in capsys.readouterr().out
+
+
+def test_a_screening_of_an_andes_case_faults_from_1_s_and_names_the_case(tmp_path, capsys):
+    out = tmp_path / "screen"
+    assert main(["grid", "screen", "--case", "kundur", "--faults", "5", "--trips", "none", "--fmus", "monolithic",
+                 "--stop", "1.3", "--resolution", "0.1", "--workers", "0", "--quiet", "--out", str(out)]) == 0
+    rows = json.loads((out / "screening.json").read_text())
+    assert [(r["bus"], r["clear_s"]) for r in rows] == [(5, 1.1)]  # cleared 0.1 s after the fault at 1 s
+    report = (out / "screening.md").read_text()
+    assert report.startswith("# Kundur two-area contingency screening") and "WSCC" not in report
+
+
+@pytest.mark.andes
+def test_an_andes_screening_checks_every_fault_start_before_any_work(tmp_path, capsys):
+    pytest.importorskip("andes")
+    out = tmp_path / "x"
+    assert main(["grid", "screen", "--case", "kundur", "--fmus", "andes", "--fault-start", "0", "--out", str(out)]) == 2
+    stdout, err = capsys.readouterr()
+    assert stdout == "" and err.count("\n") == 1 and "--fault-start later than" in err and not out.exists()
+
+
+@pytest.mark.andes
+def test_an_unstable_andes_run_with_stop_at_loss_ends_at_the_loss_of_synchronism():
+    pytest.importorskip("andes")
+    from cosim.andes_runner import AndesRunner
+    from reference_models.grid.case import shipped_case
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+
+    case = shipped_case("kundur")
+    c = Contingency(5, 1.5, "5-6", 1.0, ANDES_FAULT_IMPEDANCE, case.network, case.events)  # CCT 1.319 s
+    result, _ = AndesRunner(case, 0.01).run(c, 4.0, stop_at_loss=True)
+    assert not result.stable and 1.5 < result.loss_of_synchronism_s == result.time[-1] < 2.0
+    spread = np.ptp(result.states["delta"][-1])
+    assert spread >= np.pi and np.ptp(result.states["delta"][-2]) < np.pi
