@@ -147,6 +147,15 @@ def test_a_case_with_a_model_opfmu_does_not_have_names_it(tmp_path):
         case_from_file(andes_case("5bus/pjm5bus.xlsx"), cache_dir=tmp_path)
 
 
+@pytest.mark.andes
+def test_a_case_whose_data_opfmu_refuses_names_the_users_file(tmp_path):
+    source = andes_case("smib/SMIB.xlsx")  # its infinite bus: a GENCLS of Sn = 1e9 MVA
+    with pytest.raises(CaseError) as error:
+        case_from_file(source, cache_dir=tmp_path)
+    assert str(error.value).startswith(f"{source}: generator at bus 2 (Slack_1): machine: parameter Sn")
+    assert list(tmp_path.iterdir()) == []
+
+
 @pytest.mark.skipif(importlib.util.find_spec("andes") is not None, reason="ANDES is installed")
 def test_without_andes_a_case_file_asks_for_it(tmp_path):
     case = tmp_path / "grid.xlsx"

@@ -34,7 +34,7 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   input data before its own conversion to the system base: machine and turbine data on the
   machine base Sn, as reference_models.models take them, docs/standard-models.md), plus Sn, Sb,
   fn where the component takes them. A model opfmu does not have is refused with one line naming
-  it; measurement-only models (BusFreq, ACEc, Area) and the case's description (Summary) are left out.
+  it; measurement-only models (BusFreq, BusROCOF, ACEc, Area) and the case's description (Summary) are left out.
 * the case's own events: Toggle of a Line (a branch event: status 0 open, 1 closed again, each
   toggle flipping the status it finds, all in service at the start), of a machine (GENROU, GENCLS)
   or of its load-flow generator (PV, Slack; a group name such as SynGen or StaticGen resolves to its
@@ -64,7 +64,7 @@ from .case import DATA_DIR, Case, CaseError, load_case
 ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_full.xlsx",
                "ieee39": "ieee39/ieee39_full.xlsx", "npcc": "npcc/npcc.xlsx"}
 NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault")
-IGNORED_MODELS = ("Area", "BusFreq", "ACEc", "Summary")  # measurements and the case's description
+IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "Summary")  # measurements and the case's description
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS")
@@ -170,7 +170,13 @@ def case_from_file(path, dyr=None, cache_dir=None) -> Case:
     except OSError as exc:
         raise CaseError(f"cannot write the case cache {root}: {exc.strerror}") from None
     try:
-        convert(path, tmp, name, dyr)
+        try:
+            convert(path, tmp, name, dyr)
+        except CaseError as exc:  # name the user's file, not the converted ones in the cache
+            message = str(exc)
+            for written in (tmp / f"{name}_network.json", tmp / f"{name}.json"):
+                message = message.replace(str(written), str(path))
+            raise CaseError(message) from None
         try:
             os.rename(tmp, entry)
         except OSError:  # another process put the same conversion in place first
