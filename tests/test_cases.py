@@ -128,7 +128,17 @@ def test_converter_reproduces_the_shipped_files(name, tmp_path):
 
     for written, shipped in zip(convert(ANDES_CASES[name], tmp_path, name),
                                 (DATA_DIR / f"{name}_network.json", DATA_DIR / f"{name}.json")):
-        assert _close(json.loads(written.read_text()), json.loads(shipped.read_text())), written.name
+        assert _close(_without_operators(json.loads(written.read_text())),
+                      _without_operators(json.loads(shipped.read_text()))), written.name
+
+
+def _without_operators(data: dict) -> dict:
+    """A case file without the operator files its units' fmu entries name (the shipped kundur names
+    the surrogates trained for it, which no converter can know)."""
+    for unit in data.get("generators", []):
+        if isinstance(unit.get("fmu"), dict):
+            unit["fmu"] = {k: v for k, v in unit["fmu"].items() if k != "operator"}
+    return data
 
 
 def _close(a, b) -> bool:
