@@ -277,9 +277,9 @@ def screening_table(rows) -> str:
     return "\n".join(lines)
 
 
-def write_screening(out, rows, title: str, notes=()) -> None:
+def write_screening(out, rows, title: str, notes=(), fault_start: float = 0.0) -> None:
     """screening.csv, screening.json, screening.md (with `notes`, lines of text, after the table) and
-    screening.png (CCT per contingency) in `out`."""
+    screening.png (per contingency the critical fault duration [ms]: CCT - `fault_start` [s]) in `out`."""
     import json
 
     out = Path(out)
@@ -299,15 +299,17 @@ def write_screening(out, rows, title: str, notes=()) -> None:
     fig = _figure((max(6.0, 0.45 * len(rows)), 4.0))
     ax = fig.subplots()
     labels = [f"{r['bus']}" + (f"\n{r['trip']}" if r["trip"] else "") for r in rows]
-    values = [np.nan if r["cct_s"] is None else r["cct_s"] * 1e3 for r in rows]
+    values = [np.nan if r["cct_s"] is None else (r["cct_s"] - fault_start) * 1e3 for r in rows]
     colors = ["tab:green" if r["stable"] else "tab:red" for r in rows]
     ax.bar(range(len(rows)), values, color=colors)
     if rows:
-        ax.axhline(rows[0]["clear_s"] * 1e3, color="k", lw=0.8, ls="--", label="screening clearing time")
+        ax.axhline((rows[0]["clear_s"] - fault_start) * 1e3, color="k", lw=0.8, ls="--",
+                   label="screening clearing time")
         ax.legend(fontsize=8)
     ax.set_xticks(range(len(rows)), labels, fontsize=7)
     ax.set_xlabel("fault bus / line opened")
-    ax.set_ylabel("critical clearing time [ms]")
+    ax.set_ylabel(f"critical clearing time - fault start ({fault_start:g} s) [ms]" if fault_start
+                  else "critical clearing time [ms]")
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     with atomic_path(out / "screening.png") as tmp:

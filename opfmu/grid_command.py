@@ -454,7 +454,7 @@ def cmd_screen(args) -> None:
             outputs.write_screening(staging, rows, f"{CASE_TITLES.get(args.case, args.case)} contingency screening "
                                                    f"({_label(kind)}, faults from {args.fault_start:g} s, verdicts "
                                                    f"at {clear:g} s clearing)",
-                                    [f"Left out: {n}." for n in left_out])
+                                    [f"Left out: {n}." for n in left_out], args.fault_start)
     except (outputs.OutputError, OSError) as exc:
         raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     print(outputs.screening_table(rows))
