@@ -1,5 +1,6 @@
-"""ANDES' own time-domain simulation of a shipped case as a grid runner (`--fmus andes`): the ANDES
-case file the shipped case was converted from (reference_models.grid.andes_case.ANDES_CASES), with
+"""ANDES' own time-domain simulation of a case as a grid runner (`--fmus andes`): the case file the
+case was converted from (`Case.source`: a user's file, with its dyr; for a shipped case its entry of
+reference_models.grid.andes_case.ANDES_CASES), with
 the case's own events (its Toggle and Fault devices) as the file has them, or switched off where
 the contingency leaves them out (Contingency.events empty), the contingency added as ANDES devices
 (a Fault at the bus from fault_start to clear_s with the contingency's fault impedance, a Toggle of
@@ -44,25 +45,29 @@ def andes_available() -> bool:
 
 
 class AndesRunner:
-    """ANDES' time-domain simulation of the shipped case `case` (its name one of ANDES_CASES) at
-    the fixed step `step` [s], its result rows every `rows` [s] (default: `step`)."""
+    """ANDES' time-domain simulation of `case` (converted from a case file, `Case.source`, or a
+    shipped case named in ANDES_CASES) at the fixed step `step` [s], its result rows every `rows` [s]
+    (default: `step`)."""
 
     def __init__(self, case, step: float = 0.001, rows: float | None = None):
         from reference_models.grid.andes_case import ANDES_CASES
 
-        if case.name not in ANDES_CASES:
-            raise ValueError(f"--fmus andes runs the cases converted from ANDES ({', '.join(ANDES_CASES)}), "
-                             f"not {case.name}")
+        if case.source is None and case.name not in ANDES_CASES:
+            raise ValueError(f"--fmus andes runs the cases converted from ANDES ({', '.join(ANDES_CASES)}) and case "
+                             f"files, not {case.name}")
         if not andes_available():
             raise ValueError(ANDES_MISSING)
-        self.case, self.step, self.source = case, step, ANDES_CASES[case.name]
+        self.case, self.step = case, step
+        self.source, self.dyr = case.source if case.source is not None else (ANDES_CASES[case.name], None)
         self.rows = step if rows is None else rows
 
     def _system(self, contingency, stop: float, stop_at_loss: bool):
         import andes
 
         andes.config_logger(stream_level=50)  # ANDES' own messages off: a failed run is one line of ours
-        ss = andes.load(andes.get_case(self.source), setup=False, no_output=True, default_config=True)
+        path = self.source if self.case.source is not None else andes.get_case(self.source)
+        extra = {"addfile": self.dyr} if self.dyr is not None else {}
+        ss = andes.load(path, setup=False, no_output=True, default_config=True, **extra)
         number = {idx: int(idx) for idx in ss.Bus.idx.v}
         bus_idx = {n: idx for idx, n in number.items()}
         c = contingency

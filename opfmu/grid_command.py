@@ -26,6 +26,8 @@ from pathlib import Path
 from opfmu.errors import UserError
 
 CASES = ("wscc9", "kundur", "ieee14", "ieee39", "npcc")  # reference_models.grid.case.SHIPPED_CASES
+CASE_FILE_SUFFIXES = (".xlsx", ".json", ".raw")  # case files ANDES reads
+WSCC9_STABILITY_STOP_S = 3.0  # DESIGN section 8: cct's default stop for wscc9, whose faults start at 0
 CASE_TITLES = {"wscc9": "WSCC 9-bus", "kundur": "Kundur two-area", "ieee14": "IEEE 14-bus", "ieee39": "IEEE 39-bus",
                "npcc": "NPCC 140-bus"}
 REFERENCE_KINDS = ("monolithic", "andes")  # the runs without FMUs
@@ -56,7 +58,9 @@ def _run_kinds() -> tuple:
 def _common(p, trip: bool = True) -> None:
     p.add_argument("--case", default="wscc9",
                    help="the shipped case: wscc9 (default; the WSCC 9-bus system, Anderson & Fouad), or one "
-                        "converted from ANDES (kundur, ieee14, ieee39, npcc)")
+                        "converted from ANDES (kundur, ieee14, ieee39, npcc), or a case file ANDES reads (xlsx, "
+                        "json, or a PSS/E raw with --dyr; converted once, needs ANDES: pip install -e '.[andes]')")
+    p.add_argument("--dyr", default=None, metavar="FILE", help="the PSS/E dyr file of a raw --case")
     p.add_argument("--no-case-events", action="store_true",
                    help="leave the case's own events (line toggles, faults, generator trips) out (default: they "
                         "apply as in the case file, with the contingency)")
@@ -145,12 +149,26 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _case(args):
-    """The case of --case and --dynamic-data; UserError for what cannot be read."""
+    """The case of --case (a shipped name or a case file) and --dynamic-data / --dyr; UserError for
+    what cannot be read."""
     from reference_models.grid import wscc9
     from reference_models.grid.case import DATA_DIR, CaseError, load_case, shipped_case
 
     if args.case not in CASES:
-        raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)})")
+        if not (Path(args.case).exists() or Path(args.case).suffix.lower() in CASE_FILE_SUFFIXES):
+            raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)}, or a case file ANDES reads: "
+                            f"{', '.join(CASE_FILE_SUFFIXES)})")
+        if args.dynamic_data is not None:
+            raise UserError("--dynamic-data goes with a shipped case; a case file brings its own dynamic data "
+                            "(a PSS/E raw: --dyr)")
+        from reference_models.grid.andes_case import case_from_file
+
+        try:
+            return case_from_file(args.case, args.dyr)
+        except CaseError as exc:
+            raise UserError(_one_line(exc)) from None
+    if args.dyr is not None:
+        raise UserError(f"--dyr goes with a PSS/E raw case file, not the shipped case {args.case}")
     try:
         if args.case == "wscc9":
             return wscc9.case(args.dynamic_data)
@@ -221,9 +239,9 @@ def _check_fmus(case, kind, fmu_cache=None, contingency=None) -> None:
     if kind == "andes":
         from cosim.andes_runner import ANDES_MISSING, andes_available
 
-        if case.name not in CASES[1:]:
-            raise UserError(f"--fmus andes runs the cases converted from ANDES ({', '.join(CASES[1:])}), "
-                            f"not {case.name}")
+        if case.name not in CASES[1:] and case.source is None:
+            raise UserError(f"--fmus andes runs the cases converted from ANDES ({', '.join(CASES[1:])}) and case "
+                            f"files, not {case.name}")
         if not andes_available():
             raise UserError(ANDES_MISSING)
         if contingency is not None:
@@ -352,6 +370,14 @@ def _resolution(args) -> None:
         raise UserError(f"--resolution must be a time in (0, 0.1] s, got {args.resolution:g}")
 
 
+def _default_stop(case, contingency) -> float:
+    """The stop [s] of cct and screen runs where --stop is not given: 3 s for wscc9 (DESIGN), else
+    stability.default_stop (the fault start + 4 s: a second-swing loss of an inter-area mode)."""
+    from cosim.stability import default_stop
+
+    return WSCC9_STABILITY_STOP_S if case.name == "wscc9" and case.source is None else default_stop(contingency)
+
+
 def _stop_after_fault(stop: float, contingency) -> None:
     """UserError where the runs end [s] no later than the fault start of `contingency`."""
     if stop <= contingency.fault_start:
@@ -359,14 +385,14 @@ def _stop_after_fault(stop: float, contingency) -> None:
 
 
 def cmd_cct(args) -> None:
-    from cosim.stability import critical_clearing_time, default_stop, runner_stable
+    from cosim.stability import critical_clearing_time, runner_stable
 
     case = _case(args)
     _fault_start(args)
     settings = _settings(args)
     _resolution(args)
     contingency = _contingency(case, args.fault, args.fault_start + 0.05, args.trip, args)  # clearing: bisected
-    stop = args.stop if args.stop is not None else default_stop(contingency)
+    stop = args.stop if args.stop is not None else _default_stop(case, contingency)
     _stop(stop, settings)
     _stop_after_fault(stop, contingency)
     _check_fmus(case, args.fmus, args.fmu_cache, contingency)
@@ -395,7 +421,6 @@ def cmd_screen(args) -> None:
     from cosim.fmu import CouplingError
     from cosim.fmus import generator_files
     from cosim.screening import ScreeningTask, contingencies, default_fault_buses, screen
-    from cosim.stability import default_stop
 
     case = _case(args)
     _fault_start(args)
@@ -423,7 +448,7 @@ def cmd_screen(args) -> None:
             if trip is None:
                 raise
             left_out.append(f"fault at bus {bus}, {trip} opened: {exc}")  # a trip the case's own events forbid
-    stop = args.stop if args.stop is not None else default_stop(tasks_contingencies[0])  # one fault start for all
+    stop = args.stop if args.stop is not None else _default_stop(case, tasks_contingencies[0])  # one fault start
     _stop(stop, settings)
     if clear >= stop:
         raise UserError(f"the clearing at {clear:g} s must come before the stop at {stop:g} s")

@@ -289,3 +289,34 @@ def test_an_unstable_andes_run_with_stop_at_loss_ends_at_the_loss_of_synchronism
     assert not result.stable and 1.5 < result.loss_of_synchronism_s == result.time[-1] < 2.0
     spread = np.ptp(result.states["delta"][-1])
     assert spread >= np.pi and np.ptp(result.states["delta"][-2]) < np.pi
+
+
+def test_a_case_file_that_is_not_there_or_a_dyr_with_a_shipped_case_is_refused_in_one_line(tmp_path, capsys):
+    from opfmu.cli import main
+
+    for argv, words in ((["--case", str(tmp_path / "mine.raw")], "no case file"),
+                        (["--case", "kundur", "--dyr", "x.dyr"], "--dyr goes with a PSS/E raw"),
+                        (["--case", str(tmp_path / "mine.xlsx"), "--dynamic-data", "d.json"], "--dynamic-data goes with")):
+        out = tmp_path / "out"
+        assert main(["grid", "run", *argv, "--fault", "7", "--clear", "1.1", "--out", str(out)]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1 and words in captured.err, captured.err
+        assert not out.exists()
+
+
+@pytest.mark.andes
+def test_a_pss_e_raw_with_its_dyr_runs_with_native_fmus_and_follows_the_monolithic_run(tmp_path, capsys):
+    import andes
+
+    from opfmu.cli import main
+
+    raw, dyr = andes.get_case("kundur/kundur.raw"), andes.get_case("kundur/kundur_gencls.dyr")
+    out = tmp_path / "raw"
+    assert main(["grid", "run", "--case", raw, "--dyr", dyr, "--fault", "7", "--clear", "1.1", "--stop", "1.5",
+                 "--fmus", "reference", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "stable" in text and (out / "result.csv").is_file()
+    header = (out / "result.csv").read_text().splitlines()[0].split(",")
+    assert {"delta_1", "omega_4", "V_10"} <= set(header)
+    angle = float(text.split("rotor angles ")[1].split(" deg")[0])
+    assert angle < 0.1  # native FMUs against the monolithic DAE of the same file (measured 0.008 deg over 2 s)
