@@ -25,9 +25,13 @@ Coupling, over each communication step [t0, t1] (h = t1 - t0):
    and their Jacobians accumulated at that bus; the results stay per unit. A machine whose current is affine in V for given states is solved by
    one Newton step; the next confirms.
 4. If V(t1) moved by more than `tolerance` from the guess, the FMUs are set back to t0
-   (fmi2SetFMUstate) and the step is done again from 2 with V(t1) as the guess: at most `passes`
-   passes. Converged, every input over the step is linear between two consistent ends: the
-   coupling error is second order in h (held inputs are first order: degrees of rotor angle at
+   (fmi2SetFMUstate) and the step is done again from 2 with a new guess: V(t1) on the second
+   pass, then each unit's guess moved along its change by an Aitken factor (from the last two
+   changes, within RELAX_BOUNDS; a machine of small subtransient reactance pins its bus voltage to
+   its subtransient flux, which follows the guessed voltage within the step, so the plain
+   iteration contracts by only 0.85-0.97 a pass there: ieee39); at most `passes` passes; the last
+   pass keeps the solved V(t1). Converged, every input over the step is linear between two
+   consistent ends: the coupling error is second order in h (held inputs are first order: degrees of rotor angle at
    h = 10 ms after a fault; see docs/grid.md for the measured numbers).
 
 Events (a fault, its clearing, a branch opening or closing, a unit tripped:
@@ -133,6 +137,7 @@ class CosimResult:
     notes: tuple = ()
 
 
+RELAX_BOUNDS = (1.0, 50.0)  # the Aitken factor of an iterated step's end-voltage update
 MAX_STEPS = 1_000_000  # communication steps of one run (a row each in the result)
 
 
@@ -564,6 +569,7 @@ class GridMaster:
                 t_save = time.perf_counter()
                 saved = [fmu.save() for fmu in live]
                 timing.rollback_s += time.perf_counter() - t_save
+            relax, previous = np.ones(n), None
             try:
                 for p in range(passes if saved is not None else 1):
                     if p > 0:
@@ -575,10 +581,20 @@ class GridMaster:
                     outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing)
                     timing.passes += 1
                     new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
-                    change = float(np.max(np.abs(new_V - V1)))
-                    V1, theta1 = new_V, new_theta
-                    if change < s.tolerance:
+                    residual = new_V - V1
+                    change = float(np.max(np.abs(residual)))
+                    if change < s.tolerance or p == passes - 1 or saved is None:
+                        V1, theta1 = new_V, new_theta
                         break
+                    if previous is not None:
+                        moved = residual - previous
+                        norm = (moved * moved.conj()).real
+                        found = norm > 0.0
+                        relax[found] = np.clip(-relax[found] * (previous.conj() * moved).real[found] / norm[found],
+                                               *RELAX_BOUNDS)
+                    previous = residual
+                    V1 = V1 + relax * residual
+                    theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), new_theta.tolist())])
             finally:
                 if saved is not None:
                     for fmu, snap in zip(live, saved):
