@@ -54,7 +54,7 @@ def test_screening_kundur_without_dask_gives_one_row_per_contingency(fmu_cache):
     files = tuple(generator_files(case, "reference", fmu_cache))
     pairs = contingencies(case.network, [5], "each")[:2]
     tasks = [ScreeningTask(case, Contingency(bus, 1.1, trip, 1.0, FAULT, case.network), "reference", files,
-                           MasterSettings(step=0.01), 3.0, 0.02) for bus, trip in pairs]
+                           MasterSettings(step=0.01), 2.5, 0.04) for bus, trip in pairs]
     rows = screen(tasks, workers=0, progress=False)
     assert [(r["bus"], r["trip"]) for r in rows] == [(5, ""), (5, "5-6")]
     for row in rows:
