@@ -76,13 +76,16 @@ def unit_fmu(unit, dynamic_data: Path | None) -> UnitFMU:
 
 
 def unit_fmus(case, kind: str | None = None) -> tuple:
-    """The UnitFMU of every unit of `case`: its own, or `kind` for all (FMU_KINDS but file)."""
+    """The UnitFMU of every unit of `case`: its own, or `kind` for all (FMU_KINDS but file; surrogate
+    only where the unit's dynamic data name an operator, native reference FMUs elsewhere)."""
     if kind is not None and kind not in FMU_KINDS:
         raise CouplingError(f"FMU kind must be one of {', '.join(FMU_KINDS)}, got {kind!r}")
     out = []
     for unit in case.units:
         fmu = unit_fmu(unit, case.dynamic_data)
-        out.append(fmu if kind is None else replace(fmu, kind=kind))
+        if kind is not None:  # surrogate: for the machines the dynamic data name an operator for, native for the rest
+            fmu = replace(fmu, kind="reference" if kind == "surrogate" and fmu.operator is None else kind)
+        out.append(fmu)
     return tuple(out)
 
 
@@ -175,6 +178,14 @@ def check_unit_fmus(case, kind: str | None = None) -> tuple:
                 raise CouplingError(f"generator at bus {unit.bus}: no FMU file {', '.join(absent)}")
         elif fmu.kind == "surrogate":
             _check_operator(operator_path(fmu.operator), unit.machine, unit.bus)
+        elif fmu.kind == "python":
+            from fmu_export.python_reference_fmu import ReferenceBuildError, check_packable
+
+            for device in unit.devices:
+                try:
+                    check_packable(device.component)
+                except ReferenceBuildError as exc:
+                    raise CouplingError(f"generator at bus {unit.bus}: {exc}") from None
     return fmus
 
 

@@ -138,6 +138,17 @@ def _package_name(component: Component, sources: list[Path]) -> str:
     return name
 
 
+def check_packable(component: Component) -> None:
+    """ReferenceBuildError (one line) where the pythonfmu FMU cannot carry the module that defines
+    `component` (a module-level object whose module imports only its siblings), before any build."""
+    module, _ = _definition(component)
+    try:
+        _module_closure(Path(module.__file__))
+    except ReferenceBuildError as exc:
+        raise ReferenceBuildError(f"a pythonfmu reference FMU cannot carry {component.name}: {exc} "
+                                  "(use the native reference FMU: --fmus reference)") from None
+
+
 def _description(component: Component) -> str:
     return f"{component.description}: reference RK45 integration over each communication step"
 

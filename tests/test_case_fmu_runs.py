@@ -133,3 +133,21 @@ def test_steps_right_after_a_topology_change_are_cut_and_only_the_grid_is_record
     # the two steps starting within 0.02 s of the change at 0.02 s are quartered, no other
     assert np.allclose(added, [0.0225, 0.025, 0.0275, 0.0325, 0.035, 0.0375])
     assert [t for t, _, _ in refined_points(points, 1, 0.02)] == [t for t, _ in points]
+
+
+def test_surrogate_runs_the_machines_with_an_operator_and_native_fmus_for_the_rest():
+    from cosim.fmus import unit_fmus
+
+    assert {f.kind for f in unit_fmus(shipped_case("kundur"), "surrogate")} == {"surrogate"}  # operators named
+    assert {f.kind for f in unit_fmus(shipped_case("ieee14"), "surrogate")} == {"reference"}  # none named
+
+
+def test_pythonfmu_fmus_of_the_standard_models_are_refused_in_one_line_before_any_build(tmp_path, capsys):
+    from opfmu.cli import main
+
+    out = tmp_path / "out"
+    assert main(["grid", "run", "--case", "kundur", "--fmus", "python", "--fault", "7", "--clear", "1.1",
+                 "--fmu-cache", str(tmp_path / "cache"), "--out", str(out)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1 and "--fmus reference" in captured.err
+    assert not out.exists() and not list((tmp_path / "cache").glob("*.fmu"))
