@@ -115,8 +115,8 @@ def add_grid_parser(sub) -> None:
                           "its clearing action by bisection (stable: no two rotor angles pi apart before --stop).")
     cct.add_argument("--fault", type=int, required=True, metavar="BUS", help="faulted bus")
     cct.add_argument("--stop", type=_time, default=None,
-                     help="end of each run in s (default: 4 s after the fault start, so that a loss on the second "
-                          "swing of an inter-area mode is seen)")
+                     help="end of each run in s (default: 3 for wscc9; 4 s after the fault start for the other cases, "
+                          "so that a loss on the second swing of an inter-area mode is seen)")
     cct.add_argument("--resolution", type=float, default=1e-3, help="bisection resolution in s (default 0.001)")
     cct.add_argument("--json", action="store_true", help="print one JSON object (with cct_s)")
     _common(cct)
@@ -133,8 +133,8 @@ def add_grid_parser(sub) -> None:
                      help=f"clearing time of the verdict runs in s (default: {SCREEN_CLEARING_S:g} s after the fault "
                           "start)")
     scr.add_argument("--stop", type=_time, default=None,
-                     help="end of each run in s (default: 4 s after the fault start, so that a loss on the second "
-                          "swing of an inter-area mode is seen)")
+                     help="end of each run in s (default: 3 for wscc9; 4 s after the fault start for the other cases, "
+                          "so that a loss on the second swing of an inter-area mode is seen)")
     scr.add_argument("--resolution", type=float, default=1e-3, help="CCT resolution in s (default 0.001)")
     scr.add_argument("--workers", type=int, default=2, help="local dask worker processes (0: no dask; default 2)")
     scr.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing dask scheduler instead")

@@ -200,13 +200,14 @@ def test_ctrl_c_during_a_screening_on_dask_workers_ends_in_one_interrupted_line(
      "opening branch 1-5 disconnects a generator"),
     (["grid", "cct", "--case", "ieee14", "--fault", "4", "--trip", "4-7:2", "--fmus", "monolithic"], "no branch 4-7"),
     (["grid", "screen", "--fmus", "andes", "--faults", "7", "--out", "x"], "converted from ANDES"),
+    (["grid", "cct", "--case", "kundur", "--dyr", "k.dyr", "--fault", "7"], "--dyr goes with a PSS/E raw"),
     (["grid", "run", "--case", "kundur", "--fault", "7", "--clear", "0.5", "--out", "x"],
      "after the fault start (1.0 s)"),  # the ANDES cases' faults start at 1 s by default
     (["grid", "cct", "--case", "ieee14", "--fault", "4", "--stop", "0.5", "--fmus", "monolithic"],
      "--stop (0.5 s) must come after the fault start at 1 s"),
     (["grid", "screen", "--case", "kundur", "--clear", "5.5", "--out", "x"],
      "the clearing at 5.5 s must come before the stop at 5 s"),  # default stop: fault start 1 s + 4 s
-    (["grid", "screen", "--clear", "4.5", "--out", "x"], "before the stop at 4 s"),  # wscc9: faults from 0 s
+    (["grid", "screen", "--clear", "3.5", "--out", "x"], "before the stop at 3 s"),  # wscc9: DESIGN's 3 s
 ])
 def test_mistakes_with_the_andes_cases_end_in_one_line_before_any_work(argv, message, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
