@@ -153,12 +153,9 @@ def plot(rows, kinds, path: Path) -> None:
     ax.set_title("CCT of the ANDES cases: native FMUs and monolithic DAE against ANDES")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    from reference_models.files import atomic_path
+    from reference_models.files import write_png
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    write_png(path, fig)
 
 
 def main(argv=None) -> None:

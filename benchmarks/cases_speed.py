@@ -199,12 +199,9 @@ def plot(results, path: Path) -> None:
         ax.set_title(f"{r['case']}: one 5 s contingency", fontsize=9)
         ax.legend(fontsize=7)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    from reference_models.files import atomic_path
+    from reference_models.files import write_png
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    plt.close(fig)
+    write_png(path, fig)
 
 
 def main(argv=None) -> None:

@@ -40,3 +40,13 @@ def write_json(path, data) -> None:
 def write_npz(path, **arrays) -> None:
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)
+
+
+def write_png(path, fig, dpi: int = 120) -> None:
+    """A matplotlib figure as a PNG at `path` (its folder made), atomically; the figure is closed."""
+    import matplotlib.pyplot as plt
+
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=dpi)
+    plt.close(fig)
