@@ -84,7 +84,8 @@ def add_operator_parser(sub) -> None:
     op.add_argument("--seed", type=int, default=0, help="dataset and training seed (default 0)")
     op.add_argument("--workers", type=int, default=2, help="dask workers for the dataset (default 2)")
     op.add_argument("--threads", type=int, default=None, help="torch threads for training (default: torch's)")
-    op.add_argument("--name", default="SM4", help="FMU model name prefix (default SM4: SM4Surrogate, SM4Reference)")
+    op.add_argument("--name", default=None, help="FMU model name prefix (default: the component's name in capitals, "
+                    "e.g. SM4: SM4Surrogate, SM4Reference; GENROU: GENROUSurrogate, GENROUReference)")
     op.add_argument("--quiet", action="store_true", help="no progress bars")
     op.set_defaults(func=cmd_operator)
 
@@ -224,6 +225,8 @@ def _run(args) -> None:
     from opfmu.checks import MAX_COUNT, output_folder
     from reference_models.components import component
 
+    if args.name is None:
+        args.name = re.sub(r"\W", "", str(args.component))[:40].upper() or "SM4"
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,40}", args.name):
         raise OperatorError(f"--name {args.name[:60]!r} must be a C identifier of at most 41 characters")
     if not (0.05 <= args.horizon <= 10.0) or not 1 <= args.epochs <= MAX_COUNT or args.workers < 0 \
