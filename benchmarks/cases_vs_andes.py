@@ -16,9 +16,12 @@ ANDES' rows of any rotor-angle difference to the first machine [deg], of the bus
 magnitudes at the generators outside the fault [pu], the swing, both wall times [s], the
 monolithic solve's right-hand-side evaluations and its verdict. --half-step: ANDES also at half
 the step, printing the largest rotor-angle difference error of ANDES at --step against ANDES at
-half of it (ANDES' own integration error; its implicit trapezoid's error falls about fourfold per
-halving) and of the monolithic DAE against ANDES at half the step. Needs ANDES (pip install
-andes==2.0.0).
+half of it (ANDES' own integration error), of the monolithic DAE against ANDES at half the step,
+and of the monolithic DAE against ANDES' h -> 0 limit estimated as 2 A(h/2) - A(h): while an
+exciter's regulator is pegged at its non-windup limit ANDES' error is first order in h (its Newton
+iterates feed the regulator's value beyond the limit to the next equation before its limiter resets
+it: docs/standard-models.md), so it halves per halving instead of quartering. Needs ANDES (pip
+install andes==2.0.0).
 """
 from __future__ import annotations
 
@@ -46,6 +49,20 @@ def _angle_error(result, reference, times) -> np.ndarray:
     return np.abs((m - m[:, :1]) - (a - a[:, :1]))
 
 
+def _limit_error(result, coarse, fine) -> np.ndarray:
+    """|error| [rad] of every rotor-angle difference against ANDES' h -> 0 limit estimated from its
+    runs at h (`coarse`) and h/2 (`fine`) on coarse's rows, as 2 fine - coarse: ANDES' error while a
+    non-windup limit is pegged is first order in h (docs/standard-models.md), so its step error
+    halves, rather than quarters, per halving."""
+    from cosim.outputs import on_times
+
+    def differences(r):
+        d = on_times(r, coarse.time, r.states["delta"])
+        return d - d[:, :1]
+
+    return np.abs(differences(result) - (2.0 * differences(fine) - differences(coarse)))
+
+
 def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: float, reactance: float,
             resets: bool = True, half_step: bool = False) -> dict:
     """The errors and wall times of one scenario (see the module docstring)."""
@@ -70,7 +87,8 @@ def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: fl
     if half_step:
         fine, _ = AndesRunner(case, step / 2).run(contingency, stop)
         half = {"andes_vs_half_deg": math.degrees(float(np.max(_angle_error(andes, fine, andes.time)))),
-                "mono_vs_half_deg": math.degrees(float(np.max(_angle_error(mono, fine, andes.time))))}
+                "mono_vs_half_deg": math.degrees(float(np.max(_angle_error(mono, fine, andes.time)))),
+                "mono_vs_limit_deg": math.degrees(float(np.max(_limit_error(mono, andes, fine))))}
     worst = np.unravel_index(np.argmax(angle_error), angle_error.shape)
     outside = (andes.time < FAULT_START) | (andes.time > FAULT_START + clear)
     V = np.max(np.abs(on_times(mono, andes.time, mono.Vs) - andes.Vs)[outside])
@@ -94,7 +112,9 @@ def main(argv=None) -> None:
     print(f"faults from {FAULT_START:g} s (x = {args.fault_impedance:g} pu), {args.stop:g} s, ANDES at "
           f"h = {args.step * 1e3:g} ms, monolithic {'without' if args.no_resets else 'with'} limit resets")
     print(f"{'case':8} {'bus':>4} {'clear':>6} {'trip':>8} {'angle err [deg]':>16} {'(at s, gen bus)':>16} "
-          f"{'V err [pu]':>11} {'swing [deg]':>12} {'ANDES [s]':>10} {'monolithic [s]':>15} {'rhs':>7} stable")
+          f"{'V err [pu]':>11} {'swing [deg]':>12} {'ANDES [s]':>10} {'monolithic [s]':>15} {'rhs':>7} stable"
+          + (f" {'ANDES h vs h/2 [deg]':>21} {'monolithic vs h/2 [deg]':>24} {'vs limit [deg]':>18}"
+             if args.half_step else ""))
     for name in args.cases:
         for bus, clear, trip in SCENARIOS[name][:1] if args.defaults else SCENARIOS[name]:
             r = compare(name, bus, clear, trip, args.stop, args.step, args.fault_impedance, not args.no_resets,
@@ -103,7 +123,8 @@ def main(argv=None) -> None:
             print(f"{r['case']:8} {r['fault_bus']:>4} {r['clear_ms']:>4.0f}ms {r['trip']:>8} {r['angle_deg']:>16.4f} "
                   f"{where:>16} {r['V_pu']:>11.2e} {r['swing_deg']:>12.1f} {r['andes_s']:>10.1f} "
                   f"{r['monolithic_s']:>15.1f} {r['n_rhs']:>7} {r['stable']}"
-                  + (f" {r['andes_vs_half_deg']:>21.4f} {r['mono_vs_half_deg']:>24.4f}" if args.half_step else ""),
+                  + (f" {r['andes_vs_half_deg']:>21.4f} {r['mono_vs_half_deg']:>24.4f} {r['mono_vs_limit_deg']:>18.4f}"
+                     if args.half_step else ""),
                   flush=True)
 
 
