@@ -64,7 +64,9 @@ class AndesRunner:
     def _system(self, contingency, stop: float, stop_at_loss: bool):
         import andes
 
-        andes.config_logger(stream_level=50)  # ANDES' own messages off: a failed run is one line of ours
+        from reference_models.grid.andes_case import configure_andes_logging
+
+        configure_andes_logging(andes)  # ANDES' own messages off: a failed run is one line of ours
         path = self.source if self.case.source is not None else andes.get_case(self.source)
         extra = {"addfile": self.dyr} if self.dyr is not None else {}
         ss = andes.load(path, setup=False, no_output=True, default_config=True, **extra)

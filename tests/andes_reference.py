@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from reference_models.grid.andes_case import configure_andes_logging
 from reference_models.models import STANDARD_MODELS, esst3a, exdc2, exst1, gencls, genrou, ieeeg1, ieeex1
 from reference_models.models import sexs, tgov1, tgov1n
 from reference_models.models.common import network_current
@@ -27,7 +28,7 @@ def load(case: str):
     """The ANDES system of a shipped case after power flow and TDS initialisation."""
     import andes
 
-    andes.config_logger(stream_level=40)
+    configure_andes_logging(andes, 40)
     ss = andes.load(andes.get_case(case), setup=True, no_output=True, default_config=True)
     ss.PFlow.run()
     ss.TDS.init()
@@ -189,7 +190,7 @@ def compare_in_transient(case: str, t: float, fault_bus=None, tol: float = 1e-6)
     ours are held, 0), the largest difference of the main output (`output`), and how many of the model's devices have a non-windup state at a limit there."""
     import andes
 
-    andes.config_logger(stream_level=40)
+    configure_andes_logging(andes, 40)
     ss = andes.load(andes.get_case(case), setup=False, no_output=True, default_config=True)
     if fault_bus is not None:
         ss.add("Fault", {"bus": fault_bus, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
@@ -259,7 +260,7 @@ def compare_trajectories(case: str, fault_bus, tf: float = 3.0, h: float = 0.001
     import andes
     from scipy.integrate import solve_ivp
 
-    andes.config_logger(stream_level=40)
+    configure_andes_logging(andes, 40)
     ss = andes.load(andes.get_case(case), setup=False, no_output=True, default_config=True)
     ss.add("Fault", {"bus": fault_bus, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
     ss.setup()

@@ -201,9 +201,9 @@ def test_a_toggle_of_a_machine_or_its_load_flow_generator_is_a_generator_event(m
     pytest.importorskip("andes")
     import andes
 
-    from reference_models.grid.andes_case import events
+    from reference_models.grid.andes_case import configure_andes_logging, events
 
-    andes.config_logger(stream_level=50)
+    configure_andes_logging(andes)
     ss = andes.load(andes.get_case("ieee14/ieee14_full.xlsx"), setup=False, no_output=True, default_config=True)
     ss.add("Toggle", {"model": model, "dev": dev, "t": 1.0})
     ss.add("Toggle", {"model": "Line", "dev": "Line_3", "t": 1.2})

@@ -110,10 +110,16 @@ def load_andes(source, dyr=None):
     return ss
 
 
+def configure_andes_logging(andes, level: int = logging.CRITICAL + 1) -> None:
+    """ANDES' log messages below `level` off, and no log file: ANDES' config_logger otherwise makes
+    an empty folder /tmp/andes-* for a log file at every call."""
+    andes.config_logger(stream_level=level, file=False, log_path=tempfile.gettempdir())
+
+
 @contextmanager
 def _silenced(andes):
     """ANDES' log output and whatever it prints off for the block."""
-    andes.config_logger(stream_level=logging.CRITICAL + 1)
+    configure_andes_logging(andes)
     sink = io.StringIO()
     with redirect_stdout(sink), redirect_stderr(sink):
         yield
