@@ -38,6 +38,7 @@ Events (a fault, its clearing, a branch opening or closing, a unit tripped:
 reference_models.grid.contingency) happen at communication points: the step before an event is shortened to end there. At an event time the
 network is solved twice: in the old topology (the end of the step before) and in the new one (the
 start of the step after; the inputs jump there). The row recorded at an event time is the one after.
+The steps after an event are cut finer (`event_refinement`, rows stay on the step grid).
 A tripped unit (Topology.tripped) injects nothing from its trip on; its FMUs are no longer stepped
 (its row values stand at the trip) and its rotor angle leaves the loss-of-synchronism spread.
 
@@ -73,7 +74,9 @@ class MasterSettings:
     does); passes: the most passes of an iterated step; tolerance [pu]: the change of the end
     voltages below which a step is consistent; newton_tolerance [pu]: the network's current
     mismatch that ends Newton; stop_at_loss: end a run when two rotor angles are pi apart (a
-    critical-clearing-time run needs no more)."""
+    critical-clearing-time run needs no more); event_refinement: (window [s], substeps) pairs, a
+    step starting within the first window after a topology change cut into its substeps (the
+    first pair that holds: 10 within 50 ms, 2 within 1 s by default; refined_points)."""
 
     step: float = 0.01
     coupling: str = "iterated"
@@ -82,8 +85,7 @@ class MasterSettings:
     newton_tolerance: float = 1e-10
     newton_iterations: int = 20
     stop_at_loss: bool = False
-    event_substeps: int = 10
-    event_window: float = 0.05
+    event_refinement: tuple = ((0.05, 10), (1.0, 2))
 
     def __post_init__(self):
         if not (isinstance(self.step, (int, float)) and math.isfinite(self.step) and 1e-5 <= self.step <= 1.0):
@@ -94,10 +96,13 @@ class MasterSettings:
             raise ValueError(f"passes must be an integer from 1 to 20, got {self.passes!r}")
         if not (self.tolerance > 0 and self.newton_tolerance > 0):
             raise ValueError("tolerances must be positive")
-        if not (isinstance(self.event_substeps, int) and 1 <= self.event_substeps <= 100):
-            raise ValueError(f"event_substeps must be an integer from 1 to 100, got {self.event_substeps!r}")
-        if not (math.isfinite(self.event_window) and self.event_window >= 0):
-            raise ValueError(f"event_window must be a time >= 0 s, got {self.event_window!r}")
+        for tier in self.event_refinement:
+            window, substeps = tier if isinstance(tier, tuple) and len(tier) == 2 else (None, None)
+            if not (isinstance(substeps, int) and 1 <= substeps <= 100):
+                raise ValueError(f"event_refinement: (window, substeps) pairs with substeps from 1 to 100, "
+                                 f"got {tier!r}")
+            if not (isinstance(window, (int, float)) and math.isfinite(window) and window >= 0):
+                raise ValueError(f"event_refinement: (window, substeps) pairs with a window >= 0 s, got {tier!r}")
 
 
 @dataclass
@@ -202,16 +207,19 @@ def communication_points(step: float, stop: float, changes):
         yield waiting
 
 
-def refined_points(points, substeps: int, window: float):
+def refined_points(points, refinement):
     """The communication points `points` ((time, topology or None), as communication_points gives
     them) with each step that starts less than `window` [s] after a topology change cut into
-    `substeps` equal steps, one at a time as (time, topology or None, recorded): the points added
-    are not recorded (the result keeps its rows on the communication grid). Right after a fault or
-    its clearing the machines' subtransient currents and the network move within milliseconds;
-    held over a whole step they cost degrees of rotor angle (ieee39 at h = 10 ms)."""
+    `substeps` equal steps, by the first (window, substeps) of `refinement` whose window holds the
+    step's start, one at a time as (time, topology or None, recorded): the points added are not
+    recorded (the result keeps its rows on the communication grid). Right after a fault or its
+    clearing the machines' subtransient currents and the network move within milliseconds, and the
+    exciters and stabilisers within the next second; with the voltage linear over a whole step they
+    cost tenths of a degree of rotor angle (ieee39 at h = 10 ms: docs/grid.md)."""
     t0, changed = 0.0, -math.inf
     for t1, topology in points:
-        if substeps > 1 and t0 < changed + window - 1e-12:
+        substeps = next((n for window, n in refinement if t0 < changed + window - 1e-12), 1)
+        if substeps > 1:
             for k in range(1, substeps):
                 yield t0 + (t1 - t0) * k / substeps, None, False
         yield t1, topology, True
@@ -551,7 +559,7 @@ class GridMaster:
         V_prev, h_prev = None, None
         t0 = 0.0
         points = communication_points(s.step, stop, topologies[1:])
-        for t1, new_topology, recorded in refined_points(points, s.event_substeps, s.event_window):
+        for t1, new_topology, recorded in refined_points(points, s.event_refinement):
             h = t1 - t0
             Vt0 = self._terminal(V, I, theta)
             if V_prev is not None and s.coupling != "held":

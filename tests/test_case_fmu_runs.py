@@ -126,13 +126,16 @@ def test_steps_right_after_a_topology_change_are_cut_and_only_the_grid_is_record
     from cosim.master import refined_points
 
     points = [(0.01, None), (0.02, "fault"), (0.03, None), (0.04, None), (0.05, None)]
-    out = list(refined_points(points, 4, 0.02))
+    out = list(refined_points(points, ((0.02, 4),)))
     recorded = [(t, tp) for t, tp, keep in out if keep]
     assert recorded == points
     added = [t for t, _, keep in out if not keep]
     # the two steps starting within 0.02 s of the change at 0.02 s are quartered, no other
     assert np.allclose(added, [0.0225, 0.025, 0.0275, 0.0325, 0.035, 0.0375])
-    assert [t for t, _, _ in refined_points(points, 1, 0.02)] == [t for t, _ in points]
+    assert [t for t, _, _ in refined_points(points, ((0.02, 1),))] == [t for t, _ in points]
+    # the first window that holds a step's start decides: quartered, then halved up to 0.03 s after
+    tiers = [t for t, _, keep in refined_points(points, ((0.01, 4), (0.03, 2))) if not keep]
+    assert np.allclose(tiers, [0.0225, 0.025, 0.0275, 0.035, 0.045])
 
 
 def test_surrogate_runs_the_machines_with_an_operator_and_native_fmus_for_the_rest():
