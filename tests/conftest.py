@@ -51,9 +51,16 @@ def cosim_tiny(tmp_path_factory):
 def fmu_cache(tmp_path_factory):
     """The FMU build cache of this run: $OPFMU_FMU_CACHE where it is set (CI shares one folder between
     its two runs), else a folder in the run's temporary directory. Set as $OPFMU_FMU_CACHE for the
-    whole run, so the commands the tests start use it too. Tests read its FMUs and never write them."""
+    whole run, so the commands the tests start use it too; under pytest-xdist one folder for all the
+    run's workers. Tests read its FMUs and never write them."""
     given = os.environ.get("OPFMU_FMU_CACHE")
-    path = Path(given) if given else tmp_path_factory.mktemp("fmu_cache")
+    if given:
+        path = Path(given)
+    elif os.environ.get("PYTEST_XDIST_WORKER"):  # one cache for the run's workers (builds are atomic)
+        path = tmp_path_factory.getbasetemp().parent / "fmu_cache"
+        path.mkdir(exist_ok=True)
+    else:
+        path = tmp_path_factory.mktemp("fmu_cache")
     environment = pytest.MonkeyPatch()
     environment.setenv("OPFMU_FMU_CACHE", str(path))
     yield path
@@ -91,6 +98,12 @@ def reference_path(tmp_path_factory):
 def grid_fmu_cache(fmu_cache):
     """The FMU cache of the grid tests (cosim.fmus): the run's build cache."""
     return fmu_cache
+
+
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto` (pyproject's addopts): a worker per core, at most 4 (each holds torch and the FMUs
+    its tests load; the CI machine has 2 cores)."""
+    return max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
 
 
 def optional_tools() -> dict:
