@@ -9,6 +9,9 @@ import importlib.util
 import json
 import os
 import shutil
+import signal
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -98,6 +101,32 @@ def reference_path(tmp_path_factory):
 def grid_fmu_cache(fmu_cache):
     """The FMU cache of the grid tests (cosim.fmus): the run's build cache."""
     return fmu_cache
+
+
+def opfmu_process(argv, **popen):
+    """`python -m opfmu argv` in its own process group (as a terminal starts a command), text pipes
+    for stdout and stderr, Python's fault handler on (interrupt_and_wait's report)."""
+    env = dict(popen.pop("env", os.environ), PYTHONFAULTHANDLER="1")
+    return subprocess.Popen([sys.executable, "-m", "opfmu", *map(str, argv)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=env, **popen)
+
+
+def interrupt_and_wait(process, timeout: float):
+    """(exit code, stderr) of `process` (opfmu_process) after Ctrl-C (SIGINT to its process group, as
+    a terminal sends it). A process still running after `timeout` [s] fails the test with what it
+    was doing: SIGABRT makes Python's fault handler print every thread's stack, and the processes
+    of its group are listed."""
+    os.killpg(process.pid, signal.SIGINT)
+    try:
+        _, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        group = subprocess.run(["ps", "-o", "pid,ppid,stat,etime,args", "-g", str(process.pid)],
+                               capture_output=True, text=True).stdout
+        process.send_signal(signal.SIGABRT)
+        _, err = process.communicate(timeout=60)
+        os.killpg(process.pid, signal.SIGKILL)
+        pytest.fail(f"still running {timeout:g} s after Ctrl-C; its group:\n{group}\nits stderr:\n{err[-6000:]}")
+    return process.returncode, err
 
 
 def pytest_xdist_auto_num_workers(config):

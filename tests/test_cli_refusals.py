@@ -2,17 +2,13 @@
 before any work (nothing written, nothing else printed), naming the file or field; a Ctrl-C is one
 "interrupted" line, which says "rerun to resume" only where a rerun resumes."""
 import json
-import os
-import signal
-import subprocess
-import sys
 import time
 
 import pytest
 
 from opfmu.cli import build_parser, interrupted_message, main
 
-from conftest import preset_file, tiny
+from conftest import interrupt_and_wait, opfmu_process, preset_file, tiny
 
 MACHINE = {"H": 3.01, "D": 2.0}
 
@@ -196,15 +192,12 @@ def test_an_interrupt_offers_a_rerun_only_where_a_rerun_resumes(argv, expected):
 def interrupted_run(out, argv):
     """(exit code, stderr) of `opfmu argv` sent Ctrl-C (SIGINT to its process group, as a terminal
     does) once a first solved chunk appears under `out`; at most 300 s for that, 120 s to stop."""
-    process = subprocess.Popen([sys.executable, "-m", "opfmu", *map(str, argv)], stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, start_new_session=True)
+    process = opfmu_process(argv)
     deadline = time.monotonic() + 300
     while process.poll() is None and time.monotonic() < deadline and not any(out.glob("**/.partial/*-0*.npz")):
         time.sleep(0.05)
     assert process.poll() is None, process.stderr.read()
-    os.killpg(process.pid, signal.SIGINT)
-    _, err = process.communicate(timeout=120)
-    return process.returncode, err
+    return interrupt_and_wait(process, 120)
 
 
 def test_ctrl_c_while_dask_workers_solve_is_one_line_and_keeps_the_finished_chunks(tmp_path):

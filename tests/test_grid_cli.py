@@ -5,14 +5,12 @@ work, a result set written whole or not at all, and no extracted FMU folder left
 import csv
 import json
 import os
-import signal
-import subprocess
-import sys
 import tempfile
 
 import numpy as np
 import pytest
 
+from conftest import interrupt_and_wait, opfmu_process
 from opfmu.cli import main
 from reference_models.grid import wscc9
 
@@ -178,16 +176,13 @@ def test_a_malformed_dynamic_data_file_is_one_line_without_python_internals_and_
 def test_ctrl_c_during_a_screening_on_dask_workers_ends_in_one_interrupted_line(tmp_path):
     scratch = tmp_path / "tmp"
     scratch.mkdir()
-    screening = subprocess.Popen(
-        [sys.executable, "-m", "opfmu", "grid", "screen", "--fmus", "monolithic", "--faults", "4,5,6,7,8,9",
-         "--workers", "2", "--stop", "3", "--resolution", "0.0001", "--out", str(tmp_path / "out")],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-        env=dict(os.environ, TMPDIR=str(scratch)))
+    screening = opfmu_process(["grid", "screen", "--fmus", "monolithic", "--faults", "4,5,6,7,8,9", "--workers", "2",
+                               "--stop", "3", "--resolution", "0.0001", "--out", tmp_path / "out"],
+                              env=dict(os.environ, TMPDIR=str(scratch)))
     first = screening.stderr.readline()  # the first progress line: the workers are busy
     assert first.startswith("contingencies: ") and not first.startswith("contingencies: 18/18")
-    os.killpg(screening.pid, signal.SIGINT)  # what Ctrl-C sends: the whole process group
-    _, rest = screening.communicate(timeout=300)
-    assert screening.returncode == 130
+    code, rest = interrupt_and_wait(screening, 120)
+    assert code == 130
     lines = rest.splitlines()
     assert lines[-1] == "interrupted" and rest.count("interrupted") == 1  # no "rerun to resume": a rerun starts over
     assert all(line.startswith("contingencies: ") for line in lines[:-1]), rest  # no worker traceback

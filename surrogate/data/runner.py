@@ -4,6 +4,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+import warnings
 from contextlib import contextmanager
 
 import numpy as np
@@ -91,7 +92,8 @@ class SolveRunner:
         elif self.workers > 0:
             from dask.distributed import Client, LocalCluster
 
-            with _interrupts_left_to_this_process():
+            with _interrupts_left_to_this_process(), warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
                 self._cluster = LocalCluster(
                     n_workers=self.workers, threads_per_worker=1, processes=True,
                     # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as an
