@@ -103,12 +103,21 @@ def grid_fmu_cache(fmu_cache):
     return fmu_cache
 
 
+def _interrupts_as_at_a_terminal():
+    """SIGINT back to its default in the child before it starts: a suite run in a background job
+    (`pytest &`: the shell ignores SIGINT there, and every program started from it inherits that)
+    still starts its commands as a terminal does."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def opfmu_process(argv, **popen):
-    """`python -m opfmu argv` in its own process group (as a terminal starts a command), text pipes
-    for stdout and stderr, Python's fault handler on (interrupt_and_wait's report)."""
+    """`python -m opfmu argv` in its own process group with Ctrl-C at its default (as a terminal
+    starts a command), text pipes for stdout and stderr, Python's fault handler on
+    (interrupt_and_wait's report)."""
     env = dict(popen.pop("env", os.environ), PYTHONFAULTHANDLER="1")
     return subprocess.Popen([sys.executable, "-m", "opfmu", *map(str, argv)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=env, **popen)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True, env=env,
+                            preexec_fn=_interrupts_as_at_a_terminal, **popen)
 
 
 def interrupt_and_wait(process, timeout: float):
@@ -129,10 +138,23 @@ def interrupt_and_wait(process, timeout: float):
     return process.returncode, err
 
 
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 def pytest_xdist_auto_num_workers(config):
     """`-n auto` (pyproject's addopts): a worker per core, at most 4 (each holds torch and the FMUs
     its tests load; the CI machine has 2 cores)."""
-    return max(1, min(4, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+    return max(1, min(4, _cores()))
+
+
+def pytest_configure(config):
+    """Under pytest-xdist each worker's torch takes its share of the cores, not all of them."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "0"))
+    if workers > 1:
+        import torch
+
+        torch.set_num_threads(max(1, _cores() // workers))
 
 
 def optional_tools() -> dict:
