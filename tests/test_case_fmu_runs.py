@@ -138,6 +138,14 @@ def test_steps_right_after_a_topology_change_are_cut_and_only_the_grid_is_record
     assert np.allclose(tiers, [0.0225, 0.025, 0.0275, 0.035, 0.045])
 
 
+@pytest.mark.parametrize("refinement", [((0.05, 0),), ((-1.0, 2),), ((0.05, 2.5),), ((float("nan"), 2),), (0.05, 10)])
+def test_a_refinement_that_is_not_window_and_substeps_pairs_is_refused(refinement):
+    from cosim.master import MasterSettings
+
+    with pytest.raises(ValueError, match="event_refinement"):
+        MasterSettings(event_refinement=refinement)
+
+
 def test_surrogate_runs_the_machines_with_an_operator_and_native_fmus_for_the_rest():
     from cosim.fmus import unit_fmus
 
