@@ -41,12 +41,17 @@ SCENARIOS = {
 }
 
 
-def _angle_error(result, reference, times) -> np.ndarray:
-    """|error| [rad] of every rotor-angle difference to the first machine at `times` [n, g]."""
+def _differences(result, times) -> np.ndarray:
+    """Every rotor-angle difference to the first machine [rad] at `times` [n, g]."""
     from cosim.outputs import on_times
 
-    m, a = on_times(result, times, result.states["delta"]), on_times(reference, times, reference.states["delta"])
-    return np.abs((m - m[:, :1]) - (a - a[:, :1]))
+    d = on_times(result, times, result.states["delta"])
+    return d - d[:, :1]
+
+
+def _angle_error(result, reference, times) -> np.ndarray:
+    """|error| [rad] of every rotor-angle difference to the first machine at `times` [n, g]."""
+    return np.abs(_differences(result, times) - _differences(reference, times))
 
 
 def _limit_error(result, coarse, fine) -> np.ndarray:
@@ -54,13 +59,8 @@ def _limit_error(result, coarse, fine) -> np.ndarray:
     runs at h (`coarse`) and h/2 (`fine`) on coarse's rows, as 2 fine - coarse: ANDES' error while a
     non-windup limit is pegged is first order in h (docs/standard-models.md), so its step error
     halves, rather than quarters, per halving."""
-    from cosim.outputs import on_times
-
-    def differences(r):
-        d = on_times(r, coarse.time, r.states["delta"])
-        return d - d[:, :1]
-
-    return np.abs(differences(result) - (2.0 * differences(fine) - differences(coarse)))
+    t = coarse.time
+    return np.abs(_differences(result, t) - (2.0 * _differences(fine, t) - _differences(coarse, t)))
 
 
 def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: float, reactance: float,

@@ -34,7 +34,8 @@ class _Parser(argparse.ArgumentParser):
         raise UserError(f"{self.prog}: {message}")
 
 
-def _cores() -> int:
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system has one)."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
@@ -436,7 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="JSON file of machine parameters (any subset of D, H, Rs, Td0_p, Tq0_p, Xd, Xd_p, Xq, "
                            "Xq_p, Xep, Re, Wb; the rest: paper Table I; Pm and Efd are inputs)")
     data.add_argument("--seed", type=int, default=0, help="base seed; same seed, same files (default 0)")
-    data.add_argument("--workers", type=int, default=_cores(),
+    data.add_argument("--workers", type=int, default=usable_cores(),
                       help="local dask worker processes; 0 solves in this process (default: all cores)")
     data.add_argument("--scheduler", default=None, help="address of a running dask scheduler to use instead")
     data.add_argument("--quiet", action="store_true", help="no progress bars")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from opfmu.cli import usable_cores
 from surrogate.data import generate, preset
 
 
@@ -138,14 +139,10 @@ def interrupt_and_wait(process, timeout: float):
     return process.returncode, err
 
 
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-
-
 def pytest_xdist_auto_num_workers(config):
     """`-n auto` (pyproject's addopts): a worker per core, at most 4 (each holds torch and the FMUs
     its tests load; the CI machine has 2 cores)."""
-    return max(1, min(4, _cores()))
+    return max(1, min(4, usable_cores()))
 
 
 def pytest_configure(config):
@@ -154,7 +151,7 @@ def pytest_configure(config):
     if workers > 1:
         import torch
 
-        torch.set_num_threads(max(1, _cores() // workers))
+        torch.set_num_threads(max(1, usable_cores() // workers))
 
 
 def optional_tools() -> dict:
