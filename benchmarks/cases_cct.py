@@ -1,8 +1,10 @@
-"""Critical clearing times of the cases converted from ANDES, by native reference FMUs through the
-co-simulation master, by the monolithic DAE and by ANDES' own simulation, each bisected to the
-same resolution (issue 26's goal: the native FMUs at h = 10 ms within 5 ms of ANDES' bisection).
+"""Critical clearing times of the cases converted from ANDES, by native reference FMUs or surrogate
+FMUs through the co-simulation master, by the monolithic DAE and by ANDES' own simulation, each
+bisected to the same resolution (issue 26's goal: the FMUs at h = 10 ms within 5 ms of ANDES'
+bisection). The surrogate kind puts a surrogate FMU on every machine its dynamic data name an operator
+for (kundur's four) and native FMUs on the rest.
 
-    python benchmarks/cases_cct.py [--cases kundur ieee14] [--kinds reference monolithic andes]
+    python benchmarks/cases_cct.py [--cases kundur ieee14] [--kinds reference surrogate monolithic andes]
         [--fmu-step 0.01] [--andes-step 0.001] [--resolution 0.001] [--fault-impedance 1e-4]
         [--faults 7,5:5-6] [--out runs/benchmarks/cases_cct.png]
 
@@ -30,7 +32,7 @@ FAULTS = {"kundur": [(7, None), (5, "5-6")],
           "ieee39": [(16, None), (16, "16-17")],
           "npcc": [(30, None), (30, "29-30")]}
 FAULT_START_S = 1.0
-LABELS = {"reference": "native FMUs", "monolithic": "monolithic", "andes": "ANDES"}
+LABELS = {"reference": "native FMUs", "surrogate": "surrogate FMUs", "monolithic": "monolithic", "andes": "ANDES"}
 
 
 def _runner(kind, case, fmu_step, andes_step):

@@ -317,24 +317,39 @@ NETWORK = Family(
 
 # The `case-<name>` families: windows recorded from a shipped grid case (reference_models/grid) run
 # monolithically through faults at each of its buses. A run per (bus, clearing time, fault
-# impedance), the fault from CASE_FAULT_START_S to that plus the clearing time, CASE_STOP_S long
-# (cut where two rotor angles get pi apart), rows every CASE_SAMPLE_S s and both sides of each event;
-# the window starts at one of the events (as a surrogate FMU's window does at an input jump) a
-# share CASE_EVENT_SHARE of the time, else anywhere in the run; its initial state is the unit's state
-# there, moved by up to CASE_JITTER times the component's state scales (a co-simulation starts
-# each window from its own last state); its inputs are the unit's machine inputs as recorded.
-CASE_CLEARING_S = (0.05, 0.1, 0.15, 0.2)
+# impedance, trip): the fault from CASE_FAULT_START_S to that plus the clearing time, with no trip or
+# with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at);
+# clearing times reach past the critical clearing times of the shipped cases (0.2-0.45 s), so the
+# windows cover the long faults a CCT bisection runs and the swings on either side of it. Each run
+# lasts CASE_STOP_S (cut where two rotor angles get pi apart), rows every CASE_SAMPLE_S s and both
+# sides of each event; the window starts at one of the events (as a surrogate FMU's window does at an
+# input jump) a share CASE_EVENT_SHARE of the time, else anywhere in the run; its initial state is the
+# unit's state there, moved by up to CASE_JITTER times the component's state scales (a co-simulation
+# starts each window from its own last state); its inputs are the unit's machine inputs as recorded.
+CASE_CLEARING_S = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45)
 CASE_FAULT_IMPEDANCES = (1e-4j, 0.05j)  # pu: bolted, and a fault that leaves some voltage
 CASE_FAULT_START_S, CASE_STOP_S, CASE_SAMPLE_S = 0.5, 4.0, 0.005
 CASE_EVENT_SHARE, CASE_JITTER = 0.3, 0.1
+
+
+def case_trips(network, bus: int) -> tuple:
+    """None (no trip) and one branch of each corridor at `bus` that may open (parallel circuits
+    between the same two buses count once)."""
+    corridors = {}
+    for name in network.trips_at(bus):
+        branch = network.branch(name)
+        corridors.setdefault(frozenset((branch.from_bus, branch.to_bus)), name)
+    return (None, *corridors.values())
 
 
 def case_contingencies(case) -> list:
     """The contingencies (reference_models.grid.contingency) the `case-` family of `case` records."""
     from .grid.contingency import Contingency
 
-    return [Contingency(bus, CASE_FAULT_START_S + clearing, None, CASE_FAULT_START_S, z, case.network)
-            for bus in case.network.buses for clearing in CASE_CLEARING_S for z in CASE_FAULT_IMPEDANCES]
+    network = case.network
+    return [Contingency(bus, CASE_FAULT_START_S + clearing, trip, CASE_FAULT_START_S, z, network)
+            for bus in network.buses for trip in case_trips(network, bus)
+            for clearing in CASE_CLEARING_S for z in CASE_FAULT_IMPEDANCES]
 
 
 _CASE_RUNS: dict = {}  # (case name, contingency index) -> GridResult: each run serves many windows
