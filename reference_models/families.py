@@ -319,8 +319,8 @@ NETWORK = Family(
 # monolithically through faults at each of its buses. A run per (bus, clearing time, fault
 # impedance, trip): the fault from CASE_FAULT_START_S to that plus the clearing time, with no trip or
 # with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at);
-# clearing times reach past the critical clearing times of the shipped cases (0.2-0.45 s), so the
-# windows cover the long faults a CCT bisection runs and the swings on either side of it. Each run
+# clearing times reach 450 ms, past most CCTs of the shipped cases (kundur: 320-490 ms; its buses 8
+# and 9 without a trip 560-620 ms), so the windows cover the long faults a CCT bisection runs. Each run
 # lasts CASE_STOP_S (cut where two rotor angles get pi apart), rows every CASE_SAMPLE_S s and both
 # sides of each event; the window starts at one of the events (as a surrogate FMU's window does at an
 # input jump) a share CASE_EVENT_SHARE of the time, else anywhere in the run; its initial state is the

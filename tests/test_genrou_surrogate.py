@@ -177,8 +177,8 @@ def test_the_surrogate_fmu_of_a_kundur_machine_follows_the_native_fmu_through_a_
 
 
 def test_the_case_recipe_records_faults_past_the_cct_with_one_circuit_of_each_corridor_opened(kundur):
-    """Kundur's CCT faults last 320-430 ms and may open a line at clearing: the case family's runs
-    reach 450 ms, and open each corridor at the faulted bus once (7-8 has three circuits)."""
+    """Most of Kundur's CCT faults last 320-490 ms and may open a line at clearing: the case family's
+    runs reach 450 ms, and open each corridor at the faulted bus once (7-8 has three circuits)."""
     from reference_models.families import CASE_CLEARING_S, case_contingencies, case_trips
 
     network = kundur.network
