@@ -82,6 +82,7 @@ def test_progress_off_a_terminal_is_plain_lines_not_bar_redraws(tmp_path):
     result = opfmu("data", "--preset", str(spec), "--out", str(tmp_path / "d"), "--workers", "0")
     assert result.returncode == 0, result.stderr
     assert "\r" not in result.stderr
+    assert "sampling train: 8/8 window (100%" in result.stderr  # before the solves: a case family runs grids
     assert "solving train: 8/8 traj (100%" in result.stderr
 
 

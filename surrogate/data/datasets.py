@@ -104,7 +104,8 @@ def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner
         trained_on = []  # (x0, u) of the splits a model trains on: its envelope
         for split in SPLITS:
             x0, signals, names = sample_split(preset.counts[split], preset.families, ic_box, preset.horizon,
-                                              rngs[split], pool, preset.reachable_fraction, preset.levels, params)
+                                              rngs[split], pool, preset.reachable_fraction, preset.levels, params,
+                                              progress, f"sampling {split}")
             _check_channels(signals, model)
             arrays = {"x0": x0, "u": np.stack([s(t) for s in signals]), "t": t,
                       "family": np.array(names), "signal": np.array([json.dumps(s.to_dict()) for s in signals])}
