@@ -177,15 +177,15 @@ def test_the_surrogate_fmu_of_a_kundur_machine_follows_the_native_fmu_through_a_
 
 
 def test_the_case_recipe_records_faults_past_the_cct_with_one_circuit_of_each_corridor_opened(kundur):
-    """Most of Kundur's CCT faults last 320-490 ms and may open a line at clearing: the case family's
-    runs reach 450 ms, and open each corridor at the faulted bus once (7-8 has three circuits)."""
+    """Kundur's CCT faults last 320-620 ms and may open a line at clearing: the case family's runs
+    reach 700 ms, and open each corridor at the faulted bus once (7-8 has three circuits)."""
     from reference_models.families import CASE_CLEARING_S, case_contingencies, case_trips
 
     network = kundur.network
     assert case_trips(network, 7) == (None, "6-7", "7-8")
     assert case_trips(network, 1) == (None,)  # its one branch is G1's transformer
     runs = case_contingencies(kundur)
-    assert max(c.clear_s - c.fault_start for c in runs) >= 0.45 - 1e-12
+    assert max(c.clear_s - c.fault_start for c in runs) >= 0.7 - 1e-12
     at_7 = {(c.trip, round(c.clear_s - c.fault_start, 3)) for c in runs if c.fault_bus == 7}
-    assert {(trip, clearing) for trip in (None, "6-7", "7-8") for clearing in (0.05, 0.45)} <= at_7
+    assert {(trip, clearing) for trip in (None, "6-7", "7-8") for clearing in (0.05, 0.7)} <= at_7
     assert len(runs) == len(CASE_CLEARING_S) * 2 * sum(len(case_trips(network, b)) for b in network.buses)
