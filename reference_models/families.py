@@ -318,7 +318,11 @@ NETWORK = Family(
 # The `case-<name>` families: windows recorded from a shipped grid case (reference_models/grid) run
 # monolithically through faults at each of its buses. A run per (bus, clearing time, fault
 # impedance, trip): the fault from CASE_FAULT_START_S to that plus the clearing time, with no trip or
-# with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at);
+# with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at),
+# every other clearing time with the case's own events (as `grid run` and `grid cct` apply them by
+# default: kundur opens 8-9:2 at 2 s, into the swings) and the rest without (as --no-case-events and
+# benchmarks/cases_cct.py run); where the case's events refuse a contingency (e.g. they close the
+# branch it opens), that run goes without them;
 # clearing times reach 700 ms, past the CCTs of the shipped cases' faults (kundur: 320-490 ms with a
 # trip, up to 620 ms at its buses 8 and 9 without), so the windows cover the long faults a CCT
 # bisection runs. Each run
@@ -344,13 +348,24 @@ def case_trips(network, bus: int) -> tuple:
 
 
 def case_contingencies(case) -> list:
-    """The contingencies (reference_models.grid.contingency) the `case-` family of `case` records."""
+    """The contingencies (reference_models.grid.contingency) the `case-` family of `case` records:
+    per bus, trip, clearing time and fault impedance one, the case's own events included at every
+    other clearing time (see CASE_CLEARING_S)."""
     from .grid.contingency import Contingency
 
     network = case.network
-    return [Contingency(bus, CASE_FAULT_START_S + clearing, trip, CASE_FAULT_START_S, z, network)
-            for bus in network.buses for trip in case_trips(network, bus)
-            for clearing in CASE_CLEARING_S for z in CASE_FAULT_IMPEDANCES]
+
+    def contingency(bus, trip, k, z):
+        args = (bus, CASE_FAULT_START_S + CASE_CLEARING_S[k], trip, CASE_FAULT_START_S, z, network)
+        if k % 2 == 1 and case.events:
+            try:
+                return Contingency(*args, case.events)
+            except ValueError:  # the case's events and this contingency exclude each other
+                pass
+        return Contingency(*args)
+
+    return [contingency(bus, trip, k, z) for bus in network.buses for trip in case_trips(network, bus)
+            for k in range(len(CASE_CLEARING_S)) for z in CASE_FAULT_IMPEDANCES]
 
 
 _CASE_RUNS: dict = {}  # (case name, contingency index) -> GridResult: each run serves many windows

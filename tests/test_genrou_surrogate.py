@@ -178,7 +178,9 @@ def test_the_surrogate_fmu_of_a_kundur_machine_follows_the_native_fmu_through_a_
 
 def test_the_case_recipe_records_faults_past_the_cct_with_one_circuit_of_each_corridor_opened(kundur):
     """Kundur's CCT faults last 320-620 ms and may open a line at clearing: the case family's runs
-    reach 700 ms, and open each corridor at the faulted bus once (7-8 has three circuits)."""
+    reach 700 ms, and open each corridor at the faulted bus once (7-8 has three circuits); every
+    other clearing time carries the case's own 8-9:2 opening, unless it would cut buses 8 and 9
+    apart (the trip of 8-9 opens the other circuit)."""
     from reference_models.families import CASE_CLEARING_S, case_contingencies, case_trips
 
     network = kundur.network
@@ -189,3 +191,7 @@ def test_the_case_recipe_records_faults_past_the_cct_with_one_circuit_of_each_co
     at_7 = {(c.trip, round(c.clear_s - c.fault_start, 3)) for c in runs if c.fault_bus == 7}
     assert {(trip, clearing) for trip in (None, "6-7", "7-8") for clearing in (0.05, 0.7)} <= at_7
     assert len(runs) == len(CASE_CLEARING_S) * 2 * sum(len(case_trips(network, b)) for b in network.buses)
+    with_events = {(c.fault_bus, c.trip, round(c.clear_s - c.fault_start, 3)) for c in runs if c.events}
+    assert (7, None, 0.1) in with_events and (7, None, 0.05) not in with_events
+    assert (8, "8-9", 0.1) not in with_events and (8, "7-8", 0.1) in with_events
+    assert all(c.events == kundur.events for c in runs if c.events)
