@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -318,14 +319,13 @@ NETWORK = Family(
 # The `case-<name>` families: windows recorded from a shipped grid case (reference_models/grid) run
 # monolithically through faults at each of its buses. A run per (bus, clearing time, fault
 # impedance, trip): the fault from CASE_FAULT_START_S to that plus the clearing time, with no trip or
-# with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at),
-# every other clearing time with the case's own events (as `grid run` and `grid cct` apply them by
-# default: kundur opens 8-9:2 at 2 s, into the swings) and the rest without (as --no-case-events and
-# benchmarks/cases_cct.py run); where the case's events refuse a contingency (e.g. they close the
-# branch it opens), that run goes without them;
-# clearing times reach 700 ms, past the CCTs of the shipped cases' faults (kundur: 320-490 ms with a
-# trip, up to 620 ms at its buses 8 and 9 without), so the windows cover the long faults a CCT
-# bisection runs. Each run
+# with one circuit of each corridor at the faulted bus opened at the clearing (Network.trips_at).
+# Clearing times reach 700 ms, past the CCTs of the shipped cases' faults (kundur: 320-490 ms with a
+# trip, 560-660 ms at its buses 8 and 9 without), so the windows cover the long faults a CCT
+# bisection runs. Every other clearing time carries the case's own events (as `grid run` and `grid
+# cct` apply them by default: kundur opens 8-9:2 at 2 s, into the swings), the rest go without (as
+# --no-case-events and benchmarks/cases_cct.py run); where the case's events refuse a contingency
+# (e.g. its trip and theirs would cut the network apart), that run goes without them. Each run
 # lasts CASE_STOP_S (cut where two rotor angles get pi apart), rows every CASE_SAMPLE_S s and both
 # sides of each event; the window starts at one of the events (as a surrogate FMU's window does at an
 # input jump) a share CASE_EVENT_SHARE of the time, else anywhere in the run; its initial state is the
@@ -371,14 +371,21 @@ def case_contingencies(case) -> list:
 _CASE_RUNS: dict = {}  # (case name, contingency index) -> GridResult: each run serves many windows
 
 
+@lru_cache(maxsize=None)
+def _shipped_case_contingencies(name: str) -> tuple:
+    """case_contingencies of the shipped case `name`, built once (ieee39's take seconds)."""
+    from .grid.case import shipped_case
+
+    return tuple(case_contingencies(shipped_case(name)))
+
+
 def _case_run(name: str, index: int):
     if (name, index) not in _CASE_RUNS:
         from .grid.case import shipped_case
         from .grid.monolithic import System, simulate
 
-        case = shipped_case(name)
-        contingency = case_contingencies(case)[index]
-        _CASE_RUNS[name, index] = simulate(System(case), contingency, stop=CASE_STOP_S, step=CASE_SAMPLE_S,
+        contingency = _shipped_case_contingencies(name)[index]
+        _CASE_RUNS[name, index] = simulate(System(shipped_case(name)), contingency, stop=CASE_STOP_S, step=CASE_SAMPLE_S,
                                            rtol=1e-8, atol=1e-10, event_rows=True, stop_at_loss=True)
     return _CASE_RUNS[name, index]
 
@@ -395,7 +402,7 @@ def case_family(name: str) -> Family:
 
     case = shipped_case(name)
     component = case.units[0].machine.component
-    runs = len(case_contingencies(case))
+    runs = len(_shipped_case_contingencies(name))
 
     def build(p, horizon, machine):
         units = case_units(case, component, machine)
