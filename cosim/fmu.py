@@ -92,6 +92,7 @@ class FMU:
         self.name = name
         self.messages = []
         self.fmu = None
+        self._log_key = None
         self._initial = None
         self._directory = None
         if isinstance(source, tuple):
@@ -151,10 +152,11 @@ class FMU:
                                 if v.causality == "output" and getattr(self.variables.get(f"{v.name}0"), "causality", None) == "parameter")
         self.t = 0.0
         if self.version == 2:
-            from fmpy.fmi2 import FMU2Slave, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+            from fmpy.fmi2 import FMU2Slave
 
-            self._callbacks = fmi2CallbackFunctions()  # kept: ctypes must not free the logger
-            self._callbacks.logger = fmi2CallbackLoggerTYPE(self._log)
+            from cosim import fmi2_logging
+
+            self._callbacks, self._log_key = fmi2_logging.callbacks(self._log)
             try:
                 self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(self.directory),
                                      modelIdentifier=cs.modelIdentifier, instanceName=self.name)
@@ -208,9 +210,9 @@ class FMU:
 
     # what the FMU logs
 
-    def _log(self, env, instance, status, category, message) -> None:
-        """fmi2CallbackLogger: keeps (status, text)."""
-        self._log3(env, status, category, message)
+    def _log(self, status, category, message) -> None:
+        """The fmi2_logging sink: keeps (status, text)."""
+        self._log3(None, status, category, message)
 
     def _log3(self, env, status, category, message) -> None:
         """fmi3LogMessageCallback (no instance argument): keeps (status, text)."""
@@ -409,6 +411,11 @@ class FMU:
             except Exception:
                 pass
             self.fmu = None
+        if self._log_key is not None:
+            from cosim import fmi2_logging
+
+            fmi2_logging.release(self._log_key)
+            self._log_key = None
         if self._directory is not None:
             self._cleanup()
             self._directory = None

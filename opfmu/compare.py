@@ -167,6 +167,9 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     parameters: further start values by name (e.g. the surrogate's rollover_horizon); role: which
     FMU it is, for messages ("the surrogate")."""
     from fmpy import instantiate_fmu, read_model_description, simulate_fmu
+    from fmpy.fmi2 import FMU2Slave
+
+    from cosim import fmi2_logging
 
     md = read_model_description(str(fmu_dir))
     known = {v.name for v in md.modelVariables}
@@ -176,15 +179,24 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     unknown = sorted(set(parameters or {}) - known)
     if unknown:
         raise CompareError(f"{md.modelName} has no parameter {', '.join(unknown)}")
-    messages, in_step = [], [0.0]
+    messages, in_step, log_key = [], [0.0], None
 
-    def logger(_env, _instance, status, category, message):
+    def keep(status, category, message):
         messages.append(f"{category.decode(errors='replace')}: {message.decode(errors='replace')}")
 
     started = time.perf_counter()
     try:
-        fmu = instantiate_fmu(str(fmu_dir), md, "CoSimulation", debug_logging=True, logger=logger)
+        if md.fmiVersion.startswith("2"):  # fmi2_logging: a logger that outlives this FMU (fmpy's proxy keeps it)
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(fmu_dir), modelIdentifier=md.coSimulation.modelIdentifier,
+                            instanceName="instance1")
+            callbacks, log_key = fmi2_logging.callbacks(keep)
+            fmu.instantiate(callbacks=callbacks, loggingOn=True)
+        else:
+            fmu = instantiate_fmu(str(fmu_dir), md, "CoSimulation", debug_logging=True,
+                                  logger=lambda _env, status, category, message: keep(status, category, message))
     except Exception as exc:  # fmpy raises plain Exceptions for a missing or unloadable binary
+        if log_key is not None:
+            fmi2_logging.release(log_key)
         raise CompareError(f"{role} FMU {md.modelName} cannot be loaded: {_load_failure(exc, fmu_dir)}") from None
     do_step = fmu.doStep
 
@@ -207,6 +219,8 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     finally:
         fmu.freeInstance()
         fmu.freeLibrary()
+        if log_key is not None:
+            fmi2_logging.release(log_key)
     wall = time.perf_counter() - started
     return Run({n: np.asarray(result[n], dtype=float) for n in ["time", *names]}, wall, in_step[0], messages)
 
