@@ -212,13 +212,13 @@ class FMU:
 
     def _log(self, status, category, message) -> None:
         """The fmi2_logging sink: keeps (status, text)."""
-        self._log3(None, status, category, message)
-
-    def _log3(self, env, status, category, message) -> None:
-        """fmi3LogMessageCallback (no instance argument): keeps (status, text)."""
         self.messages.append((int(status), message.decode(errors="replace") if message else ""))
         if len(self.messages) > LOG_KEPT:
             del self.messages[:-LOG_KEPT]
+
+    def _log3(self, env, status, category, message) -> None:
+        """fmi3LogMessageCallback (no instance argument): as _log."""
+        self._log(status, category, message)
 
     def last_message(self) -> str:
         return self.messages[-1][1] if self.messages else "(no message logged)"

@@ -187,8 +187,7 @@ def simulate(fmu_dir, inputs: Inputs, stop_time: float, step: float, names, para
     started = time.perf_counter()
     try:
         if md.fmiVersion.startswith("2"):  # fmi2_logging: a logger that outlives this FMU (fmpy's proxy keeps it)
-            fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(fmu_dir), modelIdentifier=md.coSimulation.modelIdentifier,
-                            instanceName="instance1")
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(fmu_dir), modelIdentifier=md.coSimulation.modelIdentifier)
             callbacks, log_key = fmi2_logging.callbacks(keep)
             fmu.instantiate(callbacks=callbacks, loggingOn=True)
         else:
