@@ -27,6 +27,33 @@ class ParameterError(ValueError):
     """A parameter set that a component refuses: unknown key, not a number, out of range."""
 
 
+#: The load-flow point a device with a bus port starts from (keys of its initialisation's `given`):
+#: bus voltage magnitude V0 [pu] and angle theta0 [rad] (network frame), and its share P0 + jQ0 of
+#: the power injected at its bus [pu, system base, generator convention: a load's is negative].
+LOAD_FLOW = ("V0", "theta0", "P0", "Q0")
+
+
+@dataclass(frozen=True)
+class Initialisation:
+    """How a component starts at rest from what its surroundings fix (ANDES: each variable's initial
+    equation, declared with the model).
+
+    solves: the inputs its start sets itself, by name: set points (an exciter's Vref, a governor's
+        Pref) and inputs linked from a device of its unit, which then has to give that value (a
+        machine's Pm and Efd, an inverter's current commands).
+    start(given, p) -> (x0 [n_x], {input: value} for every name in `solves`), where `given` holds
+        by name the value of every other input (a bus device's voltage inputs, a governor's speed),
+        the value each output that a device it drives has solved for must take (an exciter's Efd),
+        and for a component with a bus port the load-flow point LOAD_FLOW. Raises ValueError,
+        naming the component, where there is no such rest (a limit, no solution).
+
+    A component without one starts at `equilibrium(u)` with every input given (a stabiliser).
+    """
+
+    solves: tuple
+    start: Callable
+
+
 @dataclass(frozen=True)
 class Quantity:
     """One state, input or output: name, unit, what it is, and for an input its start value, the
@@ -82,6 +109,8 @@ class Component:
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
     ports: how it connects (reference_models.ports): its bus port and its control links.
+    initialisation: how it starts at rest from the load flow and from what the devices it drives
+        need (`Initialisation`); None: at `equilibrium` with every input given.
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
@@ -103,6 +132,7 @@ class Component:
     drift: Drift | None = None
     ports: Ports = Ports()
     reset: Callable | None = None
+    initialisation: Initialisation | None = None
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -117,6 +147,9 @@ class Component:
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
         self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")
+        if self.initialisation is not None and not set(self.initialisation.solves) <= set(self.input_names):
+            raise ValueError(f"component {self.name!r}: its initialisation solves {self.initialisation.solves}, "
+                             f"which are not all inputs ({', '.join(self.input_names)})")
 
     @property
     def state_names(self) -> tuple:
@@ -173,6 +206,24 @@ class Component:
         if self.rest is None:
             return self.steady_state(u, p)
         return np.asarray(self.rest(np.asarray(u, dtype=float), p), dtype=float)
+
+    def start(self, given: Mapping, p=None) -> tuple:
+        """(x0 [n_x], inputs {name: value} for every input) of the component at rest, from `given`
+        (see Initialisation: the inputs it does not solve, the outputs demanded of it, and for a
+        bus device the load-flow point). ValueError where there is no rest or an input is missing."""
+        p = p if p is not None else self.params_type()
+        init = self.initialisation
+        solves = init.solves if init is not None else ()
+        missing = [n for n in self.input_names if n not in solves and n not in given]
+        if missing:
+            raise ValueError(f"{self.name}: no start without the input(s) {', '.join(missing)}")
+        inputs = {n: float(given[n]) for n in self.input_names if n not in solves}
+        if init is None:
+            x0 = self.steady_state(np.array([inputs[n] for n in self.input_names]), p)
+            return x0, inputs
+        x0, solved = init.start(dict(given), p)
+        inputs.update({n: float(solved[n]) for n in solves})
+        return np.asarray(x0, dtype=float), {n: inputs[n] for n in self.input_names}
 
     def params(self, values: Mapping | None = None):
         """The component's parameters from a mapping of some of them (the rest default), checked:

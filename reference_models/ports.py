@@ -52,6 +52,8 @@ SIGNALS = {
     "terminal_current_real": ("I_re", "pu", "machine current into the bus, real part, system base: an exciter's input"),
     "terminal_current_imaginary": ("I_im", "pu", "machine current into the bus, imaginary part, system base: "
                                    "an exciter's input"),
+    "rotor_angle": ("delta", "rad", "rotor angle (network frame) of a synchronous machine: what the stability "
+                    "judgement compares between machines"),
 }
 
 TOOL_NAME = "opfmu"
