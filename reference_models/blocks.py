@@ -220,3 +220,33 @@ def rectifier_loading(m, IN):
                  where(m, IN <= 0.433, 1.0 - 0.577 * IN,
                        where(m, IN <= 0.75, root,
                              where(m, IN <= 1.0, 1.732 * (1.0 - IN), 0.0 * IN))))
+
+
+def low_value_gate(m, u1, u2):
+    """ANDES' LVGate: the smaller of u1 and u2 (u2 where they are equal)."""
+    return where(m, u1 < u2, u1, u2)
+
+
+def dead_band(m, u, low: float, high: float):
+    """Continuous dead band (ANDES' DeadBand1, centre 0): 0 for low <= u <= high, u - high above
+    the band, u - low below it."""
+    return where(m, u > high, u - high, where(m, u < low, u - low, 0.0 * u))
+
+
+def step_dead_band(m, u, low: float, high: float):
+    """Dead band that passes its input unshifted outside the band: u where u > high or u < low,
+    else 0 (the output steps at the band's edges; ANDES' DeadBand as `u (1 - zi)`)."""
+    return where(m, u > high, u, where(m, u < low, u, 0.0 * u))
+
+
+def rate_limited_non_windup(m, rate, x, rate_low, rate_high, low: float, high: float):
+    """The derivative of a state x under a rate limit [rate_low, rate_high] (values of the
+    namespace, e.g. moving with a signal) and a non-windup limit [low, high] (ANDES'
+    AntiWindupRate): `rate` clipped to the rate limits, then `non_windup`."""
+    return non_windup(m, clip_between(m, rate, rate_low, rate_high), x, low, high)
+
+
+def rate_limited_non_windup_reset(m, rate, x, rate_low, rate_high, low: float, high: float):
+    """The state of `rate_limited_non_windup` after its limit's reset (`non_windup_reset` at the
+    rate-limited derivative)."""
+    return non_windup_reset(m, clip_between(m, rate, rate_low, rate_high), x, low, high)
