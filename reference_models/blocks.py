@@ -250,3 +250,15 @@ def rate_limited_non_windup_reset(m, rate, x, rate_low, rate_high, low: float, h
     """The state of `rate_limited_non_windup` after its limit's reset (`non_windup_reset` at the
     rate-limited derivative)."""
     return non_windup_reset(m, clip_between(m, rate, rate_low, rate_high), x, low, high)
+
+
+def pid_tracking(m, u, xi, xd, kp: float, ki: float, kd: float, Td: float, ks: float, low: float, high: float):
+    """PID controller kp + ki / s + s kd / (1 + s Td) with a windup limiter [low, high] on its output
+    and tracking anti-windup (ANDES' PIDTrackAW): (dxi/dt, dxd/dt, y) with
+    Td dxd/dt = u - xd (the derivative's washout), ys = kp u + xi + kd (u - xd) / Td,
+    y = ys clipped to [low, high], dxi/dt = ki (u - ks (ys - y)): the clipped excess, times the
+    tracking gain ks, is fed back to the integrator. Nothing is reset. Td must be > 0."""
+    d_xd, derivative = washout(m, u, xd, kd, Td)
+    ys = kp * u + xi + derivative
+    y = clip(m, ys, low, high)
+    return ki * (u - ks * (ys - y)), d_xd, y
