@@ -43,8 +43,8 @@ def angle_error_deg(result, reference) -> float:
 
     from cosim.outputs import on_times
 
-    d = result.states["delta"]
-    r = on_times(reference, result.time, reference.states["delta"])
+    d = result.angles
+    r = on_times(reference, result.time, reference.angles)
     return math.degrees(float(np.nanmax(np.abs((d - d[:, :1]) - (r - r[:, :1])))))
 
 

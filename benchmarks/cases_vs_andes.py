@@ -45,7 +45,7 @@ def _differences(result, times) -> np.ndarray:
     """Every rotor-angle difference to the first machine [rad] at `times` [n, g]."""
     from cosim.outputs import on_times
 
-    d = on_times(result, times, result.states["delta"])
+    d = on_times(result, times, result.angles)
     return d - d[:, :1]
 
 
@@ -81,7 +81,7 @@ def compare(name: str, bus: int, clear: float, trip: bool, stop: float, step: fl
     started = time.perf_counter()
     mono = simulate(System(case), contingency, stop, step=step, rtol=1e-9, atol=1e-11, resets=resets)
     mono_s = time.perf_counter() - started
-    a = andes.states["delta"]
+    a = andes.angles
     angle_error = _angle_error(mono, andes, andes.time)
     half = {}
     if half_step:

@@ -177,7 +177,7 @@ class AndesRunner:
         for k, u in enumerate(units):
             name = u.machine.component.ports.input("field_voltage")
             field.setdefault(name, nan.copy())[:, k] = Efd[:, k]
-        result = GridResult(time=t, states={"delta": delta, "omega": omega}, Vs=np.abs(V_gen),
+        result = GridResult(time=t, states={"delta": delta, "omega": omega}, rotor_angle=delta, Vs=np.abs(V_gen),
                             theta_vs=theta_bus[:, gen_cols], P=nan, Q=nan, V_bus=np.abs(V), theta_bus=theta_bus,
                             stable=lost is None, loss_of_synchronism_s=lost,
                             events=tuple((tp.start, tp.description) for tp in topologies[1:]),

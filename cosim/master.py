@@ -58,7 +58,7 @@ import numpy as np
 
 from reference_models.grid.case import Case, external_impedance, step_order, unit_wiring
 from reference_models.grid.contingency import Contingency
-from reference_models.grid.result import ROTOR_ANGLE, GridResult
+from reference_models.grid.result import GridResult, device_labels, rotor_angle_state
 
 from .fmu import FMU, CouplingError
 
@@ -303,7 +303,8 @@ class _Unit:
         self.current_rows = tuple(outputs_index for outputs_index in
                                   (self.fmus[0].output_names.index(n) for n in bus.current))
         self.voltage_columns = tuple(self.inputs[0].index(n) for n in bus.voltage)
-        self.angle_row = unit.machine.component.state_names.index(ROTOR_ANGLE)
+        angle = rotor_angle_state(unit.machine.component)
+        self.angle_row = None if angle is None else unit.machine.component.state_names.index(angle)
         self.impedance = external_impedance(unit.machine)
         # link values at the start of the coming step (first: the consumers' start values), at the
         # start of the step before (None: none to extrapolate from) and at its end (guessed, then
@@ -548,7 +549,9 @@ class GridMaster:
         topology = topologies[0]
         n = len(self.units)
         standing = [[f.outputs() for f in u.fmus] for u in self.units]  # every device's outputs now
-        theta_ref = np.array([float(x[0][u.angle_row]) for x, u in zip(standing, self.units)])  # continuous angles
+        # continuous angles: each bus angle kept near its machine's rotor angle (an inverter's: its load-flow angle)
+        theta_ref = np.array([float(x[0][u.angle_row]) if u.angle_row is not None else float(self.case.flow.theta[i])
+                              for x, u, i in zip(standing, self.units, self._gen_rows)])
         active = self._active(topology)
         V = self.case.flow.V_complex[self._gen_rows].copy()
         V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, active, timing)
@@ -656,7 +659,7 @@ class GridMaster:
         """The time two rotor angles of the `active` units first got pi apart, linear between the last
         two rows; None if not."""
         def spread(row):
-            d = [row["devices"][k][0][self.units[k].angle_row] for k in active]
+            d = [row["devices"][k][0][self.units[k].angle_row] for k in active if self.units[k].angle_row is not None]
             return float(max(d) - min(d)) if d else 0.0
 
         now = spread(rows[-1])
@@ -671,18 +674,25 @@ class GridMaster:
     def _result(self, rows, topologies, lost) -> GridResult:
         time_ = np.array([r["time"] for r in rows])
         g = len(self.units)
-        states, inputs = {}, {}
-        for k, u in enumerate(self.units):
+        states, inputs, device_states = {}, {}, {}
+        angles = np.full((len(rows), g), np.nan)
+        for k, (u, labels) in enumerate(zip(self.units, device_labels(self.case.units))):
             for j, names in enumerate(u.state_names):
                 values = np.array([r["devices"][k][j][:len(names)] for r in rows])
                 for i, name in enumerate(names):
-                    states.setdefault(name, np.full((len(rows), g), np.nan))[:, k] = values[:, i]
+                    device_states[f"{labels[j]}_{name}"] = values[:, i]
+                    if j == 0:
+                        states.setdefault(name, np.full((len(rows), g), np.nan))[:, k] = values[:, i]
+            if u.angle_row is not None:
+                angles[:, k] = [r["devices"][k][0][u.angle_row] for r in rows]
             values = np.array([r["inputs"][k] for r in rows])
             for i, name in enumerate(u.inputs[0]):
                 inputs.setdefault(name, np.full((len(rows), g), np.nan))[:, k] = values[:, i]
         V_gen = np.stack([r["V"] for r in rows])
         I_gen = np.stack([r["I"] for r in rows])
         S = V_gen * np.conj(I_gen)
+        for k, labels in enumerate(device_labels(self.case.units)):
+            device_states[f"{labels[0]}_P"], device_states[f"{labels[0]}_Q"] = S.real[:, k], S.imag[:, k]
         # bus voltages: the recovery of the topology in force at each row
         V_bus = np.empty((len(rows), len(self.case.buses)), dtype=complex)
         for i, t in enumerate(time_):
@@ -694,4 +704,5 @@ class GridMaster:
         return GridResult(time=time_, states=states, Vs=np.abs(V_gen), theta_vs=theta_vs, P=S.real, Q=S.imag,
                           V_bus=np.abs(V_bus), theta_bus=theta_bus, stable=lost is None, loss_of_synchronism_s=lost,
                           events=tuple((tp.start, tp.description) for tp in topologies[1:]),
-                          gen_buses=self.case.generator_buses, buses=self.case.buses, machine_inputs=inputs)
+                          gen_buses=self.case.generator_buses, buses=self.case.buses, machine_inputs=inputs,
+                          rotor_angle=angles, device_states=device_states)

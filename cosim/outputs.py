@@ -152,8 +152,10 @@ def errors(result, reference, fault=None, case=None) -> dict:
         raise ValueError("the two runs have no row at a common time outside their events")
     t = result.time[mine]
     out = {}
-    angle = max((float(np.max(np.abs(result.angle_difference(b)[mine] - reference.angle_difference(b)[theirs])))
-                 for b in result.gen_buses[1:]), default=0.0)
+    differences = [np.abs(result.angle_difference(b)[mine] - reference.angle_difference(b)[theirs])
+                   for b in result.gen_buses[1:]]
+    differences = [d for d in differences if np.any(np.isfinite(d))]
+    angle = max((float(np.nanmax(d)) for d in differences), default=0.0)
     out["angle_deg"] = math.degrees(angle)
     if case is not None:
         pairs = {"omega": (speed_deviation(result, case), speed_deviation(reference, case)),
@@ -185,8 +187,8 @@ def plot(path, runs: dict, title: str, case=None) -> None:
     for kind, result in runs.items():
         style = STYLES.get(kind, {})
         nan = np.full(result.Vs.shape, np.nan)
-        omega = speed_deviation(result, case) if case is not None else result.states.get("omega", nan)
-        Efd = field_voltage(result, case) if case is not None else result.states.get("Efd", nan)
+        omega = speed_deviation(result, case) if case is not None else nan
+        Efd = field_voltage(result, case) if case is not None else nan
         for k, bus in enumerate(result.gen_buses):
             color = style.get("color", colors[k % len(colors)])
             kw = {key: v for key, v in style.items() if key != "color"}

@@ -4,9 +4,10 @@ kinds, the monolithic reference, ANDES' own simulation: cosim.runners).
 
 A run is stable when no rotor-angle difference between two machines in service exceeds pi rad before
 the run's stop time (docs/grid.md, "The coupling", Stability): the spread max(delta) - min(delta)
-over the units [rad], whatever their model (SM4, GENROU and GENCLS all give `delta` in rad; their
-speeds, rad/s deviations or per unit, do not enter), the units a topology trips (`Topology.tripped`)
-left out from their trip on. It is ANDES' own criterion (TDS `ddelta_limit` = 180 deg over every
+over the units whose bus device gives a rotor angle [rad] (GridResult.angles: the `rotor_angle`
+signal of its ports, whatever its model; an inverter or a load gives none and is not judged), the
+units a topology trips (`Topology.tripped`) left out from their trip on. A case without two machines
+is judged stable. It is ANDES' own criterion (TDS `ddelta_limit` = 180 deg over every
 synchronous generator). The CCT of a fault and its clearing action is the longest fault duration
 after which the run is stable: bisection between a stable and an unstable clearing time to
 `resolution` (1 ms by default), the bracket found by doubling the fault duration from 50 ms.
@@ -49,7 +50,7 @@ def in_service(result, contingency: Contingency, stop: float) -> np.ndarray:
 
 def angle_spread(result, contingency: Contingency, stop: float) -> np.ndarray:
     """[n] rad: max - min of the rotor angles of the units in service at each row (0 with fewer than two)."""
-    delta = np.asarray(result.states["delta"], dtype=float)
+    delta = np.asarray(result.angles, dtype=float)
     mask = in_service(result, contingency, stop) & np.isfinite(delta)
     high = np.where(mask, delta, -np.inf).max(axis=1)
     low = np.where(mask, delta, np.inf).min(axis=1)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .component import Component, Parameters, Quantity
+from .component import Component, Initialisation, Parameters, Quantity
 from .piecewise import where
 from .ports import Link, Ports
 
@@ -125,6 +125,15 @@ def equilibrium(u, p: IEEE1Params) -> np.ndarray:
     return np.array([Efd, p.KF / p.TF * Efd, VR])
 
 
+
+def _start(given, p: IEEE1Params) -> tuple:
+    """(x0, {Vref}): IEEE1 at rest holding the field voltage given["Efd"] at the terminal voltage
+    given["Vt"] (initialisation.exciter_start)."""
+    from .initialisation import exciter_start
+
+    s = exciter_start(given["Efd"], given["Vt"], p)
+    return s.x0, {"Vref": s.Vref}
+
 IEEE1 = Component(
     name="ieee1",
     description="IEEE Type I exciter (Sauer-Pai, optional non-windup regulator limits)",
@@ -144,4 +153,5 @@ IEEE1 = Component(
     affine_states=(1,),
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=Initialisation(("Vref",), lambda given, p: _start(given, p)),
 )

@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .component import Component, Parameters, Quantity
+from .component import Component, Initialisation, Parameters, Quantity
 from .drift import Drift
 from .ports import BusPort, Link, Ports
 
@@ -178,6 +178,14 @@ def rest(u, p: SM4Params) -> np.ndarray:
     return equilibrium((max(Vs, min_voltage_with_equilibrium(p, Pm, Efd)), theta_vs, Pm, Efd), p)
 
 
+def _start(given, p: SM4Params) -> tuple:
+    """(x0, {Pm, Efd}): SM4 at rest at the load-flow point (initialisation.machine_start)."""
+    from .initialisation import machine_start
+
+    s = machine_start(given["V0"], given["theta0"], given["P0"], given["Q0"], p)
+    return s.x0, {"Pm": s.Pm, "Efd": s.Efd}
+
+
 SM4 = Component(
     name="sm4",
     description="SM4 synchronous machine: Sauer-Pai two-axis model on a bus of varying voltage",
@@ -207,7 +215,8 @@ SM4 = Component(
     drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=2.0),
     ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im")),
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
-                outputs=(Link("speed", "omega"), Link("electrical_power", "P"))),
+                outputs=(Link("rotor_angle", "delta"), Link("speed", "omega"), Link("electrical_power", "P"))),
+    initialisation=Initialisation(("Pm", "Efd"), lambda given, p: _start(given, p)),
 )
 
 STATE_NAMES = SM4.state_names

@@ -101,6 +101,7 @@ def _result(time, omega, events=(), Vs=None, machine_inputs=None, states=None):
     delta = np.zeros((n, g))
     Vs = np.ones((n, g)) if Vs is None else Vs
     return GridResult(time=np.asarray(time, float), states={"delta": delta, "omega": omega, **(states or {})},
+                      rotor_angle=delta,
                       Vs=Vs, theta_vs=delta, P=delta, Q=delta, V_bus=np.ones((n, len(KUNDUR.buses))),
                       theta_bus=np.zeros((n, len(KUNDUR.buses))), stable=True, loss_of_synchronism_s=None,
                       events=tuple(events), gen_buses=KUNDUR.generator_buses, buses=KUNDUR.buses,
@@ -124,7 +125,8 @@ def test_a_speed_in_rad_per_s_is_taken_as_it_is():
     wscc9 = shipped_case("wscc9")
     n, g = 2, 3
     zeros = np.zeros((n, g))
-    r = GridResult(time=np.array([0.0, 0.01]), states={"delta": zeros, "omega": zeros + 0.3, "Efd": zeros + 2.0},
+    r = GridResult(time=np.array([0.0, 0.01]), states={"delta": zeros, "omega": zeros + 0.3},
+                   machine_inputs={"Efd": zeros + 2.0}, rotor_angle=zeros,
                    Vs=zeros + 1, theta_vs=zeros, P=zeros, Q=zeros, V_bus=np.ones((n, 9)), theta_bus=np.zeros((n, 9)),
                    stable=True, loss_of_synchronism_s=None, events=(), gen_buses=(1, 2, 3), buses=wscc9.buses)
     np.testing.assert_array_equal(speed_deviation(r, wscc9), zeros + 0.3)

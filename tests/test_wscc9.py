@@ -156,7 +156,7 @@ def test_bus7_fault_cleared_by_tripping_5_7_first_swing():
     assert r.time[0] == r.time[1] == 0.0
     assert r.V_bus[0, wscc9.bus_index(7)] == pytest.approx(wscc9.load_flow().V[6], abs=1e-9)
     assert r.V_bus[1, wscc9.bus_index(7)] < 1e-4
-    columns = r.columns()
+    columns = r.columns(wscc9)
     assert {"time", "delta_1", "omega_3", "Efd_2", "V_9"} <= set(columns)
     assert columns["V_7"] is not None and len(columns["delta_2"]) == len(r.time)
 

@@ -502,121 +502,118 @@ def load_events(path) -> tuple:
 
 def unit_start(unit: Unit, op: dict) -> tuple:
     """The DeviceStart of every device of `unit` at the load-flow operating point op (V, theta, P, Q
-    of its generator): the machine at its equilibrium, each control component holding the signal the
-    machine takes from it at the terminal voltage."""
-    from ..initialisation import machine_start
-
-    machine = unit.machine
-    module = _standard_module(machine.component)
-    if module is not None:
-        x0, Pm, Efd = module.operating_point(op["V"], op["theta"], op["P"], op["Q"], machine.params)
-        given = {"mechanical_power": float(Pm), "field_voltage": float(Efd)}
-        bus = machine.component.ports.bus
-        inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
-        for link in machine.component.ports.inputs:
-            inputs[link.variable] = given[link.signal]
-        return at_rest(unit.devices, x0, inputs, f"generator at bus {unit.bus}")
-    ms = machine_start(op["V"], op["theta"], op["P"], op["Q"], machine.params)
-    given = {"mechanical_power": float(ms.Pm), "field_voltage": float(ms.Efd)}
-    bus = machine.component.ports.bus
-    inputs = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"]}
-    for link in machine.component.ports.inputs:
-        inputs[link.variable] = given[link.signal]
-    return at_rest(unit.devices, ms.x0, inputs, f"generator at bus {unit.bus}")
+    of its share of the bus injection): the bus device from its own initialisation (Component.start
+    with the load-flow point), then its control devices (`at_rest`)."""
+    device = unit.machine
+    component = device.component
+    bus = component.ports.bus
+    given = {bus.voltage[0]: op["V"], bus.voltage[1]: op["theta"], "V0": op["V"], "theta0": op["theta"],
+             "P0": op["P"], "Q0": op["Q"]}
+    where = f"{component.name.upper()} at bus {unit.bus}"
+    try:
+        x0, inputs = component.start(given, device.params)
+    except ValueError as exc:
+        raise CaseError(f"{where} has no start at the load flow: {' '.join(str(exc).split())[:160]}") from None
+    return at_rest(unit.devices, x0, inputs, where)
 
 
-def at_rest(devices, x0, machine_inputs: dict, where: str = "the unit") -> tuple:
-    """The DeviceStart of every device of a unit whose machine (devices[0]) is at rest in state x0
-    under `machine_inputs` (every input by name): each control component started holding the signal
-    the machine takes from it, at the terminal voltage (the bus voltage behind the machine's
-    external impedance)."""
-    from ..initialisation import exciter_start
+def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit") -> tuple:
+    """The DeviceStart of every device of a unit whose bus device (devices[0]) is at rest in state x0
+    under `bus_device_inputs` (every input by name), the control devices started from what the
+    devices they drive need (Component.start).
 
+    Order: a control device starts once every input it does not solve itself is known (the bus, the
+    terminal voltage behind the bus device's external impedance, the outputs of devices already
+    started) and every device that solves an input it gives has started (that value is what it has
+    to give): a stabiliser at rest before the exciter that takes its signal, the exciter after the
+    machine that solved the field voltage, a plant controller after the electrical controller that
+    solved its references. A device's outputs that others solved for are checked at its start."""
+    devices = list(devices)
+    ports = [d.component.ports for d in devices]
+    wiring = unit_wiring(ports, where)
     machine = devices[0]
     component = machine.component
     bus = component.ports.bus
-    u = np.array([float(machine_inputs[n]) for n in component.input_names])
-    y = component.output_values(np.asarray(x0, dtype=float), u, machine.params)
-    current = complex(y[component.output_names.index(bus.current[0])], y[component.output_names.index(bus.current[1])])
-    V = machine_inputs[bus.voltage[0]] * np.exp(1j * machine_inputs[bus.voltage[1]])
-    Vt = float(abs(V + external_impedance(machine) * current))
-    given = {"terminal_voltage": Vt}
-    for link in component.ports.inputs:
-        given[link.signal] = float(machine_inputs[link.variable])
-    starts = [DeviceStart(tuple(float(v) for v in x0), dict(machine_inputs))]
-    if any(_standard_module(d.component) is not None for d in devices[1:]):
-        return tuple(starts) + _standard_controls_at_rest(devices, x0, y, Vt, V, machine_inputs, where)
-    for device in devices[1:]:
-        ports = device.component.ports
-        if ports.output("field_voltage") is None:
-            raise CaseError(f"{where}: no start for {device.name} ({device.component.name}): only field-voltage "
-                            "controllers are initialised")
-        es = exciter_start(given["field_voltage"], Vt, device.params)
-        values = {**given, "voltage_reference": float(es.Vref)}
-        inputs = {link.variable: values[link.signal] for link in ports.inputs}
-        starts.append(DeviceStart(tuple(float(v) for v in es.x0), inputs))
-    return tuple(starts)
+    x0 = np.asarray(x0, dtype=float)
+    starts = {0: DeviceStart(tuple(float(v) for v in x0), {n: float(bus_device_inputs[n]) for n in component.input_names})}
+    outputs = {0: _outputs(machine, starts[0])}
+    current = complex(outputs[0][bus.current[0]], outputs[0][bus.current[1]])
+    V = starts[0].inputs[bus.voltage[0]] * np.exp(1j * starts[0].inputs[bus.voltage[1]])
+    Vt = V + external_impedance(machine) * current
+    terminal = (float(abs(Vt)), float(np.angle(Vt)))
+    bus_values = (starts[0].inputs[bus.voltage[0]], starts[0].inputs[bus.voltage[1]])
 
+    def solves(j) -> tuple:
+        init = devices[j].component.initialisation
+        return init.solves if init is not None else ()
 
-def _standard_module(component):
-    """The module of a standard model's component (reference_models.models), None for others."""
-    from .. import models
-
-    if models.STANDARD_MODELS.get(component.name.upper()) is not component:
+    def value(source):
+        """The start value a Source gives, or None while its device has not started."""
+        if source.kind == "bus":
+            return bus_values[source.index]
+        if source.kind == "terminal":
+            return terminal[source.index]
+        if source.kind == "device":
+            return outputs[source.device][source.variable] if source.device in starts else None
         return None
-    return getattr(models, component.name)
 
+    def demands(j) -> dict:
+        """{output variable of device j: the value a started device solved for it} (None: one that solves
+        an input taken from j has not started)."""
+        out = {}
+        for k, wires in enumerate(wiring):
+            for name, source in wires.items():
+                if source.kind == "device" and source.device == j and name in solves(k):
+                    if k not in starts:
+                        return None
+                    out[source.variable] = starts[k].inputs[name]
+        return out
 
-def _standard_controls_at_rest(devices, x0, y, Vt: float, V: complex, machine_inputs: dict, where: str) -> tuple:
-    """The DeviceStarts of a unit's standard control devices (devices[1:]) with its machine at
-    rest in state x0 with outputs y and terminal voltage Vt (bus voltage phasor V): stabilisers
-    at their equilibrium first (their signal goes to the exciter), then exciters and governors
-    holding the machine's field voltage and mechanical power by their `initialise`."""
-    machine = devices[0]
-    component = machine.component
-    bus = component.ports.bus
-    outputs = dict(zip(component.output_names, (float(v) for v in y)))
-    current = complex(outputs[bus.current[0]], outputs[bus.current[1]])
-    signals = {"terminal_voltage": Vt,
-               "terminal_voltage_angle": float(np.angle(V + external_impedance(machine) * current)),
-               "terminal_current_real": current.real, "terminal_current_imaginary": current.imag,
-               "stabiliser_signal": 0.0, "voltage_reference": 0.0, "power_reference": 0.0}
-    states = dict(zip(component.state_names, (float(v) for v in x0)))
-    for link in component.ports.outputs:
-        signals[link.signal] = outputs[link.variable] if link.variable in outputs else states[link.variable]
-    for link in component.ports.inputs:
-        signals[link.signal] = float(machine_inputs[link.variable])
-    rank = {"stabiliser_signal": 0, "field_voltage": 1, "mechanical_power": 2}
-    order = sorted(range(1, len(devices)), key=lambda j: min(
-        (rank.get(link.signal, 3) for link in devices[j].component.ports.outputs), default=3))
-    starts = {}
-    for j in order:
+    pending = list(range(1, len(devices)))
+    while pending:
+        for j in pending:
+            comp = devices[j].component
+            wires = wiring[j]
+            given = {}
+            for name in comp.input_names:
+                if name in solves(j):
+                    continue
+                source = wires.get(name)
+                if source is None or source.kind == "held":
+                    given[name] = float(next(q.start for q in comp.inputs if q.name == name) or 0.0)
+                else:
+                    given[name] = value(source)
+            demanded = demands(j)
+            if demanded is None or any(v is None for v in given.values()):
+                continue
+            break
+        else:
+            names = ", ".join(f"{devices[j].name} ({devices[j].component.name})" for j in pending)
+            raise CaseError(f"{where}: no order in which {names} can start (each waits for another)")
+        pending.remove(j)
         device = devices[j]
-        comp, ports = device.component, device.component.ports
-        module = _standard_module(comp)
-        signal_of = {link.variable: link.signal for link in ports.inputs}
-        missing = [v for v in comp.input_names if v not in signal_of]
-        if module is None or missing:
-            raise CaseError(f"{where}: no start for {device.name} ({comp.name}): "
-                            + ("not a standard model" if module is None else f"inputs {missing} are not linked"))
-        u = np.array([signals[signal_of[v]] for v in comp.input_names])
         try:
-            if ports.output("field_voltage") is not None:
-                x, ref = module.initialise(signals["field_voltage"], u, device.params)
-                u[comp.input_names.index(ports.input("voltage_reference"))] = ref
-            elif ports.output("mechanical_power") is not None:
-                x, ref = module.initialise(signals["mechanical_power"], u, device.params)
-                u[comp.input_names.index(ports.input("power_reference"))] = ref
-            else:
-                x = comp.equilibrium(u, device.params)
-                for link in ports.outputs:
-                    signals[link.signal] = float(comp.output_values(x, u, device.params)[
-                        comp.output_names.index(link.variable)])
+            x, inputs = comp.start({**given, **demanded}, device.params)
         except ValueError as exc:
             raise CaseError(f"{where}: {device.name} ({comp.name}) has no rest: {' '.join(str(exc).split())[:160]}") \
                 from None
-        starts[j] = DeviceStart(tuple(float(v) for v in x), dict(zip(comp.input_names, (float(v) for v in u))))
-    return tuple(starts[j] for j in range(1, len(devices)))
+        starts[j] = DeviceStart(tuple(float(v) for v in x), inputs)
+        outputs[j] = _outputs(device, starts[j])
+        for name, wanted in demanded.items():
+            got = outputs[j][name]
+            if not abs(got - wanted) <= 1e-8 * max(1.0, abs(wanted)):
+                raise CaseError(f"{where}: {device.name} ({comp.name}) starts giving {name} = {got:.10g}, "
+                                f"not the {wanted:.10g} its unit needs")
+    return tuple(starts[j] for j in range(len(devices)))
+
+
+def _outputs(device: Device, start: DeviceStart) -> dict:
+    """{state or output name: value} of a device at its start."""
+    comp = device.component
+    x = np.asarray(start.states, dtype=float)
+    u = np.array([start.inputs[n] for n in comp.input_names])
+    y = comp.output_values(x, u, device.params)
+    return {**dict(zip(comp.state_names, (float(v) for v in x))), **dict(zip(comp.output_names, (float(v) for v in y)))}
 
 
 def load_case(network_file, dynamic_data, name: str | None = None, source: tuple | None = None) -> Case:

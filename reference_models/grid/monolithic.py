@@ -43,7 +43,7 @@ import numpy as np
 
 from .case import Case, Reduced, external_impedance, held_inputs, unit_wiring
 from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency, Topology
-from .result import ROTOR_ANGLE, GridResult
+from .result import GridResult, device_labels, rotor_angle_state
 
 
 class _Branches:
@@ -233,7 +233,10 @@ class System:
                 x0[self.slices[k][j]] = start.states
         x0.setflags(write=False)
         self.x0 = x0
-        self.rotor_angles = [self.slices[k][0].start + u.machine.component.state_names.index(ROTOR_ANGLE)
+        # per unit the position of its bus device's rotor angle in the state (None: no rotor angle)
+        self.rotor_angles = [None if rotor_angle_state(u.machine.component) is None else
+                             self.slices[k][0].start + u.machine.component.state_names.index(
+                                 rotor_angle_state(u.machine.component))
                              for k, u in enumerate(case.units)]
         # the machine inputs its bus current is read at: start values, or the state of the device giving them
         self.machine_links = tuple(
@@ -360,10 +363,16 @@ class System:
         n, g = len(y), len(self.units)
         V_re, V_im = self.generator_voltages(y, network, np, tripped)
         V_gen = V_re + 1j * V_im
-        delta = y[:, self.rotor_angles]
-        theta_vs = delta + np.angle(V_gen * np.exp(-1j * delta))
+        # the bus angles continuous: near the rotor angle of a machine, unwrapped along the rows elsewhere
+        delta = np.full((n, g), np.nan)
+        theta_vs = np.unwrap(np.angle(V_gen), axis=0)
+        for k, at in enumerate(self.rotor_angles):
+            if at is not None:
+                delta[:, k] = y[:, at]
+                theta_vs[:, k] = delta[:, k] + np.angle(V_gen[:, k] * np.exp(-1j * delta[:, k]))
         I = np.empty((n, g), dtype=complex)
-        states, machine_inputs = {}, {}
+        states, machine_inputs, device_states = {}, {}, {}
+        labels = device_labels(self.units)
         for k, unit in enumerate(self.units):
             inputs = self.unit_inputs(k, y, V_re[:, k], V_im[:, k], controls, np)
             machine = unit.machine
@@ -377,13 +386,16 @@ class System:
                 machine_inputs.setdefault(name, np.full((n, g), np.nan))[:, k] = column
             for j, d in enumerate(unit.devices):
                 for i, name in enumerate(d.component.state_names):
-                    states.setdefault(name, np.full((n, g), np.nan))[:, k] = y[:, self.slices[k][j].start + i]
-        if "Efd" not in states and "Efd" in machine_inputs:  # the field voltage where no device has it as a state
-            states["Efd"] = machine_inputs["Efd"]
+                    column = y[:, self.slices[k][j].start + i]
+                    device_states[f"{labels[k][j]}_{name}"] = column
+                    if j == 0:
+                        states.setdefault(name, np.full((n, g), np.nan))[:, k] = column
         S = V_gen * np.conj(I)
+        for k in range(g):
+            device_states[f"{labels[k][0]}_P"], device_states[f"{labels[k][0]}_Q"] = S.real[:, k], S.imag[:, k]
         return {"time": np.asarray(t, dtype=float), "V_gen": V_gen, "V_bus": V_gen[:, list(self.first_unit)] @ network.recovery.T,
                 "Vs": np.abs(V_gen), "theta_vs": theta_vs, "P": S.real, "Q": S.imag, "states": states,
-                "machine_inputs": machine_inputs}
+                "machine_inputs": machine_inputs, "device_states": device_states, "rotor_angle": delta}
 
 
 # A healthy solve of a shipped case takes 2,000-6,000 evaluations of the right-hand side for 5 s with
@@ -429,7 +441,7 @@ class _Locked:
         self.system, self.network, self.controls, self.tripped, self.count = system, network, controls, tripped, count
         self.resets = resets
         self.modes, self.owners = (), ()
-        self.angles = [a for k, a in enumerate(system.rotor_angles) if k not in tripped]
+        self.angles = [a for k, a in enumerate(system.rotor_angles) if k not in tripped and a is not None]
 
     def natural(self, t, y):
         self.count(t)
@@ -630,9 +642,10 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
             pieces.append(system.observe(np.array(rows_t), np.array(rows_y), network, controls, tuple(tp.tripped)))
         if stop_at_loss and lost is not None:
             break
-    rows = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0] if key not in ("states", "machine_inputs")}
-    states = {name: np.concatenate([p["states"][name] for p in pieces]) for name in pieces[0]["states"]}
-    inputs = {name: np.concatenate([p["machine_inputs"][name] for p in pieces]) for name in pieces[0]["machine_inputs"]}
+    named = ("states", "machine_inputs", "device_states")
+    rows = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0] if key not in named}
+    states, inputs, device_states = ({name: np.concatenate([p[key][name] for p in pieces]) for name in pieces[0][key]}
+                                     for key in named)
     theta_bus = np.unwrap(np.angle(rows["V_bus"]), axis=0)
     gen_rows = [system.case.network.bus_index(b) for b in system.case.generator_buses]
     theta_bus[:, gen_rows] = rows["theta_vs"]
@@ -640,7 +653,8 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
                       Q=rows["Q"], V_bus=np.abs(rows["V_bus"]), theta_bus=theta_bus, stable=lost is None,
                       loss_of_synchronism_s=lost, events=tuple((tp.start, tp.description) for tp in topologies[1:]),
                       gen_buses=system.case.generator_buses, buses=system.case.buses, controls=controls,
-                      n_rhs=calls[0], machine_inputs=inputs)
+                      n_rhs=calls[0], machine_inputs=inputs, rotor_angle=rows["rotor_angle"],
+                      device_states=device_states)
 
 
 def _switching_summary(system: System, switched_by: dict) -> str:

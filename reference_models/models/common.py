@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from ..component import Initialisation
+
 
 def check_ranges(params, ranges: dict) -> None:
     """Raise ParameterError unless every parameter named in `ranges` {name: (low, high, unit)} lies
@@ -77,3 +79,30 @@ def finite_inputs(u, name: str) -> tuple:
     if not all(math.isfinite(v) for v in values):
         raise ValueError(f"{name}: no steady state at non-finite inputs {values}")
     return values
+
+
+def controller_initialisation(inputs: tuple, output: str, set_point: str, initialise) -> Initialisation:
+    """The Initialisation of a controller (an exciter, a governor) whose module gives
+    initialise(y, u, p) -> (x0, s): its state at rest giving the output `output` = y and the value s
+    of its input `set_point` that holds it, u its inputs (`inputs`: its Quantity tuple, component
+    order) with the set point's entry ignored."""
+    names = tuple(q.name for q in inputs)
+
+    def start(given, p):
+        u = np.array([0.0 if n == set_point else float(given[n]) for n in names])
+        x0, value = initialise(float(given[output]), u, p)
+        return x0, {set_point: float(value)}
+
+    return Initialisation((set_point,), start)
+
+
+def machine_initialisation(operating_point, power: str = "Pm", field: str = "Efd") -> Initialisation:
+    """The Initialisation of a machine on a bus whose module gives operating_point(V, theta, P, Q, p)
+    -> (x0, Pm, Efd): its state at rest delivering the load-flow point and the mechanical power and
+    field voltage (its inputs `power`, `field`) holding it."""
+
+    def start(given, p):
+        x0, Pm, Efd = operating_point(given["V0"], given["theta0"], given["P0"], given["Q0"], p)
+        return x0, {power: float(Pm), field: float(Efd)}
+
+    return Initialisation((power, field), start)

@@ -36,7 +36,7 @@ import numpy as np
 from ..blocks import clip, lag, lag_non_windup, lag_non_windup_reset, lead_lag, rectifier_loading
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs, set_point
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs, set_point
 
 PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KM": (0.01, 5000.0, "pu"), "TC": (0.0, 100.0, "s"),
                     "TB": (0.0, 100.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.0, 10.0, "s"),
@@ -144,6 +144,16 @@ def equilibrium(u, p: ESST3AParams) -> np.ndarray:
     return x
 
 
+INPUTS = (Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
+          Quantity("theta_vs", "rad", "terminal voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
+          Quantity("I_re", "pu", "machine current into the bus, real part (system base)", start=1.0,
+                   operating_range=(0.0, 5.0)),
+          Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
+                   operating_range=(-2.0, 2.0)),
+          Quantity("Vref", "pu", "voltage set point", start=1.03, operating_range=(0.9, 1.2)),
+          Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
+          Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0)))
+
 ESST3A = Component(
     name="esst3a",
     description="ESST3A IEEE ST3A static exciter (PSS/E, ANDES)",
@@ -151,15 +161,7 @@ ESST3A = Component(
             Quantity("LL_x", "pu", "lead-lag state"),
             Quantity("VR", "pu", "regulator output (non-windup limited)"),
             Quantity("VM", "pu", "inner loop output (non-windup limited)")),
-    inputs=(Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-            Quantity("theta_vs", "rad", "terminal voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
-            Quantity("I_re", "pu", "machine current into the bus, real part (system base)", start=1.0,
-                     operating_range=(0.0, 5.0)),
-            Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
-                     operating_range=(-2.0, 2.0)),
-            Quantity("Vref", "pu", "voltage set point", start=1.03, operating_range=(0.9, 1.2)),
-            Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
-            Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0))),
+    inputs=INPUTS,
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=ESST3AParams,
     derivatives=derivatives,
@@ -172,4 +174,5 @@ ESST3A = Component(
                         Link("voltage_reference", "Vref"), Link("stabiliser_signal", "Vss"),
                         Link("field_current", "XadIfd")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=controller_initialisation(INPUTS, "Efd", "Vref", initialise),
 )

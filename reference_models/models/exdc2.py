@@ -29,7 +29,7 @@ from ..blocks import lag, lag_non_windup, lag_non_windup_reset, lead_lag, quadra
 from ..component import Component, Parameters, Quantity
 from ..piecewise import where
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs, set_point
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs, set_point
 
 PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "TA": (0.001, 10.0, "s"), "TC": (0.0, 100.0, "s"),
                     "TB": (0.0, 100.0, "s"), "TE": (0.001, 10.0, "s"), "TF1": (0.001, 100.0, "s"),
@@ -160,12 +160,13 @@ DC_INPUTS = (Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, opera
              Quantity("Vref", "pu", "voltage set point", start=1.05, operating_range=(0.9, 1.2)),
              Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)))
 
+INPUTS = DC_INPUTS + (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),)
+
 EXDC2 = Component(
     name="exdc2",
     description="EXDC2 IEEE DC2 exciter (PSS/E, ANDES)",
     states=DC_STATES,
-    inputs=DC_INPUTS + (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05),
-                                 minimum=0.0),),
+    inputs=INPUTS,
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=EXDC2Params,
     derivatives=derivatives,
@@ -176,4 +177,5 @@ EXDC2 = Component(
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss"), Link("rotor_speed", "omega")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=controller_initialisation(INPUTS, "Efd", "Vref", initialise),
 )

@@ -29,7 +29,7 @@ from ..blocks import clip, lag, lead_lag, washout
 from ..component import Component, Parameters, Quantity
 from ..piecewise import where
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs
 
 PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "TC": (0.0, 100.0, "s"), "TB": (0.0, 100.0, "s"),
                     "KA": (0.01, 5000.0, "pu"), "TA": (0.001, 10.0, "s"), "KC": (0.0, 10.0, "pu"),
@@ -99,6 +99,11 @@ def equilibrium(u, p: EXST1Params) -> np.ndarray:
     return initialise(p.KA * vi, u, p)[0]
 
 
+INPUTS = (Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
+          Quantity("Vref", "pu", "voltage set point", start=1.02, operating_range=(0.9, 1.2)),
+          Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
+          Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0)))
+
 EXST1 = Component(
     name="exst1",
     description="EXST1 IEEE ST1 static exciter (PSS/E, ANDES)",
@@ -106,10 +111,7 @@ EXST1 = Component(
             Quantity("LL_x", "pu", "lead-lag state"),
             Quantity("LR_y", "pu", "regulator output"),
             Quantity("WF_x", "pu", "feedback washout state")),
-    inputs=(Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-            Quantity("Vref", "pu", "voltage set point", start=1.02, operating_range=(0.9, 1.2)),
-            Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
-            Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0))),
+    inputs=INPUTS,
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=EXST1Params,
     derivatives=derivatives,
@@ -119,4 +121,5 @@ EXST1 = Component(
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss"), Link("field_current", "XadIfd")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=controller_initialisation(INPUTS, "Efd", "Vref", initialise),
 )

@@ -38,7 +38,7 @@ from ..blocks import quadratic_saturation_coefficients, quadratic_saturation_pro
 from ..component import Component, Parameters, Quantity
 from ..drift import Drift
 from ..ports import BusPort, Link, Ports
-from .common import check_ranges, dq_voltage, finite_inputs, network_current, stator_currents
+from .common import check_ranges, dq_voltage, finite_inputs, machine_initialisation, network_current, stator_currents
 
 PARAMETER_RANGES = {
     "fn": (16.0, 400.0, "Hz"), "Sn": (1e-3, 1e5, "MVA"), "Sb": (1e-3, 1e5, "MVA"),
@@ -220,10 +220,11 @@ GENROU = Component(
     affine_states=(1,),
     ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im")),
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
-                outputs=(Link("rotor_speed", "omega"), Link("electrical_power", "Pe"),
+                outputs=(Link("rotor_angle", "delta"), Link("rotor_speed", "omega"), Link("electrical_power", "Pe"),
                          Link("field_current", "XadIfd"))),
     # the equations see delta and theta_vs only through delta - theta_vs, and omega through
     # d delta/dt = 2 pi fn (omega - 1) and the damping torque D (omega - 1) (reference_models/drift.py)
     drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=0.005,
                 speed_scale=(2.0 * math.pi, "fn"), speed_rest=1.0),
+    initialisation=machine_initialisation(operating_point),
 )

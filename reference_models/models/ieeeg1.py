@@ -30,7 +30,7 @@ import numpy as np
 from ..blocks import clip, integrator_non_windup, integrator_non_windup_reset, lag, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs
 
 PARAMETER_RANGES = {"K": (0.0, 1000.0, "pu"), "T1": (0.0, 100.0, "s"), "T2": (0.0, 100.0, "s"),
                     "T3": (0.001, 100.0, "s"), "T4": (0.0, 100.0, "s"), "T5": (0.0, 100.0, "s"),
@@ -138,6 +138,9 @@ def equilibrium(u, p: IEEEG1Params) -> np.ndarray:
     return np.array([wd, valve, valve, valve, valve, valve])
 
 
+INPUTS = (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
+          Quantity("Pref", "pu", "power reference", start=0.7, operating_range=(0.0, 1.2)))
+
 IEEEG1 = Component(
     name="ieeeg1",
     description="IEEEG1 IEEE Type 1 speed-governing model (PSS/E, ANDES), one machine",
@@ -145,8 +148,7 @@ IEEEG1 = Component(
             Quantity("IAW_y", "pu", "valve position (non-windup limited)"),
             Quantity("L4_y", "pu", "first stage"), Quantity("L5_y", "pu", "second stage"),
             Quantity("L6_y", "pu", "third stage"), Quantity("L7_y", "pu", "fourth stage")),
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "power reference", start=0.7, operating_range=(0.0, 1.2))),
+    inputs=INPUTS,
     outputs=(Quantity("Pm", "pu", "mechanical power"),),
     params_type=IEEEG1Params,
     derivatives=derivatives,
@@ -156,4 +158,5 @@ IEEEG1 = Component(
     reset=reset,
     ports=Ports(inputs=(Link("rotor_speed", "omega"), Link("power_reference", "Pref")),
                 outputs=(Link("mechanical_power", "Pm"),)),
+    initialisation=controller_initialisation(INPUTS, "Pm", "Pref", initialise),
 )

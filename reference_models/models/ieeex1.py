@@ -24,7 +24,7 @@ import numpy as np
 
 from ..component import Component, Quantity
 from ..ports import Link, Ports
-from .common import finite_inputs
+from .common import controller_initialisation, finite_inputs
 from .exdc2 import DC_INPUTS, DC_STATES, EXDC2Params, dc_derivatives, dc_equilibrium, dc_initialise, dc_reset
 
 IEEEX1Params = EXDC2Params
@@ -78,4 +78,5 @@ IEEEX1 = Component(
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=controller_initialisation(DC_INPUTS, "Efd", "Vref", initialise),
 )

@@ -22,7 +22,7 @@ import numpy as np
 from ..blocks import lag_non_windup, lag_non_windup_reset, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs
 
 PARAMETER_RANGES = {"TATB": (0.0, 10.0, "pu"), "TB": (0.0, 100.0, "s"), "K": (0.01, 1000.0, "pu"),
                     "TE": (0.001, 10.0, "s")}
@@ -85,14 +85,16 @@ def equilibrium(u, p: SEXSParams) -> np.ndarray:
     return initialise(Efd, u, p)[0]
 
 
+INPUTS = (Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
+          Quantity("Vref", "pu", "voltage set point", start=1.1, operating_range=(0.9, 1.2)),
+          Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)))
+
 SEXS = Component(
     name="sexs",
     description="SEXS simplified excitation system (PSS/E, ANDES)",
     states=(Quantity("LL_x", "pu", "lead-lag state"),
             Quantity("LAW_y", "pu", "exciter output (non-windup limited)")),
-    inputs=(Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-            Quantity("Vref", "pu", "voltage set point", start=1.1, operating_range=(0.9, 1.2)),
-            Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1))),
+    inputs=INPUTS,
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=SEXSParams,
     derivatives=derivatives,
@@ -103,4 +105,5 @@ SEXS = Component(
     ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_reference", "Vref"),
                         Link("stabiliser_signal", "Vss")),
                 outputs=(Link("field_voltage", "Efd"),)),
+    initialisation=controller_initialisation(INPUTS, "Efd", "Vref", initialise),
 )

@@ -26,7 +26,7 @@ import numpy as np
 from ..blocks import lag_non_windup, lag_non_windup_reset, lead_lag
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
-from .common import check_limits, check_ranges, finite_inputs
+from .common import check_limits, check_ranges, controller_initialisation, finite_inputs
 
 PARAMETER_RANGES = {"R": (0.001, 10.0, "pu"), "T1": (0.001, 100.0, "s"), "T2": (0.0, 100.0, "s"),
                     "T3": (0.0, 100.0, "s"), "Dt": (0.0, 100.0, "pu"), "wref0": (0.5, 1.5, "pu")}
@@ -119,12 +119,14 @@ OUTPUTS = (Quantity("Pm", "pu", "mechanical power"),)
 PORTS = Ports(inputs=(Link("rotor_speed", "omega"), Link("power_reference", "Pref")),
               outputs=(Link("mechanical_power", "Pm"),))
 
+INPUTS = (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
+          Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.06)))
+
 TGOV1 = Component(
     name="tgov1",
     description="TGOV1 steam turbine-governor (PSS/E, ANDES)",
     states=STATES,
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.06))),
+    inputs=INPUTS,
     outputs=OUTPUTS,
     params_type=TGOV1Params,
     derivatives=derivatives,
@@ -133,4 +135,5 @@ TGOV1 = Component(
     state_scales=(0.2, 0.2),
     ports=PORTS,
     reset=reset,
+    initialisation=controller_initialisation(INPUTS, "Pm", "Pref", initialise),
 )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..component import Component, Quantity
-from .common import finite_inputs
+from .common import controller_initialisation, finite_inputs
 from .tgov1 import (OUTPUTS, PORTS, STATES, TGOV1Params, governor_derivatives, governor_power, governor_reset,
                     rest_valve)
 
@@ -52,12 +52,14 @@ def equilibrium(u, p: TGOV1Params) -> np.ndarray:
     return rest_valve(Pref - (omega - p.wref0) / p.R, p, "TGOV1N")
 
 
+INPUTS = (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
+          Quantity("Pref", "pu", "power reference", start=0.7, operating_range=(0.0, 1.2)))
+
 TGOV1N = Component(
     name="tgov1n",
     description="TGOV1N steam turbine-governor, reference after the droop (ANDES)",
     states=STATES,
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "power reference", start=0.7, operating_range=(0.0, 1.2))),
+    inputs=INPUTS,
     outputs=OUTPUTS,
     params_type=TGOV1Params,
     derivatives=derivatives,
@@ -66,4 +68,5 @@ TGOV1N = Component(
     state_scales=(0.2, 0.2),
     ports=PORTS,
     reset=reset,
+    initialisation=controller_initialisation(INPUTS, "Pm", "Pref", initialise),
 )
