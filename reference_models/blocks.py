@@ -262,3 +262,34 @@ def pid_tracking(m, u, xi, xd, kp: float, ki: float, kd: float, Td: float, ks: f
     ys = kp * u + xi + derivative
     y = clip(m, ys, low, high)
     return ki * (u - ks * (ys - y)), d_xd, y
+
+
+def pi_tracking(m, u, xi, kp: float, ki: float, ks: float, low, high):
+    """PI controller kp + ki / s with a windup limiter [low, high] on its output and tracking
+    anti-windup (ANDES' PITrackAW): (dxi/dt, y) with ys = kp u + xi, y = ys clipped to [low, high],
+    dxi/dt = ki (u - ks (ys - y)). The limits are Python floats or values of the namespace (limits
+    that move with a signal). Nothing is reset."""
+    ys = kp * u + xi
+    low = low + 0.0 * ys if isinstance(low, (int, float)) else low
+    high = high + 0.0 * ys if isinstance(high, (int, float)) else high
+    y = clip_between(m, ys, low, high)
+    return ki * (u - ks * (ys - y)), y
+
+
+def lag_rate(m, u, x, K: float, T: float, rate_low: float, rate_high: float):
+    """Lag K / (1 + s T) with a rate limit (ANDES' LagRate): (dx/dt, y = x) with
+    T dx/dt = K u - x clipped to [rate_low, rate_high]: the limits bound T dx/dt, as ANDES' RateLimiter
+    clips the equation's value before its time constant divides it. T must be > 0."""
+    return clip(m, K * u - x, rate_low, rate_high) / T, x
+
+
+def piecewise_linear(m, u, points: tuple, values: tuple):
+    """The piecewise-linear characteristic through (points[k], values[k]) (points non-decreasing),
+    flat beyond its ends: values[0] for u <= points[0], values[-1] above points[-1] (ANDES'
+    Piecewise with linear pieces: REECA1's VDL1, VDL2). A piece of zero width is never taken."""
+    y = values[-1] + 0.0 * u
+    for k in range(len(points) - 1, 0, -1):
+        if points[k] > points[k - 1]:
+            slope = (values[k] - values[k - 1]) / (points[k] - points[k - 1])
+            y = where(m, u <= points[k], values[k - 1] + slope * (u - points[k - 1]), y)
+    return where(m, u <= points[0], values[0] + 0.0 * u, y)
