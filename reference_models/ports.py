@@ -54,6 +54,20 @@ SIGNALS = {
                                    "an exciter's input"),
     "rotor_angle": ("delta", "rad", "rotor angle (network frame) of a synchronous machine: what the stability "
                     "judgement compares between machines"),
+    "active_current_command": ("Ipcmd", "pu", "active current command, system base: an inverter's electrical "
+                               "controller's output, its converter's input"),
+    "reactive_current_command": ("Iqcmd", "pu", "reactive current command, system base, ANDES' sign (< 0 delivers "
+                                 "reactive power): an electrical controller's output, its converter's input"),
+    "active_power": ("Pe", "pu", "active power of an inverter into its bus, system base: a converter's output, "
+                     "its electrical and plant controllers' input"),
+    "reactive_power": ("Qe", "pu", "reactive power of an inverter into its bus, system base: a converter's output, "
+                       "its electrical and plant controllers' input"),
+    "active_power_reference": ("Pref", "pu", "active power set point of an inverter's electrical controller, "
+                               "system base (a plant controller's output)"),
+    "reactive_power_reference": ("Qref", "pu", "reactive power set point of an inverter's electrical controller, "
+                                 "system base (a plant controller's output)"),
+    "power_factor_angle_reference": ("pfaref", "rad", "power factor angle set point of an inverter's electrical "
+                                     "controller (its power factor control)"),
 }
 
 TOOL_NAME = "opfmu"
