@@ -7,21 +7,35 @@ Machines give `operating_point(Vs, theta_vs, P, Q, params)` (the steady state fr
 and the Pm, Efd holding it); controllers give `initialise(output, inputs, params)` (the state at
 rest giving an output and the set point holding it), each in its model's module.
 """
+from .esac1a import ESAC1A
+from .esst1a import ESST1A
 from .esst3a import ESST3A
+from .esst4b import ESST4B
+from .exac1 import EXAC1
+from .exac4 import EXAC4
 from .exdc2 import EXDC2
 from .exst1 import EXST1
+from .gast import GAST
 from .gencls import GENCLS
 from .genrou import GENROU
+from .hygov import HYGOV
+from .hygov4 import HYGOV4
+from .hygovdb import HYGOVDB
 from .ieeeg1 import IEEEG1
+from .ieesgo import IEESGO
 from .ieeest import IEEEST
 from .ieeex1 import IEEEX1
 from .sexs import SEXS
+from .st2cut import ST2CUT
+from .tg2 import TG2
 from .tgov1 import TGOV1
 from .tgov1n import TGOV1N
 
 STANDARD_MODELS = {
     "GENCLS": GENCLS, "GENROU": GENROU,
     "IEEEX1": IEEEX1, "EXDC2": EXDC2, "EXST1": EXST1, "ESST3A": ESST3A, "SEXS": SEXS,
+    "EXAC1": EXAC1, "EXAC4": EXAC4, "ESAC1A": ESAC1A, "ESST1A": ESST1A, "ESST4B": ESST4B,
     "TGOV1": TGOV1, "TGOV1N": TGOV1N, "IEEEG1": IEEEG1,
-    "IEEEST": IEEEST,
+    "TG2": TG2, "GAST": GAST, "HYGOV": HYGOV, "HYGOV4": HYGOV4, "HYGOVDB": HYGOVDB, "IEESGO": IEESGO,
+    "IEEEST": IEEEST, "ST2CUT": ST2CUT,
 }
