@@ -7,7 +7,10 @@ Machines give `operating_point(Vs, theta_vs, P, Q, params)` (the steady state fr
 and the Pm, Efd holding it); controllers give `initialise(output, inputs, params)` (the state at
 rest giving an output and the set point holding it), each in its model's module.
 """
+from .ac8b import AC8B
 from .esac1a import ESAC1A
+from .esdc1a import ESDC1A
+from .esdc2a import ESDC2A
 from .esst1a import ESST1A
 from .esst3a import ESST3A
 from .esst4b import ESST4B
@@ -15,6 +18,7 @@ from .exac1 import EXAC1
 from .exac4 import EXAC4
 from .exdc2 import EXDC2
 from .exst1 import EXST1
+from .fload import FLoad
 from .gast import GAST
 from .gencls import GENCLS
 from .genrou import GENROU
@@ -24,7 +28,11 @@ from .hygovdb import HYGOVDB
 from .ieeeg1 import IEEEG1
 from .ieesgo import IEESGO
 from .ieeest import IEEEST
+from .ieeet1 import IEEET1
+from .ieeet3 import IEEET3
+from .ieeevc import IEEEVC
 from .ieeex1 import IEEEX1
+from .motor import Motor3, Motor5
 from .sexs import SEXS
 from .st2cut import ST2CUT
 from .tg2 import TG2
@@ -35,7 +43,10 @@ STANDARD_MODELS = {
     "GENCLS": GENCLS, "GENROU": GENROU,
     "IEEEX1": IEEEX1, "EXDC2": EXDC2, "EXST1": EXST1, "ESST3A": ESST3A, "SEXS": SEXS,
     "EXAC1": EXAC1, "EXAC4": EXAC4, "ESAC1A": ESAC1A, "ESST1A": ESST1A, "ESST4B": ESST4B,
+    "ESDC1A": ESDC1A, "ESDC2A": ESDC2A, "IEEET1": IEEET1, "IEEET3": IEEET3, "AC8B": AC8B,
     "TGOV1": TGOV1, "TGOV1N": TGOV1N, "IEEEG1": IEEEG1,
     "TG2": TG2, "GAST": GAST, "HYGOV": HYGOV, "HYGOV4": HYGOV4, "HYGOVDB": HYGOVDB, "IEESGO": IEESGO,
     "IEEEST": IEEEST, "ST2CUT": ST2CUT,
+    "IEEEVC": IEEEVC,
+    "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
 }
