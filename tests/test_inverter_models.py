@@ -1,0 +1,251 @@
+"""The inverter chain REGCA1 (converter) + REECA1 (electrical controller): their start from the load
+flow, the voltage-dip logic (frozen states, the injected reactive current, the hold timers), the
+current limits with their priority, and ANDES 2.0.0 on ieee14/ieee14_solar.xlsx (initial states
+and set points; dx/dt and outputs at ANDES' states mid-fault, with the dip logic and the current
+limits active, and after clearing)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from reference_models.models.reeca1 import REECA1
+from reference_models.models.regca1 import REGCA1, low_voltage_power_limit
+
+REECA1_ANDES_STATES = REECA1.state_names[:7]  # the rest are ours: tdip, Ipmaxh, dIpcmd
+
+
+def _chain_start(V0=0.98, theta0=0.1, P0=0.6, Q0=0.2, regca1=None, reeca1=None):
+    """(REGCA1 (x, u, p), REECA1 (x, u, p)) started from a load-flow point as a unit starts them: the
+    converter solves its commands, the controller is given them and the converter's measurements."""
+    pg, pr = REGCA1.params(regca1), REECA1.params(reeca1)
+    xg, ug = REGCA1.start(dict(V0=V0, theta0=theta0, P0=P0, Q0=Q0, Vs=V0, theta_vs=theta0), pg)
+    ug = np.array([ug[n] for n in REGCA1.input_names])
+    y = dict(zip(REGCA1.output_names, REGCA1.output_values(xg, ug, pg)))
+    xr, ur = REECA1.start(dict(V=V0, Pe=y["Pe"], Qe=y["Qe"], Ipcmd=ug[2], Iqcmd=ug[3]), pr)
+    return (xg, ug, pg), (xr, np.array([ur[n] for n in REECA1.input_names]), pr)
+
+
+def test_converter_start_delivers_the_load_flow_power_at_rest():
+    (xg, ug, pg), _ = _chain_start(regca1={"Lvpnt1": 1.0})
+    y = dict(zip(REGCA1.output_names, REGCA1.output_values(xg, ug, pg)))
+    assert (y["P"], y["Q"]) == (pytest.approx(0.6, abs=1e-15), pytest.approx(0.2, abs=1e-15))
+    assert complex(y["I_re"], y["I_im"]) == pytest.approx(complex(0.6, -0.2) / (0.98 * np.exp(-0.1j)), abs=1e-15)
+    np.testing.assert_array_equal(REGCA1.rhs(xg, ug, pg), 0.0)
+    # 0.98 pu lies below Lvpnt1 = 1: the low-voltage gain 0.9667 raises the active current command
+    assert ug[2] == pytest.approx(0.6 / 0.98 / ((0.98 - 0.4) / 0.6), rel=1e-15)
+
+
+def test_controller_start_gives_the_converter_its_commands_at_rest_with_andes_offset():
+    """ANDES' converter command is Ipcmd0_LVG + IpHL_y - p0 / V0: the controller's held offset
+    dIpcmd carries it, so its output is the converter's command at the start."""
+    (_, ug, _), (xr, ur, pr) = _chain_start(regca1={"Lvpnt1": 1.0})
+    np.testing.assert_allclose(REECA1.output_values(xr, ur, pr), ug[2:], rtol=1e-15)
+    assert xr[9] == pytest.approx(ug[2] - 0.6 / 0.98, rel=1e-15) and xr[9] > 0
+    np.testing.assert_array_equal(REECA1.rhs(xr, ur, pr), 0.0)
+
+
+def test_converter_start_cut_by_its_reactive_current_floor_is_refused():
+    with pytest.raises(ValueError, match="REGCA1: the reactive current"):
+        REGCA1.start(dict(V0=1.0, theta0=0.0, P0=0.5, Q0=-0.2, Vs=1.0, theta_vs=0.0), REGCA1.params({"Iolim": 0.0}))
+
+
+def test_a_voltage_dip_freezes_the_controller_and_injects_reactive_current_beyond_the_dead_band():
+    _, (xr, ur, pr) = _chain_start(reeca1={"Kqv": 2.0, "Vref0": 1.0})
+    dip = ur.copy()
+    dip[0] = 0.6  # below Vdip = 0.8
+    rates = REECA1.rhs(xr, dip, pr)
+    frozen = [REECA1.state_names.index(n) for n in ("PIQ_xi", "s4_y", "s5_y", "PIV_xi")]
+    np.testing.assert_array_equal(rates[frozen], 0.0)
+    assert rates[0] == pytest.approx((0.6 - xr[0]) / pr.Trv)  # the voltage filter goes on
+    # Iqinj = Kqv db(Vref - s0_y) with s0_y still at 0.98: 2 (0.02 - 0.02) = 0 in the band; at s0_y = 0.7
+    low = xr.copy()
+    low[0] = 0.7
+    Iqcmd_dip = REECA1.output_values(low, dip, pr)[1]
+    Iqcmd_normal = REECA1.output_values(low, ur, pr)[1]
+    assert Iqcmd_normal - Iqcmd_dip == pytest.approx(2.0 * (1.0 - 0.7 - 0.02), rel=1e-12)
+
+
+def test_after_a_dip_the_hold_timer_counts_and_keeps_the_injection_and_the_active_current_limit():
+    p = {"Kqv": 2.0, "Vref0": 1.0, "Thld": -0.5, "Thld2": 0.3, "Imax": 1.0}
+    _, (xr, ur, pr) = _chain_start(reeca1=p)
+    assert xr[7] == 0.5  # at rest: the timer at its cap, no hold
+    x = xr.copy()
+    x[0] = 0.7  # s0_y, filtered voltage still low
+    dip = ur.copy()
+    dip[0] = 0.6
+    placed = REECA1.reset_states(x, dip, pr)
+    assert placed[7] == 0.0  # a dip resets the timer, which stays there
+    assert REECA1.rhs(placed, dip, pr)[7] == 0.0
+    after = placed.copy()
+    after[7], after[8] = 0.2, 0.42  # 0.2 s after the dip (within Thld2 and |Thld|), Ipmax sampled 0.42
+    assert REECA1.rhs(after, ur, pr)[7] == 1.0
+    assert REECA1.reset_states(after, ur, pr)[8] == 0.42  # held, not resampled
+    Ipcmd, Iqcmd = REECA1.output_values(after, ur, pr)
+    assert Ipcmd == pytest.approx(0.42 + xr[9], rel=1e-15)  # s5_y / vp = 0.612 held under Ipmaxh = 0.42
+    injected = 2.0 * (1.0 - 0.7 - 0.02)
+    assert -Iqcmd == pytest.approx(min(xr[3] + injected, 1.0), rel=1e-12)  # Thld < 0: Iqv kept
+    later = after.copy()
+    later[7] = 0.4  # Thld2 over: Ipmax = sqrt(Imax^2 - IqHL^2) again; the injection still held
+    Ipcmd, Iqcmd = REECA1.output_values(later, ur, pr)
+    assert Ipcmd == pytest.approx(min(0.6 / 0.98, math.sqrt(1.0 - Iqcmd ** 2)) + xr[9], rel=1e-12)
+    assert REECA1.rhs(np.r_[later[:7], 0.5, later[8:]], ur, pr)[7] == 0.0  # the timer stops at its cap
+
+
+@pytest.mark.parametrize("PQFLAG", [0.0, 1.0])
+def test_the_current_limit_serves_the_priority_axis_first(PQFLAG):
+    """Imax = 0.7 pu with a 0.612 pu active and a 0.5 pu reactive demand: Q priority keeps Iq and
+    cuts Ip to sqrt(Imax^2 - Iq^2); P priority the other way round. In a deep dip the priority axis
+    is capped by its VDL table (2 + 10 (s0_y - 0.2) below 0.4 pu), the other takes the rest of Imax."""
+    _, (xr, ur, _) = _chain_start(Q0=0.49)
+    pr = REECA1.params({"Imax": 0.7, "PQFLAG": PQFLAG})
+    Ipcmd, Iqcmd = REECA1.output_values(xr, ur, pr)
+    demand_p, demand_q = 0.6 / 0.98, 0.49 / 0.98
+    if PQFLAG:
+        assert Ipcmd == pytest.approx(demand_p, rel=1e-15)
+        assert -Iqcmd == pytest.approx(math.sqrt(0.49 - demand_p ** 2), rel=1e-12)
+    else:
+        assert -Iqcmd == pytest.approx(demand_q, rel=1e-15)
+        assert Ipcmd == pytest.approx(math.sqrt(0.49 - demand_q ** 2), rel=1e-12)
+    # s0_y = 0.25 pu: both tables give 2.5 pu; V = 0.2 pu: the active demand s5_y / vp = 3 pu, the
+    # reactive demand 0.5 + Iqinj = 0.5 + 40 (1 - 0.25 - 0.02) = 29.7 pu; Imax = 999
+    pr = REECA1.params({"PQFLAG": PQFLAG, "Kqv": 40.0, "Vref0": 1.0})
+    low, dip = xr.copy(), ur.copy()
+    low[0], dip[0], dip[5] = 0.25, 0.2, 1.0
+    Ipcmd, Iqcmd = REECA1.output_values(low, dip, pr)
+    if PQFLAG:
+        assert (Ipcmd, -Iqcmd) == (pytest.approx(2.5, rel=1e-12), pytest.approx(29.7, rel=1e-12))
+    else:
+        assert (Ipcmd, -Iqcmd) == (pytest.approx(3.0, rel=1e-12), pytest.approx(2.5, rel=1e-12))
+
+
+def test_active_current_is_held_on_the_low_voltage_power_limit_and_placed_on_it():
+    (xg, ug, pg), _ = _chain_start()
+    x = xg.copy()
+    x[2] = 0.6  # filtered voltage 0.6: LVPL = (0.6 - 0.5) / (1.0 - 0.5) = 0.2
+    assert low_voltage_power_limit(math, 0.6, pg) == pytest.approx(0.2)
+    x[0] = 0.25
+    placed = REGCA1.reset_states(x, ug, pg)
+    assert placed[0] == pytest.approx(0.2)
+    assert REGCA1.rhs(placed, ug, pg)[0] == 0.0  # pushed up: held
+    below = ug.copy()
+    below[2] = 0.1
+    assert REGCA1.rhs(placed, below, pg)[0] < 0.0  # released downward
+
+
+# --- ANDES 2.0.0 --------------------------------------------------------------------------------
+
+CASE = "ieee14/ieee14_solar.xlsx"
+FAULT_BUS = 7  # the inverter's (bus 8) only neighbour; ANDES does not converge with the fault on bus 8
+
+
+def _andes_chain(ss):
+    """(REGCA1 (x, u, p), REECA1 (x, u, p)) at ANDES' present point, our states and inputs from
+    ANDES' variables: the converter's q0; the controller's timer from ANDES' ExtendedEvent fThld
+    (0 during a dip, the time since its end, capped), its held Ipmaxh, its offset
+    Ipcmd0_LVG - Ipcmd0. A state ANDES holds on its LVPL limit is placed on ours (ANDES' LVPL is
+    an algebraic variable, within its Newton tolerance of ours)."""
+    from andes_reference import params
+
+    g, r = ss.REGCA1, ss.REECA1
+    pg = params(g, REGCA1, 0, {"Sb": ss.config.mva})
+    pr = params(r, REECA1, 0, {"Sb": ss.config.mva, "Sn": float(g.Sn.v[0])})
+    bus = list(ss.Bus.idx.v).index(g.bus.v[0])
+    V, theta = float(ss.Bus.v.v[bus]), float(ss.Bus.a.v[bus])
+    xg = np.array([g.S0_y.v[0], g.S1_y.v[0], g.S2_y.v[0], g.q0.v[0]], dtype=float)
+    if g.S0_lim.zu[0]:
+        xg[0] = low_voltage_power_limit(math, xg[2], pg)
+    ug = np.array([V, theta, g.Ipcmd.v[0], g.Iqcmd.v[0]], dtype=float)
+    ended = float(r.fThld.t_final[0]) - abs(pr.Thld)
+    tdip = 0.0 if r.Volt_dip.v[0] else (pr.timer_cap if r.fThld.t_final[0] == 0 else
+                                        min(float(ss.dae.t) - ended, pr.timer_cap))
+    xr = np.array([float(getattr(r, n).v[0]) for n in REECA1_ANDES_STATES]
+                  + [tdip, float(r.Ipmaxh.v[0]), float(g.Ipcmd0_LVG.v[0] - r.Ipcmd0.v[0])])
+    ur = np.array([V, g.Pe.v[0], g.Qe.v[0], r.Pref.v[0], r.Qref.v[0], r.Vref0r.v[0], r.pfaref.v[0]], dtype=float)
+    return (xg, ug, pg), (xr, ur, pr)
+
+
+def _andes_rates(ss, model, names) -> np.ndarray:
+    """ANDES' dx/dt (f / Tf) of the named states of its (only) device of `model`."""
+    return np.array([float(ss.dae.f[int(getattr(model, n).a[0])]) / float(ss.dae.Tf[int(getattr(model, n).a[0])])
+                     for n in names])
+
+
+@pytest.fixture(scope="module")
+def andes_solar():
+    pytest.importorskip("andes")
+    from andes_reference import load
+
+    return load(CASE)
+
+
+@pytest.mark.andes
+def test_chain_start_gives_andes_initial_states_and_set_points(andes_solar):
+    ss = andes_solar
+    g, r = ss.REGCA1, ss.REECA1
+    (xa_g, ua_g, pg), (xa_r, ua_r, pr) = _andes_chain(ss)
+    given = dict(V0=ua_g[0], theta0=ua_g[1], P0=float(g.p0.v[0]), Q0=float(g.q0.v[0]), Vs=ua_g[0], theta_vs=ua_g[1])
+    xg, commands = REGCA1.start(given, pg)
+    np.testing.assert_allclose(xg, xa_g, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose([commands["Ipcmd"], commands["Iqcmd"]], ua_g[2:], rtol=1e-12, atol=1e-14)
+    y = dict(zip(REGCA1.output_names, REGCA1.output_values(xg, ua_g, pg)))
+    np.testing.assert_allclose([y["Pe"], y["Qe"]], [g.Pe.v[0], g.Qe.v[0]], rtol=1e-12, atol=1e-14)
+    xr, set_points = REECA1.start(dict(V=ua_g[0], Pe=y["Pe"], Qe=y["Qe"], Ipcmd=commands["Ipcmd"],
+                                       Iqcmd=commands["Iqcmd"]), pr)
+    np.testing.assert_allclose(xr, xa_r, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose([set_points[n] for n in ("Pref", "Qref", "Vref", "pfaref")], ua_r[3:],
+                               rtol=1e-12, atol=1e-14)
+    assert set_points["Qref"] == pytest.approx(float(g.q0.v[0]), rel=1e-12)  # QFLAG = 0: Qref = q0
+    assert np.abs(REGCA1.rhs(xg, ua_g, pg)).max() == 0.0
+    assert np.abs(REECA1.rhs(xr, ua_r, pr)).max() == 0.0
+
+
+@pytest.fixture(scope="module")
+def andes_faulted():
+    """ANDES' states at 1.05 s (mid-fault at bus 7, 1.0-1.1 s) and 2.5 s, our chain there."""
+    andes = pytest.importorskip("andes")
+    from reference_models.grid.andes_case import configure_andes_logging
+
+    configure_andes_logging(andes, 40)
+    ss = andes.load(andes.get_case(CASE), setup=False, no_output=True, default_config=True)
+    ss.add("Fault", {"bus": FAULT_BUS, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
+    ss.setup()
+    ss.PFlow.run()
+    ss.TDS.config.update(tol=1e-6, fixt=1, tstep=0.005, no_tqdm=1)
+    points = {}
+    for t in (1.05, 2.5):
+        ss.TDS.config.tf = t
+        ss.TDS.run()
+        ss.TDS.fg_update(ss.exist.tds)
+        assert float(ss.dae.t) == pytest.approx(t)
+        chain = _andes_chain(ss)
+        g, r = ss.REGCA1, ss.REECA1
+        points[t] = dict(chain=chain, regca1_rates=_andes_rates(ss, g, ("S0_y", "S1_y", "S2_y")),
+                         reeca1_rates=_andes_rates(ss, r, REECA1_ANDES_STATES),
+                         PQ=np.array([g.Pe.v[0], g.Qe.v[0]], dtype=float),
+                         dip=float(r.Volt_dip.v[0]), Iqinj=float(r.Iqinj.v[0]), Iqmax=float(r.Iqmax.v[0]),
+                         at_lvpl=bool(g.S0_lim.zu[0]))
+    return points
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("t", [1.05, 2.5])
+def test_chain_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(andes_faulted, t):
+    """At ANDES' states and inputs: our dx/dt equals ANDES' f / Tf and our converter's P, Q and the
+    controller's commands equal ANDES' (relative to the values compared). Mid-fault the dip logic
+    is on (frozen states, reactive current injection capped by VDL1, the active current on LVPL);
+    at 2.5 s the dip is over and its injection held (Thld = -2 s)."""
+    point = andes_faulted[t]
+    (xg, ug, pg), (xr, ur, pr) = point["chain"]
+    if t == 1.05:
+        assert point["dip"] == 1.0 and point["at_lvpl"] and point["Iqinj"] > point["Iqmax"] > 0.0
+    else:
+        assert point["dip"] == 0.0 and 0.0 < xr[7] < pr.timer_cap
+    for ours, theirs in ((REGCA1.rhs(xg, ug, pg)[:3], point["regca1_rates"]),
+                         (REECA1.rhs(xr, ur, pr)[:7], point["reeca1_rates"])):
+        assert np.abs(theirs).max() > 1e-4  # not at rest
+        np.testing.assert_allclose(ours, theirs, rtol=0.0, atol=1e-9 * np.abs(theirs).max())
+    y = REGCA1.output_values(xg, ug, pg)
+    np.testing.assert_allclose(y[2:4], point["PQ"], rtol=0.0, atol=1e-9 * np.abs(point["PQ"]).max())
+    np.testing.assert_allclose(REECA1.output_values(xr, ur, pr), ug[2:], rtol=0.0, atol=1e-9 * np.abs(ug[2:]).max())
