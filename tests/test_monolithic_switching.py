@@ -24,7 +24,7 @@ def test_ieee39_gets_through_a_fault_that_drives_its_exciters_onto_their_ceiling
                       rtol=1e-9, atol=1e-11)
     assert result.time[-1] == pytest.approx(0.3)
     ceilings = np.array([next(d for d in u.devices if d.component.name == "ieeex1").params.VRMAX for u in case.units])
-    margin = ceilings - result.states["LA_y"]
+    margin = ceilings - result.device_column("ieeex1", "LA_y")
     assert np.min(margin) > -1e-9
     on = np.abs(margin) < 1e-9
     assert np.sum(np.any(on, axis=0)) >= 2
@@ -41,8 +41,8 @@ def test_a_locked_solve_agrees_with_one_at_a_hundred_times_tighter_tolerance_thr
     contingency = Contingency(8, 1.1, None, 1.0, 1e-4j, case.network)
     coarse = simulate(system, contingency, 1.6, step=0.01, rtol=1e-7, atol=1e-9)
     tight = simulate(system, contingency, 1.6, step=0.01, method="RK45", rtol=1e-9, atol=1e-11)
-    assert np.max(np.ptp(tight.states["LA_y"], axis=0)) > 0.5  # the regulators move far (to their limits)
-    delta_c, delta_t = coarse.states["delta"], tight.states["delta"]
+    assert np.max(np.ptp(tight.device_column("exdc2", "LA_y"), axis=0)) > 0.5  # the regulators move far (to their limits)
+    delta_c, delta_t = coarse.angles, tight.angles
     error = np.max(np.abs((delta_c - delta_c[:, :1]) - (delta_t - delta_t[:, :1])))
     assert math.degrees(error) < 1e-4
 

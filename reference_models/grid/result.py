@@ -157,6 +157,15 @@ class GridResult:
             return delta[:, g.index(bus)] - delta[:, first]
         return delta[:, g.index(bus)] - delta[:, g.index(reference_bus)]
 
+    def device_column(self, model: str, state: str) -> np.ndarray:
+        """[n, m]: the state `state` of every device of the model `model` (its label's prefix, in
+        capitals), in unit order; KeyError where no device has it."""
+        columns = [v for k, v in self.device_states.items()
+                   if k.startswith(f"{model.upper()}_") and k.endswith(f"_{state}")]
+        if not columns:
+            raise KeyError(f"no {model.upper()} device has a state {state}")
+        return np.column_stack(columns)
+
     @property
     def angles(self) -> np.ndarray:
         """[n, units] rad: `rotor_angle` (all NaN where the result carries none)."""
