@@ -33,6 +33,8 @@ from .ieeet3 import IEEET3
 from .ieeevc import IEEEVC
 from .ieeex1 import IEEEX1
 from .motor import Motor3, Motor5
+from .reeca1 import REECA1
+from .regca1 import REGCA1
 from .sexs import SEXS
 from .st2cut import ST2CUT
 from .tg2 import TG2
@@ -49,4 +51,5 @@ STANDARD_MODELS = {
     "IEEEST": IEEEST, "ST2CUT": ST2CUT,
     "IEEEVC": IEEEVC,
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
+    "REGCA1": REGCA1, "REECA1": REECA1,
 }
