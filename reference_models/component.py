@@ -109,6 +109,10 @@ class Component:
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
     ports: how it connects (reference_models.ports): its bus port and its control links.
+    affine_current: for a component with a bus port, whether its bus current is affine in the bus
+        voltage (V_re, V_im) at given states and other inputs (a machine's stator equations): the
+        monolithic DAE then solves the network in one linear step (checked there); otherwise it
+        solves the network by Newton (an inverter's current limits, a constant-power load).
     initialisation: how it starts at rest from the load flow and from what the devices it drives
         need (`Initialisation`); None: at `equilibrium` with every input given.
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
@@ -133,6 +137,7 @@ class Component:
     ports: Ports = Ports()
     reset: Callable | None = None
     initialisation: Initialisation | None = None
+    affine_current: bool = False
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]

@@ -217,6 +217,7 @@ SM4 = Component(
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
                 outputs=(Link("rotor_angle", "delta"), Link("speed", "omega"), Link("electrical_power", "P"))),
     initialisation=Initialisation(("Pm", "Efd"), lambda given, p: _start(given, p)),
+    affine_current=True,
 )
 
 STATE_NAMES = SM4.state_names

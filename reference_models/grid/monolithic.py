@@ -15,16 +15,21 @@ not depend on them (the machines' bus currents do not depend on Pm or Efd). Load
 impedances drawing their load-flow power at the load-flow voltages. A machine's quantities are on
 its own base Sn, its bus port on the system base (the components convert).
 
-The network. With the machines' states given, each machine's bus current (its bus-port current
-outputs, network frame) is affine in its bus voltage (V_re, V_im) for the machines modelled here
-(SM4, GENCLS, GENROU: the stator equations are linear in Vs sin(delta - theta_vs) and
-Vs cos(delta - theta_vs), GENROU's saturation a function of its states only), read at the machine's
-other inputs: their start values, or the state of the device of its unit that gives them (GENCLS'
-Efd enters its current: held, or an exciter state). Its map I = c + A v is read off the
-component's own output equations at v = 0, (1, 0), (0, 1), so the equations are used as they are.
-The network, Kron-reduced to the generator buses for each topology (Case.reduced; units at one bus
-inject into it together), gives I = Y_red V there; so every right-hand side is one linear solve
-(Y_red - A) v = c, exact. The other buses' voltages follow from the generator buses'.
+The network. With the bus devices' states given, each one's bus current (its bus-port current
+outputs, network frame) is a function of its bus voltage (V_re, V_im), read at its other inputs:
+their start values, or the state of the device of its unit that gives them (GENCLS' Efd enters its
+current: held, or an exciter state). A component that declares its current affine in the voltage
+(`affine_current`: the machines, whose stator equations are linear in Vs sin(delta - theta_vs) and
+Vs cos(delta - theta_vs)) gives its map I = c + A v read off its own output equations at v = 0,
+(1, 0), (0, 1) - the declaration is checked when the System is built, at the start state and two
+more voltages. The network, Kron-reduced to the units' buses for each topology (Case.reduced; units
+at one bus inject into it together), gives I = Y_red V there; with affine currents only, every
+right-hand side is one linear solve (Y_red - A) v = c, exact. Any other current (an inverter's
+limits, a constant-power load) is linearised at the voltage reached (I(v), and its differences over
+NEWTON_STEP in V_re and V_im) and the network solved by Newton from the voltages of the last solve to
+NEWTON_TOLERANCE; the last linearisation, at the solution, is evaluated on the namespace whose
+conditions the solve locks (so the branches a right-hand side records are those of one linear
+solve). The other buses' voltages follow from the units' buses'.
 
 Events: the topologies of the contingency (Contingency.topologies: a fault, a shunt of impedance
 `fault_impedance`, default 1e-6 pu: bolted, at a bus from `fault_start` to `clear_s`, absolute
@@ -80,25 +85,44 @@ def _scalar(m) -> bool:
     return m is math or isinstance(m, _Branches)
 
 
-def _current_map(component, x, p, m, u0=None):
-    """(c [2], A [2][2]) with the machine's bus current (I_re, I_im) = c + A (V_re, V_im), read off the
-    component's output equations at three voltages (x: its states, scalars or arrays; u0: its
-    other inputs, component order, the bus-port entries ignored; None: zeros)."""
+NEWTON_STEP = 1e-7  # pu: the voltage difference a non-affine current is linearised over
+NEWTON_TOLERANCE = 1e-11  # pu: the voltage change that ends the network's Newton iteration
+NEWTON_ITERATIONS = 30
+
+
+def _bus_current(component, x, p, m, u0, V_re, V_im):
+    """(I_re, I_im): the bus current of a device in states x at bus voltage V_re + j V_im (scalars, or
+    arrays with m = numpy), its other inputs u0 (component order, the bus-port entries ignored;
+    None: zeros)."""
     bus = component.ports.bus
     names = component.input_names
-    i_v, i_a = names.index(bus.voltage[0]), names.index(bus.voltage[1])
-    i_re, i_im = (component.output_names.index(n) for n in bus.current)
+    u = [0.0] * len(names) if u0 is None else list(u0)
+    if _scalar(m):
+        u[names.index(bus.voltage[0])], u[names.index(bus.voltage[1])] = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
+    else:
+        u[names.index(bus.voltage[0])], u[names.index(bus.voltage[1])] = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
+    y = component.output_equations(x, tuple(u), p, m)
+    return y[component.output_names.index(bus.current[0])], y[component.output_names.index(bus.current[1])]
 
-    def current(Vs, theta):
-        u = [0.0] * len(names) if u0 is None else list(u0)
-        u[i_v], u[i_a] = Vs, theta
-        y = component.output_equations(x, tuple(u), p, m)
-        return y[i_re], y[i_im]
 
-    c_re, c_im = current(0.0, 0.0)
-    r_re, r_im = current(1.0, 0.0)
-    i_re_, i_im_ = current(1.0, 0.5 * math.pi)
-    return (c_re, c_im), ((r_re - c_re, i_re_ - c_re), (r_im - c_im, i_im_ - c_im))
+def _current_map(component, x, p, m, u0=None, at=None):
+    """(c [2], A [2][2]) with the device's bus current (I_re, I_im) = c + A (V_re, V_im): read off
+    the component's output equations at v = 0, (1, 0), (0, 1) (at None: exact for an affine
+    current), or its linearisation at the voltage `at` = (V_re, V_im) (differences over
+    NEWTON_STEP). x: its states, scalars or arrays; u0: its other inputs, component order, the
+    bus-port entries ignored (None: zeros)."""
+    if at is None:
+        c = _bus_current(component, x, p, m, u0, 0.0, 0.0)
+        r = _bus_current(component, x, p, m, u0, 1.0, 0.0)
+        i = _bus_current(component, x, p, m, u0, 0.0, 1.0)
+        return c, ((r[0] - c[0], i[0] - c[0]), (r[1] - c[1], i[1] - c[1]))
+    v_re, v_im = at
+    f = _bus_current(component, x, p, m, u0, v_re, v_im)
+    r = _bus_current(component, x, p, m, u0, v_re + NEWTON_STEP, v_im)
+    i = _bus_current(component, x, p, m, u0, v_re, v_im + NEWTON_STEP)
+    A = (((r[0] - f[0]) / NEWTON_STEP, (i[0] - f[0]) / NEWTON_STEP),
+         ((r[1] - f[1]) / NEWTON_STEP, (i[1] - f[1]) / NEWTON_STEP))
+    return (f[0] - A[0][0] * v_re - A[0][1] * v_im, f[1] - A[1][0] * v_re - A[1][1] * v_im), A
 
 
 def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, controls: bool = True, m=math,
@@ -250,6 +274,26 @@ class System:
         self.bus_slot = tuple(buses.index(u.bus) for u in case.units)
         self.first_unit = tuple(self.bus_slot.index(b) for b in range(len(buses)))
         self._networks = {}
+        self._voltages = {}  # id(Reduced) -> the reduced buses' voltages of the last scalar solve there
+        self._check_affine_currents()
+
+    def _check_affine_currents(self) -> None:
+        """ValueError where a bus device declares its current affine in its bus voltage
+        (Component.affine_current) and it is not, at its start state: the map read at 0, 1 and j
+        must give the current at the load-flow voltage and at two voltages around it."""
+        for k, unit in enumerate(self.units):
+            d = unit.machine
+            if not d.component.affine_current:
+                continue
+            x, u0 = list(self.case.starts[k][0].states), self._machine_u(k, self.x0)
+            (c_re, c_im), ((a, b), (e, f)) = _current_map(d.component, x, d.params, math, u0)
+            V = complex(self.case.flow.V_complex[self.case.network.bus_index(unit.bus)])
+            for probe in (V, 1.1 * V, V * complex(math.cos(0.3), math.sin(0.3))):
+                I = complex(*_bus_current(d.component, x, d.params, math, u0, probe.real, probe.imag))
+                mapped = complex(c_re + a * probe.real + b * probe.imag, c_im + e * probe.real + f * probe.imag)
+                if abs(I - mapped) > 1e-9 * max(1.0, abs(I)):
+                    raise ValueError(f"{d.component.name} at bus {unit.bus} declares its bus current affine in the "
+                                     f"bus voltage, but it is not (off by {abs(I - mapped):.3g} pu at {abs(probe):.3g} pu)")
 
     def network(self, fault_bus: int | None = None, fault_impedance: complex = BOLTED_FAULT_IMPEDANCE,
                 out_of_service=()) -> Reduced:
@@ -262,38 +306,67 @@ class System:
     def generator_voltages(self, y, network: Reduced, m=math, tripped=()):
         """(V_re [g], V_im [g]) at every unit's bus for the state y (m = math or a _Branches namespace),
         or for states y [n, n_states] (m = numpy: arrays [n, g]); units at one bus inject into it
-        together; the units `tripped` (indices) inject nothing."""
+        together; the units `tripped` (indices) inject nothing. Affine currents in one linear solve,
+        any other by Newton (module docstring)."""
+        active = [k for k in range(len(self.units)) if k not in tripped]
+        scalar = _scalar(m)
+        y = y if scalar else np.asarray(y)
+        states = {k: (list(y[self.slices[k][0]]) if scalar else
+                      [y[:, j] for j in range(self.slices[k][0].start, self.slices[k][0].stop)]) for k in active}
+        others = {k: self._machine_u(k, y, math if scalar else np) for k in active}
+        newton = [k for k in active if not self.units[k].machine.component.affine_current]
+        at = None
+        if newton:
+            at = self._last_voltages(network, None if scalar else y.shape[0])
+            plain = math if scalar else np
+            for _ in range(NEWTON_ITERATIONS):
+                v = self._linear_solve(network, states, others, active, newton, plain, at, scalar)
+                change = np.max(np.abs(v - at))
+                at = v
+                if change < NEWTON_TOLERANCE:
+                    break
+        if scalar and m is not math:
+            v = self._linear_solve(network, states, others, active, newton, m, at, scalar)
+        elif not newton:
+            v = self._linear_solve(network, states, others, active, newton, m, at, scalar)
+        else:
+            v = at
+        if scalar:
+            self._voltages[id(network)] = v
+        slots = list(self.bus_slot)
+        return (v[0::2][slots], v[1::2][slots]) if scalar else (v[:, 0::2][:, slots], v[:, 1::2][:, slots])
+
+    def _last_voltages(self, network: Reduced, rows: int | None) -> np.ndarray:
+        """v [2b] (or [rows, 2b]): the reduced buses' voltages of the last scalar solve in this
+        topology, else the load flow's."""
+        v = self._voltages.get(id(network))
+        if v is None:
+            V = self.case.flow.V_complex[[self.case.network.bus_index(u.bus) for u in self.units]][list(self.first_unit)]
+            v = np.empty(2 * len(V))
+            v[0::2], v[1::2] = V.real, V.imag
+        return v.copy() if rows is None else np.tile(v, (rows, 1))
+
+    def _linear_solve(self, network: Reduced, states, others, active, newton, m, at, scalar) -> np.ndarray:
+        """v [2b] (or [n, 2b]): the network solved with every active unit's current map (exact for an
+        affine one, linearised at `at` for those in `newton`) evaluated on m."""
         b = len(self.first_unit)
-        if _scalar(m):
-            M = np.array(network.Y_real)
-            c = np.zeros(2 * b)
-            for k, u in enumerate(self.units):
-                if k in tripped:
-                    continue
-                if m is not math:
-                    m.owner = (k, 0)
-                d, i = u.machine, 2 * self.bus_slot[k]
-                ck, A = _current_map(d.component, list(y[self.slices[k][0]]), d.params, m, self._machine_u(k, y))
-                c[i: i + 2] += ck
-                M[i: i + 2, i: i + 2] -= A
-            v = np.linalg.solve(M, c)
-            return v[0::2][list(self.bus_slot)], v[1::2][list(self.bus_slot)]
-        y = np.asarray(y)
-        M = np.broadcast_to(network.Y_real, (y.shape[0], 2 * b, 2 * b)).copy()
-        c = np.zeros((y.shape[0], 2 * b))
-        for k, u in enumerate(self.units):
-            if k in tripped:
-                continue
-            d, s, i = u.machine, self.slices[k][0], 2 * self.bus_slot[k]
-            ck, A = _current_map(d.component, [y[:, j] for j in range(s.start, s.stop)], d.params, np,
-                                 self._machine_u(k, y, np))
-            c[:, i] += ck[0]
-            c[:, i + 1] += ck[1]
+        if scalar:
+            M, c = np.array(network.Y_real), np.zeros(2 * b)
+        else:
+            n = len(at) if at is not None else len(next(iter(states.values()))[0])
+            M = np.broadcast_to(network.Y_real, (n, 2 * b, 2 * b)).copy()
+            c = np.zeros((n, 2 * b))
+        for k in active:
+            if isinstance(m, _Branches):
+                m.owner = (k, 0)
+            d, i = self.units[k].machine, 2 * self.bus_slot[k]
+            point = None if k not in newton else ((at[i], at[i + 1]) if scalar else (at[:, i], at[:, i + 1]))
+            ck, A = _current_map(d.component, states[k], d.params, m, others[k], point)
             for r in range(2):
+                c[..., i + r] += ck[r]
                 for q in range(2):
-                    M[:, i + r, i + q] -= A[r][q]
-        v = np.linalg.solve(M, c[..., None])[..., 0]
-        return v[:, 0::2][:, list(self.bus_slot)], v[:, 1::2][:, list(self.bus_slot)]
+                    M[..., i + r, i + q] -= A[r][q]
+        return np.linalg.solve(M, c) if scalar else np.linalg.solve(M, c[..., None])[..., 0]
 
     def _machine_u(self, k: int, y, m=math) -> list:
         """The inputs of unit k's machine (component order) that its bus current is read at: each

@@ -143,4 +143,5 @@ GENCLS = Component(
     drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=0.005,
                 speed_scale=(2.0 * math.pi, "fn"), speed_rest=1.0),
     initialisation=machine_initialisation(operating_point),
+    affine_current=True,
 )
