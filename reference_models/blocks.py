@@ -293,3 +293,17 @@ def piecewise_linear(m, u, points: tuple, values: tuple):
             slope = (values[k] - values[k - 1]) / (points[k] - points[k - 1])
             y = where(m, u <= points[k], values[k - 1] + slope * (u - points[k - 1]), y)
     return where(m, u <= points[0], values[0] + 0.0 * u, y)
+
+
+def power(m, x, a: float):
+    """x ** a for x > 0 and an exponent a decided in Python (a load's voltage or frequency exponent):
+    a whole or half-whole a by products, divisions and m.sqrt, so it traces into C; any other a as
+    m.exp(a m.log(x)), for the namespaces that have a logarithm (math, numpy, torch; the C tracers
+    have none)."""
+    whole = math.floor(a)
+    if 2.0 * a != math.floor(2.0 * a):
+        return m.exp(a * m.log(x))
+    y = m.sqrt(x) if a != whole else 1.0 + 0.0 * x
+    for _ in range(int(abs(whole))):
+        y = y * x if whole > 0 else y / x
+    return y

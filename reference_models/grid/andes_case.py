@@ -70,6 +70,7 @@ STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit 
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS")
 GOVERNORS = ("TGOV1", "TGOV1N", "IEEEG1", "TG2", "GAST", "HYGOV", "HYGOV4", "HYGOVDB", "IEESGO")
 STABILISERS = ("IEEEST", "ST2CUT")
+LOADS = ("ZIP", "FLoad", "Motor5", "Motor3")  # dynamic and voltage-dependent loads (wired by the conversion: to come)
 CONVERTERS = ("REGCA1",)  # inverters' converters: a unit's bus device (wired by the conversion: to come)
 ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers (wired by the conversion: to come)
 CACHE_FORMAT = 1  # version of what convert writes: a new one keys new cache entries
