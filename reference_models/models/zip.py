@@ -47,7 +47,8 @@ class ZIPParams(Parameters):
             self.require(name, low <= getattr(self, name) <= high, f"lie in [{low:g}, {high:g}] %")
         self.require("V0", 0.01 <= self.V0 <= 3.0, "lie in [0.01, 3] pu")
         for name, parts in (("P0", ("kpp", "kpi", "kpz")), ("Q0", ("kqp", "kqi", "kqz"))):
-            self.require(name, abs(getattr(self, name)) <= POWER_LIMIT, f"lie in [-{POWER_LIMIT:g}, {POWER_LIMIT:g}] pu")
+            self.require(name, abs(getattr(self, name)) <= POWER_LIMIT,
+                         f"lie in [-{POWER_LIMIT:g}, {POWER_LIMIT:g}] pu")
             self.require(name, getattr(self, name) == 0 or sum(getattr(self, k) for k in parts) > 0,
                          f"be 0 where {' + '.join(parts)} = 0 (nothing of the load is drawn)")
 
