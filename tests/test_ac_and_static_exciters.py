@@ -4,6 +4,7 @@
 derivatives and field voltage mid-fault and after clearing."""
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -108,21 +109,23 @@ def _scaled(difference, values) -> float:
     return float(np.max(np.abs(difference) / np.maximum(1.0, np.abs(values))))
 
 
-def _start_differences(ss, name: str) -> tuple:
-    """(states, set point): our start's largest scaled differences from ANDES' initialisation over
-    the model's devices in ss."""
+def _start_differences(ss, name: str) -> list:
+    """[(states, set point, residual)] per device of the model in ss: our start's largest scaled
+    differences from ANDES' initial states and vref, and how far ANDES' initial point is from the
+    rest it solves for (its states' field voltage, ours at its states and inputs, against the
+    machine's: the residual its initialisation's iterations left)."""
     from andes_reference import params
 
     component, model = STANDARD_MODELS[name], getattr(ss, name)
-    states = set_point = 0.0
+    rows = []
     for i in range(model.n):
-        given = _inputs(ss, name, model, i)
-        x0, inputs = component.start(given, params(model, component, i))
+        given, p = _inputs(ss, name, model, i), params(model, component, i)
+        x0, inputs = component.start(given, p)
         theirs = _andes_states(model, component, i)
-        states = max(states, _scaled(x0 - theirs, theirs))
-        set_point = max(set_point, _scaled(inputs["Vref"] - given["Vref"], given["Vref"]))
-        assert not np.isnan(_andes_rates(ss, model, component, i)).all()
-    return states, set_point
+        u = np.array([given[n] for n in component.input_names])
+        rows.append((_scaled(x0 - theirs, theirs), _scaled(inputs["Vref"] - given["Vref"], given["Vref"]),
+                     _scaled(component.output_values(theirs, u, p)[0] - given["Efd"], given["Efd"])))
+    return rows
 
 
 @pytest.mark.andes
@@ -131,31 +134,37 @@ def test_start_gives_andes_initial_states_and_set_point(name):
     """ieee14 with the model on GENROU_5: from ANDES' load flow, field voltage and machine signals,
     our start gives ANDES' initial states and vref to rounding (relative to max(1, |value|))."""
     pytest.importorskip("andes")
-    from andes_reference import load
-
-    states, set_point = _start_differences(load(CASES[name]), name)
+    (states, set_point, _), = _andes_run(name)["start"]
     assert states < 1e-10 and set_point < 1e-12, (states, set_point)
 
 
 @pytest.mark.andes
-def test_start_gives_andes_initial_states_of_the_ei33_ac_and_static_exciters():
-    """EI_33's three EXAC1 (saturation, KD), its EXAC4 and its ESST4B (integral gain KIR, KG = 0)."""
+def test_start_gives_andes_initial_states_of_the_ei33_ac_and_static_exciters_to_its_own_residual():
+    """EI_33's three EXAC1 (saturation, KD), its EXAC4 and its ESST4B (integral gain KIR, KG = 0):
+    our start gives ANDES' initial states to rounding, but for the EXAC1 whose rest lies next to a
+    breakpoint of FEX (IN = 0.423), where ANDES' iterations stop 7.6e-8 from its field voltage (its
+    initialisation of EI_33 fails on an IEEEG1): there ours differ by what that residual makes."""
     pytest.importorskip("andes")
     from andes_reference import load
 
     ss = load("ei/EI_33.xlsx")
+    residuals = []
     for name, count in (("EXAC1", 3), ("EXAC4", 1), ("ESST4B", 1)):
         assert getattr(ss, name).n == count
-        states, set_point = _start_differences(ss, name)
-        assert states < 1e-10 and set_point < 1e-12, (name, states, set_point)
+        for states, set_point, residual in _start_differences(ss, name):
+            assert states < 1e-10 + 10.0 * residual and set_point < 1e-12 + residual, (name, states, residual)
+            residuals.append(residual)
+    assert sum(r > 1e-10 for r in residuals) == 1 and max(residuals) < 1e-7
 
 
-def _transient(name: str, times) -> list:
-    """[(t, rate difference, ANDES' largest |dx/dt|, our largest held rate, output difference)] for
-    the model's device in its ieee14 case, ANDES running a fault at bus 7 1.0-1.1 s (tol 1e-8,
-    fixed 5 ms steps) on to each time of `times`: our dx/dt at ANDES' states and inputs against
-    ANDES' f / Tf (states ANDES treats as algebraic are held in ours: rate 0), and our Efd against
-    ANDES' vout, both relative to max(1, |ANDES' value|)."""
+@functools.cache
+def _andes_run(name: str) -> dict:
+    """ANDES on the model's ieee14 case with a fault at bus 7 1.0-1.1 s (tol 1e-6, fixed 5 ms steps):
+    {"start": _start_differences after its initialisation, "transient": [(t, rate difference,
+    ANDES' largest |dx/dt|, our largest held rate, output difference)] at 1.05 s (mid-fault) and
+    2.5 s}: our dx/dt at ANDES' states and inputs against ANDES' f / Tf (states ANDES treats as
+    algebraic are held in ours: rate 0), and our Efd against ANDES' vout, both relative to
+    max(1, |ANDES' value|)."""
     import andes
 
     from andes_reference import params
@@ -166,11 +175,12 @@ def _transient(name: str, times) -> list:
     ss.add("Fault", {"bus": FAULT_BUS, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
     ss.setup()
     ss.PFlow.run()
-    ss.TDS.config.update(tol=1e-8, fixt=1, tstep=0.005, no_tqdm=1)
+    ss.TDS.config.update(tol=1e-6, fixt=1, tstep=0.005, no_tqdm=1)
+    ss.TDS.init()
+    run = {"start": _start_differences(ss, name), "transient": []}
     component, model = STANDARD_MODELS[name], getattr(ss, name)
     p = params(model, component, 0)
-    rows = []
-    for t in times:
+    for t in (1.05, 2.5):
         ss.TDS.config.tf = t
         ss.TDS.run()
         ss.TDS.fg_update(ss.exist.tds)
@@ -181,10 +191,10 @@ def _transient(name: str, times) -> list:
         ours = component.rhs(x, u, p)
         held = np.isnan(theirs)
         vout = float(model.vout.v[0])
-        rows.append((float(ss.dae.t), _scaled((ours - theirs)[~held], theirs[~held]),
-                     float(np.abs(theirs[~held]).max()), float(np.abs(ours[held]).max(initial=0.0)),
-                     _scaled(component.output_values(x, u, p)[0] - vout, vout)))
-    return rows
+        run["transient"].append((float(ss.dae.t), _scaled((ours - theirs)[~held], theirs[~held]),
+                                 float(np.abs(theirs[~held]).max()), float(np.abs(ours[held]).max(initial=0.0)),
+                                 _scaled(component.output_values(x, u, p)[0] - vout, vout)))
+    return run
 
 
 @pytest.mark.andes
@@ -192,8 +202,8 @@ def _transient(name: str, times) -> list:
 def test_derivatives_and_field_voltage_match_andes_mid_fault_and_after_clearing(name):
     """Mid-fault (1.05 s, the terminal voltage collapsed) and after clearing (2.5 s): at ANDES' states
     and inputs our dx/dt is ANDES' f / Tf and our Efd ANDES' vout, to what ANDES' Newton tolerance
-    (1e-8) leaves in its algebraic variables."""
+    (1e-6) leaves in its algebraic variables."""
     pytest.importorskip("andes")
-    for t, rate, andes_rate, held, output in _transient(name, (1.05, 2.5)):
+    for t, rate, andes_rate, held, output in _andes_run(name)["transient"]:
         assert andes_rate > 1e-3, (t, andes_rate)  # not at rest
         assert rate < 1e-6 and output < 1e-8 and held == 0.0, (t, rate, output, held)
