@@ -40,6 +40,29 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   or of its load-flow generator (PV, Slack; a group name such as SynGen or StaticGen resolves to its
   model) (a generator event: its unit tripped), Fault (bus, tf, tc, rf, xf); a disabled one (u = 0)
   is left out; a Toggle of any other model is refused in one line.
+
+Nothing silently wrong (read_back): ANDES' log records at WARNING and above while it reads, sets up
+and solves the case are kept (a logging handler on the 'andes' logger), not printed, and read back
+with what the file gave each device (System.add's arguments) against what ANDES kept (its vin):
+* refused (CaseError, one line naming the file and each model, device, parameter and value): what
+  ANDES drops: a dyr model it does not know (a misspelt one, IEEET2, ...: its records are dropped,
+  a generator left without a model it had in the file is an error; the generators are named), a
+  model (sheet) it does not know, a field (column) it does not know; and a value ANDES replaces or
+  fills in for a parameter the conversion uses of a device in service: a zero the model divides
+  by (an inertia M, a time constant, a Line's x), a negative inertia, an empty cell or NaN; any
+  other ANDES error record;
+* stated (the case's notes, Case.dynamic_data's "notes", case_notes; `opfmu grid` prints them on
+  stderr and writes them into its report): a replaced value that the converted case does not use
+  (a device out of service, a model left out such as ACEc, a parameter opfmu does not read), a
+  power-flow start guess replaced (Bus v0, a0: the solution does not depend on it), an infinite
+  limit made 1e8, and any other ANDES warning (PSS/E raw conversion notes, two slack generators on a
+  bus, ...) with ANDES' words;
+* an empty cell of a parameter the conversion does not use (TGOV1's Tn: Sn where not given) and a
+  parameter the file does not give at all take ANDES' defaults, as ANDES documents, unstated.
+The power flow converges to pflow_tolerance (PFLOW_TOLERANCE, or ROUNDING_MARGIN times the rounding
+error of the largest bus power balance: eps times the largest row sum of |Y|, for large cases such
+as GBnetwork) and the stored network must meet it to mismatch_limit (MISMATCH_LIMIT, or
+MISMATCH_MARGIN times that tolerance).
 """
 from __future__ import annotations
 
@@ -47,7 +70,9 @@ import argparse
 import hashlib
 import io
 import logging
+import math
 import os
+import re
 import shutil
 import sys
 import tempfile
@@ -67,23 +92,32 @@ NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault"
 IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "Summary")  # measurements and the case's description
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
-EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS")
+EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS", "EXAC1", "EXAC4", "ESAC1A", "ESST1A", "ESST4B",
+            "ESDC1A", "ESDC2A", "IEEET1", "IEEET3", "AC8B")
 GOVERNORS = ("TGOV1", "TGOV1N", "IEEEG1", "TG2", "GAST", "HYGOV", "HYGOV4", "HYGOVDB", "IEESGO")
 STABILISERS = ("IEEEST", "ST2CUT")
 LOADS = ("ZIP", "FLoad", "Motor5", "Motor3")  # dynamic and voltage-dependent loads (wired by the conversion: to come)
-CONVERTERS = ("REGCA1",)  # inverters' converters: a unit's bus device (wired by the conversion: to come)
-ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers (wired by the conversion: to come)
-CACHE_FORMAT = 1  # version of what convert writes: a new one keys new cache entries
-PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance (its default 1e-6 leaves 4e-7 pu mismatches)
-MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow
+COMPENSATORS = ("IEEEVC",)  # voltage compensators: an exciter's input voltage
+CONVERTERS = ("REGCA1",)  # inverters' converters: a unit's bus device, as a machine
+ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers
+PLANT_CONTROLS = ()  # inverters' plant controllers
+CACHE_FORMAT = 2  # version of what convert writes: a new one keys new cache entries (2: notes, refusals of issue 33)
+PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
+MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
+ROUNDING_MARGIN = 10  # pflow_tolerance: times the rounding error of the largest bus power balance
+MISMATCH_MARGIN = 100  # mismatch_limit: times the power-flow tolerance
+#: Parameters ANDES replaces that only start its power flow (the solution does not depend on them).
+START_GUESSES = {"Bus": ("v0", "a0")}
 # our state name -> ANDES variable where they differ
 ANDES_STATE_NAMES = {"ESST3A": {"VR": "LAW1_y", "VM": "LAW2_y"}}
 
 
-def load_andes(source, dyr=None):
+def load_andes(source, dyr=None, notes=None):
     """ANDES' System of `source` (a file or a case ANDES ships) after its power flow (Newton
-    tolerance PFLOW_TOLERANCE), ANDES' own log output silenced. CaseError (one line) where ANDES is
-    missing, cannot read the file or its power flow does not converge."""
+    tolerance pflow_tolerance), ANDES' own output off and its log records read back (read_back, see
+    the module docstring): what it drops or replaces that the case uses is a CaseError, the other
+    adjustments are appended to `notes` (a list; None: not kept). CaseError (one line) also where
+    ANDES is missing, cannot read the file or its power flow does not converge."""
     try:
         import andes
     except ImportError:
@@ -97,20 +131,72 @@ def load_andes(source, dyr=None):
         if path is None or not path.is_file():
             raise CaseError(f"no case file {source}")
     kwargs = {"addfile": str(dyr)} if dyr else {}
-    with _silenced(andes):
+    files = f"{path}{' with ' + str(dyr) if dyr else ''}"
+    with _silenced(andes) as records:
         try:
-            ss = andes.load(str(path), setup=True, no_output=True, default_config=True, **kwargs)
+            ss = andes.system.System(str(path), no_output=True, default_config=True, **kwargs)
+            inputs = _keep_inputs(ss)
+            try:
+                parsed = andes.io.parse(ss)
+            finally:
+                del ss.add  # System.add again
+            if parsed:
+                ss.setup()
         except Exception as exc:  # ANDES' parsers raise anything on a file that is not theirs
-            raise CaseError(f"ANDES cannot read {path}{' with ' + str(dyr) if dyr else ''} "
-                            f"({type(exc).__name__}: {' '.join(str(exc).split())[:80]})") from None
-        if ss is None:
-            raise CaseError(f"ANDES cannot read {path}{' with ' + str(dyr) if dyr else ''} (not a case file "
-                            "ANDES reads: xlsx, json, PSS/E raw with its dyr)")
-        ss.PFlow.config.tol = PFLOW_TOLERANCE
+            raise CaseError(f"ANDES cannot read {files} ({type(exc).__name__}: {' '.join(str(exc).split())[:80]})") \
+                from None
+        if not parsed:
+            _refuse_dropped(ss, records, path, dyr)  # what it dropped explains why it failed
+            said = _first_error(records)
+            raise CaseError(f"ANDES cannot read {files} ("
+                            + (f"ANDES: {said}" if said else "not a case file ANDES reads: xlsx, json, PSS/E raw "
+                               "with its dyr") + ")")
+        read_back(ss, records, inputs, path, dyr, notes)
+        del records[:]
+        tolerance = pflow_tolerance(ss)
+        ss.PFlow.config.tol = tolerance
         ss.PFlow.config.max_iter = 50
         if not ss.PFlow.run() or not ss.PFlow.converged:
-            raise CaseError(f"{path}: ANDES' power flow does not converge")
+            said = _first_error(records)
+            raise CaseError(f"{path}: ANDES' power flow does not converge (to {tolerance:.2g} pu"
+                            + (f"; ANDES: {said}" if said else "") + ")")
+        read_back(ss, records, {}, path, dyr, notes)
     return ss
+
+
+def pflow_tolerance(ss) -> float:
+    """ANDES' power-flow Newton tolerance [pu] for the case of `ss` (set up): PFLOW_TOLERANCE, or
+    ROUNDING_MARGIN times the rounding error of the largest bus power balance where that is larger:
+    eps times the largest sum over a bus's row of |Y| (the in-service lines' series admittances with
+    ANDES' 1e-8 added to r and x, taps, charging; the shunts), |V| about 1 pu. That rounding error:
+    kundur 1e-13, ieee39 3e-13, npcc 4e-13, wecc 3e-12 (ANDES' Newton reaches 9e-13 there),
+    GBnetwork 9e-11 (2224 buses, branches of 1e-5 pu: ANDES' Newton stalls at 2e-11; tolerance
+    9e-10)."""
+    L = ss.Line
+    position = {b: k for k, b in enumerate(ss.Bus.idx.v)}
+    row = np.zeros(ss.Bus.n)
+    if L.n:
+        on = np.asarray(L.u.v, dtype=float) != 0
+        y = np.abs(1.0 / (np.asarray(L.r.v, dtype=float) + 1e-8 + 1j * (np.asarray(L.x.v, dtype=float) + 1e-8)))
+        tap = np.abs(np.asarray(L.tap.v, dtype=float))
+        half_b = np.abs(np.asarray(L.b.v, dtype=float)) / 2
+        one = np.array([position[b] for b in L.bus1.v], dtype=int)
+        two = np.array([position[b] for b in L.bus2.v], dtype=int)
+        np.add.at(row, one[on], (y / tap ** 2 + y / tap + half_b)[on])
+        np.add.at(row, two[on], (y + y / tap + half_b)[on])
+    S = ss.Shunt
+    if S.n:
+        at = np.array([position[b] for b in S.bus.v], dtype=int)
+        np.add.at(row, at, np.abs(np.asarray(S.g.v, dtype=float) + 1j * np.asarray(S.b.v, dtype=float))
+                  * (np.asarray(S.u.v, dtype=float) != 0))
+    floor = float(np.finfo(float).eps * row.max()) if row.size else 0.0
+    return max(PFLOW_TOLERANCE, ROUNDING_MARGIN * floor)
+
+
+def mismatch_limit(tolerance: float) -> float:
+    """The largest bus power mismatch [pu] the stored network may have at the stored load flow of a
+    power flow solved to `tolerance` [pu]: MISMATCH_LIMIT, or MISMATCH_MARGIN times the tolerance."""
+    return max(MISMATCH_LIMIT, MISMATCH_MARGIN * tolerance)
 
 
 def configure_andes_logging(andes, level: int = logging.CRITICAL + 1) -> None:
@@ -119,13 +205,205 @@ def configure_andes_logging(andes, level: int = logging.CRITICAL + 1) -> None:
     andes.config_logger(stream_level=level, file=False, log_path=tempfile.gettempdir())
 
 
+class _Kept(logging.Handler):
+    """Keeps the log records it gets (WARNING and above) in `records`, for read_back."""
+
+    def __init__(self, records: list):
+        super().__init__(logging.WARNING)
+        self.records = records
+
+    def emit(self, record):
+        self.records.append(record)
+
+
 @contextmanager
 def _silenced(andes):
-    """ANDES' log output and whatever it prints off for the block."""
+    """ANDES' printed output and its log output off for the block, its log records at WARNING and
+    above kept: yields the list they go into (read_back reads them)."""
     configure_andes_logging(andes)
+    records = []
+    handler = _Kept(records)
+    logger = logging.getLogger("andes")
+    logger.addHandler(handler)
     sink = io.StringIO()
-    with redirect_stdout(sink), redirect_stderr(sink):
-        yield
+    try:
+        with redirect_stdout(sink), redirect_stderr(sink):
+            yield records
+    finally:
+        logger.removeHandler(handler)
+
+
+def _keep_inputs(ss) -> dict:
+    """Wraps ss.add (until `del ss.add`) so that what the file gives each device is kept: returns
+    {model name: {device idx: {parameter: value as given}}}, filled while ANDES parses."""
+    inputs = {}
+    add = ss.add
+
+    def add_kept(model_name, param_dict=None, **kwargs):
+        given = dict(param_dict or {}, **kwargs)
+        idx = add(model_name, param_dict, **kwargs)
+        if idx is not None:
+            inputs.setdefault(model_name, {})[idx] = given
+        return idx
+
+    ss.add = add_kept
+    return inputs
+
+
+def _first_error(records) -> str:
+    """The first two ERROR records' messages, one line ('' where there is none)."""
+    return "; ".join([_said(r, 100) for r in records if r.levelno >= logging.ERROR][:2])
+
+
+def _said(record, length: int = 120) -> str:
+    return " ".join(record.getMessage().split())[:length]
+
+
+# ANDES' log messages that read_back reads (andes.io.psse.read_add, System.add, ModelData.add and
+# report_corrections); any other is stated (WARNING) or refused (ERROR) with ANDES' words.
+_DYR_UNKNOWN = (re.compile(r"^Models not yet supported: (.+)$"), re.compile(r"^PSS/E Model <(.+)> is not supported\.$"))
+_MODEL_UNKNOWN = re.compile(r"^<(.+)> is not an existing model\.$")
+_FIELD_UNKNOWN = re.compile(r"^(\w+): unrecognized field '(.*?)'\.")
+_CORRECTED = re.compile(r"^(\w+): \d+ device\(s\) had \w+ param <(\w+)> corrected to .+\. idx=(.+)$")
+_LISTED = 6  # items a refusal lists before "and N more"
+
+
+def _listed(items, most: int = _LISTED) -> str:
+    items = list(dict.fromkeys(items))
+    return ", ".join(items[:most]) + (f" and {len(items) - most} more" if len(items) > most else "")
+
+
+def read_back(ss, records, inputs: dict, path, dyr=None, notes=None) -> None:
+    """Reads back ANDES' log `records` and what the file gave its devices (`inputs`, _keep_inputs)
+    for the case `path` (with `dyr`), set up or with its power flow solved: CaseError (one line) for
+    what the module docstring refuses; what it states is appended to `notes` (None: not kept)."""
+    rest = _refuse_dropped(ss, records, path, dyr)
+    refused, stated, seen = _replaced(ss, inputs)
+    if refused:
+        raise CaseError(f"{path}: data ANDES would replace: {_listed(refused)}")
+    for r in rest:
+        said = r.getMessage()
+        corrected = _CORRECTED.match(said)
+        if corrected and all((corrected.group(1), idx, corrected.group(2)) in seen
+                             for idx in _idx_list(corrected.group(3))):
+            continue  # stated by _replaced with the file's value
+        if r.levelno >= logging.ERROR:
+            raise CaseError(f"{path}: ANDES: {_said(r, 200)}")
+        stated.append(f"ANDES: {_said(r, 200)}")
+    if notes is not None:
+        notes += [n for n in dict.fromkeys(stated) if n not in notes]
+
+
+def _refuse_dropped(ss, records, path, dyr=None) -> list:
+    """CaseError (one line) naming every model, dyr model (with the generators its records name) and
+    field that ANDES' `records` say it does not know and drops; the other records."""
+    dyr_models, dropped, rest = [], [], []
+    for r in records:
+        said = r.getMessage()
+        unknown = next((m for m in (p.match(said) for p in _DYR_UNKNOWN) if m), None)
+        if unknown:
+            dyr_models += [m.strip() for m in unknown.group(1).split(",") if m.strip()]
+        elif _MODEL_UNKNOWN.match(said):
+            dropped.append(f"the model {_MODEL_UNKNOWN.match(said).group(1)} with its devices")
+        elif _FIELD_UNKNOWN.match(said) and _uses(ss, _FIELD_UNKNOWN.match(said).group(1)) is not None:
+            model, field = _FIELD_UNKNOWN.match(said).groups()
+            dropped.append(f"the field {field} of {model} with its values")
+        else:
+            rest.append(r)
+    if dyr_models:
+        dropped.insert(0, _dyr_dropped(ss, dyr_models))
+    if dropped:
+        raise CaseError(f"{dyr if dyr_models and dyr else path}: ANDES does not know and drops {'; '.join(dropped)}"
+                        + ("; a generator left without a model it had in the file is an error" if dyr_models else ""))
+    return rest
+
+
+def _idx_list(text: str) -> list:
+    """The device idx of a report_corrections record's list (e.g. "[1, 'GENROU_2']"), as strings."""
+    return [t.strip().strip("'\"") for t in text.strip("[]").split(",") if t.strip()]
+
+
+def _dyr_dropped(ss, models) -> str:
+    """The dyr models ANDES does not know, with the generators (bus, ID) their records name."""
+    table = getattr(ss, "dyr_dict", None) or {}
+    parts = []
+    for name in dict.fromkeys(models):
+        rows = table.get(name)
+        named = []
+        if rows is not None and rows.shape[1] >= 2:
+            named = [f"bus {_plain(b)} ID {_plain(i)}" for b, i in zip(rows.iloc[:, 0], rows.iloc[:, 1])]
+        parts.append(name + (f" ({_listed(named, 3)})" if named else ""))
+    return f"the dyr model{'s' if len(parts) > 1 else ''} {', '.join(parts)} with {'their' if len(parts) > 1 else 'its'} records"
+
+
+def _plain(value) -> str:
+    try:
+        return f"{float(value):g}"
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def _uses(ss, name: str):
+    """The parameters of model `name` that the conversion uses (a set), or None where the model is
+    not converted (left out, or one opfmu does not have: refused on its own by _check_supported)."""
+    model = ss.models.get(name)
+    if model is None or name in IGNORED_MODELS:
+        return None
+    if name in NETWORK_MODELS:
+        return set(model.num_params)
+    if name in STANDARD_MODELS:
+        return set(STANDARD_MODELS[name].params_type.__dataclass_fields__) | {"u"}
+    return None
+
+
+def _replaced(ss, inputs: dict) -> tuple:
+    """(refused, stated, seen): the values the file gave that ANDES replaced (a NumParam's non_zero,
+    non_negative, non_positive checks) or filled in with its default (empty, NaN), as
+    "MODEL idx param = value (why)", refused or stated by the module docstring's rule; `seen`: the
+    (model, idx as text, parameter) of each replaced value, to match ANDES' own records."""
+    refused, stated, seen = [], [], set()
+    for name, devices in inputs.items():
+        model = ss.models.get(name)
+        if model is None:
+            continue
+        uses = _uses(ss, name)
+        for idx, given in devices.items():
+            i = model.uid.get(idx)
+            if i is None:
+                continue
+            in_service = "u" not in model.params or float(model.u.v[i]) != 0
+            for param, raw in given.items():
+                p = model.num_params.get(param)
+                if p is None or callable(getattr(p, "iconvert", None)) or p.vin is None:
+                    continue
+                empty = raw is None or (isinstance(raw, float) and math.isnan(raw))
+                try:
+                    value, kept = (None if empty else float(raw)), float(p.vin[i])
+                except (TypeError, ValueError):
+                    continue
+                used = uses is not None and param in uses and in_service
+                if empty:
+                    if used:
+                        refused.append(f"{name} {idx} {param} empty or NaN (ANDES would use {kept:g})")
+                    continue
+                if value == kept:
+                    continue
+                seen.add((name, str(idx), param))
+                what = f"{name} {idx}: {param} = {value:g} in the file, ANDES uses {kept:g}"
+                if math.isinf(value) and abs(kept) == 1e8:
+                    if used:
+                        stated.append(f"{what} (no limit either way)")
+                elif not used:
+                    why = (f"{name} is not converted" if uses is None else "out of service" if param in uses
+                           else f"opfmu does not use {param}")
+                    stated.append(f"{what} ({why})")
+                elif param in START_GUESSES.get(name, ()):
+                    stated.append(f"{what} (a start guess of the power flow)")
+                else:
+                    reason = ("zero, which the model divides by" if value == 0 else "negative" if value < 0
+                              else "positive" if kept < 0 else "out of its range")
+                    refused.append(f"{name} {idx} {param} = {value:g} ({reason}; ANDES would use {kept:g})")
+    return refused, stated, seen
 
 
 def case_cache_dir() -> Path:
@@ -196,6 +474,23 @@ def case_from_file(path, dyr=None, cache_dir=None) -> Case:
     return load_case(*files, name, source)
 
 
+def case_notes(case) -> tuple:
+    """What ANDES adjusted in the file of `case` and the conversion states rather than refuses (the
+    module docstring): the "notes" of its dynamic-data file, () where it has none."""
+    return file_notes(case.dynamic_data) if getattr(case, "dynamic_data", None) is not None else ()
+
+
+def file_notes(path) -> tuple:
+    """The "notes" (strings) of a dynamic-data file; () where it has none or cannot be read."""
+    import json
+
+    try:
+        notes = json.loads(Path(path).read_text()).get("notes", ())
+    except (OSError, ValueError, AttributeError):
+        return ()
+    return tuple(str(n) for n in notes) if isinstance(notes, list) else ()
+
+
 def _remove(folder: Path) -> None:
     """Removes a cache folder: renamed aside first, so no reader finds it half removed."""
     if not folder.exists():
@@ -220,10 +515,10 @@ def _bus(value, where: str) -> int:
 
 def _check_supported(ss) -> None:
     known = set(NETWORK_MODELS) | set(IGNORED_MODELS) | set(STANDARD_MODELS)
-    for name, model in ss.models.items():
-        if model.n > 0 and name not in known:
-            raise CaseError(f"the case uses the model {name}, which opfmu does not have "
-                            f"(it has {', '.join(STANDARD_MODELS)})")
+    missing = [name for name, model in ss.models.items() if model.n > 0 and name not in known]
+    if missing:  # all of them in one line
+        raise CaseError(f"the case uses the model{'s' if len(missing) > 1 else ''} {', '.join(missing)}, which opfmu "
+                        f"does not have (it has {', '.join(STANDARD_MODELS)})")
     cfg = ss.PQ.config
     if (cfg.p2p, cfg.p2i, cfg.p2z, cfg.q2q, cfg.q2i, cfg.q2z) != (0, 0, 1, 0, 0, 1):
         raise CaseError("only constant-impedance loads in the time domain are converted (ANDES' default PQ "
@@ -255,8 +550,9 @@ def network_data(ss, name: str) -> dict:
     # the power each load draws in the power flow (ANDES' Ppf, Qpf: p0, q0 within [vmin, vmax])
     V = dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
     loads = {}
+    replaced = _replaced_loads(ss)
     for i in range(ss.PQ.n):
-        if ss.PQ.u.v[i] == 0:
+        if ss.PQ.u.v[i] == 0 or ss.PQ.idx.v[i] in replaced:
             continue
         v0, p0, q0 = float(V[ss.PQ.bus.v[i]]), float(ss.PQ.p0.v[i]), float(ss.PQ.q0.v[i])
         vmin, vmax = float(ss.PQ.vmin.v[i]), float(ss.PQ.vmax.v[i])
@@ -335,8 +631,8 @@ def _branch_name(ss, dev, number) -> str:
 
 
 def _params(model, name: str, i: int, ss) -> dict:
-    """Device i's parameters as the case file gives them (ANDES' vin), with Sn, Sb, fn where the
-    component takes them."""
+    """Device i's parameters as the case file gives them (ANDES' vin), with Sn, Sb, fn and its bus's
+    nominal voltage Vb where the component takes them."""
     component = STANDARD_MODELS[name]
     fields = component.params_type.__dataclass_fields__
     values = {}
@@ -345,56 +641,130 @@ def _params(model, name: str, i: int, ss) -> dict:
         if param is not None and hasattr(param, "vin"):
             values[field] = float(param.vin[i])
     for field, value in (("Sb", float(ss.config.mva)), ("Sn", None), ("fn", None)):
-        if field in fields:
+        if field in fields and (value is not None or hasattr(model, field)):
             values[field] = value if value is not None else float(getattr(model, field).v[i])
+    if "Vb" in fields:  # the nominal voltage [kV] of the device's bus
+        values["Vb"] = float(ss.Bus.Vn.v[list(ss.Bus.idx.v).index(model.bus.v[i])])
     return values
 
 
-def dynamic_data(ss, name: str) -> dict:
-    """The dynamic-data file's content (see the module docstring) of ANDES' System."""
-    number = dict(zip(ss.Bus.idx.v, (_bus(b, "Bus") for b in ss.Bus.idx.v)))
-    machines = {}  # machine idx -> (model name, position)
-    for mname in MACHINES:
-        model = getattr(ss, mname)
-        for i in range(model.n):
-            machines[model.idx.v[i]] = (mname, i)
-    units = {}
-    for idx, (mname, i) in machines.items():
-        model = getattr(ss, mname)
-        if model.u.v[i] == 0:
+def _replaced_loads(ss) -> dict:
+    """{PQ idx: (model, position)} of the PQ loads a load device in service replaces (ANDES' ZIP and
+    FLoad: `pq`, whose PQ ANDES switches off in the time domain: the device draws its power)."""
+    out = {}
+    for dname in LOADS:
+        model = getattr(ss, dname)
+        if not hasattr(model, "pq") or dname not in STANDARD_MODELS:
             continue
-        units[idx] = {"bus": number[model.bus.v[i]], "generator": str(model.gen.v[i]),
-                      "machine": {"component": STANDARD_MODELS[mname].name, "andes": str(idx),
-                                  "params": _params(model, mname, i, ss)}}
-    exciter_of = {}
-    for role, names in (("exciter", EXCITERS), ("governor", GOVERNORS)):
+        for i in range(model.n):
+            if model.u.v[i] != 0:
+                out[model.pq.v[i]] = (dname, i)
+    return out
+
+
+# the share of its PQ's load-flow power a load device draws: (active, reactive) percentage parameters
+LOAD_SHARES = {"FLoad": ("kp", "kq"), "ZIP": (("kpp", "kpi", "kpz"), ("kqp", "kqi", "kqz"))}
+
+
+def _share(model, name: str, i: int) -> tuple:
+    """(active, reactive) fraction of its PQ's load-flow power a load device draws (ANDES: the
+    percentages of the device; the rest of the PQ is dropped)."""
+    return tuple(sum(float(getattr(model, k).v[i]) for k in ((keys,) if isinstance(keys, str) else keys)) / 100.0
+                 for keys in LOAD_SHARES[name])
+
+
+def _bus_frequency(ss, bus) -> dict:
+    """Tf, Tw of the BusFreq measuring `bus` (ANDES' own, else the defaults of the one it adds)."""
+    model = ss.BusFreq
+    for i in range(model.n):
+        if model.bus.v[i] == bus and model.u.v[i] != 0:
+            return {"Tf": float(model.Tf.v[i]), "Tw": float(model.Tw.v[i])}
+    return {"Tf": float(model.Tf.default), "Tw": float(model.Tw.default)}
+
+
+def _load_units(ss, number) -> list:
+    """The dynamic-data entries of the load devices (module docstring): a unit per device at its bus
+    with the power P, Q it draws at the load flow: a device that replaces a PQ (FLoad) its share of
+    the PQ's power-flow power Ppf, Qpf (CaseError where the share is not all of it: ANDES drops the
+    rest and starts off its load flow), a motor what ANDES' power flow gives it. An FLoad measures
+    its bus frequency with the BusFreq of its bus (Tf, Tw) at the case's frequency."""
+    out = []
+    for pq, (dname, i) in _replaced_loads(ss).items():
+        model = getattr(ss, dname)
+        j = list(ss.PQ.idx.v).index(pq)
+        share = _share(model, dname, i)
+        if any(abs(f - 1.0) > 1e-9 for f in share):
+            raise CaseError(f"{dname} {model.idx.v[i]} draws {100 * share[0]:g} % of the active and "
+                            f"{100 * share[1]:g} % of the reactive power of PQ {pq}: ANDES drops the rest, so its "
+                            "simulation starts off its own load flow (make the percentages sum to 100)")
+        entry = _entry(model, dname, i, ss)
+        if dname == "FLoad":
+            entry["params"].update(_bus_frequency(ss, ss.PQ.bus.v[j]), fn=float(ss.config.freq))
+        out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": float(ss.PQ.Ppf.v[j]),
+                    "Q": float(ss.PQ.Qpf.v[j]), "load_device": entry, "fmu": {"kind": "reference"}})
+    for dname in LOADS:
+        model = getattr(ss, dname)
+        if hasattr(model, "pq") or dname not in STANDARD_MODELS:
+            continue
+        for i in range(model.n):
+            if model.u.v[i] != 0:
+                out.append({"bus": number[model.bus.v[i]], "load": str(model.idx.v[i]), "P": float(model.p.v[i]),
+                            "Q": float(model.q.v[i]), "load_device": _entry(model, dname, i, ss),
+                            "fmu": {"kind": "reference"}})
+    return out
+
+
+def _control_roles() -> tuple:
+    """(role, ANDES models, the IdxParam naming the device it controls, that device's role; None: the
+    unit's bus device), each role after the one it links to."""
+    return (("exciter", EXCITERS, "syn", None), ("governor", GOVERNORS, "syn", None),
+            ("electrical_control", ELECTRICAL_CONTROLS, "reg", None),
+            ("stabiliser", STABILISERS, "avr", "exciter"), ("compensator", COMPENSATORS, "avr", "exciter"),
+            ("plant_control", PLANT_CONTROLS, "ree", "electrical_control"))
+
+
+def _entry(model, name: str, i: int, ss) -> dict:
+    """A device's dynamic-data entry: its component, ANDES idx and parameters."""
+    return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": _params(model, name, i, ss)}
+
+
+def dynamic_data(ss, name: str) -> dict:
+    """The dynamic-data file's content (see the module docstring) of ANDES' System: a unit per bus
+    device of a static generator (a machine, or an inverter's converter, linked by `gen`) with the
+    control devices linked to it (exciter, governor, electrical control by `syn` or `reg`;
+    stabiliser and compensator to the exciter by `avr`; plant control to the electrical control by
+    `ree`)."""
+    number = dict(zip(ss.Bus.idx.v, (_bus(b, "Bus") for b in ss.Bus.idx.v)))
+    units = {}  # bus device idx -> its unit's entry
+    owner = {None: {}}  # role -> {device idx: the unit's key}
+    for role, names in (("machine", MACHINES), ("converter", CONVERTERS)):
         for dname in names:
             model = getattr(ss, dname)
             for i in range(model.n):
                 if model.u.v[i] == 0:
                     continue
-                syn = model.syn.v[i]
+                idx = model.idx.v[i]
+                units[idx] = {"bus": number[model.bus.v[i]], "generator": str(model.gen.v[i]),
+                              role: _entry(model, dname, i, ss)}
+                owner[None][idx] = idx
+    for role, names, link, target in _control_roles():
+        owner[role] = {}
+        for dname in names:
+            model = getattr(ss, dname)
+            for i in range(model.n):
+                if model.u.v[i] == 0:
+                    continue
                 if dname == "IEEEG1" and model.syn2.v[i] is not None:
                     raise CaseError(f"IEEEG1 {model.idx.v[i]} drives two machines (syn2), which opfmu does not model")
-                unit = units.get(syn)
-                if unit is None:
-                    raise CaseError(f"{dname} {model.idx.v[i]} names no machine in service ({syn})")
-                if role in unit:
-                    raise CaseError(f"machine {syn} has two {role}s")
-                unit[role] = {"component": STANDARD_MODELS[dname].name, "andes": str(model.idx.v[i]),
-                              "params": _params(model, dname, i, ss)}
-                if role == "exciter":
-                    exciter_of[model.idx.v[i]] = syn
-    for dname in STABILISERS:
-        model = getattr(ss, dname)
-        for i in range(model.n):
-            if model.u.v[i] == 0:
-                continue
-            syn = exciter_of.get(model.avr.v[i])
-            if syn is None:
-                raise CaseError(f"{dname} {model.idx.v[i]} names no exciter in service ({model.avr.v[i]})")
-            units[syn]["stabiliser"] = {"component": STANDARD_MODELS[dname].name, "andes": str(model.idx.v[i]),
-                                        "params": _params(model, dname, i, ss)}
+                controlled = getattr(model, link).v[i]
+                key = owner.get(target, {}).get(controlled)
+                if key is None:
+                    raise CaseError(f"{dname} {model.idx.v[i]} names no {target or 'machine or converter'} in "
+                                    f"service ({controlled})")
+                if role in units[key]:
+                    raise CaseError(f"{target or 'the bus device'} {controlled} has two {role.replace('_', ' ')}s")
+                units[key][role] = _entry(model, dname, i, ss)
+                owner[role][model.idx.v[i]] = key
     for unit in units.values():
         unit["fmu"] = {"kind": "reference"}
     generators = [str(g) for m in (ss.Slack, ss.PV) for g in m.idx.v]
@@ -402,18 +772,20 @@ def dynamic_data(ss, name: str) -> dict:
     bare = [g for g in in_service if g not in {u["generator"] for u in units.values()}]
     if bare:
         raise CaseError(f"the generator{'s' if len(bare) > 1 else ''} {', '.join(bare[:5])}"
-                        f"{' ...' if len(bare) > 5 else ''} {'have' if len(bare) > 1 else 'has'} no machine "
-                        "(GENROU, GENCLS) in the case")
+                        f"{' ...' if len(bare) > 5 else ''} {'have' if len(bare) > 1 else 'has'} no machine or "
+                        f"converter ({', '.join(MACHINES + CONVERTERS)}) in the case")
     order = sorted(units.values(), key=lambda u: generators.index(u["generator"]))
     return {"case": name, "description": "converted from ANDES' case by reference_models.grid.andes_case: one unit per "
-            "machine (machine, exciter, governor, stabiliser), parameters as the case file gives them (machine "
-            "base Sn; Sb the system base), keyed by bus and load-flow generator",
-            "generators": order}
+            "machine or converter (with its exciter, governor, stabiliser, compensator, electrical and plant "
+            "controls), parameters as the case file gives them (machine base Sn; Sb the system base), keyed by bus "
+            "and load-flow generator; a unit per load device (ZIP, FLoad) with the power it draws", "generators": order,
+            "loads": _load_units(ss, number)}
 
 
-def mismatch(network: dict) -> float:
+def mismatch(network: dict, device_loads=()) -> float:
     """The largest bus power mismatch [pu] of a network file's content at its stored load flow:
-    generation - load - V conj(Y V)."""
+    generation - load - V conj(Y V), the loads including `device_loads` ((bus, P, Q) drawn by load
+    devices: the dynamic-data file's "loads")."""
     import tempfile
 
     from .case import load_network
@@ -424,6 +796,8 @@ def mismatch(network: dict) -> float:
         net, flow = load_network(path)
     V = flow.V_complex
     S = V * np.conj(net.ybus() @ V) + flow.S_load
+    for bus, P, Q in device_loads:
+        S[net.bus_index(bus)] += complex(P, Q)
     for k, bus in enumerate(flow.generator_buses):
         S[net.bus_index(bus)] -= complex(flow.P_gen[k], flow.Q_gen[k])
     return float(np.abs(S).max())
@@ -433,10 +807,13 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     """Write NAME_network.json and NAME.json of ANDES' case `source` into out_dir; (network file,
     dynamic-data file). CaseError where the case cannot be converted."""
     name = name or Path(str(source)).stem
-    ss = load_andes(source, dyr)
+    notes = []
+    ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    worst = mismatch(network)
-    if worst > MISMATCH_LIMIT:
+    if notes:  # what ANDES adjusted, stated (case_notes)
+        dynamic["notes"] = notes
+    worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic["loads"]])
+    if worst > mismatch_limit(float(ss.PFlow.config.tol)):
         raise CaseError(f"{source}: the converted network misses ANDES' load flow by {worst:.3g} pu")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -536,7 +913,10 @@ def main(argv=None) -> int:
             for model, r in compare_shipped(args.compare).items():
                 print(model, " ".join(f"{k}={v:.3g}" for k, v in r.items()))
         elif args.case and args.out:
-            print(*convert(args.case, args.out, args.name, args.dyr))
+            files = convert(args.case, args.out, args.name, args.dyr)
+            print(*files)
+            for note in file_notes(files[1]):
+                print(f"note: {note}", file=sys.stderr)
         else:
             raise CaseError("give CASE OUT_DIR, --shipped or --compare NAME")
     except CaseError as exc:

@@ -251,14 +251,17 @@ class DeviceStart:
 
 @dataclass(frozen=True)
 class Unit:
-    """The devices of one generator at `bus`: the machine (the one with a bus port) first, then its
-    control components; `fmu`: the dynamic data's fmu entry, as given (for the co-simulation);
-    `generator`: the load-flow generator's name where the data give one."""
+    """The devices at `bus` around one bus device (the one with a bus port: a machine, an inverter's
+    converter, a load), which comes first, then its control components; `fmu`: the dynamic data's
+    fmu entry, as given (for the co-simulation); `generator`: the load-flow generator's name where
+    the data give one; `load`: for a unit that is a load (not a generator), the power it draws at
+    the load-flow point, P + jQ [pu, system base] (None: a generator's unit)."""
 
     bus: int
     devices: tuple
     fmu: object = None
     generator: str | None = None
+    load: complex | None = None
 
     @property
     def machine(self) -> Device:
@@ -429,7 +432,6 @@ def load_units(path, generator_buses, generator_names=None) -> tuple:
     matched by bus and, where it gives one, generator name). CaseError for an unknown component, a
     unit without exactly one machine first, a generator at a bus that has none in the load flow,
     or two entries for one generator."""
-    from ..components import component
 
     path = Path(path)
     data = _read_json(path)
@@ -444,35 +446,56 @@ def load_units(path, generator_buses, generator_names=None) -> tuple:
         where = f"{path}: generator at bus {bus}" + (f" ({generator})" if generator else "")
         if (bus, generator) in by_key:
             raise CaseError(f"{where}: the bus has two generator entries")
-        devices = []
-        for name, entry in g.items():
-            if name in ("bus", "fmu", "generator"):
-                continue
-            if not isinstance(entry, dict):
-                raise CaseError(f"{where}: {name} must be an object with its component")
-            try:
-                comp = component(entry.get("component"))
-            except ValueError as exc:
-                raise CaseError(f"{where}: {name}: {exc}") from None
-            try:
-                if "file" in entry:
-                    source = path.parent / str(entry["file"])
-                    params = comp.load_params(source)
-                else:
-                    source = None
-                    params = comp.params(entry.get("params", {}))
-            except (ValueError, OSError, TypeError) as exc:
-                raise CaseError(f"{where}: {name}: {' '.join(str(exc).split())[:160]}") from None
-            devices.append(Device(name, comp, params, source))
-        machines = [d for d in devices if d.component.ports.bus is not None]
-        if len(machines) != 1 or devices[0] is not machines[0]:
-            raise CaseError(f"{where}: a unit needs exactly one device with a bus port (a machine), listed first")
-        by_key[(bus, generator)] = Unit(bus, tuple(devices), g.get("fmu"), generator)
+        by_key[(bus, generator)] = Unit(bus, _devices(path, g, where, ("bus", "fmu", "generator")), g.get("fmu"),
+                                        generator)
     keys = [(bus, name if (bus, name) in by_key else None) for bus, name in zip(generator_buses, names)]
     if sorted(by_key, key=str) != sorted(keys, key=str):
         raise CaseError(f"{path}: needs one generator at each of the buses {tuple(generator_buses)}, "
                         f"got {sorted(bus for bus, _ in by_key)}")
-    return tuple(by_key[key] for key in keys)
+    loads = []
+    for e in _entries(path, data, "loads"):
+        try:
+            bus = int(e["bus"])
+            drawn = complex(_number(path, "load P", e["P"]), _number(path, "load Q", e["Q"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            if isinstance(exc, CaseError):
+                raise
+            raise CaseError(f"{path}: every load needs its bus number and the P, Q it draws") from None
+        where = f"{path}: load at bus {bus}" + (f" ({e['load']})" if e.get("load") is not None else "")
+        loads.append(Unit(bus, _devices(path, e, where, ("bus", "fmu", "load", "P", "Q")), e.get("fmu"), None, drawn))
+    return tuple(by_key[key] for key in keys) + tuple(loads)
+
+
+def _devices(path: Path, entry: dict, where: str, keys: tuple) -> tuple:
+    """The Devices of a unit's entry in a dynamic-data file: every key but `keys`, in file order, the
+    one with a bus port first."""
+    from ..components import component
+
+    devices = []
+    for name, value in entry.items():
+        if name in keys:
+            continue
+        if not isinstance(value, dict):
+            raise CaseError(f"{where}: {name} must be an object with its component")
+        try:
+            comp = component(value.get("component"))
+        except ValueError as exc:
+            raise CaseError(f"{where}: {name}: {exc}") from None
+        try:
+            if "file" in value:
+                source = path.parent / str(value["file"])
+                params = comp.load_params(source)
+            else:
+                source = None
+                params = comp.params(value.get("params", {}))
+        except (ValueError, OSError, TypeError) as exc:
+            raise CaseError(f"{where}: {name}: {' '.join(str(exc).split())[:160]}") from None
+        devices.append(Device(name, comp, params, source))
+    bus_devices = [d for d in devices if d.component.ports.bus is not None]
+    if len(bus_devices) != 1 or devices[0] is not bus_devices[0]:
+        raise CaseError(f"{where}: a unit needs exactly one device with a bus port (a machine, a converter, a "
+                        "load), listed first")
+    return tuple(devices)
 
 
 def load_events(path) -> tuple:
@@ -498,6 +521,15 @@ def load_events(path) -> tuple:
             raise CaseError(f"{path}: malformed event ({type(exc).__name__}: {str(exc)[:80]})") from None
         events.append(event)
     return tuple(sorted(events, key=lambda ev: ev.time))
+
+
+def _operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
+    """V, theta, P, Q of unit k at the load flow: its generator's, or for a load unit minus the
+    power it draws (generator convention)."""
+    if unit.load is None:
+        return flow.generator_at(k)
+    i = flow.buses.index(unit.bus)
+    return {"V": float(flow.V[i]), "theta": float(flow.theta[i]), "P": -unit.load.real, "Q": -unit.load.imag}
 
 
 def unit_start(unit: Unit, op: dict) -> tuple:
@@ -621,7 +653,7 @@ def load_case(network_file, dynamic_data, name: str | None = None, source: tuple
     where they were converted from a file ANDES reads (Case.source)."""
     network, flow = load_network(network_file)
     units = load_units(dynamic_data, network.generator_buses, [g.name for g in network.generators])
-    starts = tuple(unit_start(u, flow.generator_at(k)) for k, u in enumerate(units))
+    starts = tuple(unit_start(u, _operating_point(u, k, flow)) for k, u in enumerate(units))
     return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data),
                 source)
 
