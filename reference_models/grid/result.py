@@ -43,14 +43,21 @@ def unit_labels(gen_buses) -> tuple:
 
 
 def device_labels(units) -> tuple:
-    """Per unit (case.Unit) the label of each of its devices: `<MODEL>_<unit label>` (the component's
-    name in capitals), `<MODEL>_<unit label>_<device key>` where a unit holds two of one model."""
-    labels = unit_labels([u.bus for u in units])
+    """Per unit (case.Unit) the label of each of its devices: `<MODEL>_<bus>` (the component's name in
+    capitals), `<MODEL>_<bus>_<k>` (k 1-based in unit order) where the bus holds that model in
+    several units, and the device's key appended where a unit holds two of one model."""
+    models = [tuple(d.component.name.upper() for d in u.devices) for u in units]
+    keys = [(m, u.bus) for u, ms in zip(units, models) for m in dict.fromkeys(ms)]
+    seen = {}
     out = []
-    for unit, label in zip(units, labels):
-        models = [d.component.name.upper() for d in unit.devices]
-        out.append(tuple(f"{m}_{label}" if models.count(m) == 1 else f"{m}_{label}_{d.name}"
-                         for m, d in zip(models, unit.devices)))
+    for unit, ms in zip(units, models):
+        labels = []
+        for m in dict.fromkeys(ms):
+            seen[(m, unit.bus)] = seen.get((m, unit.bus), 0) + 1
+        for m, d in zip(ms, unit.devices):
+            label = f"{m}_{unit.bus}" + (f"_{seen[(m, unit.bus)]}" if keys.count((m, unit.bus)) > 1 else "")
+            labels.append(label if ms.count(m) == 1 else f"{label}_{d.name}")
+        out.append(tuple(labels))
     return tuple(out)
 
 
@@ -175,7 +182,8 @@ class GridResult:
 
     def columns(self, case=None) -> dict:
         """The result as named columns (the grid CSV's names, unit labels by `unit_labels`): time,
-        delta_<unit>, omega_<unit>, Efd_<unit> (units with a rotor angle), V_<bus>, theta_<bus>,
+        delta_<machine>, omega_<machine>, Efd_<machine> (the units with a rotor angle, labelled among
+        themselves), V_<bus>, theta_<bus>,
         then every device state `<device>_<state>` (`device_states`), Vs_<unit>, theta_vs_<unit>,
         P_<unit>, Q_<unit>. With the `case` the result is of, omega is the speed deviation [rad/s]
         and Efd the field voltage of every unit (`speed_deviation`, `field_voltage`); without it,
@@ -184,6 +192,7 @@ class GridResult:
         out = {"time": self.time}
         angles = self.angles
         machines = [k for k in range(len(labels)) if np.any(np.isfinite(angles[:, k]))]
+        machine_labels = dict(zip(machines, unit_labels([self.gen_buses[k] for k in machines])))
         if case is not None:
             per_unit = {"delta": angles, "omega": speed_deviation(self, case), "Efd": field_voltage(self, case)}
         else:
@@ -191,7 +200,7 @@ class GridResult:
         for name in ("delta", "omega", "Efd"):
             if per_unit[name] is not None:
                 for k in machines:
-                    out[f"{name}_{labels[k]}"] = per_unit[name][:, k]
+                    out[f"{name}_{machine_labels[k]}"] = per_unit[name][:, k]
         for i, bus in enumerate(self.buses):
             out[f"V_{bus}"] = self.V_bus[:, i]
         for i, bus in enumerate(self.buses):
