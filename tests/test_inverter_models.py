@@ -265,3 +265,43 @@ def test_chain_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(
     y = REGCA1.output_values(xg, ug, pg)
     np.testing.assert_allclose(y[2:4], point["PQ"], rtol=0.0, atol=1e-9 * np.abs(point["PQ"]).max())
     np.testing.assert_allclose(REECA1.output_values(xr, ur, pr), ug[2:], rtol=0.0, atol=1e-9 * np.abs(ug[2:]).max())
+
+
+def test_native_fmu_holds_the_injection_and_the_active_current_limit_after_a_dip(fmu_cache):
+    """REECA1's native FMU (FMI 2.0) through a dip 0.1-0.3 s (V = 0.6 pu) with Thld = 0.275 s,
+    Iqfrz = 0.5 pu, Thld2 = 0.175 s, Imax = 0.9 pu, steps of 50 ms: it follows the independent
+    solver of tests/test_standard_model_fmus.py (the resets at each step's start and located
+    switching); the timer stays at 0 through the dip, then counts to its cap; after the dip the
+    active current stays under the limit sampled in the dip for Thld2 and the reactive current
+    carries Iqfrz for Thld."""
+    from test_standard_model_fmus import H, locked_solution, run_inputs
+
+    from cosim.fmu import FMU
+    from fmu_export.build_cache import cached_native_reference_fmu
+
+    values = {"Thld": 0.275, "Iqfrz": 0.5, "Thld2": 0.175, "Imax": 0.9, "Kqv": 2.0}
+    p = REECA1.params(values)
+    path = cached_native_reference_fmu("REECA1Hold", REECA1, values, fmi_version=2, cache=fmu_cache)
+    inputs = run_inputs(REECA1, ((0.1, {}), (0.3, {"V": 0.6}), (0.8, {})))
+    x = REECA1.steady_state(None, p)
+    slave = FMU(path, component=REECA1)
+    rows = []
+    for u in inputs:
+        x, _ = locked_solution(REECA1, p, x, tuple(u), H)
+        got = np.concatenate([slave.step(H, *u), slave.get(*REECA1.output_names)])
+        expected = np.concatenate([x, REECA1.output_values(x, u, p)])
+        assert np.all(np.abs(got - expected) <= 1e-8 * np.maximum(1.0, np.abs(expected))), (got, expected)
+        rows.append(got)
+    slave.close()
+    t = H * np.arange(1, len(rows) + 1) + 1e-9  # each step's end (just after, against rounding)
+    rows = np.array(rows)
+    tdip, Ipcmd, Iqcmd = rows[:, REECA1.state_names.index("tdip")], rows[:, -2], rows[:, -1]
+    assert np.all(tdip[(t > 0.15) & (t < 0.3)] == 0.0) and tdip[-1] == pytest.approx(0.275, abs=1e-9)
+    after = (t > 0.35) & (t < 0.55)
+    np.testing.assert_allclose(tdip[after], t[after] - 0.3, atol=1e-8)
+    # the limit sampled at the dip's last step start (ANDES: at its last iterate), held for Thld2
+    held = (t > 0.35) & (t < 0.475)
+    assert np.all(Ipcmd[held] == Ipcmd[held][0]) and Ipcmd[held][0] < 0.3
+    assert Ipcmd[t > 0.5][0] == pytest.approx(0.5, rel=1e-6)  # released: s5_y / vp
+    np.testing.assert_allclose(-Iqcmd[(t > 0.35) & (t < 0.575)], 0.1 + 0.5, rtol=1e-6)  # s4_y + Iqfrz
+    np.testing.assert_allclose(-Iqcmd[t > 0.6], 0.1, rtol=1e-6)

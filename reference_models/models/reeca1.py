@@ -41,17 +41,19 @@ Equations (ANDES 2.0 model reference, RenExciter: REECA1), all on the system bas
 
 The hold timers (ANDES' ExtendedEvent fThld, fThld2) are the state tdip: 0 during a dip (its reset
 places it there, its rate is 0), then counting seconds up to max(|Thld|, Thld2). Ipmaxh is a
-sample: the reset places it on the present Ipmax wherever Ipmax is not held, at each restart of an
-integrator (each step's start, each located switching), so it holds the value of the dip's last
-restart (ANDES: of its last Newton iterate). dIpcmd carries ANDES' offset: the converter's
-command equation is Ipcmd = Ipcmd0_LVG + IpHL_y - p0 / V0, so where the converter's low-voltage
-gain is below 1 at the start its command exceeds IpHL_y by a constant.
+sample: where Thld2 > 0 the reset places it on the present Ipmax wherever Ipmax is not held, at
+each restart of an integrator (each communication step's start, each located switching), so after
+a dip it holds the value of the dip's last restart (ANDES: of its last Newton iterate, one step
+later). dIpcmd carries ANDES' offset: the converter's command equation is
+Ipcmd = Ipcmd0_LVG + IpHL_y - p0 / V0, so where the converter's low-voltage gain is below 1 at the
+start its command exceeds IpHL_y by a constant.
 
-Deviations: during a dip ANDES also holds the two PI controllers' outputs (their algebraic ys, y)
-at their last values; here their integrators are frozen and the outputs follow kp u + xi (no effect
-with VFLAG = QFLAG = 0). ANDES' Iqh1, Iql1 limit nothing in its equations and are not parameters.
-Only Vdip, Vup, Thld and Thld2 decide the dip logic (ANDES' extend-only flag fThld2 would also be 1
-during a second dip; here it is not).
+Deviations from ANDES: during a dip ANDES also holds the two PI controllers' outputs (their
+algebraic ys, y) at their last values; here their integrators are frozen and the outputs follow
+kp u + xi (no effect with VFLAG = QFLAG = 0, and none on QFLAG = 0's commands). ANDES' Iqh1, Iql1
+limit nothing in its equations and are not parameters. ANDES' extend-only flag fThld2 keeps the
+value 1 it took at the end of a first dip through every later dip (its ExtendedEvent keeps v_event);
+here Ipmax is the live limit during every dip.
 
 Bases: the parameters ANDES converts by Sn / Sb (QMax, QMin, dPmax, dPmin, PMAX, PMIN: powers;
 Imax, Iq1..Iq4, Ip1..Ip4: currents) are given on the converter's base Sn and converted; the rest
