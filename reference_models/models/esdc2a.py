@@ -68,8 +68,11 @@ PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0
 
 def ceiling(VRMAX: float) -> float:
     """The regulator's upper limit [pu]: VRMAX, or 999 where VRMAX = 0 (ANDES' VRMAXc of ESDC1A,
-    ESDC2A, IEEET1, IEEET3)."""
-    return VRMAX if VRMAX != 0 else UNLIMITED_CEILING
+    ESDC2A, IEEET1, IEEET3), in ANDES' floating-point arithmetic: it evaluates VRMAX - 999 z + 999
+    (z = 1 where VRMAX is not 0; sympy's form of VRMAX + 999 (1 - z)), so VRMAX = 7.3 gives
+    7.2999999999999545, and a regulator ANDES holds at its ceiling is at this one."""
+    z = 1.0 if VRMAX != 0 else 0.0
+    return VRMAX - UNLIMITED_CEILING * z + UNLIMITED_CEILING
 
 
 def check_dc_exciter(params, ranges: dict) -> None:
