@@ -141,6 +141,20 @@ def test_active_current_is_held_on_the_low_voltage_power_limit_and_placed_on_it(
     assert REGCA1.rhs(placed, below, pg)[0] < 0.0  # released downward
 
 
+def test_rate_limits_bound_tg_times_the_rate_and_the_reactive_one_acts_in_the_start_power_direction():
+    """ANDES' RateLimiter clips the lag's T dx/dt: Rrpwr above for the active current; Iqrmax above
+    only where the start's reactive power q0 > 0, Iqrmin below only where q0 < 0."""
+    p = REGCA1.params({"Tg": 0.1, "Rrpwr": 1.0, "Iqrmax": 0.5, "Iqrmin": -0.5, "Sn": 200.0})  # Sn / Sb = 2
+    x = np.array([0.5, 0.1, 1.0, 0.1])  # q0 > 0
+    up = REGCA1.rhs(x, np.array([1.0, 0.0, 2.5, -2.1]), p)  # Ipcmd - S0_y = 2, -Iqcmd - S1_y = 2
+    down = REGCA1.rhs(x, np.array([1.0, 0.0, -1.5, 1.9]), p)
+    assert (up[0], up[1]) == (pytest.approx(1.0 / 0.1), pytest.approx(2 * 0.5 / 0.1))  # Iqrmax on base Sn
+    assert (down[0], down[1]) == (pytest.approx(-2.0 / 0.1), pytest.approx(-2.0 / 0.1))
+    x[3] = -0.1  # q0 < 0
+    assert REGCA1.rhs(x, np.array([1.0, 0.0, 2.5, -2.1]), p)[1] == pytest.approx(2.0 / 0.1)
+    assert REGCA1.rhs(x, np.array([1.0, 0.0, 2.5, 1.9]), p)[1] == pytest.approx(-2 * 0.5 / 0.1)
+
+
 # --- ANDES 2.0.0 --------------------------------------------------------------------------------
 
 CASE = "ieee14/ieee14_solar.xlsx"

@@ -12,7 +12,7 @@ Outputs y = (I_re, I_im [pu]: the current into the bus, network frame; P, Q [pu]
 Equations (ANDES 2.0 model reference, RenGen: REGCA1), all on the system base:
 
     LVG(V) = 0 for V <= Lvpnt0, (V - Lvpnt0) / (Lvpnt1 - Lvpnt0) up to Lvpnt1, 1 above
-    T S2_y:  Tfltr dS2_y/dt = V - S2_y  (Tfltr = 0: S2_y held, V used)
+    Tfltr dS2_y/dt = V - S2_y  (Tfltr = 0: S2_y held, V used)
     LVPL(S2_y) = F for S2_y <= Zerox, (S2_y - Zerox) Lvplsw Lvpl1 / (Brkpt - Zerox) + F up to Brkpt,
         9999 above, with F = 9999 (1 - Lvplsw)
     Tg dS0_y/dt = min(Ipcmd - S0_y, Rrpwr), non-windup above LVPL(S2_y)
