@@ -307,3 +307,14 @@ def power(m, x, a: float):
     for _ in range(int(abs(whole))):
         y = y * x if whole > 0 else y / x
     return y
+
+
+def bus_frequency(m, theta, theta_f, theta_w, Tf: float, Tw: float, fn: float):
+    """A bus-frequency measurement (ANDES' BusFreq) as a device's own states: (d theta_f/dt,
+    d theta_w/dt, f [pu]). The bus angle theta [rad] through the lag 1 / (1 + s Tf) (state theta_f;
+    Tf = 0: held, theta passes), then the washout s K / (1 + s Tw), K = 1 / (2 pi fn) (state theta_w):
+    f = 1 + K (theta_f - theta_w) / Tw. Both states are angles of the network frame (ANDES' L_y and
+    WO_x plus the load flow's angle theta0). Tw must be > 0."""
+    d_f, filtered = lag(m, theta, theta_f, 1.0, Tf)
+    d_w, deviation = washout(m, filtered, theta_w, 1.0 / (2.0 * math.pi * fn), Tw)
+    return d_f, d_w, 1.0 + deviation
