@@ -95,7 +95,9 @@ class Parameters:
 
 @dataclass(frozen=True)
 class Component:
-    """A dynamic component x' = f(x, u; p) with derived outputs y = g(x, u; p).
+    """A dynamic component x' = f(x, u; p) with derived outputs y = g(x, u; p). It may have no
+    states (n_x = 0: a bus device whose current is a function of its bus voltage and inputs alone,
+    ZIP): then f is empty, y = g(u; p), and it has no operator to learn (`require_states`).
 
     derivatives(x, u, p, m) and output_equations(x, u, p, m) take sequences of scalars (or arrays
     broadcast together) and return tuples of len(states) and len(outputs). equilibrium(u [n_u], p)
@@ -141,8 +143,8 @@ class Component:
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
-        if not (self.states and self.inputs and self.outputs):
-            raise ValueError(f"component {self.name!r} needs at least one state, one input and one derived output")
+        if not (self.inputs and self.outputs):
+            raise ValueError(f"component {self.name!r} needs at least one input and one derived output")
         if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
             raise ValueError(f"component {self.name!r}: variable names must be distinct identifiers, got {names}")
         if len(self.state_scales) != len(self.states) or not all(s > 0 for s in self.state_scales):
@@ -176,6 +178,13 @@ class Component:
     def n_inputs(self) -> int:
         return len(self.inputs)
 
+    def require_states(self) -> None:
+        """ValueError where the component has no states (a dataset, an operator, a surrogate ask for
+        some)."""
+        if not self.states:
+            raise ValueError(f"the {self.name} component has no states: a component without states has no "
+                             "operator to learn")
+
     @property
     def start_inputs(self) -> np.ndarray:
         """The inputs' start values [n_u]: where the default initial state is the equilibrium."""
@@ -184,12 +193,16 @@ class Component:
     def rhs(self, x, u, p):
         """dx/dt [..., n_x] for states x [..., n_x] and inputs u [..., n_u] (numpy or torch, broadcast)."""
         m, stack = _namespace(x)
-        return stack(self.derivatives(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+        columns = _columns(x, self.n_states), _columns(u, self.n_inputs)
+        if not self.states:  # nothing to stack: an empty last axis on the leading axes broadcast
+            return _broadcast(m, x[..., :0], x, u, 0)
+        return stack(self.derivatives(*columns, p, m))
 
     def output_values(self, x, u, p):
-        """Derived outputs [..., n_y] for x [..., n_x], u [..., n_u] (numpy or torch)."""
+        """Derived outputs [..., n_y] for x [..., n_x], u [..., n_u] (numpy or torch, broadcast)."""
         m, stack = _namespace(x)
-        return stack(self.output_equations(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+        y = stack(self.output_equations(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
+        return _broadcast(m, y, x, u, len(self.outputs))
 
     def reset_states(self, x, u, p):
         """The states [..., n_x] after the component's limit resets (`reset`) at inputs u [..., n_u]
@@ -288,6 +301,13 @@ def _columns(a, n: int) -> list:
     if a.shape[-1] != n:
         raise ValueError(f"expected {n} values on the last axis, got shape {tuple(a.shape)}")
     return [a[..., i] for i in range(n)]
+
+
+def _broadcast(m, a, x, u, n: int):
+    """a on the leading axes of x and u broadcast together, with a last axis of n (a component's
+    outputs that read only the inputs follow a batch of states; one without states has none)."""
+    shape = (*m.broadcast_shapes(tuple(x.shape[:-1]), tuple(u.shape[:-1])), n)
+    return a if tuple(a.shape) == shape else m.broadcast_to(a, shape)
 
 
 def _namespace(x):

@@ -40,6 +40,7 @@ from .st2cut import ST2CUT
 from .tg2 import TG2
 from .tgov1 import TGOV1
 from .tgov1n import TGOV1N
+from .zip import ZIP
 
 STANDARD_MODELS = {
     "GENCLS": GENCLS, "GENROU": GENROU,
@@ -51,5 +52,6 @@ STANDARD_MODELS = {
     "IEEEST": IEEEST, "ST2CUT": ST2CUT,
     "IEEEVC": IEEEVC,
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
+    "ZIP": ZIP,
     "REGCA1": REGCA1, "REECA1": REECA1,
 }
