@@ -139,7 +139,8 @@ def equilibrium(u, p: ESST4BParams) -> np.ndarray:
     rest at given inputs is not unique (ANDES' initialisation picks it from the field voltage the
     machine needs: `start`); this one has both integrator states at 0 (a regulator that has
     integrated nothing) and LA_y at the outer PI's output. ValueError where that is no rest (an
-    integral gain with an error left)."""
+    integral gain with an error left). At the start inputs (Vref = Vt) it is the rest at Efd = 0
+    for any gains whose limits span 0."""
     values = finite_inputs(u, "ESST4B")
     Vt, Vref = values[0], values[4]
     x = np.array([Vt, 0.0, float(clip(math, p.KPR * (Vref - Vt), p.VRMIN, p.VRMAX)), 0.0])
@@ -162,7 +163,7 @@ ESST4B = Component(
                      operating_range=(0.0, 5.0)),
             Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
                      operating_range=(-2.0, 2.0)),
-            Quantity("Vref", "pu", "voltage set point", start=1.5, operating_range=(1.0, 2.0)),
+            Quantity("Vref", "pu", "voltage set point", start=1.0, operating_range=(0.9, 1.2)),
             XADIFD),
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=ESST4BParams,
