@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from reference_models.blocks import rectifier_loading
 from reference_models.component import ParameterError
 from reference_models.models import STANDARD_MODELS
 from reference_models.models.common import network_current
