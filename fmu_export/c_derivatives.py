@@ -17,7 +17,7 @@ import re
 
 from reference_models.component import Component
 
-from .c_equations import live_statements
+from .c_equations import c_size, live_statements
 
 _NAME = re.compile(r"\bd\d+\b")
 
@@ -166,7 +166,8 @@ def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int
     # a value whose only use was its own derivative is dropped
     body = live_statements(recorder.lines, stores, _NAME) + stores
     return (f"/* {doc}: J[i * {cols} + j] = d out_i / d (x, u)_j */\n"
-            f"static void {name}(const double x[{n_x}], const double u[{n_u}], double J[{n_rows * cols}])\n{{\n"
+            f"static void {name}(const double x[{c_size(n_x)}], const double u[{n_u}], "
+            f"double J[{c_size(n_rows) * cols}])\n{{\n"
             f"    (void)x;\n    (void)u;\n" + "\n".join(body) + "\n}\n")
 
 

@@ -100,6 +100,12 @@ def _literal(value: float) -> str:
     return f"({text})" if text.startswith("-") else text
 
 
+def c_size(n: int) -> int:
+    """The declared size of a C array of n values: at least 1, as C requires (a component without
+    states declares one unused state)."""
+    return max(int(n), 1)
+
+
 class CMath:
     """The math namespace of traced values: each function becomes a call to C's libm."""
 
@@ -140,8 +146,9 @@ def c_function(name: str, fn, component: Component, params, outputs: list[str], 
     body = lines + [f"    out[{i}] = {r.code if isinstance(r, Traced) else _literal(r)};"
                     for i, r in enumerate(results)]
     return (f"/* {_comment(doc)}: out = ({_comment(', '.join(outputs))}) */\n"
-            f"{linkage} void {name}(const double x[{component.n_states}], const double u[{component.n_inputs}], "
-            f"double out[{len(outputs)}])\n{{\n" + "\n".join(body) + "\n}\n")
+            f"{linkage} void {name}(const double x[{c_size(component.n_states)}], "
+            f"const double u[{component.n_inputs}], double out[{c_size(len(outputs))}])\n{{\n"
+            + "\n".join(body) + "\n}\n")
 
 
 def output_input_dependencies(component: Component, params) -> list[tuple]:

@@ -34,7 +34,7 @@ from surrogate.frame_graph import network_graph
 
 from .binaries import PLUMBING, BuildError, check_fmi_version, compile_binaries, compile_c, targets
 from .c_derivatives import jacobians_c_source
-from .c_equations import equations_c_source
+from .c_equations import c_size, equations_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
@@ -121,7 +121,8 @@ def component_config(kind: str, model_name: str, guid: str, component, state_hea
            else "inputs held over a step; no input derivatives */"),
     ]
     tables = [
-        f"static const double OPFMU_DEFAULT_X0[{n_x}] = {_c_array(x_default)}; /* equilibrium at the start inputs */",
+        f"static const double OPFMU_DEFAULT_X0[{c_size(n_x)}] = {_c_array(list(x_default) or [0.0])}; /* equilibrium "
+        "at the start inputs (none without states: one unused) */",
         f"static const double OPFMU_START_U[{n_u}] = {_c_array(start_inputs(component, operating_point))};",
         f"static const double OPFMU_INPUT_MIN[{n_u}] = {_c_array(input_minima(component))};",
         f"static const char *const OPFMU_INPUT_NAMES[{n_u}] = {_c_strings(component.input_names)};",
@@ -325,9 +326,10 @@ def derivatives_source(component, params) -> str:
     component_output_jacobian."""
     n_x, n_u, n_y = component.n_states, component.n_inputs, len(component.outputs)
     return ('#include "model.h"\n' + jacobians_c_source(component, params) + "\n"
-            f"void component_rhs_jacobian(const double x[{n_x}], const double u[{n_u}], double J[{n_x * (n_x + n_u)}])\n"
+            f"void component_rhs_jacobian(const double x[{c_size(n_x)}], const double u[{n_u}], "
+            f"double J[{c_size(n_x) * (n_x + n_u)}])\n"
             "{\n    model_derivatives_jacobian(x, u, J);\n}\n\n"
-            f"void component_output_jacobian(const double x[{n_x}], const double u[{n_u}], "
+            f"void component_output_jacobian(const double x[{c_size(n_x)}], const double u[{n_u}], "
             f"double J[{n_y * (n_x + n_u)}])\n"
             "{\n    model_outputs_jacobian(x, u, J);\n}\n")
 

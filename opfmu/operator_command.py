@@ -239,6 +239,7 @@ def _run(args) -> None:
         raise OperatorError(f"--seed must lie in [0, {MAX_COUNT}] and --threads be >= 1")
     try:
         model = component(args.component)
+        model.require_states()
     except ValueError as exc:
         raise OperatorError(f"--component: {exc}") from None
     if model.name != "sm4" and args.recipe in SM4_RECIPES:

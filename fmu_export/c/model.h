@@ -14,9 +14,10 @@
        double time;                  current communication point [s]
        double u[OPFMU_N_INPUTS];     inputs (the component's, in its order)
        double du[OPFMU_N_INPUTS];    their first time derivatives over the next steps [unit/s] (0: held)
-       double x[OPFMU_N_STATES];     state at `time`
-       double x_start[OPFMU_N_STATES]; initial-state parameters
-   which variables.c reads and writes for the component's own variables. */
+       double x[OPFMU_X_SIZE];       state at `time`
+       double x_start[OPFMU_X_SIZE]; initial-state parameters
+   which variables.c reads and writes for the component's own variables (the first OPFMU_N_STATES
+   of x and x_start: a component without states has none, and one unused element, as C needs). */
 #ifndef OPFMU_MODEL_H
 #define OPFMU_MODEL_H
 
@@ -43,18 +44,21 @@ typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT } VarKind;
 /* columns of the component's Jacobians: the states, then the inputs */
 #define OPFMU_N_COLUMNS (OPFMU_N_STATES + OPFMU_N_INPUTS)
 
+/* the declared size of an array of the states: at least 1, as C requires (n_x = 0: one unused) */
+#define OPFMU_X_SIZE (OPFMU_N_STATES > 0 ? OPFMU_N_STATES : 1)
+
 #include OPFMU_STATE_HEADER /* the model's ModelState */
 
 /* --- the component's equations (equations.c, derivatives.c: generated from its definition) --- */
-OPFMU_INTERNAL void model_derivatives(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
-                                      double dx[OPFMU_N_STATES]);
-OPFMU_INTERNAL void model_outputs(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+OPFMU_INTERNAL void model_derivatives(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
+                                      double dx[OPFMU_X_SIZE]);
+OPFMU_INTERNAL void model_outputs(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
                                   double y[OPFMU_N_OUTPUTS]);
 /* J[i * OPFMU_N_COLUMNS + j] = d (dx_i/dt) / d (x, u)_j, exact */
-OPFMU_INTERNAL void component_rhs_jacobian(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
-                                           double J[OPFMU_N_STATES * OPFMU_N_COLUMNS]);
+OPFMU_INTERNAL void component_rhs_jacobian(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
+                                           double J[OPFMU_X_SIZE * OPFMU_N_COLUMNS]);
 /* J[i * OPFMU_N_COLUMNS + j] = d y_i / d (x, u)_j, exact */
-OPFMU_INTERNAL void component_output_jacobian(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS],
+OPFMU_INTERNAL void component_output_jacobian(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
                                               double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
 
 /* --- variables.c (both FMUs): the component's variables by value reference --- */

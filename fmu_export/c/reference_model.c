@@ -19,7 +19,10 @@
    limit, ANDES' anti-windup) has it applied wherever the branches are locked: at the start of each
    communication step (at the inputs set for it) and at each located switching, before the branches
    are chosen: a state that starts beyond a limit, or that the located crossing's bracket leaves just
-   beyond it, goes on exactly from the limit, and one under a limit that moves with an input follows it. */
+   beyond it, goes on exactly from the limit, and one under a limit that moves with an input follows it.
+
+   A component without states (OPFMU_N_STATES = 0: its outputs a function of its inputs alone) has
+   nothing to integrate: a step advances the time and the inputs, and the outputs follow them. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -65,6 +68,7 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
     return MODEL_OK;
 }
 
+#if N_X > 0
 /* the inputs over a step: u(t) = u0 + du (t - t0); the branches the right-hand side is locked to */
 typedef struct {
     const double *u0, *du;
@@ -122,12 +126,11 @@ static void lock(void *ctx, double t, const double *x)
 }
 #endif
 
-ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
+/* integrates m->x from m->time to stop with the inputs over the step (m->u, m->du); MODEL_ERROR
+   (message written) where Dormand-Prince cannot, m unchanged */
+static ModelStatus integrate(ModelState *m, double stop, char *message, size_t size)
 {
-    const double stop = m->time + h;
-    double u_end[N_U], x[N_X], h_guess = m->h_guess;
-    for (int c = 0; c < N_U; ++c) u_end[c] = m->u[c] + m->du[c] * h;
-    if (check_inputs_at_step_end(m, u_end, message, size) != MODEL_OK) return MODEL_ERROR;
+    double x[N_X], h_guess = m->h_guess;
     StepInputs inputs = {m->u, m->du, m->time};
     DopriStats stats;
     memcpy(x, m->x, sizeof x);
@@ -145,9 +148,22 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
         return MODEL_ERROR;
     }
     memcpy(m->x, x, sizeof x);
+    m->h_guess = h_guess;
+    return MODEL_OK;
+}
+#endif
+
+ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
+{
+    const double stop = m->time + h;
+    double u_end[N_U];
+    for (int c = 0; c < N_U; ++c) u_end[c] = m->u[c] + m->du[c] * h;
+    if (check_inputs_at_step_end(m, u_end, message, size) != MODEL_OK) return MODEL_ERROR;
+#if N_X > 0
+    if (integrate(m, stop, message, size) != MODEL_OK) return MODEL_ERROR;
+#endif
     memcpy(m->u, u_end, sizeof u_end); /* the inputs at the new communication point */
     m->time = stop;
-    m->h_guess = h_guess;
     return MODEL_OK;
 }
 

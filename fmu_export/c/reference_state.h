@@ -7,9 +7,9 @@ typedef struct {
     double time;                    /* current communication point [s] */
     double u[OPFMU_N_INPUTS];       /* inputs at `time` */
     double du[OPFMU_N_INPUTS];      /* their first time derivatives over the next step (0: held) */
-    double x_start[OPFMU_N_STATES]; /* parameters: initial state */
+    double x_start[OPFMU_X_SIZE];   /* parameters: initial state (model.h: its first OPFMU_N_STATES) */
     double rtol, atol;              /* parameters: the solver's tolerances */
-    double x[OPFMU_N_STATES];       /* state at `time` */
+    double x[OPFMU_X_SIZE];         /* state at `time` */
     double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */
 } ModelState;
 

@@ -71,9 +71,11 @@ class Preset:
                              "ic is reachable)")
 
         try:
-            inputs = component(str(self.component)).input_names
+            model = component(str(self.component))
+            model.require_states()  # the trajectories of states are what a dataset holds
         except ValueError as exc:
             raise ValueError(f"preset {self.name!r}: {exc}") from None
+        inputs = model.input_names
         if not isinstance(self.levels, dict):
             raise ValueError(f"preset {self.name!r}: levels must map input names to (low, high)")
         for name, pair in self.levels.items():
