@@ -12,6 +12,11 @@ impedance (1e-4 pu) where --fault-impedance is not given, wscc9 a bolted fault (
 faults start at 1 s where --fault-start is not given (wscc9's at 0). cct and screen run each
 contingency to 4 s after its fault start unless --stop is given; screen faults every bus without a
 generator unless --faults names them.
+A run needs no --fault where the case has events of its own (they are the run); --trip without a
+fault opens the branch at --clear. What ANDES adjusted in a case file (the case's notes,
+reference_models.grid.andes_case) and which devices run as surrogate FMUs are printed on stderr
+and written into the report (run, screen) and summary.json (run); --fmus surrogate for a case
+where no machine has an operator is refused.
 Everything a command is asked is checked before any work (one line, exit code 2); a result set is
 written whole or not at all.
 """
@@ -100,8 +105,10 @@ def add_grid_parser(sub) -> None:
     gsub = grid.add_subparsers(dest="grid_command", required=True)
     run = gsub.add_parser("run", help="one contingency", description="Simulate one contingency; writes DIR/result.csv "
                           "(one row per communication point), result.png, report.md and summary.json.")
-    run.add_argument("--fault", type=int, required=True, metavar="BUS", help="faulted bus")
-    run.add_argument("--clear", type=_time, required=True, metavar="SECONDS", help="clearing time in s (before --stop)")
+    run.add_argument("--fault", type=int, default=None, metavar="BUS",
+                     help="faulted bus (none: the case's own events alone, or --trip opened at --clear)")
+    run.add_argument("--clear", type=_time, default=None, metavar="SECONDS",
+                     help="clearing time in s (before --stop), with --fault; without it, when --trip opens")
     run.add_argument("--stop", type=_time, default=5.0, help=f"end time in s (default 5, at most {MAX_STOP_S:g})")
     run.add_argument("--compare", default="monolithic",
                      help="runs drawn on the same figure and compared in the report: a comma list of "
@@ -177,6 +184,60 @@ def _case(args):
         return load_case(DATA_DIR / f"{args.case}_network.json", args.dynamic_data, args.case)
     except CaseError as exc:
         raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
+
+
+def _run_events(args, case) -> None:
+    """UserError for a run whose events do not add up: --fault without --clear, --trip without the
+    time it opens (--clear), --clear with neither, or nothing happening at all (no --fault, no
+    --trip and no events of the case's own). A case's own events need neither --fault nor --clear."""
+    if args.fault is not None or args.trip is not None:
+        if args.clear is None:
+            raise UserError("--fault needs --clear SECONDS (its clearing time)" if args.fault is not None else
+                            "--trip without --fault opens the branch at --clear SECONDS: give it")
+        return
+    if args.clear is not None:
+        raise UserError("--clear goes with --fault BUS or --trip FROM-TO")
+    if args.no_case_events or not case.events:
+        raise UserError("nothing happens in this run: give --fault BUS --clear SECONDS or --trip FROM-TO --clear SECONDS"
+                        + ("" if args.no_case_events else f" ({case.name} has no events of its own)"))
+
+
+def _case_notes(case) -> list:
+    """What ANDES adjusted in the case's file and its conversion states rather than refuses
+    (reference_models.grid.andes_case.case_notes), each printed on stderr."""
+    from reference_models.grid.andes_case import case_notes
+
+    notes = list(case_notes(case))
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    return notes
+
+
+def _surrogates(case, kind) -> str | None:
+    """Which devices of `case` run as surrogate FMUs under `kind` (None: each unit's own), in words;
+    None where none does."""
+    if kind in REFERENCE_KINDS:
+        return None
+    from cosim.fmus import unit_fmus
+
+    fmus = unit_fmus(case, kind)
+    named = [f"{u.machine.component.name.upper()} at bus {u.bus}" + (f" (generator {u.generator})" if u.generator else "")
+             + f" (operator {Path(str(f.operator)).name})" for u, f in zip(case.units, fmus) if f.kind == "surrogate"]
+    if not named:
+        return None
+    others = sum(len(u.devices) for u in case.units) - len(named)
+    return (f"surrogate FMUs for {len(named)} machine{'s' if len(named) > 1 else ''}: {', '.join(named)}; native "
+            f"reference FMUs for the other {others} device{'s' if others != 1 else ''}")
+
+
+def _state(case, kind) -> list:
+    """The case's notes and which devices run as surrogates under `kind`, each printed on stderr."""
+    stated = _case_notes(case)
+    text = _surrogates(case, kind)
+    if text:
+        stated.append(text)
+        print(f"note: {text}", file=sys.stderr)
+    return stated
 
 
 def _settings(args):
@@ -255,9 +316,12 @@ def _check_fmus(case, kind, fmu_cache=None, contingency=None) -> None:
     if fmu_cache is not None:
         output_folder(fmu_cache)
     try:
-        check_unit_fmus(case, kind)
+        fmus = check_unit_fmus(case, kind)
     except CouplingError as exc:
         raise UserError(_one_line(exc)) from None
+    if kind == "surrogate" and not any(f.kind == "surrogate" for f in fmus):
+        raise UserError(f"--fmus surrogate: no machine of {case.name} has a surrogate operator in its dynamic data "
+                        "(\"fmu\": {\"kind\": \"surrogate\", \"operator\": FILE}); run --fmus reference instead")
 
 
 def _main_kind(case, fmus) -> str:
@@ -294,8 +358,9 @@ def cmd_run(args) -> None:
     _fault_start(args)
     settings = _settings(args)
     _stop(args.stop, settings)
+    _run_events(args, case)
     contingency = _contingency(case, args.fault, args.clear, args.trip, args)
-    if contingency.clear_s >= args.stop:
+    if contingency.clear_s is not None and contingency.clear_s >= args.stop:
         raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
     kinds_known = _run_kinds()
     compare = [] if args.compare.strip() in ("", "none") else [k.strip() for k in args.compare.split(",")]
@@ -310,6 +375,11 @@ def cmd_run(args) -> None:
         outputs.check_output(args.out, outputs.RUN_FILES)
     except outputs.OutputError as exc:
         raise UserError(str(exc)) from None
+    stated = _case_notes(case)  # on stderr and into the report and summary
+    for text in dict.fromkeys(_surrogates(case, kind) for kind in kinds):
+        if text:
+            stated.append(text)
+            print(f"note: {text}", file=sys.stderr)
     runs, timings = {}, {}
     for kind in kinds:
         runner = _open(kind, case, settings, args, _progress)
@@ -332,7 +402,7 @@ def cmd_run(args) -> None:
     summary = {"contingency": contingency.label, "case_events": list(contingency.case_event_labels(args.stop + 1e-9)),
                "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
-               "passes": settings.passes, "fmi_version": args.fmi_version}
+               "passes": settings.passes, "fmi_version": args.fmi_version, "notes": stated}
     fault = contingency.fault_intervals(args.stop)
     for reference in outputs.REFERENCES:
         if reference in runs and len(runs) > 1:
@@ -344,7 +414,7 @@ def cmd_run(args) -> None:
             outputs.write_csv(staging / "result.csv", main, case)
             outputs.plot(staging / "result.png", runs, title, case)
             outputs.report(staging / "report.md", title, runs, timings, contingency, case,
-                           [f"Note: {n}" for n in notes]
+                           [f"Note: {n}" for n in stated + notes]
                            + ((["", "FMU log (first messages per generator):", ""] + [f"- {n}" for n in logged])
                               if logged else []))
             (staging / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
@@ -396,6 +466,7 @@ def cmd_cct(args) -> None:
     _stop(stop, settings)
     _stop_after_fault(stop, contingency)
     _check_fmus(case, args.fmus, args.fmu_cache, contingency)
+    _state(case, args.fmus)
     runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
     try:
         cct = critical_clearing_time(runner_stable(runner, stop), contingency, args.resolution)
@@ -458,6 +529,7 @@ def cmd_screen(args) -> None:
         outputs.check_output(args.out, outputs.SCREENING_FILES)
     except outputs.OutputError as exc:
         raise UserError(str(exc)) from None
+    stated = _state(case, args.fmus)
     try:
         files = () if args.fmus in REFERENCE_KINDS else tuple(generator_files(case, args.fmus, args.fmu_cache,
                                                                                _progress, args.fmi_version))
@@ -479,7 +551,8 @@ def cmd_screen(args) -> None:
             outputs.write_screening(staging, rows, f"{CASE_TITLES.get(args.case, args.case)} contingency screening "
                                                    f"({_label(kind)}, faults from {args.fault_start:g} s, verdicts "
                                                    f"at {clear:g} s clearing)",
-                                    [f"Left out: {n}." for n in left_out], args.fault_start)
+                                    [f"Note: {n}" for n in stated] + [f"Left out: {n}." for n in left_out],
+                                    args.fault_start)
     except (outputs.OutputError, OSError) as exc:
         raise UserError(f"cannot write the results into {out}: {getattr(exc, 'strerror', None) or exc}") from None
     print(outputs.screening_table(rows))

@@ -24,7 +24,8 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   [vmin, vmax]), summed per bus; Case.reduced turns them into the admittances conj(S) / V0^2,
   ANDES' Req, Xeq. A case whose PQ config is not (0, 0, 1) is refused.
 * the load flow: ANDES' power-flow solution (Bus v, a; PV and Slack p, q), checked here: the
-  stored network's bus power mismatch at the stored solution must stay below 1e-8 pu.
+  stored network's bus power mismatch at the stored solution must stay below mismatch_limit (1e-8 pu
+  for all but the largest cases).
 * the generators: the Slack and PV devices (slack first, then PV, file order each), each named by
   its ANDES idx; units are keyed by generator (a bus may hold several, npcc does).
 * the dynamic devices, one unit per synchronous machine (GENROU, GENCLS), linked by ANDES' `gen`
@@ -33,8 +34,8 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   reference_models.models model of that name) and parameters as the case file gives them (ANDES'
   input data before its own conversion to the system base: machine and turbine data on the
   machine base Sn, as reference_models.models take them, docs/standard-models.md), plus Sn, Sb,
-  fn where the component takes them. A model opfmu does not have is refused with one line naming
-  it; measurement-only models (BusFreq, BusROCOF, ACEc, Area) and the case's description (Summary) are left out.
+  fn where the component takes them. Models opfmu does not have are refused with one line naming
+  them all; measurement-only models (BusFreq, BusROCOF, ACEc, Area) and the case's description (Summary) are left out.
 * the case's own events: Toggle of a Line (a branch event: status 0 open, 1 closed again, each
   toggle flipping the status it finds, all in service at the start), of a machine (GENROU, GENCLS)
   or of its load-flow generator (PV, Slack; a group name such as SynGen or StaticGen resolves to its
@@ -48,9 +49,10 @@ with what the file gave each device (System.add's arguments) against what ANDES 
   ANDES drops: a dyr model it does not know (a misspelt one, IEEET2, ...: its records are dropped,
   a generator left without a model it had in the file is an error; the generators are named), a
   model (sheet) it does not know, a field (column) it does not know; and a value ANDES replaces or
-  fills in for a parameter the conversion uses of a device in service: a zero the model divides
-  by (an inertia M, a time constant, a Line's x), a negative inertia, an empty cell or NaN; any
-  other ANDES error record;
+  fills in for a parameter the conversion uses of a device in service: a value the model cannot
+  take (ANDES' non_zero, non_negative, non_positive checks: a zero it divides by such as an inertia
+  M, a time constant TF1 or a Line's x, a negative inertia), an empty cell or NaN; any other ANDES
+  error record;
 * stated (the case's notes, Case.dynamic_data's "notes", case_notes; `opfmu grid` prints them on
   stderr and writes them into its report): a replaced value that the converted case does not use
   (a device out of service, a model left out such as ACEc, a parameter opfmu does not read), a
@@ -400,9 +402,9 @@ def _replaced(ss, inputs: dict) -> tuple:
                 elif param in START_GUESSES.get(name, ()):
                     stated.append(f"{what} (a start guess of the power flow)")
                 else:
-                    reason = ("zero, which the model divides by" if value == 0 else "negative" if value < 0
-                              else "positive" if kept < 0 else "out of its range")
-                    refused.append(f"{name} {idx} {param} = {value:g} ({reason}; ANDES would use {kept:g})")
+                    sign = "zero" if value == 0 else "negative" if value < 0 else "positive"
+                    refused.append(f"{name} {idx} {param} = {value:g} ({sign}, which the model cannot take; ANDES "
+                                   f"would use {kept:g})")
     return refused, stated, seen
 
 
