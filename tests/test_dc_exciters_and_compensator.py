@@ -22,7 +22,8 @@ CASES = {"ESDC1A": ("ieee14/ieee14_esdc1a.xlsx", (4, 0.05)), "ESDC2A": ("kundur/
          "IEEET1": ("ieee14/ieee14_ieeet1.xlsx", (4, 0.05)), "IEEET3": ("ieee14/ieee14_ieeet3.xlsx", (4, 0.05)),
          "AC8B": ("ieee14/ieee14_ac8b.xlsx", (4, 0.05)), "IEEEVC": ("ieee14/ieee14_ieeevc2.xlsx", (4, 0.05))}
 TIMES = (1.05, 2.5)  # s: mid-fault (fault 1.0-1.1 s) and after clearing
-TOLERANCE = 1e-8  # ANDES' Newton tolerance in its TDS (1e-10 does not converge at the fault in ieee14)
+AT_LIMIT_MID_FAULT = {"ESDC1A": 1, "ESDC2A": 4, "IEEET1": 0, "IEEET3": 0, "AC8B": 1}  # regulators ANDES holds
+TOLERANCE = 1e-8  # ANDES' Newton tolerance in its TDS (at 1e-10 it stopped at a bolted fault's start in ieee14)
 
 
 def test_esdc2a_regulator_limits_move_with_the_voltage_and_esdc1a_limits_do_not():
@@ -188,6 +189,7 @@ def test_andes_2_0_0_esdc1a_limiter_keeps_the_limit_services_it_dropped():
 
 
 @pytest.mark.andes
+@pytest.mark.filterwarnings("ignore:invalid value encountered in sqrt")  # ANDES' own AC8B code
 @pytest.mark.parametrize("name", EXCITER_MODELS)
 def test_exciter_start_gives_andes_initial_states_and_set_point(name):
     """Component.start from what the machine needs (Efd) and the exciter's other inputs at ANDES'
@@ -197,7 +199,7 @@ def test_exciter_start_gives_andes_initial_states_and_set_point(name):
     model, component = getattr(ss, name), STANDARD_MODELS[name]
     for i in range(model.n):
         s, p = _signals(ss, model, i), _params(model, component, i)
-        x0, inputs = component.start({**s, "Vref": math.nan}, p)
+        x0, inputs = component.start({**s, "Vref": math.nan}, p)  # Vref is what start solves, not given
         theirs = np.array([float(getattr(model, n).v[i]) for n in component.state_names])
         np.testing.assert_allclose(x0, theirs, rtol=1e-10, atol=1e-12)
         assert inputs["Vref"] == pytest.approx(s["Vref"], rel=1e-10, abs=1e-12)
@@ -207,17 +209,22 @@ def test_exciter_start_gives_andes_initial_states_and_set_point(name):
 
 
 @pytest.mark.andes
+@pytest.mark.filterwarnings("ignore:invalid value encountered in sqrt")  # ANDES' own AC8B code
 @pytest.mark.parametrize("name", EXCITER_MODELS)
 def test_exciter_derivatives_and_field_voltage_match_andes_in_and_after_a_fault(name):
-    """A fault near the exciter 1.0-1.1 s (ANDES' trapezoid, h = 5 ms, Newton tolerance 1e-10): at
-    1.05 s and 2.5 s our dx/dt at ANDES' states and inputs equals ANDES' f / Tf, and our Efd its
-    vout."""
+    """A fault near the exciter 1.0-1.1 s (ANDES' trapezoid, h = 5 ms, Newton tolerance 1e-8): at
+    1.05 s and 2.5 s our dx/dt at ANDES' states and inputs equals ANDES' f / Tf (measured: at most
+    7.6e-8 of ANDES' largest rate, AC8B at 2.5 s; 1e-16 to 1e-11 mid-fault), and our Efd its vout
+    (1.5e-11). Mid-fault ANDES holds the regulators of ESDC1A (at VRMAX), ESDC2A (all four, at
+    VRMAX Vt) and AC8B at a limit, and ours hold them alike."""
     pytest.importorskip("andes")
     case, fault = CASES[name]
     for t, ss in zip(TIMES, _run(case, fault, TIMES)):
         r = _compare_exciters(ss, name)
         assert r["rate"] < 1e-7, (name, t, r)
         assert r["output"] < 1e-9, (name, t, r)
+        if t == TIMES[0]:
+            assert r["at_limit"] == AT_LIMIT_MID_FAULT[name], (name, r)
 
 
 def _compensator_inputs(ss, k) -> tuple:
