@@ -83,26 +83,30 @@ def test_every_unknown_dyr_model_is_named_in_one_line_a_misspelt_machine_too(tmp
 
 @pytest.mark.andes
 def test_impossible_values_andes_would_replace_are_refused_naming_model_device_parameter_value(tmp_path):
-    case = edited_xlsx(tmp_path, [("GENROU", 1, "M", -13), ("EXDC2", 2, "TF1", 0), ("GENROU", 3, "xd", None),
-                                  ("Line", 1, "x", 0)])
+    case = edited_xlsx(tmp_path, [("GENROU", 1, "M", -13), ("EXDC2", 2, "TF1", 0), ("Line", 1, "x", 0)])
     message = convert_refused(tmp_path, case)
     assert message.startswith(f"{case}: data ANDES would replace: ")
     for part in ("GENROU 1 M = -13 (negative, which the model cannot take; ANDES would use 6)",
                  "EXDC2 2 TF1 = 0 (zero, which the model cannot take; ANDES would use 1)",
-                 "GENROU 3 xd empty or NaN (ANDES would use 1.9)",
                  "Line Line_0 x = 0 (zero, which the model cannot take; ANDES would use 1e-08)"):
         assert part in message
 
 
 @pytest.mark.andes
-def test_a_null_in_a_json_case_is_refused(tmp_path):
+def test_an_empty_value_takes_andes_default_and_is_stated(tmp_path):
+    """A null or NaN (an empty cell) of a parameter the conversion uses takes ANDES' documented
+    default, as the stock files rely on (ieee14_ieeet1 leaves its exciter's cells empty), and the
+    case says so in its notes."""
+    from reference_models.grid.andes_case import case_from_file, case_notes
+
     data = json.loads(stock("kundur/kundur_full.json").read_text())
     data["GENROU"][1]["xd1"] = None
     data["GENROU"][2]["M"] = float("nan")  # json writes NaN
     case = tmp_path / "kundur_edited.json"
     case.write_text(json.dumps(data))
-    message = convert_refused(tmp_path, case)
-    assert "GENROU 2 xd1 empty or NaN" in message and "GENROU 3 M empty or NaN" in message
+    notes = case_notes(case_from_file(case, cache_dir=tmp_path / "cache"))
+    assert "GENROU 2: xd1 empty or NaN in the file, ANDES' default 0.302 used" in notes
+    assert "GENROU 3: M empty or NaN in the file, ANDES' default 6 used" in notes
 
 
 @pytest.mark.andes

@@ -35,11 +35,32 @@ RUNS = {
     # the valve's rate limit at the speed step, and left within a step as the valve settles back
     "IEEEG1": ((0.1, {}), (0.8, {"omega": 0.95}), (1.5, {})),
     "IEEEST": ((0.1, {}), (0.6, {"omega": 1.01, "Vt": 0.5}), (1.2, {"omega": 0.99})),
+    "EXAC1": VOLTAGE_DIP, "ESAC1A": VOLTAGE_DIP, "ESST1A": VOLTAGE_DIP, "ESDC1A": VOLTAGE_DIP, "AC8B": VOLTAGE_DIP,
+    "EXAC4": ((0.1, {}), (0.6, {"Vt": 0.5}), (1.0, {"Vt": 1.2}), (1.5, {})),
+    "ESST4B": ((0.1, {}), (0.8, {"Vref": 1.5}), (1.5, {"Vref": 0.8})),
+    # at 0.5 pu ESDC2A's ceiling (VRMAX Vt) falls under the state, which is placed on it: 0.8 crosses it
+    "ESDC2A": ((0.1, {}), (0.6, {"Vt": 0.8}), (1.5, {})),
+    "IEEET1": ((0.1, {}), (0.6, {"Vref": 3.0}), (1.5, {})),  # its gain of 5 cannot reach 7.3 pu on a dip
+    "IEEET3": ((0.1, {}), (0.6, {"Vt": 0.2}), (1.0, {"Vref": 3.0}), (1.5, {})),
+    "IEEEVC": ((0.1, {}), (0.6, {"Vt": 0.5, "I_im": 0.5}), (1.0, {})),
+    "TG2": ((0.1, {}), (0.8, {"omega": 0.95}), (1.5, {"Pref": -0.2})),
+    "GAST": SPEED_STEPS, "HYGOV4": SPEED_STEPS,
+    # not SPEED_STEPS: at 1.05 pu the gate closes to GMIN = 0 and the head q^2 / g^2 has no bound
+    "HYGOV": ((0.1, {}), (0.8, {"Pref": 0.3}), (1.5, {"omega": 1.01})),
+    "HYGOVDB": ((0.1, {}), (0.8, {"Pref": 0.3}), (1.5, {"omega": 1.01})),
+    "IEESGO": ((0.1, {}), (0.8, {"omega": 0.95, "Pref": 4.9995}), (1.5, {"omega": 1.05, "Pref": 0.0005})),
+    "ST2CUT": ((0.1, {}), (0.6, {"omega": 1.01, "Vt": 0.5}), (1.2, {"omega": 0.99})),
+    "REGCA1": ((0.1, {}), (0.4, {"Vs": 0.45, "Iqcmd": -1.5}), (1.0, {})),  # LVPL and the Iq rate limit
+    "REECA1": ((0.1, {}), (0.4, {"V": 0.6}), (0.7, {"Pref": -0.2}), (1.2, {})),  # the freeze, s5_y against PMIN
+    "Motor5": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})), "Motor3": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
+    "FLoad": ((0.1, {}), (0.3, {"Vs": 0.6, "theta_vs": 0.2}), (1.0, {})),
 }
 
 
-# parameters other than the defaults: SEXS's ceiling (99 pu by default) within reach of the dip
-PARAMS = {"SEXS": {"EMAX": 3.0, "EMIN": 0.0}}
+# parameters other than the defaults: SEXS's ceiling (99 pu by default) within reach of the dip; the
+# regulator ceilings of ESAC1A and ESST1A (999 pu); ESST4B's gains (at its defaults it crosses no limit)
+PARAMS = {"SEXS": {"EMAX": 3.0, "EMIN": 0.0}, "ESAC1A": {"VAMAX": 8.0, "VAMIN": -8.0},
+          "ESST1A": {"VAMAX": 8.0, "VAMIN": -8.0}, "ESST4B": {"KPR": 10.0, "KIR": 20.0, "KIM": 2.0}}
 
 
 def params(name):

@@ -98,6 +98,11 @@ def test_ieeex1_regulator_beyond_its_ceiling_is_placed_on_it_while_pushed_up_wha
     np.testing.assert_array_equal(np.delete(component.reset_states(above, pushed_up, p), 2), np.delete(above, 2))
 
 
+# limits within reach of the points driven far: SEXS's ceiling (99 pu by default); ESST1A's regulator
+# ceiling (999 pu), which its input limit VIMAX keeps it from ever reaching at the defaults
+LIMITS_WITHIN_REACH = {"SEXS": {"EMAX": 3.0, "EMIN": 0.0}, "ESST1A": {"VAMAX": 8.0, "VAMIN": -8.0}}
+
+
 @pytest.mark.parametrize("name", MODELS)
 def test_reset_is_the_same_on_every_namespace_and_leaves_states_within_their_limits_alone(name):
     """Random points near rest (within the limits): the reset changes nothing; points driven far
@@ -106,7 +111,7 @@ def test_reset_is_the_same_on_every_namespace_and_leaves_states_within_their_lim
     GENROU, EXST1, IEEEST) declares no reset: reset_states is x itself."""
     torch = pytest.importorskip("torch")
     component, _, u, _ = _rest(name)
-    p = component.params({"EMAX": 3.0, "EMIN": 0.0} if name == "SEXS" else None)  # SEXS's limits within reach
+    p = component.params(LIMITS_WITHIN_REACH.get(name))
     x = component.steady_state(u, p)
     rng = np.random.default_rng(11)
     near = x + 0.01 * np.array(component.state_scales) * rng.standard_normal((5, component.n_states))
@@ -130,8 +135,9 @@ def test_reset_is_the_same_on_every_namespace_and_leaves_states_within_their_lim
 def test_components_without_non_windup_limits_declare_no_reset_and_reset_to_themselves():
     from reference_models.components import COMPONENTS
 
-    assert {n for n, c in COMPONENTS.items() if c.reset is None} == {"sm4", "ieee1", "gencls", "genrou", "exst1",
-                                                                     "ieeest"}
+    assert {n for n, c in COMPONENTS.items() if c.reset is None} == {
+        "sm4", "ieee1", "gencls", "genrou", "exst1", "ieeest", "exac4", "esst4b", "ieeevc", "tg2", "ieesgo", "st2cut",
+        "fload", "motor3", "motor5", "zip", "pvd1", "esd1"}
     for name in ("sm4", "ieee1"):
         component = COMPONENTS[name]
         x = component.steady_state()

@@ -48,17 +48,19 @@ with what the file gave each device (System.add's arguments) against what ANDES 
 * refused (CaseError, one line naming the file and each model, device, parameter and value): what
   ANDES drops: a dyr model it does not know (a misspelt one, IEEET2, ...: its records are dropped,
   a generator left without a model it had in the file is an error; the generators are named), a
-  model (sheet) it does not know, a field (column) it does not know; and a value ANDES replaces or
-  fills in for a parameter the conversion uses of a device in service: a value the model cannot
-  take (ANDES' non_zero, non_negative, non_positive checks: a zero it divides by such as an inertia
-  M, a time constant TF1 or a Line's x, a negative inertia), an empty cell or NaN; any other ANDES
-  error record;
+  model (sheet) it does not know, a field (column) of a converted model it does not know; and a value
+  ANDES replaces for a parameter the conversion uses of
+  a device in service: a value the model cannot take (ANDES' non_zero, non_negative, non_positive
+  checks: a zero it divides by such as an inertia M, a time constant TF1 or a Line's x, a negative
+  inertia); any other ANDES error record;
 * stated (the case's notes, Case.dynamic_data's "notes", case_notes; `opfmu grid` prints them on
   stderr and writes them into its report): a replaced value that the converted case does not use
   (a device out of service, a model left out such as ACEc, a parameter opfmu does not read), a
   power-flow start guess replaced (Bus v0, a0: the solution does not depend on it), an infinite
-  limit made 1e8, and any other ANDES warning (PSS/E raw conversion notes, two slack generators on a
-  bus, ...) with ANDES' words;
+  limit made 1e8, an empty cell or NaN of a parameter the conversion uses (ANDES' documented default
+  is used: the stock files leave many cells empty so), a field (column) ANDES drops that is one of its
+  parameters spelt in other case, with the values ANDES uses (kundur_esdc2a's SWITCH: ANDES' Switch), and any other ANDES warning
+  (PSS/E raw conversion notes, two slack generators on a bus, ...) with ANDES' words;
 * an empty cell of a parameter the conversion does not use (TGOV1's Tn: Sn where not given) and a
   parameter the file does not give at all take ANDES' defaults, as ANDES documents, unstated.
 The power flow converges to pflow_tolerance (PFLOW_TOLERANCE, or ROUNDING_MARGIN times the rounding
@@ -100,7 +102,7 @@ GOVERNORS = ("TGOV1", "TGOV1N", "IEEEG1", "TG2", "GAST", "HYGOV", "HYGOV4", "HYG
 STABILISERS = ("IEEEST", "ST2CUT")
 LOADS = ("ZIP", "FLoad", "Motor5", "Motor3")  # dynamic and voltage-dependent loads (wired by the conversion: to come)
 COMPENSATORS = ("IEEEVC",)  # voltage compensators: an exciter's input voltage
-CONVERTERS = ("REGCA1",)  # inverters' converters: a unit's bus device, as a machine
+CONVERTERS = ("REGCA1", "PVD1", "ESD1")  # inverters' converters: a unit's bus device, as a machine
 ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers
 PLANT_CONTROLS = ()  # inverters' plant controllers
 CACHE_FORMAT = 2  # version of what convert writes: a new one keys new cache entries (2: notes, refusals of issue 33)
@@ -279,7 +281,7 @@ def read_back(ss, records, inputs: dict, path, dyr=None, notes=None) -> None:
     """Reads back ANDES' log `records` and what the file gave its devices (`inputs`, _keep_inputs)
     for the case `path` (with `dyr`), set up or with its power flow solved: CaseError (one line) for
     what the module docstring refuses; what it states is appended to `notes` (None: not kept)."""
-    rest = _refuse_dropped(ss, records, path, dyr)
+    rest = _refuse_dropped(ss, records, inputs, path, dyr)
     refused, stated, seen = _replaced(ss, inputs)
     if refused:
         raise CaseError(f"{path}: data ANDES would replace: {_listed(refused)}")
@@ -289,6 +291,11 @@ def read_back(ss, records, inputs: dict, path, dyr=None, notes=None) -> None:
         if corrected and all((corrected.group(1), idx, corrected.group(2)) in seen
                              for idx in _idx_list(corrected.group(3))):
             continue  # stated by _replaced with the file's value
+        field = _FIELD_UNKNOWN.match(said)
+        if field:
+            stated.append(f"ANDES does not know the field {field.group(2)} of {field.group(1)} and drops it: its "
+                          f"values are those of ANDES' {_same_but_case(ss, *field.groups())}")
+            continue
         if r.levelno >= logging.ERROR:
             raise CaseError(f"{path}: ANDES: {_said(r, 200)}")
         stated.append(f"ANDES: {_said(r, 200)}")
@@ -296,20 +303,46 @@ def read_back(ss, records, inputs: dict, path, dyr=None, notes=None) -> None:
         notes += [n for n in dict.fromkeys(stated) if n not in notes]
 
 
-def _refuse_dropped(ss, records, path, dyr=None) -> list:
+def _same_but_case(ss, model: str, field: str) -> str | None:
+    """The parameter of `model` spelt as `field` but for case, or None."""
+    known = ss.models.get(model)
+    return next((p for p in (known.params if known is not None else {}) if p.lower() == field.lower()), None)
+
+
+def _harmless_field(ss, inputs: dict, model: str, field: str) -> bool:
+    """Whether a field ANDES drops from `model` only differs in case from one of its parameters and
+    every device's value in the file is the one ANDES uses for that parameter (kundur_esdc2a's SWITCH:
+    ANDES' Switch)."""
+    param = _same_but_case(ss, model, field)
+    known = ss.models.get(model)
+    if param is None or known is None:
+        return False
+    for idx, given in inputs.get(model, {}).items():
+        i = known.uid.get(idx)
+        try:
+            if i is not None and float(given[field]) != float(getattr(known, param).v[i]):
+                return False
+        except (KeyError, TypeError, ValueError):
+            return False
+    return True
+
+
+def _refuse_dropped(ss, records, inputs, path, dyr=None) -> list:
     """CaseError (one line) naming every model, dyr model (with the generators its records name) and
-    field that ANDES' `records` say it does not know and drops; the other records."""
+    field that ANDES' `records` say it does not know and drops (a field only spelt with other case
+    than a parameter whose values ANDES uses is stated instead: _harmless_field); the other
+    records."""
     dyr_models, dropped, rest = [], [], []
     for r in records:
         said = r.getMessage()
         unknown = next((m for m in (p.match(said) for p in _DYR_UNKNOWN) if m), None)
+        field = _FIELD_UNKNOWN.match(said)
         if unknown:
             dyr_models += [m.strip() for m in unknown.group(1).split(",") if m.strip()]
         elif _MODEL_UNKNOWN.match(said):
             dropped.append(f"the model {_MODEL_UNKNOWN.match(said).group(1)} with its devices")
-        elif _FIELD_UNKNOWN.match(said) and _uses(ss, _FIELD_UNKNOWN.match(said).group(1)) is not None:
-            model, field = _FIELD_UNKNOWN.match(said).groups()
-            dropped.append(f"the field {field} of {model} with its values")
+        elif field and _uses(ss, field.group(1)) is not None and not _harmless_field(ss, inputs, *field.groups()):
+            dropped.append(f"the field {field.group(2)} of {field.group(1)} with its values")
         else:
             rest.append(r)
     if dyr_models:
@@ -386,7 +419,7 @@ def _replaced(ss, inputs: dict) -> tuple:
                 used = uses is not None and param in uses and in_service
                 if empty:
                     if used:
-                        refused.append(f"{name} {idx} {param} empty or NaN (ANDES would use {kept:g})")
+                        stated.append(f"{name} {idx}: {param} empty or NaN in the file, ANDES' default {kept:g} used")
                     continue
                 if value == kept:
                     continue
@@ -777,11 +810,12 @@ def dynamic_data(ss, name: str) -> dict:
                         f"{' ...' if len(bare) > 5 else ''} {'have' if len(bare) > 1 else 'has'} no machine or "
                         f"converter ({', '.join(MACHINES + CONVERTERS)}) in the case")
     order = sorted(units.values(), key=lambda u: generators.index(u["generator"]))
+    loads = _load_units(ss, number)
     return {"case": name, "description": "converted from ANDES' case by reference_models.grid.andes_case: one unit per "
             "machine or converter (with its exciter, governor, stabiliser, compensator, electrical and plant "
             "controls), parameters as the case file gives them (machine base Sn; Sb the system base), keyed by bus "
-            "and load-flow generator; a unit per load device (ZIP, FLoad) with the power it draws", "generators": order,
-            "loads": _load_units(ss, number)}
+            "and load-flow generator; a unit per load device with the power it draws (\"loads\", where there are any)",
+            "generators": order, **({"loads": loads} if loads else {})}
 
 
 def mismatch(network: dict, device_loads=()) -> float:
@@ -814,7 +848,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
-    worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic["loads"]])
+    worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])
     if worst > mismatch_limit(float(ss.PFlow.config.tol)):
         raise CaseError(f"{source}: the converted network misses ANDES' load flow by {worst:.3g} pu")
     out = Path(out_dir)
