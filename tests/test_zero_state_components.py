@@ -8,7 +8,7 @@ serialize their FMU state, and survive random FMI calls and corrupt serialized s
 from __future__ import annotations
 
 import ctypes
-import math
+import json
 import subprocess
 from dataclasses import replace
 
@@ -29,6 +29,9 @@ PERCENTAGES = {"kpp": 30.0, "kpi": 30.0, "kpz": 40.0, "kqp": 10.0, "kqi": 20.0, 
 POINT = {"P0": -0.8, "Q0": 0.1, "V0": 0.97}  # the load-flow point the sweeps hold
 H = 0.01  # s: the communication step
 TESTS = __file__.rsplit("/", 1)[0]
+
+
+ANDES_TIMES = (1.05, 2.5)  # s: mid-fault (bus 4, 1.0-1.1 s) and after clearing
 
 
 def _p():
@@ -258,3 +261,51 @@ def test_random_fmi_call_sequences_and_corrupt_states_never_crash_it(zip_fmus, t
     result = subprocess.run([str(_compile(tmp_path, "state_fuzz.c")), binary, md.guid, "5", "0", str(n_reals),
                              str(rtol.valueReference), repr(1.2345678e-7)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr[-2000:]
+
+
+# --- against ANDES ------------------------------------------------------------------------------
+
+@pytest.mark.andes
+def test_the_grid_case_starts_the_zip_at_its_load_flow_and_it_draws_andes_power_through_a_fault(tmp_path):
+    """ieee14_zip.json with its ZIP's percentages made to sum to 100 (50 % P, 40 % I, 10 % Z of its
+    PQ's P; 100 % P of its Q) and without its generator trip (with it, ANDES' TDS stops converging at
+    1.016 s under this fault): the case conversion gives the ZIP its percentages and a start at its
+    PQ's load-flow power and ANDES' bus voltage; at ANDES' bus voltage mid-fault and after clearing its
+    current carries ANDES' power drawn."""
+    andes = pytest.importorskip("andes")
+    from reference_models.grid.andes_case import case_from_file, configure_andes_logging
+
+    configure_andes_logging(andes, 40)
+    data = json.loads(open(andes.get_case("ieee14/ieee14_zip.json")).read())
+    data["ZIP"][0]["kpz"] = 10.0
+    del data["Toggler"]
+    path = tmp_path / "ieee14_zip100.json"
+    path.write_text(json.dumps(data))
+    case = case_from_file(path, cache_dir=tmp_path / "cases")
+    device, start = next((u.machine, s[0]) for u, s in zip(case.units, case.starts) if u.machine.component is ZIP)
+    ss = andes.load(str(path), setup=False, no_output=True, default_config=True)
+    ss.add("Fault", {"bus": 4, "tf": 1.0, "tc": 1.1, "xf": 1e-4, "rf": 0.0})
+    ss.setup()
+    ss.PFlow.config.tol = 1e-12
+    assert ss.PFlow.run()
+    ss.TDS.init()
+    zp, pq = ss.ZIP, ss.PQ
+    j, bus = list(pq.idx.v).index(zp.pq.v[0]), list(ss.Bus.idx.v).index(zp.bus.v[0])
+    assert device.params == ZIP.params({k: float(getattr(zp, k).v[0]) for k in PERCENTAGES})
+    assert start.states == ()
+    V0, theta0 = float(ss.Bus.v.v[bus]), float(ss.Bus.a.v[bus])
+    assert start.inputs == pytest.approx({"Vs": V0, "theta_vs": theta0, "P0": -float(pq.Ppf.v[j]),
+                                          "Q0": -float(pq.Qpf.v[j]), "V0": V0}, rel=1e-10, abs=1e-12)
+    ss.TDS.config.update(fixt=1, tstep=0.005, tol=1e-6, no_tqdm=1)
+    for t in ANDES_TIMES:
+        ss.TDS.config.tf = t
+        assert ss.TDS.run() and ss.dae.t == pytest.approx(t)
+        ss.TDS.fg_update(ss.exist.tds)
+        V, theta = float(ss.Bus.v.v[bus]), float(ss.Bus.a.v[bus])
+        assert (V < 0.5) == (t < 1.1)
+        u = np.array([V, theta, *(start.inputs[n] for n in ("P0", "Q0", "V0"))])
+        I_re, I_im, P, Q = ZIP.output_values(np.zeros(0), u, device.params)
+        S = V * np.exp(1j * theta) * complex(I_re, -I_im)
+        drawn = float(zp.a.e[0]), float(zp.v.e[0])
+        np.testing.assert_allclose([-S.real, -S.imag], drawn, rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose([-P, -Q], drawn, rtol=1e-12, atol=1e-13)
