@@ -9,6 +9,7 @@ rest giving an output and the set point holding it), each in its model's module.
 """
 from .ac8b import AC8B
 from .esac1a import ESAC1A
+from .esd1 import ESD1
 from .esdc1a import ESDC1A
 from .esdc2a import ESDC2A
 from .esst1a import ESST1A
@@ -33,6 +34,7 @@ from .ieeet3 import IEEET3
 from .ieeevc import IEEEVC
 from .ieeex1 import IEEEX1
 from .motor import Motor3, Motor5
+from .pvd1 import PVD1
 from .reeca1 import REECA1
 from .regca1 import REGCA1
 from .sexs import SEXS
@@ -54,4 +56,5 @@ STANDARD_MODELS = {
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
     "ZIP": ZIP,
     "REGCA1": REGCA1, "REECA1": REECA1,
+    "PVD1": PVD1, "ESD1": ESD1,
 }
