@@ -68,6 +68,18 @@ SIGNALS = {
                                  "system base (a plant controller's output)"),
     "power_factor_angle_reference": ("pfaref", "rad", "power factor angle set point of an inverter's electrical "
                                      "controller (its power factor control)"),
+    # measurements a device takes from the network beyond its own bus (a plant controller's): the
+    # unit's dynamic data name the measured bus and branch (Measurement); the network gives them
+    "measured_voltage": ("Vm", "pu", "voltage magnitude at the measured bus"),
+    "measured_voltage_angle": ("theta_m", "rad", "voltage angle at the measured bus (network frame)"),
+    "branch_active_power": ("Pbr", "pu", "active power flowing into the measured branch at its measured end, "
+                            "system base"),
+    "branch_reactive_power": ("Qbr", "pu", "reactive power flowing into the measured branch at its measured end, "
+                              "system base"),
+    "branch_current_real": ("Ibr_re", "pu", "current into the measured branch at its measured end, real part, "
+                            "network frame, system base"),
+    "branch_current_imaginary": ("Ibr_im", "pu", "current into the measured branch at its measured end, imaginary "
+                                 "part, network frame, system base"),
 }
 
 TOOL_NAME = "opfmu"
