@@ -163,7 +163,12 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
 
 
 def _model_name(device, index: int, bus: int, kind: str) -> str:
-    stem = "Gen" if index == 0 else device.name[:1].upper() + device.name[1:]
+    """The FMU's model name: Gen<bus> for a unit's machine, <MODEL><bus> for another bus device (a
+    converter, a load), <Role><bus> for a control device (its dynamic-data key), then the kind."""
+    if index == 0:
+        stem = "Gen" if device.component.ports.output("rotor_angle") else device.component.name.upper()
+    else:
+        stem = device.name[:1].upper() + device.name[1:]
     return f"{stem}{bus}{_NAMES[kind]}"
 
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_models.grid.case import Case, external_impedance, step_order, unit_wiring
+from reference_models.grid.case import Case, external_impedance, measured_values, step_order, unit_wiring
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.result import GridResult, device_labels, rotor_angle_state
 
@@ -230,12 +230,12 @@ def refined_points(points, refinement):
 
 def _code(source) -> int:
     """The master's code of an input's Source: 0, 1 bus voltage magnitude, angle; 2, 3 terminal voltage
-    magnitude, angle; 4 a link from another device; 5 a set point."""
+    magnitude, angle; 4 a link from another device; 5 a set point; 6 a network measurement."""
     if source.kind == "bus":
         return source.index
     if source.kind == "terminal":
         return 2 + source.index
-    return 4 if source.kind == "device" else 5
+    return {"device": 4, "measured": 6}.get(source.kind, 5)
 
 
 def _wrap(angle: float) -> float:
@@ -297,8 +297,17 @@ class _Unit:
                               for n in names])
             self.state_rows.append(len(device.component.state_names))
             self.link_rows.append({n: outputs.index(n) for n in needed[j]})
-        self.plan = [[(_code(source), (source.device, source.variable) if source.kind == "device" else None, held)
-                      for source, held in zip(sources, helds)] for sources, helds in zip(self.sources, self.held)]
+        self.plan = [[(_code(source), (source.device, source.variable) if source.kind == "device" else
+                       (j, source.index) if source.kind == "measured" else None, held)
+                      for source, held in zip(sources, helds)]
+                     for j, (sources, helds) in enumerate(zip(self.sources, self.held))]
+        # the devices that measure the network: (device index, Measurement)
+        self.measuring = tuple((j, d.measures) for j, d in enumerate(unit.devices)
+                               if any(src.kind == "measured" for src in self.sources[j]))
+        missing = [unit.devices[j].name for j, m in self.measuring if m is None]
+        if missing:
+            raise CouplingError(f"generator at bus {unit.bus}: {', '.join(missing)} measure the network, but the "
+                                "case names no measured bus for them")
         self.state_names = [d.component.state_names for d in unit.devices]
         self.current_rows = tuple(outputs_index for outputs_index in
                                   (self.fmus[0].output_names.index(n) for n in bus.current))
@@ -369,6 +378,7 @@ class GridMaster:
             self.close()
             raise
         self.fmus = [fmu for u in self.units for fmu in u.fmus]
+        self._measuring = any(u.measuring for u in self.units)
         self._angles = any(code == 3 for u in self.units for plan in u.plan for code, _, _ in plan)
         self.rolls_back = all(s.rolls_back for s in self.fmus)
         self.notes = ()
@@ -479,12 +489,28 @@ class GridMaster:
             angles = [t + _wrap(cmath.phase(v) - t) for v, t in zip(Vt, theta.tolist())]
         return [abs(v) for v in Vt], angles
 
-    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, active, timing):
+    def _measure(self, V, theta, topology, active) -> dict:
+        """{(unit, device): the MEASURED values} of the measuring devices of the `active` units at the
+        unit-bus voltages V [g] (the other buses' by the topology's recovery), each measured angle
+        continuous with its unit's bus angle theta[k]; {} where no device measures."""
+        if not self._measuring:
+            return {}
+        V_bus = self.network(topology).recovery @ V[self._first]
+        out = {}
+        for k in active:
+            for j, measures in self.units[k].measuring:
+                values = [float(v) for v in measured_values(self.case.network, V_bus, measures, topology.open)]
+                values[1] = float(theta[k]) + _wrap(values[1] - float(theta[k]))
+                out[(k, j)] = values
+        return out
+
+    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, active, timing, measured=({}, {})):
         """One pass over [t0, t0 + h]: every `active` unit's devices stepped in their order, each input linear
         from its start value to its end value (bus voltage and terminal voltage: V0, Vt0 to V1, Vt1;
         a link from a device stepped before in this pass: to its new output; from a device stepped
         after it: to that device's end value from the pass before, or its extrapolation on the first
-        pass), or held at the start values with coupling "held". Returns every active unit's
+        pass; a measurement: from its value at the start to that at V1, `measured` = (start, end) of
+        _measure), or held at the start values with coupling "held". Returns every active unit's
         outputs per device at t0 + h (None for the others), and sets the units' link end values to
         this pass's outputs."""
         started = time.perf_counter()
@@ -507,6 +533,9 @@ class GridMaster:
                     elif code == 4:
                         a.append(links[key])
                         b.append(new_links[key])
+                    elif code == 6:
+                        a.append(measured[0][(k, key[0])][key[1]])
+                        b.append(measured[1][(k, key[0])][key[1]])
                     else:
                         a.append(held)
                         b.append(held)
@@ -565,6 +594,7 @@ class GridMaster:
         for t1, new_topology, recorded in refined_points(points, s.event_refinement):
             h = t1 - t0
             Vt0 = self._terminal(V, I, theta)
+            measured_start = self._measure(V, theta, topology, active)
             if V_prev is not None and s.coupling != "held":
                 V1 = V + (V - V_prev) * (h / h_prev)
             else:
@@ -589,7 +619,8 @@ class GridMaster:
                             fmu.restore(snap)
                         timing.rollback_s += time.perf_counter() - t_save
                     Vt1 = self._terminal(V1, I1, theta1)
-                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing)
+                    measured = (measured_start, self._measure(V1, theta1, topology, active))
+                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing, measured)
                     timing.passes += 1
                     new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
                     residual = new_V - V1

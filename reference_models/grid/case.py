@@ -231,14 +231,27 @@ class LoadFlow:
 
 
 @dataclass(frozen=True)
+class Measurement:
+    """What a device measures in the network beyond its own bus (a plant controller): the voltage of
+    `bus`, and the flow into `branch` (a name Network.branch takes; None: no branch) at its end `end`
+    (one of the branch's buses)."""
+
+    bus: int
+    branch: str | None = None
+    end: int | None = None
+
+
+@dataclass(frozen=True)
 class Device:
     """A component at a bus: `name` (the dynamic-data key, e.g. machine), the reference_models
-    Component, its parameters and where they came from (`source`: a file, or None)."""
+    Component, its parameters and where they came from (`source`: a file, or None); `measures`:
+    what it measures in the network (its measured_* and branch_* input links), or None."""
 
     name: str
     component: object
     params: object
     source: Path | None = None
+    measures: Measurement | None = None
 
 
 @dataclass(frozen=True)
@@ -283,12 +296,13 @@ class Reduced:
     """One topology: the full admittance matrix Y [buses, buses] with loads and any fault shunt, its
     reduction to the generator buses in real form Y_real [2g, 2g] on v = (V_re, V_im) per generator
     (I = Y_real v), and the recovery of every bus voltage from the generator ones (V_bus = recovery
-    @ V_gen, complex [buses, g])."""
+    @ V_gen, complex [buses, g]), the branches open (`open`, their names)."""
 
     Y: np.ndarray
     Y_real: np.ndarray
     recovery: np.ndarray
     description: str
+    open: tuple = ()  # the branches open in this topology
 
 
 @dataclass(frozen=True)
@@ -347,7 +361,8 @@ class Case:
         Y_real[1::2, 1::2] = Y_red.real
         for a in (Y, Y_real, recovery):
             a.setflags(write=False)
-        return Reduced(Y=Y, Y_real=Y_real, recovery=recovery, description="; ".join(parts) or "intact")
+        return Reduced(Y=Y, Y_real=Y_real, recovery=recovery, description="; ".join(parts) or "intact",
+                       open=tuple(br.name for br in opened))
 
 
 def _number(path, where: str, value) -> float:
@@ -466,6 +481,19 @@ def load_units(path, generator_buses, generator_names=None) -> tuple:
     return tuple(by_key[key] for key in keys) + tuple(loads)
 
 
+def _measurement(entry, where: str) -> Measurement | None:
+    """The Measurement of a device entry's "measures" {"bus": n, "branch": "a-b[:k]", "end": n}
+    (branch and end optional; end defaults to the branch's from bus), or None."""
+    if entry is None:
+        return None
+    try:
+        branch = None if entry.get("branch") is None else str(entry["branch"])
+        end = None if entry.get("end") is None else int(entry["end"])
+        return Measurement(int(entry["bus"]), branch, end)
+    except (KeyError, TypeError, ValueError, AttributeError):
+        raise CaseError(f"{where}: measures must be an object with the measured bus (and a branch, its end)") from None
+
+
 def _devices(path: Path, entry: dict, where: str, keys: tuple) -> tuple:
     """The Devices of a unit's entry in a dynamic-data file: every key but `keys`, in file order, the
     one with a bus port first."""
@@ -490,7 +518,7 @@ def _devices(path: Path, entry: dict, where: str, keys: tuple) -> tuple:
                 params = comp.params(value.get("params", {}))
         except (ValueError, OSError, TypeError) as exc:
             raise CaseError(f"{where}: {name}: {' '.join(str(exc).split())[:160]}") from None
-        devices.append(Device(name, comp, params, source))
+        devices.append(Device(name, comp, params, source, _measurement(value.get("measures"), f"{where}: {name}")))
     bus_devices = [d for d in devices if d.component.ports.bus is not None]
     if len(bus_devices) != 1 or devices[0] is not bus_devices[0]:
         raise CaseError(f"{where}: a unit needs exactly one device with a bus port (a machine, a converter, a "
@@ -523,6 +551,19 @@ def load_events(path) -> tuple:
     return tuple(sorted(events, key=lambda ev: ev.time))
 
 
+def _measured_at_rest(network: Network, flow: LoadFlow, unit: Unit) -> dict:
+    """{device index: the MEASURED values of its Measurement at the load flow} of a unit's devices;
+    CaseError for a measured bus or branch the network does not have."""
+    out = {}
+    for j, d in enumerate(unit.devices):
+        if d.measures is not None:
+            try:
+                out[j] = measured_values(network, flow.V_complex, d.measures)
+            except ValueError as exc:
+                raise CaseError(f"{d.component.name.upper()} at bus {unit.bus} measures {exc}") from None
+    return out
+
+
 def _operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
     """V, theta, P, Q of unit k at the load flow: its generator's, or for a load unit minus the
     power it draws (generator convention)."""
@@ -532,10 +573,11 @@ def _operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
     return {"V": float(flow.V[i]), "theta": float(flow.theta[i]), "P": -unit.load.real, "Q": -unit.load.imag}
 
 
-def unit_start(unit: Unit, op: dict) -> tuple:
+def unit_start(unit: Unit, op: dict, measured: dict | None = None) -> tuple:
     """The DeviceStart of every device of `unit` at the load-flow operating point op (V, theta, P, Q
     of its share of the bus injection): the bus device from its own initialisation (Component.start
-    with the load-flow point), then its control devices (`at_rest`)."""
+    with the load-flow point), then its control devices (`at_rest`); measured {device index: the
+    MEASURED values of its Measurement at the load flow}."""
     device = unit.machine
     component = device.component
     bus = component.ports.bus
@@ -546,10 +588,10 @@ def unit_start(unit: Unit, op: dict) -> tuple:
         x0, inputs = component.start(given, device.params)
     except ValueError as exc:
         raise CaseError(f"{where} has no start at the load flow: {' '.join(str(exc).split())[:160]}") from None
-    return at_rest(unit.devices, x0, inputs, where)
+    return at_rest(unit.devices, x0, inputs, where, measured)
 
 
-def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit") -> tuple:
+def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measured: dict | None = None) -> tuple:
     """The DeviceStart of every device of a unit whose bus device (devices[0]) is at rest in state x0
     under `bus_device_inputs` (every input by name), the control devices started from what the
     devices they drive need (Component.start).
@@ -559,7 +601,8 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit") -> tu
     started) and every device that solves an input it gives has started (that value is what it has
     to give): a stabiliser at rest before the exciter that takes its signal, the exciter after the
     machine that solved the field voltage, a plant controller after the electrical controller that
-    solved its references. A device's outputs that others solved for are checked at its start."""
+    solved its references. A device's outputs that others solved for are checked at its start.
+    measured: {device index: its MEASURED values} for the devices that measure the network."""
     devices = list(devices)
     ports = [d.component.ports for d in devices]
     wiring = unit_wiring(ports, where)
@@ -579,12 +622,17 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit") -> tu
         init = devices[j].component.initialisation
         return init.solves if init is not None else ()
 
-    def value(source):
-        """The start value a Source gives, or None while its device has not started."""
+    def value(source, j):
+        """The start value a Source of device j's input gives, or None while its device has not started."""
         if source.kind == "bus":
             return bus_values[source.index]
         if source.kind == "terminal":
             return terminal[source.index]
+        if source.kind == "measured":
+            if not measured or j not in measured:
+                raise CaseError(f"{where}: {devices[j].name} ({devices[j].component.name}) measures the network, "
+                                "but its entry names no measured bus (\"measures\")")
+            return float(measured[j][source.index])
         if source.kind == "device":
             return outputs[source.device][source.variable] if source.device in starts else None
         return None
@@ -614,7 +662,7 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit") -> tu
                 if source is None or source.kind == "held":
                     given[name] = float(next(q.start for q in comp.inputs if q.name == name) or 0.0)
                 else:
-                    given[name] = value(source)
+                    given[name] = value(source, j)
             demanded = demands(j)
             if demanded is None or any(v is None for v in given.values()):
                 continue
@@ -653,7 +701,8 @@ def load_case(network_file, dynamic_data, name: str | None = None, source: tuple
     where they were converted from a file ANDES reads (Case.source)."""
     network, flow = load_network(network_file)
     units = load_units(dynamic_data, network.generator_buses, [g.name for g in network.generators])
-    starts = tuple(unit_start(u, _operating_point(u, k, flow)) for k, u in enumerate(units))
+    starts = tuple(unit_start(u, _operating_point(u, k, flow), _measured_at_rest(network, flow, u))
+                   for k, u in enumerate(units))
     return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data),
                 source)
 
@@ -675,6 +724,36 @@ def _shipped_case(name: str) -> Case:
     return load_case(DATA_DIR / f"{name}_network.json", DATA_DIR / f"{name}.json", name)
 
 
+#: the signals a device's Measurement gives, in the order measured_values returns them
+MEASURED = ("measured_voltage", "measured_voltage_angle", "branch_active_power", "branch_reactive_power",
+            "branch_current_real", "branch_current_imaginary")
+
+
+def measured_values(network: Network, V, measures: Measurement, open_branches=(), m=np) -> tuple:
+    """The MEASURED quantities of `measures` at the bus voltages V [buses] (complex, bus order; or
+    [n, buses] with m = numpy): |V|, angle of V at the measured bus, and the power P, Q [pu] and the
+    current (real, imaginary) [pu, network frame] into the measured branch at its measured end (the
+    pi model with its charging and tap, as Network.ybus; 0 where the branch is open or none)."""
+    V = np.asarray(V)
+    at = V[..., network.bus_index(measures.bus)]
+    current = np.zeros_like(at)
+    if measures.branch is not None:
+        br = network.branch(measures.branch)
+        if br not in {network.branch(b) for b in open_branches}:
+            Va, Vb = V[..., network.bus_index(br.from_bus)], V[..., network.bus_index(br.to_bus)]
+            y = 1.0 / complex(br.r, br.x)
+            tap = br.tap * np.exp(1j * br.phi)
+            if measures.end == br.from_bus:
+                current = (y + 0.5j * br.b) / br.tap ** 2 * Va - y / np.conj(tap) * Vb
+            else:
+                current = (y + 0.5j * br.b) * Vb - y / tap * Va
+        end = V[..., network.bus_index(measures.end if measures.branch is not None else measures.bus)]
+    else:
+        end = at
+    power = end * np.conj(current)
+    return np.abs(at), np.angle(at), power.real, power.imag, current.real, current.imag
+
+
 TERMINAL = ("terminal_voltage", "terminal_voltage_angle")  # what the bus gives a unit: |Vt|, angle of Vt
 TERMINAL_CURRENT = ("terminal_current_real", "terminal_current_imaginary")  # the machine's bus-port current
 
@@ -683,8 +762,8 @@ TERMINAL_CURRENT = ("terminal_current_real", "terminal_current_imaginary")  # th
 class Source:
     """Where a device input comes from within its unit: `bus` (the bus voltage: index 0 its
     magnitude, 1 its angle), `device` (output `variable` of device `device` of the unit),
-    `terminal` (the terminal voltage: index 0 its magnitude, 1 its angle) or `held` (a set point at
-    its start value)."""
+    `terminal` (the terminal voltage: index 0 its magnitude, 1 its angle), `measured` (MEASURED[index]
+    of the device's Measurement) or `held` (a set point at its start value)."""
 
     kind: str
     device: int | None = None
@@ -721,6 +800,8 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
                 wires[link.variable] = Source("device", device=givers[0][0], variable=givers[0][1])
             elif link.signal in TERMINAL:
                 wires[link.variable] = Source("terminal", index=TERMINAL.index(link.signal))
+            elif link.signal in MEASURED:
+                wires[link.variable] = Source("measured", index=MEASURED.index(link.signal))
             elif link.signal in TERMINAL_CURRENT and j > 0:
                 wires[link.variable] = Source("device", device=0,
                                               variable=ports[0].bus.current[TERMINAL_CURRENT.index(link.signal)])

@@ -46,7 +46,7 @@ import math
 
 import numpy as np
 
-from .case import Case, Reduced, external_impedance, held_inputs, unit_wiring
+from .case import Case, Reduced, external_impedance, held_inputs, measured_values, unit_wiring
 from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency, Topology
 from .result import GridResult, device_labels, rotor_angle_state
 
@@ -126,12 +126,13 @@ def _current_map(component, x, p, m, u0=None, at=None):
 
 
 def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, controls: bool = True, m=math,
-                held=None) -> list:
+                held=None, measured=None) -> list:
     """The inputs of every device of a unit (tuples in component order), wired by `wiring`
     (case.unit_wiring): the bus voltage V_re + j V_im (scalars, m = math; arrays, m = numpy), the
     devices' states `state(j)` (lists in component order), the terminal voltage behind `impedance`,
     set points at their start values in `starts` (or `held` {variable: value} of the machine where
-    given). controls=False: the machine's links from other devices held at their start values."""
+    given), network measurements from `measured` {device index: its MEASURED values}.
+    controls=False: the machine's links from other devices held at their start values."""
     if _scalar(m):
         Vs, theta = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
     else:
@@ -174,6 +175,8 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
                     values.append(Vs if source.index == 0 else theta)
                 elif source.kind == "terminal":
                     values.append(terminal(source.index))
+                elif source.kind == "measured":
+                    values.append(measured[j][source.index])
                 else:
                     values.append(value(source.device, source.variable))
             inputs[j] = tuple(values)
@@ -275,6 +278,11 @@ class System:
         self.first_unit = tuple(self.bus_slot.index(b) for b in range(len(buses)))
         self._networks = {}
         self._voltages = {}  # id(Reduced) -> the reduced buses' voltages of the last scalar solve there
+        # unit -> [(device, Measurement)] of the devices that measure the network
+        self.measuring = {k: [(j, d.measures) for j, d in enumerate(u.devices)
+                              if any(s.kind == "measured" for s in self.wiring[k][j].values())]
+                          for k, u in enumerate(case.units)}
+        self.measuring = {k: v for k, v in self.measuring.items() if v}
         self._check_affine_currents()
 
     def _check_affine_currents(self) -> None:
@@ -378,9 +386,10 @@ class System:
             u[i] = y[at] if _scalar(m) else y[:, at]
         return u
 
-    def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math) -> list:
+    def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math, measured=None) -> list:
         """The inputs of every device of unit k (tuples in component order) at state y (scalars, m =
-        math; or arrays over rows, m = numpy) and bus voltage V_re + j V_im."""
+        math; or arrays over rows, m = numpy) and bus voltage V_re + j V_im; `measured`: the network's
+        measurements of every unit (System.measured)."""
         slices = self.slices[k]
         if _scalar(m):
             def state(j):
@@ -389,20 +398,39 @@ class System:
             def state(j):
                 return [y[:, i] for i in range(slices[j].start, slices[j].stop)]
         return unit_inputs(self.units[k].devices, self.wiring[k], self.case.starts[k], self.impedance[k], state,
-                           V_re, V_im, controls, m)
+                           V_re, V_im, controls, m, measured=None if measured is None else measured.get(k))
+
+    def measured(self, V_re, V_im, network: Reduced) -> dict | None:
+        """{unit: {device: its MEASURED values}} at the unit-bus voltages V_re + j V_im ([g], or [n, g]),
+        the other buses' by the network's recovery, each measured angle continuous with its unit's bus
+        angle; None where no device measures."""
+        if not self.measuring:
+            return None
+        V = np.asarray(V_re) + 1j * np.asarray(V_im)
+        V_bus = V[..., list(self.first_unit)] @ network.recovery.T
+        out = {}
+        for k, devices in self.measuring.items():
+            theta = np.angle(V[..., k])
+            out[k] = {}
+            for j, measures in devices:
+                values = list(measured_values(self.case.network, V_bus, measures, network.open))
+                values[1] = theta + np.remainder(values[1] - theta + np.pi, 2 * np.pi) - np.pi
+                out[k][j] = values
+        return out
 
     def rhs(self, t, y, network: Reduced, controls: bool = True, m=math, tripped=()) -> np.ndarray:
         """dy/dt [n_states] with the network voltages solved for the state y; m: the math namespace
         the equations run on (math: their conditions as they hold at y; a _Branches namespace: its
         locked branches); the devices of the units `tripped` (indices) stand still."""
         V_re, V_im = self.generator_voltages(y, network, m, tripped)
+        measured = self.measured(V_re, V_im, network)
         out = np.zeros(self.n_states)
         for k, unit in enumerate(self.units):
             if k in tripped:
                 continue
             if m is not math:
                 m.owner = (k, None)
-            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, m)
+            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, m, measured)
             for j, d in enumerate(unit.devices):
                 if j > 0 and not controls:
                     continue
@@ -417,10 +445,11 @@ class System:
         inputs at y; the devices that stand still (tripped units, controls=False) are left as they are."""
         y = np.array(y, dtype=float)
         V_re, V_im = self.generator_voltages(y, network, math, tripped)
+        measured = self.measured(V_re, V_im, network)
         for k, unit in enumerate(self.units):
             if k in tripped:
                 continue
-            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls)
+            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, measured=measured)
             for j, d in enumerate(unit.devices):
                 if j > 0 and not controls:
                     continue
@@ -435,6 +464,7 @@ class System:
         y = np.atleast_2d(y)
         n, g = len(y), len(self.units)
         V_re, V_im = self.generator_voltages(y, network, np, tripped)
+        measured = self.measured(V_re, V_im, network)
         V_gen = V_re + 1j * V_im
         # the bus angles continuous: near the rotor angle of a machine, unwrapped along the rows elsewhere
         delta = np.full((n, g), np.nan)
@@ -447,7 +477,7 @@ class System:
         states, machine_inputs, device_states = {}, {}, {}
         labels = device_labels(self.units)
         for k, unit in enumerate(self.units):
-            inputs = self.unit_inputs(k, y, V_re[:, k], V_im[:, k], controls, np)
+            inputs = self.unit_inputs(k, y, V_re[:, k], V_im[:, k], controls, np, measured)
             machine = unit.machine
             bus = machine.component.ports.bus
             u = np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in inputs[0]], -1)
