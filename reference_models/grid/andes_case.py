@@ -92,7 +92,7 @@ from .case import DATA_DIR, Case, CaseError, load_case
 #: The shipped cases converted from ANDES' own files: name -> ANDES case.
 ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_full.xlsx",
                "ieee39": "ieee39/ieee39_full.xlsx", "npcc": "npcc/npcc.xlsx"}
-NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault")
+NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault", "Alter")
 IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "Summary")  # measurements and the case's description
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
@@ -104,7 +104,7 @@ LOADS = ("ZIP", "FLoad", "Motor5", "Motor3")  # dynamic and voltage-dependent lo
 COMPENSATORS = ("IEEEVC",)  # voltage compensators: an exciter's input voltage
 CONVERTERS = ("REGCA1", "PVD1", "ESD1")  # inverters' converters: a unit's bus device, as a machine
 ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers
-PLANT_CONTROLS = ()  # inverters' plant controllers
+PLANT_CONTROLS = ("REPCA1",)  # inverters' plant controllers
 CACHE_FORMAT = 2  # version of what convert writes: a new one keys new cache entries (2: notes, refusals of issue 33)
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
@@ -683,6 +683,33 @@ def _params(model, name: str, i: int, ss) -> dict:
     return values
 
 
+# what an Alter may change without effect on ANDES' time-domain simulation: a PQ load's power, which
+# its constant-impedance equivalent (Req, Xeq: computed once at the start) no longer reads
+_ALTERS_WITHOUT_EFFECT = {"PQ": ("p0", "q0", "Ppf", "Qpf")}
+
+
+def _alters(ss) -> list:
+    """The notes of the case's Alter events that change nothing in ANDES' simulation (a PQ's power
+    under constant-impedance loads); CaseError naming any other enabled Alter (a device parameter or
+    set point changed at a time, which opfmu's cases do not carry yet)."""
+    notes, refused = [], []
+    model = ss.Alter
+    for i in range(model.n):
+        if model.u.v[i] == 0:
+            continue
+        target, dev, src, t = model.model.v[i], model.dev.v[i], model.src.v[i], float(model.t.v[i])
+        what = f"Alter {model.idx.v[i]} ({target} {dev} {src} {model.method.v[i]} {model.amount.v[i]:g} at {t:g} s)"
+        if src in _ALTERS_WITHOUT_EFFECT.get(target, ()):
+            notes.append(f"{what} changes nothing in ANDES' simulation (its constant-impedance load keeps the "
+                         "impedance of the start) and is left out")
+        else:
+            refused.append(what)
+    if refused:
+        raise CaseError(f"{_listed(refused)}: a parameter changed during the run is not converted (only a PQ's "
+                        "power, which ANDES' constant-impedance loads do not read)")
+    return notes
+
+
 def _replaced_loads(ss) -> dict:
     """{PQ idx: (model, position)} of the PQ loads a load device in service replaces (ANDES' ZIP and
     FLoad: `pq`, whose PQ ANDES switches off in the time domain: the device draws its power)."""
@@ -846,6 +873,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
+    notes += _alters(ss)
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
     worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])

@@ -37,6 +37,7 @@ from .motor import Motor3, Motor5
 from .pvd1 import PVD1
 from .reeca1 import REECA1
 from .regca1 import REGCA1
+from .repca1 import REPCA1
 from .sexs import SEXS
 from .st2cut import ST2CUT
 from .tg2 import TG2
@@ -57,4 +58,5 @@ STANDARD_MODELS = {
     "ZIP": ZIP,
     "REGCA1": REGCA1, "REECA1": REECA1,
     "PVD1": PVD1, "ESD1": ESD1,
+    "REPCA1": REPCA1,
 }
