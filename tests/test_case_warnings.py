@@ -223,3 +223,17 @@ def test_surrogate_runs_say_which_devices_are_surrogates():
     assert text.startswith("surrogate FMUs for 3 machines: SM4 at bus 1 (operator wscc9_gen1.onnx), SM4 at bus 2")
     assert text.endswith("native reference FMUs for the other 3 devices")
     assert _surrogates(case, "reference") is None and _surrogates(case, "monolithic") is None
+
+
+@pytest.mark.andes
+def test_an_alter_of_a_load_andes_ignores_is_a_note_and_one_of_a_set_point_is_refused(tmp_path):
+    """ANDES' constant-impedance loads keep the impedance of the start, so its Alter of a PQ's Ppf
+    (ieee14_hygov4's load ramp) changes nothing in its simulation: stated and left out. An Alter of
+    a governor's auxiliary power (ieee14_alter) changes the run: refused, naming every one."""
+    from reference_models.grid.andes_case import case_from_file, case_notes
+
+    case = case_from_file(stock("ieee14/ieee14_hygov4.xlsx"), cache_dir=tmp_path / "cache")
+    assert any("Alter LoadRamp_1 (PQ PQ_7 Ppf + 0.1 at 1 s) changes nothing" in n for n in case_notes(case))
+    assert not [e for e in case.events if e.kind not in ("fault", "branch", "generator")]
+    with pytest.raises(CaseError, match=r"Alter 1 \(TGOV1 TGOV1_1 paux0 \+ 0.001 at 1 s\), Alter 2 .*not converted"):
+        case_from_file(stock("ieee14/ieee14_alter.xlsx"), cache_dir=tmp_path / "cache")
