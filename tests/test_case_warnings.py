@@ -133,7 +133,11 @@ def test_adjustments_that_change_nothing_converted_are_notes_of_the_case(tmp_pat
     again = case_from_file(case.source[0], cache_dir=tmp_path / "cache")  # from the cache, without ANDES
     assert case_notes(again) == case_notes(case)
     ieee39 = case_from_file(stock("ieee39/ieee39_full.xlsx"), cache_dir=tmp_path / "cache")
-    assert case_notes(ieee39) == ("ACEc 1: bias = 300 in the file, ANDES uses -1 (ACEc is not converted)",)
+    assert case_notes(ieee39) == (
+        "ACEc 1: bias = 300 in the file, ANDES uses -1 (ACEc is not converted)",
+        "ACEc (1 device: a measurement that acts on no converted device) is left out: its outputs are not in the result",
+        "BusFreq (10 devices: a measurement that acts on no converted device) is left out: its outputs are not in the "
+        "result")
     shipped = case_from_file(stock("kundur/kundur_full.xlsx"), cache_dir=tmp_path / "cache")
     assert case_notes(shipped) == ()
 

@@ -93,7 +93,9 @@ from .case import DATA_DIR, Case, CaseError, load_case
 ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_full.xlsx",
                "ieee39": "ieee39/ieee39_full.xlsx", "npcc": "npcc/npcc.xlsx"}
 NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault", "Alter")
-IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "Summary")  # measurements and the case's description
+# measurements that act on no device of a converted case, and the case's description: left out, each
+# measurement stated in the case's notes (a device that reads a BusFreq takes its time constants)
+IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "COI", "Summary")
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS", "EXAC1", "EXAC4", "ESAC1A", "ESST1A", "ESST4B",
@@ -688,6 +690,15 @@ def _params(model, name: str, i: int, ss) -> dict:
 _ALTERS_WITHOUT_EFFECT = {"PQ": ("p0", "q0", "Ppf", "Qpf")}
 
 
+def _measurements_left_out(ss) -> list:
+    """The notes of the measurement models in the case that opfmu leaves out (IGNORED_MODELS but Area
+    and Summary): they act on no converted device, and their outputs are not in opfmu's result."""
+    return [f"{name} ({model.n} device{'s' if model.n > 1 else ''}: a measurement that acts on no converted device) "
+            "is left out: its outputs are not in the result"
+            for name, model in ss.models.items() if name in IGNORED_MODELS and name not in ("Area", "Summary")
+            and model.n > 0]
+
+
 def _alters(ss) -> list:
     """The notes of the case's Alter events that change nothing in ANDES' simulation (a PQ's power
     under constant-impedance loads); CaseError naming any other enabled Alter (a device parameter or
@@ -873,7 +884,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    notes += _alters(ss)
+    notes += _alters(ss) + _measurements_left_out(ss)
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
     worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])
