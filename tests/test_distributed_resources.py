@@ -131,8 +131,8 @@ def test_the_priority_axis_takes_the_current_limit_and_the_other_what_it_leaves(
     low = u.copy()
     low[0] = 0.06
     one = np.array([1.0, u[1], 0.05, 1.0] if pqflag else [1.0, u[1], 0.5, 0.4])
-    for point, Ip, Iq in ((low, 0.5 * pqflag, 0.5 * (1.0 - pqflag)),
-                          (one, 0.05 if pqflag else math.sqrt(0.25 - 0.16), math.sqrt(0.25 - 0.0025) if pqflag else 0.4)):
+    at_one = (0.05, math.sqrt(0.25 - 0.0025)) if pqflag else (math.sqrt(0.25 - 0.16), 0.4)
+    for point, Ip, Iq in ((low, 0.5 * pqflag, 0.5 * (1.0 - pqflag)), (one, *at_one)):
         assert _command(PVD1, x, point, p, "Ipout_y") == pytest.approx(Ip, rel=1e-12, abs=1e-15)
         assert _command(PVD1, x, point, p, "Iqout_y") == pytest.approx(Iq, rel=1e-12, abs=1e-15)
 
