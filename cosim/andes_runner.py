@@ -9,7 +9,8 @@ onto a GridResult as the other runners give it (rows at the multiples of the row
 ANDES' own rows within one topology, and ANDES' first row after each switching: `_on_grid`; the
 events as Contingency.topologies names them: rotor angles [rad], speeds [pu, 1 =
 synchronous, as the machines' components hold them], the machines' field-voltage inputs [pu,
-machine base] in `machine_inputs`, bus voltages). A unit tripped by an event leaves the stability
+machine base] in `machine_inputs`, bus voltages, and an inverter's power into its bus, ANDES' Pe, Qe,
+as P, Q of its unit [pu, system base]; NaN for what ANDES' result does not give). A unit tripped by an event leaves the stability
 check from its trip on.
 
 ANDES (GPL-3.0-or-later) is optional: `andes_available()` says whether it imports.
@@ -87,9 +88,9 @@ class AndesRunner:
             for model, n in zip((ss.Fault, ss.Toggle), own):
                 for i in range(n):  # the case's own events left out
                     model.u.v[i] = 0
-        from reference_models.grid.andes_case import PFLOW_TOLERANCE
+        from reference_models.grid.andes_case import pflow_tolerance
 
-        ss.PFlow.config.tol = PFLOW_TOLERANCE
+        ss.PFlow.config.tol = pflow_tolerance(ss)
         ss.PFlow.config.max_iter = 50
         if not ss.PFlow.run():
             raise RuntimeError(f"ANDES' power flow of {self.source} does not converge")
@@ -140,20 +141,31 @@ class AndesRunner:
         x, y = np.asarray(ts.x), np.asarray(ts.y)
         if t[0] > 0.0:
             t, x, y = np.r_[0.0, t], np.vstack([start[0], x]), np.vstack([start[1], y])
+        from reference_models.grid.andes_case import CONVERTERS, MACHINES
+
         topologies = contingency.topologies(stop)
         units = self.case.units
         g = len(units)
-        cols = [None] * (3 * g)  # (x or y, column) of delta, omega, vf per unit
+        # (x or y, column) of delta, omega, vf, P, Q per unit (None: not in ANDES' result, NaN)
+        cols = [None] * (5 * g)
         where = {(u.bus, u.generator): k for k, u in enumerate(units)}
-        for name in ("GENROU", "GENCLS"):
+        for name in MACHINES + CONVERTERS:
             model = getattr(ss, name)
             for i in range(model.n):
                 key = (number[model.bus.v[i]], str(model.gen.v[i]))
                 k = where.get(key, where.get((key[0], None)))
-                cols[k], cols[g + k], cols[2 * g + k] = (x, model.delta.a[i]), (x, model.omega.a[i]), (y, model.vf.a[i])
+                if k is None:
+                    continue
+                if name in MACHINES:
+                    cols[k], cols[g + k], cols[2 * g + k] = (x, model.delta.a[i]), (x, model.omega.a[i]), \
+                        (y, model.vf.a[i])
+                elif hasattr(model, "Pe") and hasattr(model, "Qe"):  # an inverter's power into its bus
+                    cols[3 * g + k], cols[4 * g + k] = (y, model.Pe.a[i]), (y, model.Qe.a[i])
         order = [list(number.values()).index(b) for b in self.case.buses]
         v_cols, a_cols = np.asarray(ss.Bus.v.a)[order], np.asarray(ss.Bus.a.a)[order]
-        table = np.hstack([np.stack([src[:, j] for src, j in cols], axis=1), y[:, v_cols], y[:, a_cols]])
+        table = np.hstack([np.stack([src[:, j] if src is not None else np.full(len(t), np.nan)
+                                     for src, j in (c if c is not None else (None, None) for c in cols)], axis=1),
+                           y[:, v_cols], y[:, a_cols]])
         end = float(t[-1])
         t_grid, table_grid = self._on_grid(t, table, sorted({tp.start for tp in topologies[1:]}), stop)
         if lost_early and t_grid[-1] < end - 1e-9:
@@ -161,7 +173,8 @@ class AndesRunner:
         t, table = t_grid, table_grid
         nb = len(self.case.buses)
         delta, omega, Efd = table[:, :g], table[:, g:2 * g], table[:, 2 * g:3 * g]
-        V = table[:, 3 * g:3 * g + nb] * np.exp(1j * table[:, 3 * g + nb:])
+        P, Q = table[:, 3 * g:4 * g], table[:, 4 * g:5 * g]
+        V = table[:, 5 * g:5 * g + nb] * np.exp(1j * table[:, 5 * g + nb:])
         gen_cols = [self.case.network.bus_index(u.bus) for u in units]
         V_gen = V[:, gen_cols]
         theta_bus = np.unwrap(np.angle(V), axis=0)
@@ -169,16 +182,19 @@ class AndesRunner:
         for i in range(len(t)):
             in_service = [k for k in range(len(units)) if k not in
                           [tp for tp in topologies if tp.start <= t[i] + 1e-12][-1].tripped]
-            if np.ptp(delta[i, in_service]) >= math.pi:
+            angles = delta[i, in_service]
+            angles = angles[np.isfinite(angles)]
+            if len(angles) and np.ptp(angles) >= math.pi:
                 lost = float(t[i])
                 break
         nan = np.full_like(delta, np.nan)
         field = {}
         for k, u in enumerate(units):
             name = u.machine.component.ports.input("field_voltage")
-            field.setdefault(name, nan.copy())[:, k] = Efd[:, k]
+            if name is not None:
+                field.setdefault(name, nan.copy())[:, k] = Efd[:, k]
         result = GridResult(time=t, states={"delta": delta, "omega": omega}, rotor_angle=delta, Vs=np.abs(V_gen),
-                            theta_vs=theta_bus[:, gen_cols], P=nan, Q=nan, V_bus=np.abs(V), theta_bus=theta_bus,
+                            theta_vs=theta_bus[:, gen_cols], P=P, Q=Q, V_bus=np.abs(V), theta_bus=theta_bus,
                             stable=lost is None, loss_of_synchronism_s=lost,
                             events=tuple((tp.start, tp.description) for tp in topologies[1:]),
                             gen_buses=self.case.generator_buses, buses=self.case.buses, machine_inputs=field)

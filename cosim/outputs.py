@@ -144,7 +144,9 @@ def errors(result, reference, fault=None, case=None) -> dict:
     states as stored], bus voltages at the machines outside the fault's own steps [pu] (the rows
     with a fault on, times in [start, clear), are left out: fault = (start, clear), a sequence of
     such pairs, or None), field voltages [pu] (with `case`: every unit's, GridResult's
-    field_voltage). ValueError where the runs share no such row."""
+    field_voltage), and the power P, Q [pu, system base] into the bus of every unit without a rotor
+    angle (an inverter, a load) outside the fault's steps. ValueError where the runs share no such
+    row."""
     from reference_models.grid.result import field_voltage, speed_deviation
 
     mine, theirs = common_rows(result, reference)
@@ -168,8 +170,21 @@ def errors(result, reference, fault=None, case=None) -> dict:
         rows &= ~((t >= start - EVENT_TOLERANCE) & (t < clear - EVENT_TOLERANCE))
     out["V"] = float(np.max(np.abs(result.Vs[mine] - reference.Vs[theirs])[rows])) if rows.any() else math.nan
     for name, (a, b) in pairs.items():
-        out[name] = math.nan if a is None or b is None else float(np.nanmax(np.abs(a[mine] - b[theirs])))
-    return {key: out[key] for key in ("angle_deg", "omega", "V", "Efd")}
+        out[name] = _largest(None if a is None or b is None else np.abs(a[mine] - b[theirs]))
+    # the power of the units without a rotor angle (inverters, loads) where both runs give it
+    others = ~np.any(np.isfinite(reference.angles), axis=0) & ~np.any(np.isfinite(result.angles), axis=0)
+    for name in ("P", "Q"):
+        a, b = getattr(result, name)[mine][:, others], getattr(reference, name)[theirs][:, others]
+        out[name] = _largest(np.abs(a - b)[rows]) if rows.any() else math.nan
+    return {key: out[key] for key in ("angle_deg", "omega", "V", "Efd", "P", "Q")}
+
+
+def _largest(values) -> float:
+    """The largest finite entry of `values` (NaN where there is none)."""
+    if values is None:
+        return math.nan
+    finite = np.asarray(values)[np.isfinite(values)]
+    return float(finite.max()) if finite.size else math.nan
 
 
 def plot(path, runs: dict, title: str, case=None) -> None:
@@ -250,14 +265,15 @@ def report(path, title: str, runs: dict, timings: dict, contingency, case=None, 
             continue
         lines += ["", f"Largest differences from the {REFERENCES[reference]} run, at the rows both runs have outside "
                   "the event times (terminal voltages also outside the steps with a fault on):", "",
-                  "| run | rotor angle rel. machine 1 [deg] | speed [rad/s] | terminal voltage [pu] | Efd [pu] |",
-                  "| --- | --- | --- | --- | --- |"]
+                  "| run | rotor angle rel. machine 1 [deg] | speed [rad/s] | terminal voltage [pu] | Efd [pu] | "
+                  "P, Q of inverters and loads [pu] |",
+                  "| --- | --- | --- | --- | --- | --- |"]
         for kind, result in runs.items():
             if kind == reference:
                 continue
             e = errors(result, runs[reference], fault, case)
             lines.append(f"| {LABELS.get(kind, kind)} | {e['angle_deg']:.3f} | {e['omega']:.3g} | {e['V']:.3g} | "
-                         f"{e['Efd']:.3g} |")
+                         f"{e['Efd']:.3g} | {e['P']:.3g}, {e['Q']:.3g} |")
     if notes:
         lines += ["", *notes]
     with atomic_path(path) as tmp:

@@ -424,8 +424,10 @@ def cmd_run(args) -> None:
     print(f"{title}: {verdict}; {_label(main_kind)} in {timings[main_kind]['total_s']:.2f} s")
     for reference in outputs.REFERENCES:
         for kind, e in summary.get(f"difference_from_{reference}", {}).items():
+            power = (f", inverter and load P {e['P']:.2g} pu, Q {e['Q']:.2g} pu"
+                     if e['P'] == e['P'] or e['Q'] == e['Q'] else "")  # NaN where none
             print(f"  {_label(kind)} against the {outputs.REFERENCES[reference]} run: rotor angles "
-                  f"{e['angle_deg']:.3f} deg, terminal voltages {e['V']:.2g} pu")
+                  f"{e['angle_deg']:.3f} deg, terminal voltages {e['V']:.2g} pu{power}")
     print(f"written: {out / 'result.csv'}, {out / 'result.png'}, {out / 'report.md'}")
 
 
