@@ -746,13 +746,22 @@ def _share(model, name: str, i: int) -> tuple:
                  for keys in LOAD_SHARES[name])
 
 
-def _bus_frequency(ss, bus) -> dict:
-    """Tf, Tw of the BusFreq measuring `bus` (ANDES' own, else the defaults of the one it adds)."""
+def _bus_frequency(ss, bus, prefix: str = "") -> dict:
+    """Tf, Tw, fn of the BusFreq measuring `bus` (ANDES' own, else the defaults of the one it adds),
+    under the names `prefix`Tf, ... of the device that takes them."""
     model = ss.BusFreq
     for i in range(model.n):
         if model.bus.v[i] == bus and model.u.v[i] != 0:
-            return {"Tf": float(model.Tf.v[i]), "Tw": float(model.Tw.v[i])}
-    return {"Tf": float(model.Tf.default), "Tw": float(model.Tw.default)}
+            values = (model.Tf.v[i], model.Tw.v[i], model.fn.v[i])
+            break
+    else:
+        values = (model.Tf.default, model.Tw.default, model.fn.default)
+    return {f"{prefix}{k}": float(v) for k, v in zip(("Tf", "Tw", "fn"), values)}
+
+
+# the devices that measure their bus frequency with ANDES' BusFreq as their own states: the prefix of
+# their parameters that take the BusFreq's Tf, Tw, fn
+BUS_FREQUENCY_PARAMETERS = {"FLoad": "", "PVD1": "busf_", "ESD1": "busf_"}
 
 
 def _load_units(ss, number) -> list:
@@ -771,8 +780,6 @@ def _load_units(ss, number) -> list:
                             f"{100 * share[1]:g} % of the reactive power of PQ {pq}: ANDES drops the rest, so its "
                             "simulation starts off its own load flow (make the percentages sum to 100)")
         entry = _entry(model, dname, i, ss)
-        if dname == "FLoad":
-            entry["params"].update(_bus_frequency(ss, ss.PQ.bus.v[j]), fn=float(ss.config.freq))
         out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": float(ss.PQ.Ppf.v[j]),
                     "Q": float(ss.PQ.Qpf.v[j]), "load_device": entry, "fmu": {"kind": "reference"}})
     for dname in LOADS:
@@ -797,8 +804,14 @@ def _control_roles() -> tuple:
 
 
 def _entry(model, name: str, i: int, ss) -> dict:
-    """A device's dynamic-data entry: its component, ANDES idx and parameters."""
-    return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": _params(model, name, i, ss)}
+    """A device's dynamic-data entry: its component, ANDES idx and parameters (with those of the
+    BusFreq at its bus where it measures its bus frequency as ANDES does)."""
+    params = _params(model, name, i, ss)
+    if name in BUS_FREQUENCY_PARAMETERS:
+        bus = model.bus.v[i] if hasattr(model, "bus") and name != "FLoad" else ss.PQ.bus.v[
+            list(ss.PQ.idx.v).index(model.pq.v[i])]
+        params.update(_bus_frequency(ss, bus, BUS_FREQUENCY_PARAMETERS[name]))
+    return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": params}
 
 
 def dynamic_data(ss, name: str) -> dict:
@@ -820,6 +833,15 @@ def dynamic_data(ss, name: str) -> dict:
                 units[idx] = {"bus": number[model.bus.v[i]], "generator": str(model.gen.v[i]),
                               role: _entry(model, dname, i, ss)}
                 owner[None][idx] = idx
+    per_generator = {}
+    for idx, unit in units.items():
+        per_generator.setdefault(unit["generator"], []).append(str(idx))
+    shared = {g: devices for g, devices in per_generator.items() if len(devices) > 1}
+    if shared:
+        g, devices = next(iter(shared.items()))
+        raise CaseError(f"{len(devices)} devices ({_listed(devices, 3)}) share the static generator {g}, each with its "
+                        f"gammap, gammaq share{f' (and so for {len(shared) - 1} more generators)' if len(shared) > 1 else ''}"
+                        ": one bus device per generator is converted")
     for role, names, link, target in _control_roles():
         owner[role] = {}
         for dname in names:
