@@ -128,7 +128,7 @@ def _child_andes(file: str, dyr: str | None, stop: float) -> None:
 
     def why(default: str) -> str:
         errors = [m for level, m in kept if level >= logging.ERROR and m.strip()]
-        return _one_line(errors[-1] if errors else default)
+        return _one_line("; ".join(errors[-2:]) if errors else default)  # ANDES says why, then that it stopped
 
     with redirect_stdout(sys.stderr):  # whatever ANDES prints: away from the report lines
         started = time.perf_counter()
@@ -210,7 +210,10 @@ def _child_run(kind: str, file: str, dyr: str | None, cache: str, stop: float, f
         finally:
             runner.close()
         t = float(result.time[-1])
-        finite = bool(np.all(np.isfinite(result.Vs)) and all(np.all(np.isfinite(v)) for v in result.states.values()))
+        # a state is NaN throughout for the units whose devices do not have it (GENCLS has no e1q): every
+        # value that is finite at the start stays so
+        finite = bool(np.all(np.isfinite(result.Vs)) and all(np.all(np.isfinite(v[:, np.isfinite(v[0])]))
+                                                              for v in map(np.asarray, result.states.values())))
         ok = finite and t >= stop - 1e-9
         error = None if ok else (f"non-finite values (ended at {t:g} s)" if not finite else f"ended at {t:g} s")
         _report(stage=stage, ok=ok, s=time.perf_counter() - started, t_end=t, stable=bool(result.stable),
