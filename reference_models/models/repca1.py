@@ -56,8 +56,9 @@ the monitored line's buses bus1, bus2 and r + j x its series impedance (system b
 Isign = +1 where the converter's bus is the line's bus1, -1 where it is bus2: the series branch
 alone (no charging b, b1, b2, g, no tap ratio or phase shift), its power at bus1 with the sign
 Isign (where Isign = -1, minus the power entering the series branch at bus1, not the power at
-bus2); 0 where the device names no line. The frequency is that of the BusFreq `busf` (else the one
-ANDES finds or adds at the measured bus): theta_m is then the angle at that BusFreq's bus.
+bus2); 0 where the device names no line. The frequency is that of the BusFreq `busf`, else of the
+one ANDES finds or adds at the measured bus; here it is measured from theta_m, so a `busf` at
+another bus than the measured one is not represented (the conversion has to refuse it).
 
 Parameters: all on the system base, unconverted (ANDES' REPCA1 has no Sn: its per-unit conversion
 of Pmax, Pmin is by 1). Rc, Xc are the compensation impedance used (ANDES' Rcs, Xcs): the case's
@@ -69,8 +70,8 @@ defaults for the flags VCFlag, RefFlag, Fflag (mandatory there); ours are 1.
 Start (ANDES' initialisation), given the measured inputs and the references the electrical
 controller demands (Pext, Qext at its start): theta_f = theta_w = theta_m (f = 1), s0_y = Vref =
 VCsel, s1_y = Qlinef = Qbr, s4_y = Plant_pref = Pbr, the PIs, the lead-lag and s6_y at 0,
-Pref0 = Pext, Qref0 = Qext; ValueError where a limit keeps a PI's output off 0 there (0 outside
-[Qmin, Qmax], [Pmin, Pmax]: ANDES starts off its rest then).
+Pref0 = Pext, Qref0 = Qext; ValueError where a limit keeps a PI's input or output off 0 there (0
+outside [emin, emax], [Qmin, Qmax], [femin, femax] or [Pmin, Pmax]: ANDES starts off its rest then).
 """
 from __future__ import annotations
 
