@@ -80,6 +80,17 @@ SIGNALS = {
                             "network frame, system base"),
     "branch_current_imaginary": ("Ibr_im", "pu", "current into the measured branch at its measured end, imaginary "
                                  "part, network frame, system base"),
+    # a wind turbine's controls (WTDTA1, WTARA1, WTPTA1, WTTQA1) around its electrical controller
+    "active_power_order": ("Pord", "pu", "active power order of an inverter's electrical controller, system base: "
+                           "its state, a wind turbine pitch controller's input"),
+    "generator_speed": ("wg", "pu", "generator speed of a wind turbine's drive train (1 = synchronous): its output, "
+                        "the torque controller's input"),
+    "turbine_speed": ("wt", "pu", "turbine (blade) speed of a wind turbine's drive train: its output, the pitch "
+                      "controller's input"),
+    "turbine_speed_reference": ("wref", "pu", "speed reference of a wind turbine's pitch controller: its drive "
+                                "train's speed set point w0"),
+    "pitch_angle": ("theta", "deg", "blade pitch angle: a wind turbine pitch controller's output, its aerodynamics' "
+                    "input"),
 }
 
 TOOL_NAME = "opfmu"

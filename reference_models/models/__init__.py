@@ -43,6 +43,10 @@ from .st2cut import ST2CUT
 from .tg2 import TG2
 from .tgov1 import TGOV1
 from .tgov1n import TGOV1N
+from .wtara1 import WTARA1
+from .wtdta1 import WTDTA1
+from .wtpta1 import WTPTA1
+from .wttqa1 import WTTQA1
 from .zip import ZIP
 
 STANDARD_MODELS = {
@@ -59,4 +63,5 @@ STANDARD_MODELS = {
     "REGCA1": REGCA1, "REECA1": REECA1,
     "PVD1": PVD1, "ESD1": ESD1,
     "REPCA1": REPCA1,
+    "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1, "WTTQA1": WTTQA1,
 }

@@ -26,8 +26,10 @@ Equations (ANDES 2.0 model reference, RenExciter: REECA1), all on the system bas
     Iqv = Kqv db(Vref - s0_y) (dead band [dbd1, dbd2]);  Iqinj = Iqv during a dip; for |Thld| after
         it Iqv (Thld < 0) or Iqfrz (Thld > 0); else 0
     tpfilt dpfilt_y/dt = Pref - pfilt_y clipped to [dPmin, dPmax] (a rate limit on tpfilt dpfilt_y/dt)
-    Tpord ds5_y/dt = pfilt_y - s5_y, frozen, non-windup within [PMIN, PMAX] (Psel = pfilt_y: the
-        speed wg of a drive train is 1, so PFLAG changes nothing)
+    Tpord ds5_y/dt = pfilt_y - s5_y, frozen, non-windup within [PMIN, PMAX] (Psel = pfilt_y: ANDES'
+        Psel = wg pfilt_y for PFLAG = 1 is not modelled; its wg is 1 without a wind turbine, and with a
+        drive train and torque controller 1 + wg - fPe (models/wttqa1.py), 1 at the start)
+    s5_y is the active power order Pord a wind turbine's pitch controller takes (WTPTA1)
     VDL1(s0_y), VDL2(s0_y): piecewise-linear (Vq, Iq), (Vp, Ip) tables; a table in service (both
         columns non-decreasing) caps a limit at min(VDL, Imax), else the limit is 1e8
     Q priority (PQFLAG = 0): Iqmax = VDL1 cap, Ipmax = sqrt(max(Imax^2 - IqHL_y^2, 0))
@@ -380,6 +382,7 @@ REECA1 = Component(
     ports=Ports(inputs=(Link("terminal_voltage", "V"), Link("active_power", "Pe"), Link("reactive_power", "Qe"),
                         Link("active_power_reference", "Pref"), Link("reactive_power_reference", "Qref"),
                         Link("voltage_reference", "Vref"), Link("power_factor_angle_reference", "pfaref")),
-                outputs=(Link("active_current_command", "Ipcmd"), Link("reactive_current_command", "Iqcmd"))),
+                outputs=(Link("active_current_command", "Ipcmd"), Link("reactive_current_command", "Iqcmd"),
+                         Link("active_power_order", "s5_y"))),
     initialisation=Initialisation(("Pref", "Qref", "Vref", "pfaref"), _start),
 )
