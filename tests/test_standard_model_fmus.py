@@ -56,6 +56,10 @@ RUNS = {
     "FLoad": ((0.1, {}), (0.3, {"Vs": 0.6, "theta_vs": 0.2}), (1.0, {})),
     "REPCA1": ((0.1, {}), (0.4, {"Vm": 0.6, "Vref": 1.2}), (0.8, {"Plant_pref": 0.7, "theta_m": 0.2}), (1.2, {})),
     "ZIP": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
+    "WTDTA1": ((0.1, {}), (0.5, {"Pe": 0.2}), (1.0, {})), "WTARA1": ((0.1, {}), (0.5, {"theta": 10.0}), (1.0, {})),
+    # errors of 450 and 300 pu drive both PIs onto thmax within the run, the pitch along its rate limit
+    "WTPTA1": ((0.1, {}), (1.2, {"wt": 451.0, "Pord": 300.5}), (1.8, {"wt": -449.0})),
+    "WTTQA1": ((0.1, {}), (0.6, {"Pe": 0.1}), (1.2, {"wg": 0.5})),  # the characteristic's bend at p1
 }
 
 
