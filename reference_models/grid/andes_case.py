@@ -107,6 +107,7 @@ COMPENSATORS = ("IEEEVC",)  # voltage compensators: an exciter's input voltage
 CONVERTERS = ("REGCA1", "PVD1", "ESD1")  # inverters' converters: a unit's bus device, as a machine
 ELECTRICAL_CONTROLS = ("REECA1",)  # inverters' electrical controllers
 PLANT_CONTROLS = ("REPCA1",)  # inverters' plant controllers
+WIND_CONTROLS = ("WTDTA1", "WTARA1", "WTPTA1", "WTTQA1")  # type-3 wind: drive train, aerodynamics, pitch, torque
 CACHE_FORMAT = 2  # version of what convert writes: a new one keys new cache entries (2: notes, refusals of issue 33)
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
