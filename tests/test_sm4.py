@@ -22,12 +22,13 @@ def test_numpy_and_torch_right_hand_sides_agree_in_float64():
     x, u = random_points()
     expected = rhs(x, u)
     got = rhs(torch.tensor(x), torch.tensor(u)).numpy()
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)  # d omega/dt reaches hundreds
 
 
 def test_numpy_and_torch_derived_outputs_agree_in_float64():
     x, u = random_points()
-    np.testing.assert_allclose(outputs(torch.tensor(x), torch.tensor(u)).numpy(), outputs(x, u), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(outputs(torch.tensor(x), torch.tensor(u)).numpy(), outputs(x, u), rtol=1e-12,
+                               atol=1e-12)
 
 
 def test_torch_right_hand_side_is_differentiable_and_batched():
@@ -51,7 +52,7 @@ def test_the_equations_see_angles_only_through_their_difference_and_speed_throug
     a, c = 30.0, 12.0
     turned_x, turned_u = x + [a, c, 0, 0], u + [0, a, p.D * c, 0]
     expected = rhs(x, u) + [c, 0, 0, 0]  # d delta/dt = omega carries the extra speed
-    np.testing.assert_allclose(rhs(turned_x, turned_u), expected, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(rhs(turned_x, turned_u), expected, rtol=1e-9, atol=1e-9)
     # the stator currents and the power too: only the network-frame current turns with the angle
     same = [0, 1, 4, 5]
     np.testing.assert_allclose(outputs(x + [a, 0, 0, 0], u + [0, a, 0, 0])[:, same], outputs(x, u)[:, same], atol=1e-9)
