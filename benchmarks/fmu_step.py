@@ -8,7 +8,10 @@ Without an FMU argument, builds the surrogate FMU of the shipped operator; both 
 for its machine. Also prints the cost of one operator (kernel) evaluation, the floor a surrogate
 step cannot go below, and the surrogate's DoStep cost with the rest and slow-mode corrections and
 the exact swing step turned off (rest_radius = slow_weight = swing_weight = 0): what they cost.
-Every FMU gets the same inputs (the first input varied around its start value).
+Every FMU gets the same inputs (the first input varied around the surrogate's start value) from the
+same initial state. Any machine whose surrogate FMU opfmu builds (SM4, GENROU: the shipped
+surrogate/default/kundur_gen12.onnx, ...): the references are built for the component, machine and
+operating point of its operator; instances are opened through cosim.fmu.FMU.
 """
 from __future__ import annotations
 
@@ -21,30 +24,29 @@ from pathlib import Path
 
 import numpy as np
 from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
 
-from fmu_export.surrogate_fmu import build_surrogate_fmu
+from cosim.fmu import FMU
+from fmu_export.surrogate_fmu import build_surrogate_fmu, load_operator
 from fmu_export.native_reference_fmu import build_native_reference_fmu
-from fmu_export.python_reference_fmu import build_reference_fmu
-from opfmu.compare import fmu_machine
+from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu
+from opfmu.compare import fmu_component
 from surrogate.operator import DEFAULT_OPERATOR
 
 
 CORRECTIONS_OFF = {"rest_radius": 0.0, "slow_weight": 0.0, "swing_weight": 0.0}
 
 
-def started(directory, md, parameters=None) -> FMU2Slave:
-    """An instance in step mode at t = 0, with `parameters` {name: value} set."""
-    fmu = FMU2Slave(guid=md.guid, unzipDirectory=directory, modelIdentifier=md.coSimulation.modelIdentifier,
-                    instanceName="bench")
-    fmu.instantiate()
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    for name, value in (parameters or {}).items():
-        fmu.setReal([vr[name]], [value])
-    fmu.setupExperiment(startTime=0.0)
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    return fmu
+STARTS: dict = {}  # {variable: start value} every FMU gets (the surrogate's inputs and initial state)
+
+
+def started(directory, md, parameters=None) -> FMU:
+    """An instance (cosim.fmu.FMU; its fmpy FMU2Slave is `.fmu`) in step mode at t = 0, with STARTS
+    (where they differ from its own) and `parameters` {name: value} set."""
+    instance = FMU((directory, md), name="bench", init=False)
+    own = {v.name: v.start for v in md.modelVariables}
+    common = {n: v for n, v in STARTS.items() if n in own and float(own[n] or "nan") != v}
+    instance.initialise({**common, **(parameters or {})})
+    return instance
 
 
 def variables(md) -> tuple[list, list]:
@@ -58,10 +60,11 @@ def variables(md) -> tuple[list, list]:
 
 def fmpy_loop(directory, md, h: float, steps: int) -> float:
     """fmpy's setReal of the inputs (the first one varied around its start), doStep and getReal of the states."""
-    fmu = started(directory, md)
+    instance = started(directory, md)
+    fmu = instance.fmu
     inputs, states = variables(md)
     input_vrs, state_vrs = [v.valueReference for v in inputs], [v.valueReference for v in states]
-    start = [float(v.start) for v in inputs]
+    start = [STARTS.get(v.name, float(v.start)) for v in inputs]
     begin = time.perf_counter()
     t = 0.0
     for k in range(steps):
@@ -70,20 +73,20 @@ def fmpy_loop(directory, md, h: float, steps: int) -> float:
         fmu.getReal(state_vrs)
         t += h
     elapsed = time.perf_counter() - begin
-    fmu.terminate()
-    fmu.freeInstance()
+    instance.close()
     return elapsed / steps * 1e6
 
 
 def ctypes_loop(directory, md, h: float, steps: int, parameters=None) -> float:
     """DoStep alone, called through ctypes on the loaded binary (no fmpy wrappers), under the same
     inputs as fmpy_loop set before each step (also through ctypes; outside the timing)."""
-    fmu = started(directory, md, parameters)
+    instance = started(directory, md, parameters)
+    fmu = instance.fmu
     do_step, set_real = fmu.dll.fmi2DoStep, fmu.dll.fmi2SetReal
     do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
     inputs, _ = variables(md)
     vrs = (ctypes.c_uint * len(inputs))(*[v.valueReference for v in inputs])
-    start_values = [float(v.start) for v in inputs]
+    start_values = [STARTS.get(v.name, float(v.start)) for v in inputs]
     values = [(ctypes.c_double * len(inputs))(start_values[0] + 0.01 * np.sin(k * h), *start_values[1:])
               for k in range(steps)]
     component, elapsed = fmu.component, 0.0
@@ -92,8 +95,7 @@ def ctypes_loop(directory, md, h: float, steps: int, parameters=None) -> float:
         begin = time.perf_counter()
         do_step(component, k * h, h, 1)
         elapsed += time.perf_counter() - begin
-    fmu.terminate()
-    fmu.freeInstance()
+    instance.close()
     return elapsed / steps * 1e6
 
 
@@ -132,11 +134,21 @@ def main() -> None:
         if not args.fmu:
             build_surrogate_fmu(DEFAULT_OPERATOR, path)
         surrogate = extract(path, unzipdir=str(Path(tmp) / "s")), read_model_description(path)
-        machine = fmu_machine(surrogate[0])
+        component, machine = fmu_component(surrogate[0])
+        point = load_operator(Path(surrogate[0]) / "resources" / "model.onnx")[1].get("operating_point")
+        STARTS.update({v.name: float(v.start) for v in surrogate[1].modelVariables if v.type == "Real"
+                       and v.start is not None and (v.causality == "input" or v.name[:-1] in component.state_names
+                                                    and v.name.endswith("0"))})
         references = {}
         for label, build in (("native", build_native_reference_fmu), ("pythonfmu", build_reference_fmu)):
             ref_path = Path(tmp) / f"{label}.fmu"
-            build(ref_path, params=machine)
+            extra = {"operating_point": point} if point and label == "native" else {}
+            try:
+                build(ref_path, model_name=f"{component.name.upper()}Reference", component=component, params=machine,
+                      **extra)
+            except ReferenceBuildError as exc:  # pythonfmu packs only components whose module stands alone
+                print(f"no pythonfmu reference of {component.name}: {exc}")
+                continue
             references[label] = extract(str(ref_path), unzipdir=str(Path(tmp) / label)), read_model_description(str(ref_path))
         print(f"{Path(path).name}: {Path(path).stat().st_size / 1e6:.2f} MB; one operator evaluation "
               f"{kernel_call(*surrogate):.1f} us; medians of 3 runs of {args.steps} steps; us per step")
@@ -149,8 +161,9 @@ def main() -> None:
             n_fmpy, n_step = median(lambda: fmpy_loop(*references["native"], h, args.steps)), \
                 median(lambda: ctypes_loop(*references["native"], h, args.steps))
             few = max(50, args.steps // 20)  # scipy under pythonfmu: 100-1000 times slower
-            p_fmpy, p_step = median(lambda: fmpy_loop(*references["pythonfmu"], h, few)), \
-                median(lambda: ctypes_loop(*references["pythonfmu"], h, few))
+            p_fmpy, p_step = (median(lambda: fmpy_loop(*references["pythonfmu"], h, few)),
+                              median(lambda: ctypes_loop(*references["pythonfmu"], h, few))) \
+                if "pythonfmu" in references else (float("nan"), float("nan"))
             print(f"{h:>7g} | {s_fmpy:>15.1f}{s_step:>8.1f}{s_off:>9.1f} | {n_fmpy:>17.1f}{n_step:>8.2f} | "
                   f"{p_fmpy:>15.0f}{p_step:>8.0f} | {s_step / n_step:>25.1f}x")
 

@@ -18,8 +18,10 @@ fmi2SetRealInputDerivatives; FMI 3.0 co-simulation has no input derivatives, so 
 `rolls_back` (can get and set its FMU state), `directional` (provides directional derivatives).
 Its `ports` (reference_models.ports.Ports) are the <Ports> element of the model description;
 for an FMU opfmu built without one, those of the component its model description names; None
-otherwise. A failed call raises CouplingError (one line, with the FMU's last logged message);
-what the FMU logs is kept in `messages` as (status, text).
+otherwise. A failed call raises CouplingError (one line, with the FMU's last logged message; where
+fmpy could not load or instantiate the FMU, its exception is the CouplingError's __context__);
+what the FMU logs is kept in `messages` as (status, text), and passed to `on_message(status,
+category, text)` where one is given (compare keeps each message with its category).
 """
 from __future__ import annotations
 
@@ -83,14 +85,16 @@ class FMU:
     logging_on: the FMU's debug logging; component: a reference_models Component whose input and
     state names `inputs` and `states` take (default: the model description's inputs in order, and
     the outputs that have an initial-state parameter `<name>0`); start and further keywords: start
-    values set in initialisation mode by variable name."""
+    values set in initialisation mode by variable name; on_message: called with (status, category,
+    text) for every message the FMU logs."""
 
     def __init__(self, source, name: str = "a", init: bool = True, logging_on: bool = False, component=None,
-                 start: dict | None = None, scratch=None, **values):
+                 start: dict | None = None, scratch=None, on_message=None, **values):
         from fmpy import extract, read_model_description
 
         self.name = name
         self.messages = []
+        self._on_message = on_message
         self.fmu = None
         self._log_key = None
         self._initial = None
@@ -212,9 +216,12 @@ class FMU:
 
     def _log(self, status, category, message) -> None:
         """The fmi2_logging sink: keeps (status, text)."""
-        self.messages.append((int(status), message.decode(errors="replace") if message else ""))
+        text = message.decode(errors="replace") if message else ""
+        self.messages.append((int(status), text))
         if len(self.messages) > LOG_KEPT:
             del self.messages[:-LOG_KEPT]
+        if self._on_message is not None:
+            self._on_message(int(status), category.decode(errors="replace") if category else "", text)
 
     def _log3(self, env, status, category, message) -> None:
         """fmi3LogMessageCallback (no instance argument): as _log."""

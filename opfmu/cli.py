@@ -200,9 +200,12 @@ def cmd_build_fmu(args) -> None:
     if not onnx_path.is_file():
         raise UserError(f"no operator file at {onnx_path}")
     try:
+        meta = load_operator(onnx_path)[1]
+        args.name = args.name or _model_name(meta["component"], "Surrogate")  # SM4Surrogate, GENROUSurrogate, ...
+        args.output = args.output or f"{args.name}.fmu"
         check_model_name(args.name)
         check_fmi_version(args.fmi_version)
-        default_state(load_operator(onnx_path)[1], onnx_path)
+        default_state(meta, onnx_path)
     except BuildError as exc:
         raise UserError(str(exc)) from None
     output_file(args.output)
@@ -223,14 +226,24 @@ def cmd_build_reference_fmu(args) -> None:
     from fmu_export.native_reference_fmu import build_native_reference_fmu
     from fmu_export.python_reference_fmu import ReferenceBuildError, build_reference_fmu
     from fmu_export.surrogate_fmu import check_model_name
-    from opfmu.compare import operator_machine
+    from opfmu.compare import CompareError, operator_component
+    from reference_models.components import component as named_component
 
     if args.python and (args.fmi_version != 2 or args.platforms is not None):
         raise UserError("--python builds an FMI 2.0 FMU for the Python it runs in; --fmi-version 3 and --platforms "
                         "are for the native FMU")
+    if args.operator and args.component is not None:
+        raise UserError("--operator gives the component (the one it was trained for); drop --component")
     if args.operator and not Path(args.operator).is_file():
         raise UserError(f"no operator file at {args.operator}")
     try:
+        if args.operator:
+            component, params = operator_component(args.operator, machine=False)
+        else:
+            component = named_component(args.component or "sm4")
+            params = _machine(args.machine, component.name)
+        args.name = args.name or _model_name(component, "Reference")  # SM4Reference, GENROUReference, ...
+        args.output = args.output or f"{args.name}.fmu"
         if args.python:
             if not args.name.isidentifier():
                 raise ValueError(f"model name {args.name[:80]!r} must be a Python identifier "
@@ -238,17 +251,16 @@ def cmd_build_reference_fmu(args) -> None:
         else:
             check_model_name(args.name)
             check_fmi_version(args.fmi_version)
-        params = operator_machine(args.operator) if args.operator else _machine(args.machine)
         point = _operating_point(args.operator) if args.operator and not args.python else None
-    except (ValueError, BuildError) as exc:
+    except (ValueError, BuildError, CompareError) as exc:
         raise UserError(str(exc)) from None
     output_file(args.output)
     platforms, notes = (None, []) if args.python else _platforms(args.platforms)
     options = {} if args.python else {"platforms": platforms, "fmi_version": args.fmi_version}
     build = build_reference_fmu if args.python else build_native_reference_fmu
     try:
-        info = build(args.output, model_name=args.name, params=params, **({"operating_point": point} if point else {}),
-                     **options)
+        info = build(args.output, model_name=args.name, component=component, params=params,
+                     **({"operating_point": point} if point else {}), **options)
     except (ValueError, ReferenceBuildError) as exc:
         raise UserError(str(exc)) from None
     _print_notes(notes)
@@ -257,6 +269,12 @@ def cmd_build_reference_fmu(args) -> None:
           f"guid {info['guid']}); fmpy validates it")
     if not args.python:
         print(_binaries_report(info))
+
+
+def _model_name(component, kind: str) -> str:
+    """The default model name of a component's FMU: its name in capitals and the kind (SM4Surrogate,
+    GENROUReference)."""
+    return f"{component.name.upper()}{kind}"
 
 
 def _platforms(spec):
@@ -322,8 +340,8 @@ def cmd_compare(args) -> None:
 
     from fmpy import extract
 
-    from opfmu.compare import (CompareError, compare, csv_inputs, fmu_machine, format_table, plot_comparison,
-                               same_machine, scenario_inputs, summary)
+    from opfmu.compare import (COMPONENT, CompareError, compare, csv_inputs, fmu_component, format_table,
+                               input_starts, plot_comparison, same_machine, scenario_inputs, summary)
     from reference_models.files import write_json
 
     for path in (args.surrogate, args.reference):
@@ -348,13 +366,18 @@ def cmd_compare(args) -> None:
         with tempfile.TemporaryDirectory(prefix="opfmu_compare_") as tmp:
             surrogate_dir = _extract(extract, args.surrogate, f"{tmp}/surrogate")
             reference_dir = _extract(extract, args.reference, f"{tmp}/reference")
-            machine = fmu_machine(surrogate_dir)
-            same_machine(surrogate_dir, reference_dir)
+            component, machine = fmu_component(surrogate_dir)
+            same_machine(surrogate_dir, reference_dir, component)
+            # SM4 as it always was (its start values); another machine at the surrogate FMU's input starts
+            # (its operator's operating point)
+            starts = None if component is COMPONENT else input_starts(surrogate_dir, component)
             if args.scenario:
-                inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step, machine)
+                operating = None if starts is None else (starts["power"], starts["field"])
+                inputs = scenario_inputs(args.scenario, args.seed, args.stop_time or 10.0, args.step, machine,
+                                         operating, component)
                 stop_time = inputs.times[-1]
             else:
-                inputs = csv_inputs(args.inputs, machine)
+                inputs = csv_inputs(args.inputs, machine, component, None if starts is None else starts["inputs"])
                 stop_time = args.stop_time or float(inputs.times[-1])
                 _communication_points(stop_time, args.step, "--stop-time" if args.stop_time else f"{args.inputs}: time")
             result = compare(surrogate_dir, reference_dir, inputs, stop_time, args.step, parameters)
@@ -478,40 +501,49 @@ def build_parser() -> argparse.ArgumentParser:
     ex.set_defaults(func=cmd_export)
 
     fmu = sub.add_parser("build-fmu", help="build the native FMI 2.0 or 3.0 co-simulation FMU of an operator",
-                         description="Generate C from the ONNX graph and the SM4 equations, compile it, check it "
-                                     "against onnxruntime and write the FMU (no Python needed to run it).")
+                         description="Generate C from the ONNX graph and the equations of the component the "
+                                     "operator names (SM4, GENROU, ...), compile it, check it against onnxruntime "
+                                     "and write the FMU (no Python needed to run it).")
     fmu.add_argument("model", nargs="?", default=None, help="operator .onnx (default: the shipped operator)")
-    fmu.add_argument("-o", "--output", default="SM4Surrogate.fmu", help="FMU file (default SM4Surrogate.fmu)")
-    fmu.add_argument("--name", default="SM4Surrogate", help="model name and identifier (default SM4Surrogate)")
+    fmu.add_argument("-o", "--output", default=None, help="FMU file (default NAME.fmu)")
+    fmu.add_argument("--name", default=None,
+                     help="model name and identifier (default: the component and Surrogate, SM4Surrogate)")
     _build_options(fmu)
     fmu.set_defaults(func=cmd_build_fmu)
 
     ref = sub.add_parser("build-reference-fmu", help="build the reference FMU (native Dormand-Prince 5(4))",
-                         description="An FMI 2.0 (or 3.0) co-simulation FMU of SM4 that integrates the ODE over each step "
+                         description="An FMI 2.0 (or 3.0) co-simulation FMU of a component (SM4 unless --component "
+                                     "or --operator names another) that integrates the ODE over each step "
                                      "with an adaptive Dormand-Prince 5(4) (RK45) compiled from the component's "
                                      "equations (--python: scipy's RK45 under pythonfmu instead); same variables as "
                                      "the surrogate FMU. The machine: --machine FILE, or that of an operator file "
-                                     "(--operator), or paper Table I.")
+                                     "(--operator), or the component's defaults (SM4: paper Table I).")
     ref.add_argument("--python", action="store_true",
                      help="the pythonfmu FMU (scipy RK45; needs Python, numpy and scipy where it runs)")
     machine = ref.add_mutually_exclusive_group()
     machine.add_argument("--machine", default=None, metavar="FILE", help="JSON file of machine parameters")
     machine.add_argument("--operator", default=None, metavar="ONNX",
-                         help="take the machine an exported operator was trained for")
-    ref.add_argument("-o", "--output", default="SM4Reference.fmu", help="FMU file (default SM4Reference.fmu)")
-    ref.add_argument("--name", default="SM4Reference", help="model name and identifier (default SM4Reference)")
+                         help="take the component and machine an exported operator was trained for")
+    ref.add_argument("--component", default=None, metavar="NAME",
+                     help="the component (a registered name: sm4, genrou, ...; default sm4)")
+    ref.add_argument("-o", "--output", default=None, help="FMU file (default NAME.fmu)")
+    ref.add_argument("--name", default=None,
+                     help="model name and identifier (default: the component and Reference, SM4Reference)")
     _build_options(ref)
     ref.set_defaults(func=cmd_build_reference_fmu)
 
     cmp = sub.add_parser("compare", help="run the surrogate and the reference FMU on the same inputs",
                          description="fmpy simulates both FMUs on one input signal; prints MAE, RMSE and MaxAE "
-                                     "per output, wall times and the speedup, and writes plots.")
+                                     "per output, wall times and the speedup, and writes plots. The machine (any "
+                                     "with a bus port and mechanical power and field voltage links: SM4, GENROU, "
+                                     "...) is the one the surrogate FMU's operator names.")
     cmp.add_argument("--surrogate", required=True, help="surrogate FMU")
     cmp.add_argument("--reference", required=True, help="reference FMU")
     source = cmp.add_mutually_exclusive_group(required=True)
     source.add_argument("--scenario", choices=_ScenarioNames(), help="built-in scenario")
     source.add_argument("--inputs", help="CSV with columns time, Vs, theta_vs and optionally Pm, Efd (absent: held "
-                                         "at their start values)")
+                                         "at their start values); another machine's: its bus voltage inputs and "
+                                         "optionally its others")
     cmp.add_argument("--seed", type=int, default=0, help="scenario seed (default 0)")
     cmp.add_argument("--stop-time", type=float, default=None,
                      help="seconds (default: 10 for a scenario, the last CSV time for --inputs)")

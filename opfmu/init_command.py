@@ -16,6 +16,12 @@ The values are keyed by the FMU variable names, so they go straight into an impo
 One operating point from flags (`--V --theta-deg|--theta --P --Q`), or every generator of a
 load-flow file (`--load-flow FILE`, format in `load_flow_points`). The equations are in
 reference_models/initialisation.py and docs/initialisation.md.
+
+`--component NAME` takes another machine (any registered component with a bus port: GENROU,
+GENCLS, ...): its start comes from its own initialisation (Component.start with the load-flow point
+V0, theta0, P0, Q0, as a grid case starts it), keyed the same way (its `<state>0` parameters and its
+inputs); the exciter (IEEE1) is started from the field voltage its field_voltage link takes and the
+terminal voltage, and is refused for a machine without that link. SM4's values are those above.
 """
 from __future__ import annotations
 
@@ -46,11 +52,40 @@ def start_parameter_names(component, params, x0) -> list:
     return [v.name for v in fmu_variables(component, params, x0) if v.causality == "parameter"]
 
 
+def machine_component(name):
+    """The registered component `name` if it can be started from a load flow (a bus port);
+    InitError naming what init takes otherwise."""
+    from reference_models.components import component
+
+    try:
+        found = component(name)
+    except ValueError as exc:
+        raise InitError(str(exc)) from None
+    if found.ports.bus is None:
+        raise InitError(f"the {found.name} component has no bus port: init takes a machine on a bus (sm4, genrou, ...)")
+    return found
+
+
+def component_of(machine):
+    """The registered component whose parameters `machine` is (an SM4Params: SM4)."""
+    from reference_models.components import COMPONENTS
+
+    if isinstance(machine, MACHINE.params_type):
+        return MACHINE
+    found = [c for c in COMPONENTS.values() if isinstance(machine, c.params_type) and c.ports.bus is not None]
+    if not found:
+        raise TypeError(f"no machine on a bus has parameters of type {type(machine).__name__}")
+    return found[0]
+
+
 def start_values(V: float, theta: float, P: float, Q: float, machine, exciter=None) -> dict:
     """{"machine": {FMU variable: value}, "exciter": {...} (absent when exciter is None),
     "operating_point": {...}} for the generator at bus voltage V [pu] at angle theta [rad] that
-    injects P + jQ [pu]; machine, exciter: the parameters of MACHINE, EXCITER (exciter None: none).
-    ValueError (one line) where there is no such start."""
+    injects P + jQ [pu]; machine, exciter: the parameters of MACHINE (or of another machine on a bus:
+    generic_start_values), EXCITER (exciter None: none). ValueError (one line) where there is no
+    such start."""
+    if not isinstance(machine, MACHINE.params_type):
+        return generic_start_values(V, theta, P, Q, machine, exciter)
     ms = machine_start(V, theta, P, Q, machine)
     out = {"machine": {**dict(zip(start_parameter_names(MACHINE, machine, ms.x0), map(float, ms.x0))),
                        **_machine_inputs(V, theta, ms.Pm, ms.Efd)}}
@@ -64,6 +99,73 @@ def start_values(V: float, theta: float, P: float, Q: float, machine, exciter=No
                               "I_re": ms.I_re, "I_im": ms.I_im, "delta_deg": math.degrees(ms.x0[0]),
                               "stable_at_constant_field": _on_stable_branch(ms, V, theta, machine)}
     return out
+
+
+def generic_start_values(V: float, theta: float, P: float, Q: float, machine, exciter=None) -> dict:
+    """start_values of any machine on a bus (its component found by its parameters' type): its start
+    from its own initialisation (Component.start with V0, theta0, P0, Q0 and the bus voltage), the
+    exciter's from the field voltage its field_voltage link takes and the terminal voltage behind its
+    external impedance (Re + j Xep where it has them). operating_point: V, theta, theta_deg, P, Q, Vt,
+    I_re, I_im, delta_deg (where it gives a rotor angle) and stable_at_constant_field."""
+    import cmath
+
+    import numpy as np
+
+    component = component_of(machine)
+    numbers = {"V": V, "theta": theta, "P": P, "Q": Q}
+    bad = [k for k, v in numbers.items() if not (isinstance(v, Real) and math.isfinite(float(v)))]
+    if bad:
+        raise ValueError(f"{', '.join(bad)} must be finite numbers")
+    bus = component.ports.bus
+    given = {bus.voltage[0]: float(V), bus.voltage[1]: float(theta), "V0": float(V), "theta0": float(theta),
+             "P0": float(P), "Q0": float(Q)}
+    try:
+        x0, inputs = component.start(given, machine)
+    except ValueError as exc:
+        raise ValueError(f"{component.name.upper()} has no start at V={V} pu, theta={theta} rad, P={P} pu, Q={Q} pu: "
+                         f"{' '.join(str(exc).split())[:160]}") from None
+    u = np.array([inputs[n] for n in component.input_names])
+    if not (np.all(np.isfinite(x0)) and np.all(np.isfinite(u))):
+        raise ValueError(f"no finite start of the {component.name} machine at V={V} pu, theta={theta} rad, "
+                         f"P={P} pu, Q={Q} pu")
+    y = dict(zip(component.output_names, component.output_values(x0, u, machine)))
+    current = complex(y[bus.current[0]], y[bus.current[1]])
+    Vt = abs(cmath.rect(V, theta) + complex(float(getattr(machine, "Re", 0.0)), float(getattr(machine, "Xep", 0.0)))
+             * current)
+    names = start_parameter_names(component, machine, x0)
+    out = {"machine": {**dict(zip(names, map(float, x0))), **{n: float(inputs[n]) for n in component.input_names}}}
+    field = component.ports.input("field_voltage")
+    if exciter is not None:
+        if field is None:
+            raise ValueError(f"the {component.name} machine takes no field voltage (no field_voltage link): "
+                             "no exciter; use --no-exciter")
+        es = exciter_start(float(inputs[field]), Vt, exciter)
+        links = {EXCITER.ports.input("terminal_voltage"): Vt, EXCITER.ports.input("voltage_reference"): es.Vref}
+        out["exciter"] = {**dict(zip(start_parameter_names(EXCITER, exciter, es.x0), map(float, es.x0))),
+                          **{name: links[name] for name in EXCITER.input_names}}
+    op = {"V": float(V), "theta": float(theta), "theta_deg": math.degrees(theta), "P": float(P), "Q": float(Q),
+          "Vt": float(Vt), "I_re": current.real, "I_im": current.imag}
+    rotor = _rotor_state(component)
+    if rotor is not None:
+        op["delta_deg"] = math.degrees(x0[rotor])
+    try:
+        rest = component.steady_state(u, machine)
+        stable = bool(np.allclose(rest, x0, rtol=1e-6, atol=1e-6)) if rotor is None else \
+            bool(abs(math.remainder(rest[rotor] - x0[rotor], 2 * math.pi)) < 1e-6)
+    except ValueError:
+        stable = False
+    op["stable_at_constant_field"] = stable
+    out["operating_point"] = op
+    return out
+
+
+def _rotor_state(component):
+    """The index of the state giving the rotor angle (its rotor_angle link, else its drift's first
+    angle state), or None."""
+    name = component.ports.output("rotor_angle")
+    if name in component.state_names:
+        return component.state_names.index(name)
+    return component.drift.angle_states[0] if component.drift is not None else None
 
 
 def _machine_inputs(V: float, theta: float, Pm: float, Efd: float) -> dict:
@@ -144,7 +246,7 @@ def _point_number(entry: dict, key: str, where: str) -> float:
     raise InitError(f"{where}: {key} must be a finite number, got {_label(json.dumps(value))[:40]}")
 
 
-def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
+def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER, component=MACHINE) -> list:
     """The generators of a load-flow file: [(name, V, theta [rad], P, Q, machine, exciter)].
 
     The file is a JSON object {"generators": [entry, ...]}, a list of entries or one entry. An entry
@@ -152,7 +254,8 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
     name or bus (a label), machine and exciter: a parameter file name (relative to the load-flow
     file), {"file": NAME} or {"params": {...}} (with an optional "component": "sm4" / "ieee1", as in
     reference_models/grid/data/wscc9.json); exciter null: no exciter. Without them, `machine` and
-    `exciter` (parameters of MACHINE / EXCITER, or None) apply. InitError (one line) for anything else."""
+    `exciter` (parameters of MACHINE / EXCITER, or None) apply; component: the machine's component
+    (default MACHINE, SM4), whose parameters the entries give. InitError (one line) for anything else."""
     path = Path(path)
     data = _read_json(path, "load-flow file", MAX_LOAD_FLOW_BYTES)
     if isinstance(data, dict) and "generators" in data:
@@ -167,7 +270,7 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
         raise InitError(f"{path}: needs a generator (an object) or a non-empty list of them")
     if len(entries) > MAX_GENERATORS:
         raise InitError(f"{path}: more than {MAX_GENERATORS} generators")
-    machine = MACHINE.params() if machine is None else machine
+    machine = component.params() if machine is None else machine
     points = []
     for k, entry in enumerate(entries):
         where = f"{path}: generator {k + 1}"
@@ -187,7 +290,8 @@ def load_flow_points(path, machine=None, exciter=DEFAULT_EXCITER) -> list:
         V, P, Q = (_point_number(entry, key, where) for key in ("V", "P", "Q"))
         theta = (_point_number(entry, "theta", where) if "theta" in entry
                  else math.radians(_point_number(entry, "theta_deg", where)))
-        m = _parameters(entry["machine"], MACHINE, path.parent, f"{where}: machine") if "machine" in entry else machine
+        m = _parameters(entry["machine"], component, path.parent, f"{where}: machine") if "machine" in entry \
+            else machine
         if "exciter" not in entry:
             e = exciter
         elif entry["exciter"] is None:
@@ -212,9 +316,12 @@ def add_init_parser(sub) -> None:
                     f"in equilibrium at a load-flow point (Sauer-Pai), keyed by the FMU variable names: the machine "
                     f"FMU's {names(MACHINE)}; the exciter FMU's {names(EXCITER)}. P + jQ is the power the "
                     "generator injects into its bus.")
+    init.add_argument("--component", default=None, metavar="NAME",
+                      help=f"the machine's component: any registered one with a bus port (default {MACHINE.name}; "
+                           "e.g. genrou), started by its own initialisation")
     init.add_argument("--machine", default=None, metavar="FILE",
-                      help=f"JSON file of {MACHINE.name} parameters (default: paper Table I; with --load-flow: for "
-                           "generators that name none)")
+                      help=f"JSON file of the machine's parameters (default: the component's; {MACHINE.name}: paper "
+                           "Table I; with --load-flow: for generators that name none)")
     exciter = init.add_mutually_exclusive_group()
     exciter.add_argument("--exciter", default=None, metavar="FILE",
                          help=f"JSON file of {EXCITER.name} parameters (default: the WSCC exciter)")
@@ -239,14 +346,15 @@ def run_init(args) -> None:
     point = {"--V": args.V, "--P": args.P, "--Q": args.Q,
              "--theta-deg/--theta": args.theta if args.theta is not None else args.theta_deg}
     try:
-        machine = MACHINE.params() if args.machine is None else MACHINE.load_params(args.machine)
+        component = MACHINE if args.component is None else machine_component(args.component)
+        machine = component.params() if args.machine is None else component.load_params(args.machine)
         exciter = None if args.no_exciter else DEFAULT_EXCITER if args.exciter is None \
             else EXCITER.load_params(args.exciter)
         if args.load_flow is not None:
             given = [flag for flag, value in point.items() if value is not None]
             if given:
                 raise UserError(f"init: --load-flow gives the operating points; drop {', '.join(given)}")
-            points = load_flow_points(args.load_flow, machine, exciter)
+            points = load_flow_points(args.load_flow, machine, exciter, component)
         else:
             missing = [flag for flag, value in point.items() if value is None]
             if missing:
@@ -267,28 +375,28 @@ def run_init(args) -> None:
         else:
             print(json.dumps({"generators": [{"name": n, **r} for n, r in results]}, indent=2))
         return
-    print("\n\n".join(format_table(r, n) for n, r in results))
+    print("\n\n".join(format_table(r, n, component) for n, r in results))
 
 
-def format_table(result: dict, name: str | None = None) -> str:
-    """The start values of one generator as a readable table."""
+def format_table(result: dict, name: str | None = None, component=MACHINE) -> str:
+    """The start values of one generator (its machine of `component`) as a readable table."""
     op = result["operating_point"]
     title = f"{name}: " if name else ""
     lines = [(f"{title}bus V = {op['V']:.6g} pu at {op['theta_deg']:.6g} deg, P = {op['P']:.6g} pu, "
               f"Q = {op['Q']:.6g} pu (injected)")]
-    for key, component in (("machine", MACHINE), ("exciter", EXCITER)):
+    for key, model in (("machine", component), ("exciter", EXCITER)):
         if key not in result:
             continue
-        units = {f"{q.name}0": (q.unit, "initial state") for q in component.states}
-        units.update({q.name: (q.unit, "input") for q in component.inputs})
-        lines.append(f"  {key} FMU ({component.name})")
+        units = {f"{q.name}0": (q.unit, "initial state") for q in model.states}
+        units.update({q.name: (q.unit, "input") for q in model.inputs})
+        lines.append(f"  {key} FMU ({model.name})")
         for variable, value in result[key].items():
             unit, kind = units.get(variable, ("", ""))
             extra = f" ({math.degrees(value):.6g} deg)" if unit == "rad" else ""
             lines.append(f"    {variable:<10}{value:>16.10g} {unit:<6}{kind}{extra}")
-    lines.append(f"  terminal voltage Vt = {op['Vt']:.10g} pu; stator currents Id = {op['Id']:.10g}, "
-                 f"Iq = {op['Iq']:.10g} pu; bus current {op['I_re']:.10g} {'-' if op['I_im'] < 0 else '+'} "
-                 f"{abs(op['I_im']):.10g}j pu")
+    stator = f"stator currents Id = {op['Id']:.10g}, Iq = {op['Iq']:.10g} pu; " if "Id" in op else ""
+    lines.append(f"  terminal voltage Vt = {op['Vt']:.10g} pu; {stator}bus current {op['I_re']:.10g} "
+                 f"{'-' if op['I_im'] < 0 else '+'} {abs(op['I_im']):.10g}j pu")
     if not op["stable_at_constant_field"]:
         lines.append("  note: past the peak of the machine's steady-state power-angle curve: with Efd held (no "
                      "exciter) this equilibrium is unstable")

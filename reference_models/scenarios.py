@@ -40,7 +40,8 @@ import numpy as np
 
 from .drift import frame_of
 from .families import COMPONENT, CONTROL_LEVELS, EFD, EFD_START, PM, PM_START, THETA, VS, family, held_levels, machine
-from .signals import Signal, Table
+from .ports import machine_inputs
+from .signals import Piecewise, Signal, Table
 from .simulate import simulate
 
 DEFAULT_PARAMS = COMPONENT.params()
@@ -68,6 +69,7 @@ class Scenario:
     signal: Signal
     params: object = DEFAULT_PARAMS
     speed: float = 0.0
+    component: object = COMPONENT
 
     def inputs(self, times: np.ndarray) -> np.ndarray:
         """The machine's inputs [T, n_u] at times [T] (s), in its input order (SM4: Vs [pu],
@@ -77,11 +79,13 @@ class Scenario:
     def initial_state(self) -> np.ndarray:
         """The machine at rest [n_x] under the first input value, in the frame turning at `speed`:
         the state at rest there with its torque input less the damping torque (SM4: Pm - D speed),
-        and its speed state raised by `speed`."""
-        frame = frame_of(COMPONENT.drift, self.params)
-        u0 = self.inputs(np.array([0.0]))[0] - self.speed * frame.input_torques(COMPONENT.n_inputs)
-        x0 = COMPONENT.rest_state(u0, self.params)
-        x0[frame.speed_state] += self.speed
+        and its speed state raised by `speed` (in the speed's units: divided by the frame's speed scale)."""
+        component = self.component
+        frame = frame_of(component.drift, self.params)
+        c = self.speed / frame.speed_scale  # SM4: rad/s, scale 1
+        u0 = self.inputs(np.array([0.0]))[0] - c * frame.input_torques(component.n_inputs)
+        x0 = component.rest_state(u0, self.params)
+        x0[frame.speed_state] += c
         return x0
 
 
@@ -96,30 +100,54 @@ def rest_state(Vs: float, theta_vs: float, p=DEFAULT_PARAMS, Pm: float = PM_STAR
 
 
 def scenario(name: str, seed: int = 0, stop_time: float = 10.0, params=DEFAULT_PARAMS,
-             operating: tuple | None = None) -> Scenario:
+             operating: tuple | None = None, component=COMPONENT) -> Scenario:
     """The built-in scenario `name` (one of SCENARIOS) drawn with `seed` over stop_time seconds for
     the machine `params` at the operating point `operating` = (Pm, Efd) [pu] (default: their start
-    values), which the scenarios hold or move from. ValueError for an unknown name, a stop time that is not positive, or a
-    machine that no draw keeps in synchronism."""
+    values), which the scenarios hold or move from. component: the machine on a bus it drives (any
+    component with a bus port and the mechanical_power and field_voltage links; default SM4, whose
+    parameters `params` must then be): the same draws, its inputs found by its ports, any other input
+    held at its start value. ValueError for an unknown name, a stop time that is not positive, a
+    component that is no machine on a bus, or a machine that no draw keeps in synchronism."""
     if name not in SCENARIOS:
         raise ValueError(f"unknown scenario {name!r} (built in: {', '.join(SCENARIOS)})")
     if not stop_time > 0:
         raise ValueError(f"stop time must be positive, got {stop_time}")
+    if component is not COMPONENT:
+        machine_inputs(component)  # PortError (a ValueError) where it is no machine on a bus
+        if component.drift is None:
+            raise ValueError(f"the {component.name} component declares no rotor angle and speed (drift): the "
+                             "scenarios judge synchronism by them")
+        if operating is None:
+            wiring, start = machine_inputs(component), {q.name: q.start for q in component.inputs}
+            operating = (start[wiring.power], start[wiring.field])
     stop_time = float(stop_time)
     pm, efd = (PM_START, EFD_START) if operating is None else (float(operating[0]), float(operating[1]))
     if name == "mix":
-        return Scenario(name, seed, stop_time, held_levels(np.random.default_rng(seed), stop_time, Pm=pm, Efd=efd),
-                        params)
+        return Scenario(name, seed, stop_time, _for(held_levels(np.random.default_rng(seed), stop_time, Pm=pm,
+                                                                Efd=efd), component), params, component=component)
     if name == "drift":
-        return _drift(seed, stop_time, params, pm, efd)
+        return _drift(seed, stop_time, params, pm, efd, component)
     rng = np.random.default_rng(seed)
     for _ in range(MAX_DRAWS):  # a run must end where the machine has an equilibrium (see SETTLED_VS), in step
         signal = _governor(rng, stop_time, pm, efd) if name == "governor" else _bus(name, rng, stop_time, pm, efd)
-        drawn = Scenario(name, seed, stop_time, signal, params)
+        drawn = Scenario(name, seed, stop_time, _for(signal, component), params, component=component)
         if ends_settled(drawn) and keeps_synchronism(drawn):
             return drawn
     raise ValueError(f"no draw of scenario {name!r} (seed {seed}) keeps this machine in synchronism "
                      f"over {stop_time:g} s")
+
+
+def _for(signal: Signal, component) -> Signal:
+    """The families' signal (channels by SM4's input names) as the inputs of `component`, a machine
+    on a bus: each channel to the input its ports give that role, any other input held at its start."""
+    if component is COMPONENT:
+        return signal
+    ours, theirs = machine_inputs(COMPONENT), machine_inputs(component)
+    role = {ours.magnitude: theirs.magnitude, ours.angle: theirs.angle, ours.power: theirs.power,
+            ours.field: theirs.field}
+    channels = {role[n]: c for n, c in signal.channels.items() if n in role}
+    return Signal({q.name: channels.get(q.name) or Piecewise((float(q.start),), ()) for q in component.inputs},
+                  signal.hold, signal.x0)
 
 
 def _bus(name: str, rng: np.random.Generator, stop_time: float, pm: float, efd: float) -> Signal:
@@ -153,8 +181,8 @@ def _governor(rng: np.random.Generator, stop_time: float, pm: float, efd: float)
     return machine(bus.channels[VS], bus.channels[THETA], Table(tuple(times), tuple(values)), efd)
 
 
-def _drift(seed: int, stop_time: float, params, pm: float, efd: float) -> Scenario:
-    """The mix of `seed` in a network turning at c (see the module docstring)."""
+def _drift(seed: int, stop_time: float, params, pm: float, efd: float, component=COMPONENT) -> Scenario:
+    """The mix of `seed` in a network turning at c [rad/s] (see the module docstring)."""
     rng = np.random.default_rng(seed)
     mix = held_levels(rng, stop_time)
     c = float(rng.uniform(*DRIFT_SPEEDS)) * (1.0 if rng.uniform() < 0.5 else -1.0)
@@ -166,26 +194,30 @@ def _drift(seed: int, stop_time: float, params, pm: float, efd: float) -> Scenar
             values += [theta.values[k] + c * jump, theta.values[k + 1] + c * jump]
     times.append(stop_time)
     values.append(theta(stop_time) + c * stop_time)
-    torque = c * _torque(params)  # the damping torque of the extra speed, which the turbine supplies
+    torque = c * _torque(params, component)  # the damping torque of the extra speed, which the turbine supplies
     signal = machine(mix.channels[VS], Table(tuple(times), tuple(values)), pm + torque, efd)
-    return Scenario("drift", seed, stop_time, signal, params, speed=c)
+    return Scenario("drift", seed, stop_time, _for(signal, component), params, speed=c, component=component)
 
 
-def _torque(params) -> float:
+def _torque(params, component=COMPONENT) -> float:
     """The damping torque coefficient [pu / (rad/s)] the mechanical power input carries in a frame
-    turning at 1 rad/s (SM4: D), from the machine's drift."""
-    return float(frame_of(COMPONENT.drift, params).input_torques(COMPONENT.n_inputs)[_INDEX[PM]])
+    turning at 1 rad/s (SM4: D; a machine whose speed is in other units: per its speed scale), from
+    the machine's drift."""
+    frame = frame_of(component.drift, params)
+    power = component.input_names.index(machine_inputs(component).power)
+    return float(frame.input_torques(component.n_inputs)[power]) / frame.speed_scale
 
 
 def ends_settled(s: Scenario) -> bool:
     """True if the run ends at a bus voltage of at least SETTLED_VS where the machine has an
     equilibrium at the final inputs (Pm less the damping torque of the scenario's speed)."""
+    names, wiring = s.component.input_names, machine_inputs(s.component)
     u = s.inputs(np.array([s.stop_time]))[0]
-    if not u[_INDEX[VS]] >= SETTLED_VS:
+    if not u[names.index(wiring.magnitude)] >= SETTLED_VS:
         return False
-    u[_INDEX[PM]] = u[_INDEX[PM]] - _torque(s.params) * s.speed
+    u[names.index(wiring.power)] = u[names.index(wiring.power)] - _torque(s.params, s.component) * s.speed
     try:
-        COMPONENT.steady_state(u, s.params)
+        s.component.steady_state(u, s.params)
     except ValueError:
         return False
     return True
@@ -195,6 +227,8 @@ def keeps_synchronism(s: Scenario, every: float = 0.05) -> bool:
     """True if the rotor angle (the machine's drift's first angle state) stays within pi of the bus
     angle over the whole run (RK45, checked every `every` seconds): the machine slips no pole."""
     t = np.linspace(0.0, s.stop_time, int(round(s.stop_time / every)) + 1)
-    x = simulate(s.initial_state(), s.signal, t, s.params, component=COMPONENT)
-    angle = x[:, COMPONENT.drift.angle_states[0]] - s.inputs(t)[:, _INDEX[THETA]]
+    component = s.component
+    x = simulate(s.initial_state(), s.signal, t, s.params, component=component)
+    angle = x[:, component.drift.angle_states[0]] - s.inputs(t)[:, component.input_names.index(
+        machine_inputs(component).angle)]
     return bool(np.all(np.abs(angle) < np.pi))
