@@ -795,6 +795,33 @@ def _load_units(ss, number) -> list:
     return out
 
 
+def _plant_measures(ss, model, i, number) -> dict:
+    """A plant controller's (REPCA1's) measurement and the parameters ANDES fills in for it: the
+    measured bus (busr, else its converter's bus), the monitored line from the converter's bus,
+    the line-drop compensation Rc, Xc (the line's r, x where the case gives none: ANDES' Rcs, Xcs),
+    the BusFreq it reads (CaseError where it measures another bus than the voltage), and ANDES'
+    configuration constants kqs, ksg, freeze."""
+    bus = model.buss.v[i]
+    entry = {"measures": {"bus": number[bus]}}
+    line = model.line.v[i]
+    if line is not None:
+        entry["measures"].update(branch=_branch_name(ss, line, number), end=number[model.bus.v[i]])
+    frequency = model.busfreq.v[i]
+    j = list(ss.BusFreq.idx.v).index(frequency)
+    if ss.BusFreq.bus.v[j] != bus:
+        raise CaseError(f"{type(model).__name__} {model.idx.v[i]} measures its frequency at bus {ss.BusFreq.bus.v[j]} "
+                        f"and its voltage at bus {bus}: opfmu measures both at one bus")
+    entry["params"] = {"Rc": float(model.Rcs.v[i]), "Xc": float(model.Xcs.v[i]),
+                       "busf_Tf": float(ss.BusFreq.Tf.v[j]), "busf_Tw": float(ss.BusFreq.Tw.v[j]),
+                       "busf_fn": float(ss.BusFreq.fn.v[j]),
+                       **{k: float(getattr(model.config, k)) for k in ("kqs", "ksg", "freeze")}}
+    return entry
+
+
+# the devices that measure the network: how their measurement and ANDES' filled-in values are read
+MEASURING = {"REPCA1": _plant_measures}
+
+
 def _control_roles() -> tuple:
     """(role, ANDES models, the IdxParam naming the device it controls, that device's role; None: the
     unit's bus device), each role after the one it links to."""
@@ -860,6 +887,10 @@ def dynamic_data(ss, name: str) -> dict:
                 if role in units[key]:
                     raise CaseError(f"{target or 'the bus device'} {controlled} has two {role.replace('_', ' ')}s")
                 units[key][role] = _entry(model, dname, i, ss)
+                if dname in MEASURING:
+                    extra = MEASURING[dname](ss, model, i, number)
+                    units[key][role]["measures"] = extra["measures"]
+                    units[key][role]["params"].update(extra["params"])
                 owner[role][model.idx.v[i]] = key
     for unit in units.values():
         unit["fmu"] = {"kind": "reference"}

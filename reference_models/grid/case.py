@@ -729,28 +729,24 @@ MEASURED = ("measured_voltage", "measured_voltage_angle", "branch_active_power",
             "branch_current_real", "branch_current_imaginary")
 
 
-def measured_values(network: Network, V, measures: Measurement, open_branches=(), m=np) -> tuple:
+def measured_values(network: Network, V, measures: Measurement, open_branches=()) -> tuple:
     """The MEASURED quantities of `measures` at the bus voltages V [buses] (complex, bus order; or
-    [n, buses] with m = numpy): |V|, angle of V at the measured bus, and the power P, Q [pu] and the
-    current (real, imaginary) [pu, network frame] into the measured branch at its measured end (the
-    pi model with its charging and tap, as Network.ybus; 0 where the branch is open or none)."""
+    [n, buses]): |V|, angle of V at the measured bus, and the power P, Q [pu] and the current (real,
+    imaginary) [pu, network frame] of the measured branch as a plant controller measures it (ANDES'
+    REPCA1): over its series impedance alone (no charging, no tap), I = (V_end - V_other) / (r + jx)
+    from its measured end, P + jQ = V_from conj(I) with V_from its from bus's voltage; 0 where the
+    branch is open or there is none."""
     V = np.asarray(V)
     at = V[..., network.bus_index(measures.bus)]
     current = np.zeros_like(at)
+    power = np.zeros_like(at)
     if measures.branch is not None:
         br = network.branch(measures.branch)
         if br not in {network.branch(b) for b in open_branches}:
             Va, Vb = V[..., network.bus_index(br.from_bus)], V[..., network.bus_index(br.to_bus)]
-            y = 1.0 / complex(br.r, br.x)
-            tap = br.tap * np.exp(1j * br.phi)
-            if measures.end == br.from_bus:
-                current = (y + 0.5j * br.b) / br.tap ** 2 * Va - y / np.conj(tap) * Vb
-            else:
-                current = (y + 0.5j * br.b) * Vb - y / tap * Va
-        end = V[..., network.bus_index(measures.end if measures.branch is not None else measures.bus)]
-    else:
-        end = at
-    power = end * np.conj(current)
+            sign = 1.0 if measures.end == br.from_bus else -1.0
+            current = sign * (Va - Vb) / complex(br.r, br.x)
+            power = Va * np.conj(current)
     return np.abs(at), np.angle(at), power.real, power.imag, current.real, current.imag
 
 

@@ -86,7 +86,8 @@ def _scalar(m) -> bool:
 
 
 NEWTON_STEP = 1e-7  # pu: the voltage difference a non-affine current is linearised over
-NEWTON_TOLERANCE = 1e-11  # pu: the voltage change that ends the network's Newton iteration
+NEWTON_TOLERANCE = 1e-14  # pu: the voltage change that ends the network's Newton iteration (converged to rounding:
+# a right-hand side that depends on where its iteration stopped is noise to a tight integrator)
 NEWTON_ITERATIONS = 30
 
 
