@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from reference_models.grid.case import Device, at_rest
+from reference_models.grid.case import CaseError, Device, at_rest
 from reference_models.models.reeca1 import REECA1
 from reference_models.models.regca1 import REGCA1
 from reference_models.models.wtara1 import WTARA1
@@ -58,7 +58,7 @@ def test_unit_starts_on_the_power_speed_characteristic_at_rest():
 
 def test_pitch_controller_refuses_a_start_where_the_turbine_outruns_its_reference():
     """w0 = 0.6 pu below the characteristic's 0.685 pu: the speed PI would raise the pitch."""
-    with pytest.raises(Exception, match="WTPTA1: no rest at the start"):
+    with pytest.raises(CaseError, match="WTPTA1: no rest at the start"):
         _unit({"wtdta1": {"w0": 0.6}})
 
 
@@ -169,7 +169,8 @@ def _params(ss) -> dict:
     from andes_reference import params
 
     Sb, Sn = ss.config.mva, float(ss.REGCA1.Sn.v[0])
-    return {"regca1": params(ss.REGCA1, REGCA1, 0, {"Sb": Sb}), "reeca1": params(ss.REECA1, REECA1, 0, {"Sb": Sb, "Sn": Sn}),
+    return {"regca1": params(ss.REGCA1, REGCA1, 0, {"Sb": Sb}),
+            "reeca1": params(ss.REECA1, REECA1, 0, {"Sb": Sb, "Sn": Sn}),
             "wtdta1": params(ss.WTDTA1, WTDTA1, 0, {"Sb": Sb, "Sn": float(ss.WTDTA1.Sn.v[0])}),
             "wtara1": params(ss.WTARA1, WTARA1, 0), "wtpta1": params(ss.WTPTA1, WTPTA1, 0),
             "wttqa1": params(ss.WTTQA1, WTTQA1, 0, {"Sb": Sb, "Sn": float(ss.WTTQA1.Sn.v[0])})}
@@ -224,7 +225,7 @@ def test_unit_start_gives_andes_initial_states_and_set_points(mode):
     p = _params(ss)
     devices = [Device(c.name, c, p[c.name]) for c in (REGCA1, REECA1, *WIND)]
     x0, inputs = REGCA1.start(dict(V0=V, theta0=theta, P0=_v(g.p0), Q0=_v(g.q0), Vs=V, theta_vs=theta), p["regca1"])
-    starts = dict(zip(p, (None,) * 6))
+    starts = {}
     for d, s in zip(devices, at_rest(devices, x0, inputs)):
         starts[d.name] = (np.array(s.states), np.array([s.inputs[n] for n in d.component.input_names]))
     assert starts["reeca1"][1][REECA1.input_names.index("Pref")] == pytest.approx(_v(ss.REECA1.Pref), rel=1e-14)

@@ -25,7 +25,7 @@ sp1..sp4 in pu.
 In ANDES the torque controller also adds 1 - fPe to its electrical controller's generator speed
 (which its drive train makes wg there: 1 + wg - fPe, 1 at the start), a speed that REECA1 uses only
 with PFLAG = 1 (Psel = wg Pfilt); with PFLAG = 0, as ANDES intends with a torque controller, it
-changes nothing. ANDES' freeze of the PI during a voltage dip is not implemented in ANDES either.
+changes nothing. The PI is not frozen during a voltage dip (ANDES notes that freeze as not implemented).
 
 Start (ANDES' initialisation): given its power Pe and the reference Pref its electrical controller
 demands (else Pe): s1_y = Pe, the generator speed wg = s2_y = fPe, which its drive train then has
