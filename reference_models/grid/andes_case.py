@@ -828,7 +828,11 @@ def _control_roles() -> tuple:
     return (("exciter", EXCITERS, "syn", None), ("governor", GOVERNORS, "syn", None),
             ("electrical_control", ELECTRICAL_CONTROLS, "reg", None),
             ("stabiliser", STABILISERS, "avr", "exciter"), ("compensator", COMPENSATORS, "avr", "exciter"),
-            ("plant_control", PLANT_CONTROLS, "ree", "electrical_control"))
+            ("plant_control", PLANT_CONTROLS, "ree", "electrical_control"),
+            ("drive_train", WIND_CONTROLS[:1], "ree", "electrical_control"),
+            ("aerodynamics", WIND_CONTROLS[1:2], "rego", "drive_train"),
+            ("pitch_control", WIND_CONTROLS[2:3], "rea", "aerodynamics"),
+            ("torque_control", WIND_CONTROLS[3:], "rep", "pitch_control"))
 
 
 def _entry(model, name: str, i: int, ss) -> dict:
@@ -846,8 +850,9 @@ def dynamic_data(ss, name: str) -> dict:
     """The dynamic-data file's content (see the module docstring) of ANDES' System: a unit per bus
     device of a static generator (a machine, or an inverter's converter, linked by `gen`) with the
     control devices linked to it (exciter, governor, electrical control by `syn` or `reg`;
-    stabiliser and compensator to the exciter by `avr`; plant control to the electrical control by
-    `ree`)."""
+    stabiliser and compensator to the exciter by `avr`; plant control and a wind turbine's drive
+    train to the electrical control by `ree`, its aerodynamics, pitch and torque controls each to the
+    one before)."""
     number = dict(zip(ss.Bus.idx.v, (_bus(b, "Bus") for b in ss.Bus.idx.v)))
     units = {}  # bus device idx -> its unit's entry
     owner = {None: {}}  # role -> {device idx: the unit's key}

@@ -20,10 +20,13 @@ events [{kind, time, ...}] (`Event`). A dynamic-data file (JSON): "generators": 
 (optional) names the load-flow generator where a bus has several; `fmu` is kept as it is for the
 co-simulation layer (which FMUs run the unit).
 
-Standard models (reference_models.models: GENROU, GENCLS and their exciters, governors and
-stabilisers) start from the load flow by their modules' `operating_point` and `initialise`: the
-stabiliser at rest first (its signal held by the exciter), then the exciter holding the machine's
-field voltage and the governor holding its mechanical power, each with the set point that does.
+Every device starts at rest from the load flow by the initialisation its component declares
+(Component.initialisation, `unit_start`, `at_rest`): the bus device from its share of the load-flow
+point, its controls in the order the ports impose (a stabiliser whose signal an exciter takes
+before the exciter; the exciter holding the field voltage the machine solved for, the governor its
+mechanical power, each with the set point that does). A `loads` entry of a dynamic-data file is a
+unit at a load bus with the power P, Q it draws; a device entry's `measures` names what it measures
+in the network (`Measurement`).
 
 Shipped cases (`shipped_case(name)`, `SHIPPED_CASES`): data/NAME_network.json + data/NAME.json.
 """
