@@ -56,6 +56,12 @@ RUNS = {
     "FLoad": ((0.1, {}), (0.3, {"Vs": 0.6, "theta_vs": 0.2}), (1.0, {})),
     "REPCA1": ((0.1, {}), (0.4, {"Vm": 0.6, "Vref": 1.2}), (0.8, {"Plant_pref": 0.7, "theta_m": 0.2}), (1.2, {})),
     "ZIP": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
+    # the voltage trip curves, the reactive droop both ways and the frequency measurement
+    "PVD1": ((0.1, {}), (0.4, {"Vs": 0.89}), (0.7, {"Vs": 0.5}), (0.9, {"Vs": 1.15}), (1.2, {"theta_vs": 0.3}),
+             (1.6, {})),
+    # as PVD1, then charging: the state of charge leaves its empty limit
+    "ESD1": ((0.1, {}), (0.4, {"Vs": 0.89}), (0.7, {"Vs": 0.5}), (0.9, {"Vs": 1.15}), (1.2, {"theta_vs": 0.3}),
+             (1.6, {"pref0": -0.5}), (1.8, {})),
     "WTDTA1": ((0.1, {}), (0.5, {"Pe": 0.2}), (1.0, {})), "WTARA1": ((0.1, {}), (0.5, {"theta": 10.0}), (1.0, {})),
     # errors of 450 and 300 pu drive both PIs onto thmax within the run, the pitch along its rate limit
     "WTPTA1": ((0.1, {}), (1.2, {"wt": 451.0, "Pord": 300.5}), (1.8, {"wt": -449.0})),
