@@ -12,6 +12,8 @@ Outputs y = (Efd [pu] field voltage = INT_y)
 The differences from EXDC2 are ESDC2A's (esdc2a.py: no speed term, vi from Vt unfiltered, KF);
 the limits are EXDC2's, constant.
 
+The component is esdc2a.esdc_exciter's with constant limits (ESDC2A's: limits proportional to Vt).
+
 As ANDES 2.0.0 means it, not as it runs: ANDES' ESDC1A derives from ESDC2A and replaces the limits
 VRU = VRMAXc v, VRL = VRMIN v by the constants VRMAXc, VRMIN after its regulator lag has built its
 anti-windup limiter from the old ones; the limiter keeps the dropped services, which are never
@@ -23,48 +25,8 @@ the tests compare with (tests/test_dc_exciters_and_compensator.py).
 """
 from __future__ import annotations
 
-import numpy as np
-
-from ..component import Component, Quantity
-from .common import controller_initialisation
-from .esdc2a import ESDC_PORTS, ESDC_STATES, ESDC2AParams, esdc_derivatives, esdc_equilibrium, esdc_initialise, esdc_reset
-from .exdc2 import DC_INPUTS
+from .esdc2a import ESDC2AParams, esdc_exciter
 
 ESDC1AParams = ESDC2AParams
 
-
-def derivatives(x, u, p: ESDC2AParams, m):
-    """(dLG_y, dLL_x, dLA_y, dINT_y, dWF_x)/dt, constant limits VRMIN, VRMAXc."""
-    return esdc_derivatives(x, u, p, m, False)
-
-
-def reset(x, u, p: ESDC2AParams, m):
-    """x after the reset of the regulator's limits VRMIN, VRMAXc."""
-    return esdc_reset(x, u, p, m, False)
-
-
-def outputs(x, u, p: ESDC2AParams, m):
-    """(Efd,) = INT_y."""
-    return (x[3],)
-
-
-def equilibrium(u, p: ESDC2AParams) -> np.ndarray:
-    """The steady state [5] at constant (Vt, Vref, Vss)."""
-    return esdc_equilibrium(u, p, False, "ESDC1A")
-
-
-ESDC1A = Component(
-    name="esdc1a",
-    description="ESDC1A IEEE DC1A exciter (PSS/E, ANDES 2.0.0 as it means it)",
-    states=ESDC_STATES,
-    inputs=DC_INPUTS,
-    outputs=(Quantity("Efd", "pu", "field voltage"),),
-    params_type=ESDC2AParams,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.1, 0.05, 1.0, 0.5, 0.5),
-    reset=reset,
-    ports=ESDC_PORTS,
-    initialisation=controller_initialisation(DC_INPUTS, "Efd", "Vref", esdc_initialise),
-)
+ESDC1A = esdc_exciter("esdc1a", "ESDC1A IEEE DC1A exciter (PSS/E, ANDES 2.0.0 as it means it)", False)

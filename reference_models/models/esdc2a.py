@@ -1,6 +1,6 @@
 """ESDC2A: the IEEE 421.5 DC2A exciter as ANDES 2.0.0 computes it (PSS/E ESDC2A); its equations,
-with constant regulator limits, also serve ESDC1A (esdc1a.py), and its exciter and saturation
-IEEET1 (ieeet1.py).
+with constant regulator limits, also serve ESDC1A (esdc1a.py: esdc_exciter makes both components),
+and its exciter and saturation IEEET1 (ieeet1.py).
 
 States  x = (LG_y [pu] sensing lag output (computed, not used: below), LL_x [pu] lead-lag state,
         LA_y [pu] regulator output VR, held within [VRMIN Vt, VRMAXc Vt], INT_y [pu] exciter output,
@@ -142,7 +142,7 @@ def _regulator(x, u, p: ESDC2AParams, m):
     return d_LG, d_LL, d_WF, (p.KA * LL_y - LA_y) / p.TA
 
 
-def esdc_derivatives(x, u, p: ESDC2AParams, m, proportional: bool):
+def _esdc_derivatives(x, u, p: ESDC2AParams, m, proportional: bool):
     """(dLG_y, dLL_x, dLA_y, dINT_y, dWF_x)/dt for x = (LG_y, LL_x, LA_y, INT_y, WF_x),
     u = (Vt, Vref, Vss); the regulator's limits proportional to Vt (ESDC2A) or constant (ESDC1A)."""
     d_LG, d_LL, d_WF, rate = _regulator(x, u, p, m)
@@ -150,7 +150,7 @@ def esdc_derivatives(x, u, p: ESDC2AParams, m, proportional: bool):
     return d_LG, d_LL, non_windup_between(m, rate, x[2], low, high), exciter_rate(m, x[2], x[3], p), d_WF
 
 
-def esdc_reset(x, u, p: ESDC2AParams, m, proportional: bool):
+def _esdc_reset(x, u, p: ESDC2AParams, m, proportional: bool):
     """x after the reset of the regulator's non-windup limit (blocks.non_windup_reset)."""
     low, high = _limits(u[0], p, proportional)
     return x[0], x[1], non_windup_reset(m, _regulator(x, u, p, m)[3], x[2], low, high), x[3], x[4]
@@ -163,31 +163,11 @@ def esdc_initialise(Efd: float, u, p: ESDC2AParams) -> tuple:
     return dc_initialise(Efd, Vt, Vss, 1.0, p)
 
 
-def esdc_equilibrium(u, p: ESDC2AParams, proportional: bool, name: str) -> np.ndarray:
+def _esdc_equilibrium(u, p: ESDC2AParams, proportional: bool, name: str) -> np.ndarray:
     """The steady state [5] at constant (Vt, Vref, Vss); ValueError where there is none within the
     regulator limits."""
     Vt, Vref, _ = finite_inputs(u, name)
     return dc_equilibrium(lambda e: esdc_initialise(e, u, p), Vref, _limits(Vt, p, proportional), name)
-
-
-def derivatives(x, u, p: ESDC2AParams, m):
-    """(dLG_y, dLL_x, dLA_y, dINT_y, dWF_x)/dt, limits VRMIN Vt, VRMAXc Vt."""
-    return esdc_derivatives(x, u, p, m, True)
-
-
-def reset(x, u, p: ESDC2AParams, m):
-    """x after the reset of the regulator's limits VRMIN Vt, VRMAXc Vt."""
-    return esdc_reset(x, u, p, m, True)
-
-
-def outputs(x, u, p: ESDC2AParams, m):
-    """(Efd,) = INT_y."""
-    return (x[3],)
-
-
-def equilibrium(u, p: ESDC2AParams) -> np.ndarray:
-    """The steady state [5] at constant (Vt, Vref, Vss)."""
-    return esdc_equilibrium(u, p, True, "ESDC2A")
 
 
 ESDC_STATES = (Quantity("LG_y", "pu", "sensing lag output (ANDES computes it and does not use it)"),
@@ -199,18 +179,44 @@ ESDC_PORTS = Ports(inputs=(Link("terminal_voltage", "Vt"), Link("voltage_referen
                            Link("stabiliser_signal", "Vss")),
                    outputs=(Link("field_voltage", "Efd"),))
 
-ESDC2A = Component(
-    name="esdc2a",
-    description="ESDC2A IEEE DC2A exciter (PSS/E, ANDES 2.0.0)",
-    states=ESDC_STATES,
-    inputs=DC_INPUTS,
-    outputs=(Quantity("Efd", "pu", "field voltage"),),
-    params_type=ESDC2AParams,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.1, 0.05, 1.0, 0.5, 0.5),
-    reset=reset,
-    ports=ESDC_PORTS,
-    initialisation=controller_initialisation(DC_INPUTS, "Efd", "Vref", esdc_initialise),
-)
+
+def esdc_exciter(name: str, description: str, proportional: bool) -> Component:
+    """The Component of ESDC2A (proportional: the regulator's limits VRMIN Vt, VRMAXc Vt) or ESDC1A
+    (constant limits VRMIN, VRMAXc): states x = (LG_y, LL_x, LA_y, INT_y, WF_x), inputs
+    u = (Vt, Vref, Vss), output Efd = INT_y, data ESDC2AParams."""
+    label = name.upper()
+
+    def derivatives(x, u, p: ESDC2AParams, m):
+        """(dLG_y, dLL_x, dLA_y, dINT_y, dWF_x)/dt."""
+        return _esdc_derivatives(x, u, p, m, proportional)
+
+    def reset(x, u, p: ESDC2AParams, m):
+        """x after the reset of the regulator's limits."""
+        return _esdc_reset(x, u, p, m, proportional)
+
+    def outputs(x, u, p: ESDC2AParams, m):
+        """(Efd,) = INT_y."""
+        return (x[3],)
+
+    def equilibrium(u, p: ESDC2AParams) -> np.ndarray:
+        """The steady state [5] at constant (Vt, Vref, Vss)."""
+        return _esdc_equilibrium(u, p, proportional, label)
+
+    return Component(
+        name=name,
+        description=description,
+        states=ESDC_STATES,
+        inputs=DC_INPUTS,
+        outputs=(Quantity("Efd", "pu", "field voltage"),),
+        params_type=ESDC2AParams,
+        derivatives=derivatives,
+        output_equations=outputs,
+        equilibrium=equilibrium,
+        state_scales=(0.1, 0.05, 1.0, 0.5, 0.5),
+        reset=reset,
+        ports=ESDC_PORTS,
+        initialisation=controller_initialisation(DC_INPUTS, "Efd", "Vref", esdc_initialise),
+    )
+
+
+ESDC2A = esdc_exciter("esdc2a", "ESDC2A IEEE DC2A exciter (PSS/E, ANDES 2.0.0)", True)
