@@ -31,9 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import lag, lag_non_windup, lag_non_windup_reset, low_value_gate
-from ..component import Component, Initialisation, Parameters, Quantity
+from ..component import Parameters, Quantity
 from .common import check_limits, check_ranges, finite_inputs
-from .tgov1 import OUTPUTS, PORTS
+from .tgov1 import turbine_governor
 
 PARAMETER_RANGES = {"R": (0.001, 10.0, "pu"), "KT": (0.0, 1000.0, "pu"), "AT": (0.0, 100.0, "pu"),
                     "T1": (0.0, 100.0, "s"), "T2": (0.0, 100.0, "s"), "T3": (0.0, 100.0, "s"),
@@ -112,21 +112,11 @@ def start(given, p: GASTParams) -> tuple:
     return _rest(valve, p), {"Pref": p.R * valve + wd}
 
 
-GAST = Component(
-    name="gast",
-    description="GAST gas turbine-governor (PSS/E, ANDES 2.0.0)",
+GAST = turbine_governor(
+    "gast", "GAST gas turbine-governor (PSS/E, ANDES 2.0.0)",
     states=(Quantity("LAG_y", "pu", "fuel valve position (non-windup limited)"),
             Quantity("LG2_y", "pu", "turbine lag"),
             Quantity("LG3_y", "pu", "exhaust temperature measurement lag")),
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.05))),
-    outputs=OUTPUTS,
-    params_type=GASTParams,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.2, 0.2, 0.2),
-    ports=PORTS,
-    reset=reset,
-    initialisation=Initialisation(solves=("Pref",), start=start),
-)
+    reference=Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.05)),
+    params_type=GASTParams, state_scales=(0.2, 0.2, 0.2),
+    derivatives=derivatives, outputs=outputs, equilibrium=equilibrium, reset=reset, start=start)

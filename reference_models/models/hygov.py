@@ -38,9 +38,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import lag, rate_limited_non_windup, rate_limited_non_windup_reset
-from ..component import Component, Initialisation, Parameters, Quantity
+from ..component import Component, Parameters, Quantity
 from .common import check_limits, check_ranges, finite_inputs
-from .tgov1 import OUTPUTS, PORTS
+from .tgov1 import turbine_governor
 
 PARAMETER_RANGES = {"R": (0.001, 10.0, "pu"), "r": (0.001, 100.0, "pu"), "VELM": (0.0, 100.0, "pu/s"),
                     "Tf": (0.001, 100.0, "s"), "Tg": (0.0, 100.0, "s"), "Dt": (0.0, 100.0, "pu"),
@@ -130,26 +130,16 @@ def hydro_governor(name: str, description: str, params_type: type, speed_signal)
         x0 = _rest((float(given["Pm"]) + p.At * p.qNL) / slope, p)
         return x0, {"Pref": float(speed_signal(wd, p, np)) + p.R * x0[1]}
 
-    return Component(
-        name=name,
-        description=description,
+    return turbine_governor(
+        name, description,
         states=(Quantity("LG_y", "pu", "filtered speed error"),
                 Quantity("gtpos", "pu", "gate position, integral part (rate and non-windup limited)"),
                 Quantity("LAG_y", "pu", "gate opening"),
                 Quantity("q_y", "pu", "turbine flow")),
-        inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-                Quantity("Pref", "pu", "reference (R times gate opening at rest)", start=0.04,
-                         operating_range=(0.0, 0.05))),
-        outputs=OUTPUTS,
-        params_type=params_type,
-        derivatives=derivatives,
-        output_equations=outputs,
-        equilibrium=equilibrium,
-        state_scales=(0.01, 0.2, 0.2, 0.2),
-        ports=PORTS,
-        reset=reset,
-        initialisation=Initialisation(solves=("Pref",), start=start),
-    )
+        reference=Quantity("Pref", "pu", "reference (R times gate opening at rest)", start=0.04,
+                           operating_range=(0.0, 0.05)),
+        params_type=params_type, state_scales=(0.01, 0.2, 0.2, 0.2),
+        derivatives=derivatives, outputs=outputs, equilibrium=equilibrium, reset=reset, start=start)
 
 
 HYGOV = hydro_governor("hygov", "HYGOV hydro turbine-governor (PSS/E, ANDES 2.0.0)", HYGOVParams,

@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import clip, integrator_non_windup, integrator_non_windup_reset, lag, washout
-from ..component import Component, Initialisation, Parameters, Quantity
+from ..component import Parameters, Quantity
 from .common import check_limits, check_ranges, finite_inputs
-from .tgov1 import OUTPUTS, PORTS
+from .tgov1 import turbine_governor
 
 PARAMETER_RANGES = {"Rperm": (0.001, 10.0, "pu"), "Rtemp": (0.0, 10.0, "pu"), "UO": (0.0, 100.0, "pu/s"),
                     "UC": (-100.0, 0.0, "pu/s"), "Tp": (0.0, 100.0, "s"), "Tg": (0.001, 100.0, "s"),
@@ -137,23 +137,13 @@ def start(given, p: HYGOV4Params) -> tuple:
     return x0, {"Pref": wd + p.Rperm * x0[1]}
 
 
-HYGOV4 = Component(
-    name="hygov4",
-    description="HYGOV4 hydro turbine-governor with a dashpot (PSS/E, ANDES 2.0.0)",
+HYGOV4 = turbine_governor(
+    "hygov4", "HYGOV4 hydro turbine-governor with a dashpot (PSS/E, ANDES 2.0.0)",
     states=(Quantity("LAG_y", "pu", "pilot servo output"),
             Quantity("GATE_y", "pu", "gate opening (non-windup limited)"),
             Quantity("WO_x", "pu", "dashpot (washout) state"),
             Quantity("q_y", "pu", "turbine flow")),
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "reference (Rperm times gate opening at rest)", start=0.4,
-                     operating_range=(0.0, 0.5))),
-    outputs=OUTPUTS,
-    params_type=HYGOV4Params,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.01, 0.2, 0.2, 0.2),
-    ports=PORTS,
-    reset=reset,
-    initialisation=Initialisation(solves=("Pref",), start=start),
-)
+    reference=Quantity("Pref", "pu", "reference (Rperm times gate opening at rest)", start=0.4,
+                       operating_range=(0.0, 0.5)),
+    params_type=HYGOV4Params, state_scales=(0.01, 0.2, 0.2, 0.2),
+    derivatives=derivatives, outputs=outputs, equilibrium=equilibrium, reset=reset, start=start)

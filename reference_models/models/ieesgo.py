@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import clip, lag, lead_lag
-from ..component import Component, Initialisation, Parameters, Quantity
+from ..component import Parameters, Quantity
 from .common import check_limits, check_ranges, finite_inputs
-from .tgov1 import OUTPUTS, PORTS
+from .tgov1 import turbine_governor
 
 PARAMETER_RANGES = {**{f"T{i}": (0.0, 100.0, "s") for i in range(1, 7)},
                     "K1": (0.0, 1000.0, "pu"), "K2": (0.0, 10.0, "pu"), "K3": (-10.0, 10.0, "pu"),
@@ -108,21 +108,12 @@ def start(given, p: IEESGOParams) -> tuple:
     return _rest(wd, Pm, p), {"Pref": Pm + p.K1 * wd * p.Sb / p.Sn}
 
 
-IEESGO = Component(
-    name="ieesgo",
-    description="IEESGO IEEE standard steam turbine-governor (PSS/E, ANDES 2.0.0)",
+IEESGO = turbine_governor(
+    "ieesgo", "IEESGO IEEE standard steam turbine-governor (PSS/E, ANDES 2.0.0)",
     states=(Quantity("F1_y", "pu", "controller lag"), Quantity("F2_x", "pu", "lead-lag state"),
             Quantity("F3_y", "pu", "steam inlet lag"), Quantity("F4_y", "pu", "reheater lag"),
             Quantity("F5_y", "pu", "crossover lag")),
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "power reference (mechanical power at rest at wref0)", start=0.7,
-                     operating_range=(0.0, 1.2))),
-    outputs=OUTPUTS,
-    params_type=IEESGOParams,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.01, 0.01, 0.2, 0.2, 0.2),
-    ports=PORTS,
-    initialisation=Initialisation(solves=("Pref",), start=start),
-)
+    reference=Quantity("Pref", "pu", "power reference (mechanical power at rest at wref0)", start=0.7,
+                       operating_range=(0.0, 1.2)),
+    params_type=IEESGOParams, state_scales=(0.01, 0.01, 0.2, 0.2, 0.2),
+    derivatives=derivatives, outputs=outputs, equilibrium=equilibrium, start=start)

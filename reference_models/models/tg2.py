@@ -30,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import clip, lead_lag, step_dead_band
-from ..component import Component, Initialisation, Parameters, Quantity
+from ..component import Parameters, Quantity
 from .common import check_limits, check_ranges, finite_inputs
-from .tgov1 import OUTPUTS, PORTS
+from .tgov1 import turbine_governor
 
 PARAMETER_RANGES = {"R": (0.001, 10.0, "pu"), "dbl": (-1.0, 0.0, "pu"), "dbu": (0.0, 1.0, "pu"),
                     "T1": (0.0, 100.0, "s"), "T2": (0.0, 100.0, "s"), "wref0": (0.5, 1.5, "pu")}
@@ -102,19 +102,10 @@ def start(given, p: TG2Params) -> tuple:
     return np.array([ll]), {"Pref": Pm - ll}
 
 
-TG2 = Component(
-    name="tg2",
-    description="TG2 turbine-governor (Milano; ANDES 2.0.0)",
+TG2 = turbine_governor(
+    "tg2", "TG2 turbine-governor (Milano; ANDES 2.0.0)",
     states=(Quantity("ll_x", "pu", "lead-lag state"),),
-    inputs=(Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-            Quantity("Pref", "pu", "power reference (mechanical power at rest at wref0)", start=0.7,
-                     operating_range=(0.0, 1.2))),
-    outputs=OUTPUTS,
-    params_type=TG2Params,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.2,),
-    ports=PORTS,
-    initialisation=Initialisation(solves=("Pref",), start=start),
-)
+    reference=Quantity("Pref", "pu", "power reference (mechanical power at rest at wref0)", start=0.7,
+                       operating_range=(0.0, 1.2)),
+    params_type=TG2Params, state_scales=(0.2,),
+    derivatives=derivatives, outputs=outputs, equilibrium=equilibrium, start=start)

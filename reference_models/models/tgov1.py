@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..blocks import lag_non_windup, lag_non_windup_reset, lead_lag
-from ..component import Component, Parameters, Quantity
+from ..component import Component, Initialisation, Parameters, Quantity
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, controller_initialisation, finite_inputs
 
@@ -119,8 +119,19 @@ OUTPUTS = (Quantity("Pm", "pu", "mechanical power"),)
 PORTS = Ports(inputs=(Link("rotor_speed", "omega"), Link("power_reference", "Pref")),
               outputs=(Link("mechanical_power", "Pm"),))
 
-INPUTS = (Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0),
-          Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.06)))
+SPEED = Quantity("omega", "pu", "rotor speed", start=1.0, operating_range=(0.95, 1.05), minimum=0.0)
+INPUTS = (SPEED, Quantity("Pref", "pu", "reference (R times power at rest)", start=0.035, operating_range=(0.0, 0.06)))
+
+
+def turbine_governor(name: str, description: str, states: tuple, reference: Quantity, params_type: type,
+                     state_scales: tuple, derivatives, outputs, equilibrium, start, reset=None) -> Component:
+    """The Component of a turbine-governor whose module gives its equations: inputs (omega, Pref),
+    `reference` the Quantity of its set point Pref; output Pm; the governor's ports; started by
+    start(given, p) -> (x0, {"Pref": value}) at rest at speed given["omega"] giving Pm = given["Pm"]."""
+    return Component(name=name, description=description, states=states, inputs=(SPEED, reference),
+                     outputs=OUTPUTS, params_type=params_type, derivatives=derivatives,
+                     output_equations=outputs, equilibrium=equilibrium, state_scales=state_scales,
+                     ports=PORTS, reset=reset, initialisation=Initialisation(solves=("Pref",), start=start))
 
 TGOV1 = Component(
     name="tgov1",
