@@ -181,6 +181,20 @@ def compare(case: str) -> dict:
     return results
 
 
+def run_to(ss, times, tol: float = 1e-6, tstep: float = 0.005):
+    """Yield each of `times` [s] once ANDES' fixed-step time-domain simulation of `ss` (Newton
+    tolerance tol, step tstep [s]) has reached it, with its f evaluated at the point reached
+    (fg_update); AssertionError where its TDS stops short."""
+    ss.TDS.config.update(tol=tol, fixt=1, tstep=tstep, no_tqdm=1)
+    for t in times:
+        ss.TDS.config.tf = t
+        ss.TDS.run()
+        ss.TDS.fg_update(ss.exist.tds)
+        reached = float(ss.dae.t)
+        assert math.isclose(reached, t, rel_tol=1e-6, abs_tol=1e-12), f"ANDES' TDS stopped at {reached} s, not {t} s"
+        yield t
+
+
 def compare_in_transient(case: str, t: float, fault_bus=None, tol: float = 1e-6) -> dict:
     """{model: {"devices", "rate", "andes_rate", "held_rate", "output", "at_limit"}}: ANDES runs the case (its own events,
     and a three-phase fault at `fault_bus` from 1.0 s to 1.1 s where given) to time t [s], its f

@@ -229,16 +229,10 @@ def test_start_from_the_references_andes_reeca1_demands_gives_andes_initial_stat
 @pytest.fixture(scope="module", params=list(MODES))
 def andes_faulted(request):
     """(mode, {t: ANDES' point}) at 1.05 s (mid-fault at bus 7, 1.0-1.1 s) and 2.5 s."""
+    from andes_reference import run_to
+
     ss = _andes_case(request.param, fault=True)
-    ss.TDS.config.update(tol=1e-6, fixt=1, tstep=0.005, no_tqdm=1)
-    points = {}
-    for t in (1.05, 2.5):
-        ss.TDS.config.tf = t
-        ss.TDS.run()
-        ss.TDS.fg_update(ss.exist.tds)
-        assert float(ss.dae.t) == pytest.approx(t)
-        points[t] = _andes_point(ss)
-    return request.param, points
+    return request.param, {t: _andes_point(ss) for t in run_to(ss, (1.05, 2.5))}
 
 
 @pytest.mark.andes
