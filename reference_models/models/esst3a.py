@@ -144,15 +144,20 @@ def equilibrium(u, p: ESST3AParams) -> np.ndarray:
     return x
 
 
-INPUTS = (Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-          Quantity("theta_vs", "rad", "terminal voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
-          Quantity("I_re", "pu", "machine current into the bus, real part (system base)", start=1.0,
-                   operating_range=(0.0, 5.0)),
-          Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
-                   operating_range=(-2.0, 2.0)),
-          Quantity("Vref", "pu", "voltage set point", start=1.03, operating_range=(0.9, 1.2)),
-          Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
-          Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0)))
+# the terminal voltage phasor and the machine's current that bridge_voltage takes (ESST3A, ESST4B)
+TERMINAL_INPUTS = (
+    Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
+    Quantity("theta_vs", "rad", "terminal voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
+    Quantity("I_re", "pu", "machine current into the bus, real part (system base)", start=1.0,
+             operating_range=(0.0, 5.0)),
+    Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
+             operating_range=(-2.0, 2.0)))
+TERMINAL_LINKS = (Link("terminal_voltage", "Vt"), Link("terminal_voltage_angle", "theta_vs"),
+                  Link("terminal_current_real", "I_re"), Link("terminal_current_imaginary", "I_im"))
+
+INPUTS = TERMINAL_INPUTS + (Quantity("Vref", "pu", "voltage set point", start=1.03, operating_range=(0.9, 1.2)),
+                            Quantity("Vss", "pu", "stabiliser signal", start=0.0, operating_range=(-0.1, 0.1)),
+                            Quantity("XadIfd", "pu", "machine field current", start=1.5, operating_range=(0.5, 3.0)))
 
 ESST3A = Component(
     name="esst3a",
@@ -169,10 +174,8 @@ ESST3A = Component(
     equilibrium=equilibrium,
     state_scales=(0.1, 0.01, 0.5, 0.1),
     reset=reset,
-    ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("terminal_voltage_angle", "theta_vs"),
-                        Link("terminal_current_real", "I_re"), Link("terminal_current_imaginary", "I_im"),
-                        Link("voltage_reference", "Vref"), Link("stabiliser_signal", "Vss"),
-                        Link("field_current", "XadIfd")),
+    ports=Ports(inputs=TERMINAL_LINKS + (Link("voltage_reference", "Vref"), Link("stabiliser_signal", "Vss"),
+                                         Link("field_current", "XadIfd")),
                 outputs=(Link("field_voltage", "Efd"),)),
     initialisation=controller_initialisation(INPUTS, "Efd", "Vref", initialise),
 )

@@ -44,7 +44,7 @@ from ..component import Component, Initialisation, Parameters, Quantity
 from ..piecewise import where
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs
-from .esst3a import bridge_voltage
+from .esst3a import TERMINAL_INPUTS, TERMINAL_LINKS, bridge_voltage
 from .exac1 import XADIFD
 
 TRACKING_GAIN = 2.0  # ANDES' ESST4B config ksr = ksm: the PI controllers' tracking anti-windup gain
@@ -157,23 +157,15 @@ ESST4B = Component(
             Quantity("PI1_xi", "pu", "voltage regulator integrator state"),
             Quantity("LA_y", "pu", "regulator delay output"),
             Quantity("PI2_xi", "pu", "inner loop integrator state")),
-    inputs=(Quantity("Vt", "pu", "terminal voltage magnitude", start=1.0, operating_range=(0.7, 1.2), minimum=0.0),
-            Quantity("theta_vs", "rad", "terminal voltage angle", start=0.0, operating_range=(-0.5, 0.5)),
-            Quantity("I_re", "pu", "machine current into the bus, real part (system base)", start=1.0,
-                     operating_range=(0.0, 5.0)),
-            Quantity("I_im", "pu", "machine current into the bus, imaginary part (system base)", start=-0.2,
-                     operating_range=(-2.0, 2.0)),
-            Quantity("Vref", "pu", "voltage set point", start=1.0, operating_range=(0.9, 1.2)),
-            XADIFD),
+    inputs=TERMINAL_INPUTS + (Quantity("Vref", "pu", "voltage set point", start=1.0, operating_range=(0.9, 1.2)),
+                              XADIFD),
     outputs=(Quantity("Efd", "pu", "field voltage"),),
     params_type=ESST4BParams,
     derivatives=derivatives,
     output_equations=outputs,
     equilibrium=equilibrium,
     state_scales=(0.1, 0.5, 0.5, 0.1),
-    ports=Ports(inputs=(Link("terminal_voltage", "Vt"), Link("terminal_voltage_angle", "theta_vs"),
-                        Link("terminal_current_real", "I_re"), Link("terminal_current_imaginary", "I_im"),
-                        Link("voltage_reference", "Vref"), Link("field_current", "XadIfd")),
+    ports=Ports(inputs=TERMINAL_LINKS + (Link("voltage_reference", "Vref"), Link("field_current", "XadIfd")),
                 outputs=(Link("field_voltage", "Efd"),)),
     initialisation=Initialisation(("Vref",), start),
 )
