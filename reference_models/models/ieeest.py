@@ -90,12 +90,17 @@ def derivatives(x, u, p: IEEESTParams, m):
     return _chain(x, u, p, m)[0]
 
 
+def switched_output(signal, Vt, p, m):
+    """Vss: `signal` clipped to [LSMIN, LSMAX], 0 where the terminal voltage Vt lies at or outside
+    the output switch's thresholds (low, high) = p.switch (IEEEST, ST2CUT)."""
+    low, high = p.switch
+    Vss = clip(m, signal, p.LSMIN, p.LSMAX)
+    return where(m, Vt >= high, 0.0 * Vss, where(m, Vt <= low, 0.0 * Vss, Vss))
+
+
 def outputs(x, u, p: IEEESTParams, m):
     """(Vss,): the limited washout output, 0 outside the terminal-voltage switch."""
-    Vt = u[2]
-    low, high = p.switch
-    Vss = clip(m, _chain(x, u, p, m)[1], p.LSMIN, p.LSMAX)
-    return (where(m, Vt >= high, 0.0 * Vss, where(m, Vt <= low, 0.0 * Vss, Vss)),)
+    return (switched_output(_chain(x, u, p, m)[1], u[2], p, m),)
 
 
 def equilibrium(u, p: IEEESTParams) -> np.ndarray:

@@ -41,11 +41,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import clip, lag, lead_lag, washout_or_lag
+from ..blocks import lag, lead_lag, washout_or_lag
 from ..component import ParameterError, Component, Parameters, Quantity
-from ..piecewise import where
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, finite_inputs
+from .ieeest import switched_output
 
 MODES = {0.0: "none", 1.0: "rotor speed deviation", 3.0: "electrical power", 4.0: "change of mechanical power",
          5.0: "terminal voltage"}
@@ -141,11 +141,8 @@ def derivatives(x, u, p: ST2CUTParams, m):
 
 
 def outputs(x, u, p: ST2CUTParams, m):
-    """(Vss,): the limited lead-lag output, 0 outside the terminal-voltage switch."""
-    Vt = u[3]
-    low, high = p.switch
-    Vss = clip(m, _chain(x, u, p, m)[1], p.LSMIN, p.LSMAX)
-    return (where(m, Vt >= high, 0.0 * Vss, where(m, Vt <= low, 0.0 * Vss, Vss)),)
+    """(Vss,): the limited lead-lag output, 0 outside the terminal-voltage switch (ieeest.switched_output)."""
+    return (switched_output(_chain(x, u, p, m)[1], u[3], p, m),)
 
 
 def equilibrium(u, p: ST2CUTParams) -> np.ndarray:
