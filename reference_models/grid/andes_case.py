@@ -556,7 +556,7 @@ def _check_supported(ss) -> None:
     missing = [name for name, model in ss.models.items() if model.n > 0 and name not in known]
     if missing:  # all of them in one line
         raise CaseError(f"the case uses the model{'s' if len(missing) > 1 else ''} {', '.join(missing)}, which opfmu "
-                        f"does not have (it has {', '.join(STANDARD_MODELS)})")
+                        f"does not have (it has {len(STANDARD_MODELS)} standard models: docs/standard-models.md)")
     cfg = ss.PQ.config
     if (cfg.p2p, cfg.p2i, cfg.p2z, cfg.q2q, cfg.q2i, cfg.q2z) != (0, 0, 1, 0, 0, 1):
         raise CaseError("only constant-impedance loads in the time domain are converted (ANDES' default PQ "
