@@ -1,9 +1,10 @@
 """One FMU instance over fmpy, FMI 2.0 (FMU2Slave) or 3.0 (FMU3Slave) co-simulation, with its ports.
 
-`FMU(source, name, ...)` opens an FMU: `source` is an .fmu file (extracted into a temporary folder
-that is removed on close, on a failed open and when the object is collected or the interpreter
-exits), an extracted folder, or a pair (extracted folder, fmpy model description). It is
-instantiated, and (unless `init=False`) initialised with the start values given by variable name.
+`FMU(source, name, ...)` opens an FMU: `source` is an .fmu file (extracted, but for its sources and
+documentation, into a temporary folder that is removed on close, on a failed open and when the
+object is collected or the interpreter exits), an extracted folder, or a pair (extracted folder,
+fmpy model description). It is instantiated, and (unless `init=False`) initialised with the start
+values given by variable name.
 
 Two ways to drive it:
 * by name, for scripts and tests: `set(**values)`, `get(*names)`, `get_boolean(name)`,
@@ -11,7 +12,12 @@ Two ways to drive it:
   values; returns the states), `state()`;
 * bound, for a master's every-step calls (ctypes arrays built once): `bind(inputs, outputs)`, then
   `set_inputs(values)`, `set_input_derivatives(rates)`, `outputs()`, `output_jacobian(rows,
-  columns)`, `do_step(t, h)`, `save()` / `restore(state)` / `free(state)`, `rewind()`.
+  columns)`, `do_step(t, h)`, `save()` / `restore(state)` / `free(state)`, `rewind()`; and the
+  calls a master makes most in one: `advance(t, h, values, rates)` (inputs, their rates, the step,
+  the outputs), `evaluate()` (the inputs as `inputs_now` holds them set, the outputs read),
+  `checkpoint()` / `rollback()` (one kept state, its memory reused). For FMI 2.0 these call the
+  binary's functions through plain C function pointers with their arguments built at bind (fmpy's
+  prototypes convert every argument on every call: about half of a call's cost).
 
 Its capabilities come from the model description: `interpolates` (FMI 2.0 canInterpolateInputs:
 fmi2SetRealInputDerivatives; FMI 3.0 co-simulation has no input derivatives, so never),
@@ -42,6 +48,12 @@ class CouplingError(RuntimeError):
 
 def _array(kind, values):
     return (kind * len(values))(*values)
+
+
+def _needed(member: str) -> bool:
+    """What an instance needs of an FMU archive: all but its sources and documentation (the binaries,
+    the model description, the resources)."""
+    return not member.startswith(("sources/", "documentation/"))
 
 
 def _one_line(exc: BaseException) -> str:
@@ -98,6 +110,8 @@ class FMU:
         self.fmu = None
         self._log_key = None
         self._initial = None
+        self._checkpoint = self._checkpoint_ref = None
+        self._fast = None
         self._directory = None
         if isinstance(source, tuple):
             directory, md = source
@@ -111,7 +125,7 @@ class FMU:
                     directory = Path(tempfile.mkdtemp(prefix="opfmu_fmu_", dir=scratch))
                     self._directory = directory
                     self._cleanup = weakref.finalize(self, shutil.rmtree, str(directory), True)
-                    extract(str(path), unzipdir=str(directory))
+                    extract(str(path), unzipdir=str(directory), include=_needed)
                 md = read_model_description(str(directory))
             except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
                 self.close()
@@ -308,10 +322,16 @@ class FMU:
         self._seed = _array(Real, [1.0])
         self._dd = (Real * len(outputs))()
         self._known = [_array(VR, [self.vr[n]]) for n in inputs]
+        self._fast = _Calls(self) if self.version == 2 else None
 
     def set_inputs(self, values) -> None:
         """Sets the bound inputs (bind order)."""
         self._in[:] = values
+        fast = self._fast
+        if fast is not None:
+            if fast.set_real(*fast.set_args) > 1:
+                self._check(2, "fmi2SetReal")
+            return
         n = len(self._in)
         if self.version == 2:
             self._check(self._dll.fmi2SetReal(self._c, self._in_vr, n, self._in), "fmi2SetReal")
@@ -322,16 +342,69 @@ class FMU:
         """fmi2SetRealInputDerivatives (first order) of the bound inputs: their rates over the next step
         (only where `interpolates`)."""
         self._du[:] = rates
+        fast = self._fast
+        if fast is not None:
+            if fast.set_derivatives(*fast.derivative_args) > 1:
+                self._check(2, "fmi2SetRealInputDerivatives")
+            return
         self._check(self._dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, len(self._du), self._order, self._du),
                     "fmi2SetRealInputDerivatives")
 
     def outputs(self) -> list:
         """The bound outputs now (bind order)."""
+        fast = self._fast
+        if fast is not None:
+            if fast.get_real(*fast.get_args) > 1:
+                self._check(2, "fmi2GetReal")
+            return self._out[:]
         n = len(self._out)
         if self.version == 2:
             self._check(self._dll.fmi2GetReal(self._c, self._out_vr, n, self._out), "fmi2GetReal")
         else:
             self._check(self._dll.fmi3GetFloat64(self._c, self._out_vr, n, self._out, n), "fmi3GetFloat64")
+        return self._out[:]
+
+    def evaluate(self) -> list:
+        """The bound inputs as they stand in `inputs_now` set, and the bound outputs read: a master's
+        Newton iteration, which changes a few entries of `inputs_now` between calls."""
+        fast = self._fast
+        if fast is None:
+            self.set_inputs(self._in[:])
+            return self.outputs()
+        if fast.set_real(*fast.set_args) > 1:
+            self._check(2, "fmi2SetReal")
+        if fast.get_real(*fast.get_args) > 1:
+            self._check(2, "fmi2GetReal")
+        return self._out[:]
+
+    @property
+    def inputs_now(self):
+        """The bound inputs' buffer (a ctypes array, bind order): what set_inputs last set, or what
+        evaluate() sets next."""
+        return self._in
+
+    def advance(self, t: float, h: float, values, rates=None) -> list:
+        """set_inputs(values), set_input_derivatives(rates) unless None, do_step(t, h), and the bound
+        outputs at the step's end (outputs()), in one call."""
+        fast = self._fast
+        if fast is None:
+            self.set_inputs(values)
+            if rates is not None:
+                self.set_input_derivatives(rates)
+            self.do_step(t, h)
+            return self.outputs()
+        self._in[:] = values
+        if fast.set_real(*fast.set_args) > 1:
+            self._check(2, "fmi2SetReal")
+        if rates is not None:
+            self._du[:] = rates
+            if fast.set_derivatives(*fast.derivative_args) > 1:
+                self._check(2, "fmi2SetRealInputDerivatives")
+        fast.t.value, fast.h.value = t, h
+        if fast.do_step(*fast.step_args) > 1:
+            self._check(2, f"the step at t = {t:.6g} s")
+        if fast.get_real(*fast.get_args) > 1:
+            self._check(2, "fmi2GetReal")
         return self._out[:]
 
     def output_jacobian(self, rows, columns) -> list:
@@ -340,6 +413,15 @@ class FMU:
         none (the inputs are left as they were)."""
         J = [[0.0] * len(columns) for _ in rows]
         n = len(self._out)
+        fast = self._fast
+        if self.directional and fast is not None:
+            dd, out, args = self._dd, fast.derivative, fast.jacobian_args
+            for j, c in enumerate(columns):
+                if out(*args[c]) > 1:
+                    self._check(2, "the directional derivative")
+                for i, r in enumerate(rows):
+                    J[i][j] = dd[r]
+            return J
         if self.directional:
             for j, c in enumerate(columns):
                 if self.version == 2:
@@ -367,8 +449,31 @@ class FMU:
         self.set_inputs(base)
         return J
 
+    def block(self, rows, columns) -> tuple:
+        """output_jacobian(rows, columns) of two rows and two columns, flat row by row: (d r0 / d c0,
+        d r0 / d c1, d r1 / d c0, d r1 / d c1)."""
+        fast = self._fast
+        if not (self.directional and fast is not None):
+            (a, b), (c, d) = self.output_jacobian(rows, columns)
+            return a, b, c, d
+        dd, out, args = self._dd, fast.derivative, fast.jacobian_args
+        r0, r1 = rows
+        c0, c1 = columns
+        if out(*args[c0]) > 1:
+            self._check(2, "the directional derivative")
+        a, c = dd[r0], dd[r1]
+        if out(*args[c1]) > 1:
+            self._check(2, "the directional derivative")
+        return a, dd[r0], c, dd[r1]
+
     def do_step(self, t: float, h: float) -> None:
         """One communication step from t [s] by h [s] (the inputs as they were set)."""
+        fast = self._fast if self.version == 2 else None
+        if fast is not None:
+            fast.t.value, fast.h.value = t, h
+            if fast.do_step(*fast.step_args) > 1:
+                self._check(2, f"the step at t = {t:.6g} s")
+            return
         if self.version == 2:
             status = self._dll.fmi2DoStep(self._c, self._Real(t), self._Real(h), 1)
         else:
@@ -395,6 +500,34 @@ class FMU:
         fn = self._dll.fmi2FreeFMUstate if self.version == 2 else self._dll.fmi3FreeFMUState
         fn(self._c, ctypes.byref(state))
 
+    def checkpoint(self) -> None:
+        """The FMU state now kept in the instance's one checkpoint (for rollback()); the checkpoint's
+        memory is the FMU's, reused from one checkpoint to the next (fmi2GetFMUstate into a state it
+        handed out before) and freed on close."""
+        if self._checkpoint is None:
+            self._checkpoint = self.save()
+            self._checkpoint_ref = ctypes.byref(self._checkpoint)
+            return
+        fast = self._fast if self.version == 2 else None
+        if fast is not None:
+            status = fast.get_state(fast.component, self._checkpoint_ref)
+        else:
+            fn = self._dll.fmi2GetFMUstate if self.version == 2 else self._dll.fmi3GetFMUState
+            status = fn(self._c, self._checkpoint_ref)
+        if status > 1:
+            self._check(status, "getting the FMU state")
+
+    def rollback(self) -> None:
+        """Back to the state checkpoint() kept (it stays kept)."""
+        if self._checkpoint is None:
+            raise CouplingError(f"{self.name} ({self.model_name}): no checkpoint to roll back to")
+        fast = self._fast if self.version == 2 else None
+        if fast is not None:
+            if fast.set_state(fast.component, self._checkpoint) > 1:
+                self._check(2, "setting the FMU state")
+            return
+        self.restore(self._checkpoint)
+
     def rewind(self) -> None:
         """Back to the state right after initialisation (a new run of the same instance)."""
         if self._initial is None:
@@ -410,6 +543,9 @@ class FMU:
                 if self._initial is not None:
                     self.free(self._initial)
                     self._initial = None
+                if self._checkpoint is not None:
+                    self.free(self._checkpoint)
+                    self._checkpoint = None
                 self.fmu.terminate()
             except Exception:
                 pass
@@ -432,3 +568,29 @@ class FMU:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class _Calls:
+    """An FMI 2.0 instance's every-step functions as plain C function pointers (no argtypes: their
+    arguments are built once, as ctypes objects, at bind; fmpy's prototypes convert every argument
+    on every call) and their argument tuples."""
+
+    def __init__(self, fmu: FMU):
+        def plain(name):
+            return ctypes.CFUNCTYPE(ctypes.c_int)(ctypes.cast(getattr(fmu._dll, name), ctypes.c_void_p).value)
+
+        self.component = c = ctypes.c_void_p(fmu._c)
+        n_in, n_out = ctypes.c_size_t(len(fmu._in)), ctypes.c_size_t(len(fmu._out))
+        self.set_real, self.get_real = plain("fmi2SetReal"), plain("fmi2GetReal")
+        self.set_args = (c, fmu._in_vr, n_in, fmu._in)
+        self.get_args = (c, fmu._out_vr, n_out, fmu._out)
+        self.do_step = plain("fmi2DoStep")
+        self.t, self.h = ctypes.c_double(), ctypes.c_double()
+        self.step_args = (c, self.t, self.h, ctypes.c_int(1))
+        self.set_derivatives = plain("fmi2SetRealInputDerivatives")
+        self.derivative_args = (c, fmu._in_vr, n_in, fmu._order, fmu._du)
+        self.derivative = plain("fmi2GetDirectionalDerivative")
+        one = ctypes.c_size_t(1)
+        self.jacobian_args = [(c, fmu._out_vr, n_out, known, one, fmu._seed, fmu._dd) for known in fmu._known]
+        self.get_state = plain("fmi2GetFMUstate") if fmu.rolls_back else None
+        self.set_state = plain("fmi2SetFMUstate") if fmu.rolls_back else None

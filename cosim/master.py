@@ -312,6 +312,12 @@ class _Unit:
         self.current_rows = tuple(outputs_index for outputs_index in
                                   (self.fmus[0].output_names.index(n) for n in bus.current))
         self.voltage_columns = tuple(self.inputs[0].index(n) for n in bus.voltage)
+        # each device in step order: (index, FMU, plan, (link key, output row) of the links it gives, interpolates)
+        self.schedule = tuple((j, self.fmus[j], tuple(self.plan[j]),
+                               tuple(((j, name), row) for name, row in self.link_rows[j].items()),
+                               self.fmus[j].interpolates) for j in self.order)
+        # the machine's inputs that take the bus voltage's magnitude and angle (codes 0, 1)
+        self.bus_columns = tuple(tuple(i for i, (code, _, _) in enumerate(self.plan[0]) if code == c) for c in (0, 1))
         angle = rotor_angle_state(unit.machine.component)
         self.angle_row = None if angle is None else unit.machine.component.state_names.index(angle)
         self.impedance = external_impedance(unit.machine)
@@ -368,6 +374,7 @@ class GridMaster:
         self.kinds = tuple(f.kind for f in self.files)
         self.units = []
         self._networks = {}
+        self._solve_plans = {}
         buses = list(dict.fromkeys(case.generator_buses))  # the reduced network's buses (Case.reduced's order)
         self._slot = [buses.index(b) for b in case.generator_buses]  # unit -> its bus in the reduced network
         self._first = [self._slot.index(i) for i in range(len(buses))]  # bus -> the first unit on it
@@ -416,6 +423,26 @@ class GridMaster:
         return [Vs if code == 0 else theta if code == 1 else links[key] if code == 4 else held
                 for code, key, held in unit.plan[0]]
 
+    def _solve_plan(self, active) -> tuple:
+        """What _solve needs of the `active` units (kept per set of them): per unit (index, its bus's
+        row in the reduced network, machine FMU, its input buffer, its inputs that take the bus
+        voltage's magnitude and angle, its current rows, its voltage columns), and where each
+        machine's d(I_re, I_im) / d(V_re, V_im) goes in the Jacobian (rows, columns; accumulated at a
+        shared bus)."""
+        key = tuple(active)
+        plan = self._solve_plans.get(key)
+        if plan is None:
+            entries = []
+            for k in active:
+                u = self.units[k]
+                m = u.fmus[0]
+                entries.append((k, 2 * self._slot[k], m, m.inputs_now, u.bus_columns[0], u.bus_columns[1],
+                                u.current_rows, u.voltage_columns))
+            at = [(r + i, r + j) for _, r, *_ in entries for i in (0, 1) for j in (0, 1)]
+            at = (np.array([i for i, _ in at], dtype=np.intp), np.array([j for _, j in at], dtype=np.intp))
+            plan = self._solve_plans[key] = (entries, at)
+        return plan
+
     def _solve(self, network, V, theta_ref, active, timing: Timing):
         """The unit-bus voltages [g] (complex, per unit) at which the network and the currents I(V) of
         the `active` units' machines agree, Newton from V on the reduced network's buses (units at
@@ -435,38 +462,42 @@ class GridMaster:
         current = [0.0] * (2 * g)
         machine = [None] * g
         refs = theta_ref.tolist()
+        entries, at = self._solve_plan(active)
+        for k, _, _, buffer, *_ in entries:  # each machine's inputs but the bus voltage's, for every iteration
+            buffer[:] = self._machine_inputs(units[k], 0.0, 0.0)
+        pi, two_pi = math.pi, 2.0 * math.pi
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
             i_bus = [0.0] * (2 * b)
-            for k in active:
-                u = units[k]
-                r = 2 * slot[k]
+            for k, r, m, buffer, magnitude, angles, (row_re, row_im), _ in entries:
                 re, im = values[r], values[r + 1]
-                theta[k] = angle = refs[k] + _wrap(math.atan2(im, re) - refs[k])
-                m = u.fmus[0]
-                m.set_inputs(self._machine_inputs(u, math.hypot(re, im), angle))
-                out = m.outputs()
+                ref = refs[k]
+                theta[k] = angle = ref + ((math.atan2(im, re) - ref + pi) % two_pi - pi)  # _wrap
+                if magnitude:
+                    Vs = math.hypot(re, im)
+                    for c in magnitude:
+                        buffer[c] = Vs
+                for c in angles:
+                    buffer[c] = angle
+                out = m.evaluate()
                 machine[k] = out
-                current[2 * k], current[2 * k + 1] = i_re, i_im = out[u.current_rows[0]], out[u.current_rows[1]]
+                current[2 * k], current[2 * k + 1] = i_re, i_im = out[row_re], out[row_im]
                 i_bus[r] += i_re
                 i_bus[r + 1] += i_im
             F = Y @ v - i_bus
             mismatch = float(np.max(np.abs(F)))
             if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
                 break
-            M = Y.copy()
-            for k in active:
-                u = units[k]
-                r = 2 * slot[k]
+            blocks = []
+            for k, r, m, _, _, _, rows, columns in entries:
                 re, im = values[r], values[r + 1]
                 Vs = math.hypot(re, im)
                 c, sn = re / Vs, im / Vs
-                (a, bb), (d, e) = u.fmus[0].output_jacobian(u.current_rows, u.voltage_columns)  # d(I_re, I_im) / d(Vs, theta)
+                a, bb, d, e = m.block(rows, columns)  # d(I_re, I_im) / d(Vs, theta), row by row
                 # chain rule with d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
-                M[r, r] -= a * c - bb * sn / Vs
-                M[r, r + 1] -= a * sn + bb * c / Vs
-                M[r + 1, r] -= d * c - e * sn / Vs
-                M[r + 1, r + 1] -= d * sn + e * c / Vs
+                blocks += (a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs)
+            M = Y.copy()
+            np.subtract.at(M, at, blocks)
             v -= np.linalg.solve(M, F)
             timing.newton_iterations += 1
         if not mismatch < max(s.newton_tolerance, 1e-8):
@@ -522,10 +553,9 @@ class GridMaster:
             u = self.units[k]
             links, new_links = u.links, u.ends
             unit_out = [None] * len(u.fmus)
-            for j in u.order:
-                fmu = u.fmus[j]
+            for j, fmu, plan, link_rows, interpolates in u.schedule:
                 a, b = [], []
-                for code, key, held in u.plan[j]:
+                for code, key, held in plan:
                     if code < 4:
                         start, end = ends[code]
                         a.append(start[k])
@@ -540,19 +570,14 @@ class GridMaster:
                         a.append(held)
                         b.append(held)
                 if held_coupling:
-                    fmu.set_inputs(a)
-                    if fmu.interpolates:
-                        fmu.set_input_derivatives([0.0] * len(a))
-                elif fmu.interpolates:
-                    fmu.set_inputs(a)
-                    fmu.set_input_derivatives([(y - x) / h for x, y in zip(a, b)])
+                    out = fmu.advance(t0, h, a, [0.0] * len(a) if interpolates else None)
+                elif interpolates:
+                    out = fmu.advance(t0, h, a, [(y - x) / h for x, y in zip(a, b)])
                 else:
-                    fmu.set_inputs([0.5 * (x + y) for x, y in zip(a, b)])
-                fmu.do_step(t0, h)
-                out = fmu.outputs()
+                    out = fmu.advance(t0, h, [0.5 * (x + y) for x, y in zip(a, b)])
                 unit_out[j] = out
-                for name, row in u.link_rows[j].items():
-                    new_links[(j, name)] = out[row]
+                for key, row in link_rows:
+                    new_links[key] = out[row]
             outputs[k] = unit_out
         timing.fmu_step_s += time.perf_counter() - started
         return outputs
@@ -601,46 +626,42 @@ class GridMaster:
                 V1 = V.copy()
             for k in active:
                 self.units[k].guess_ends(h / h_prev if V_prev is not None and s.coupling != "held" else None)
-            theta1 = np.array([theta[k] + _wrap(cmath.phase(V1[k]) - theta[k]) for k in range(n)])
+            theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), theta.tolist())])
             I1 = I
             live = [f for k in active for f in self.units[k].fmus]
-            saved = None
             passes = s.passes if s.coupling == "iterated" else 1
-            if passes > 1 and self.rolls_back:
+            saved = passes > 1 and self.rolls_back  # each live FMU's state at t0 kept (FMU.checkpoint)
+            if saved:
                 t_save = time.perf_counter()
-                saved = [fmu.save() for fmu in live]
+                for fmu in live:
+                    fmu.checkpoint()
                 timing.rollback_s += time.perf_counter() - t_save
             relax, previous = np.ones(n), None
-            try:
-                for p in range(passes if saved is not None else 1):
-                    if p > 0:
-                        t_save = time.perf_counter()
-                        for fmu, snap in zip(live, saved):
-                            fmu.restore(snap)
-                        timing.rollback_s += time.perf_counter() - t_save
-                    Vt1 = self._terminal(V1, I1, theta1)
-                    measured = (measured_start, self._measure(V1, theta1, topology, active))
-                    outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing, measured)
-                    timing.passes += 1
-                    new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
-                    residual = new_V - V1
-                    change = float(np.max(np.abs(residual)))
-                    if change < s.tolerance or p == passes - 1 or saved is None:
-                        V1, theta1 = new_V, new_theta
-                        break
-                    if previous is not None:
-                        moved = residual - previous
-                        norm = (moved * moved.conj()).real
-                        found = norm > 0.0
-                        relax[found] = np.clip(-relax[found] * (previous.conj() * moved).real[found] / norm[found],
-                                               *RELAX_BOUNDS)
-                    previous = residual
-                    V1 = V1 + relax * residual
-                    theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), new_theta.tolist())])
-            finally:
-                if saved is not None:
-                    for fmu, snap in zip(live, saved):
-                        fmu.free(snap)
+            for p in range(passes if saved else 1):
+                if p > 0:
+                    t_save = time.perf_counter()
+                    for fmu in live:
+                        fmu.rollback()
+                    timing.rollback_s += time.perf_counter() - t_save
+                Vt1 = self._terminal(V1, I1, theta1)
+                measured = (measured_start, self._measure(V1, theta1, topology, active))
+                outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing, measured)
+                timing.passes += 1
+                new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
+                residual = new_V - V1
+                change = float(np.max(np.abs(residual)))
+                if change < s.tolerance or p == passes - 1 or not saved:
+                    V1, theta1 = new_V, new_theta
+                    break
+                if previous is not None:
+                    moved = residual - previous
+                    norm = (moved * moved.conj()).real
+                    found = norm > 0.0
+                    relax[found] = np.clip(-relax[found] * (previous.conj() * moved).real[found] / norm[found],
+                                           *RELAX_BOUNDS)
+                previous = residual
+                V1 = V1 + relax * residual
+                theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), new_theta.tolist())])
             timing.steps += 1
             V_prev, h_prev = V, h
             V, I, theta = V1, I1, theta1
