@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -43,10 +44,11 @@ def write_npz(path, **arrays) -> None:
 
 
 def write_png(path, fig, dpi: int = 120) -> None:
-    """A matplotlib figure as a PNG at `path` (its folder made), atomically; the figure is closed."""
-    import matplotlib.pyplot as plt
-
+    """A matplotlib figure as a PNG at `path` (its folder made), atomically; the figure is closed
+    (pyplot's, where pyplot made it: pyplot is not imported for a figure made without it)."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=dpi)
-    plt.close(fig)
+    pyplot = sys.modules.get("matplotlib.pyplot")
+    if pyplot is not None:
+        pyplot.close(fig)

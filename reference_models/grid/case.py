@@ -143,14 +143,15 @@ class Network:
     def connected_buses(self, out_of_service=()) -> set:
         """The buses connected to the first generator's bus with the given branches open."""
         removed = {self.branch(b) for b in out_of_service}
+        neighbours = {}
+        for br in self.branches:
+            if br not in removed:
+                neighbours.setdefault(br.from_bus, []).append(br.to_bus)
+                neighbours.setdefault(br.to_bus, []).append(br.from_bus)
         start = self.generators[0].bus
         reach, frontier = {start}, [start]
         while frontier:
-            bus = frontier.pop()
-            for br in self.branches:
-                if br in removed or not br.connects(bus):
-                    continue
-                other = br.to_bus if br.from_bus == bus else br.from_bus
+            for other in neighbours.get(frontier.pop(), ()):
                 if other not in reach:
                     reach.add(other)
                     frontier.append(other)
