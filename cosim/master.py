@@ -446,7 +446,8 @@ class GridMaster:
     def _solve(self, network, V, theta_ref, active, timing: Timing):
         """The unit-bus voltages [g] (complex, per unit) at which the network and the currents I(V) of
         the `active` units' machines agree, Newton from V on the reduced network's buses (units at
-        one bus inject into it together: their currents are summed and their Jacobians accumulated);
+        one bus inject into it together: their currents are summed and their Jacobians accumulated;
+        a step that raises the mismatch is halved until it does not);
         the machines are left at those inputs. A unit not active injects nothing. Returns (V, I,
         theta [g], each active unit's machine outputs as read (None for the others))."""
         started = time.perf_counter()
@@ -466,6 +467,7 @@ class GridMaster:
         for k, _, _, buffer, *_ in entries:  # each machine's inputs but the bus voltage's, for every iteration
             buffer[:] = self._machine_inputs(units[k], 0.0, 0.0)
         pi, two_pi = math.pi, 2.0 * math.pi
+        last = None  # the last Newton step: (its start, the step, the mismatch there), for backtracking
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
             i_bus = [0.0] * (2 * b)
@@ -488,6 +490,12 @@ class GridMaster:
             mismatch = float(np.max(np.abs(F)))
             if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
                 break
+            if last is not None and mismatch > last[2]:
+                # the full step made it worse (a constant-power load at a deep voltage dip): half of it
+                start, step, before = last
+                last = start, 0.5 * step, before
+                v = start - last[1]
+                continue
             blocks = []
             for k, r, m, _, _, _, rows, columns in entries:
                 re, im = values[r], values[r + 1]
@@ -498,7 +506,8 @@ class GridMaster:
                 blocks += (a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs)
             M = Y.copy()
             np.subtract.at(M, at, blocks)
-            v -= np.linalg.solve(M, F)
+            last = v, np.linalg.solve(M, F), mismatch
+            v = v - last[1]
             timing.newton_iterations += 1
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")
