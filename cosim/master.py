@@ -410,9 +410,9 @@ class GridMaster:
     def network(self, topology):
         """Case.reduced of a topology (its fault shunt with its own impedance), kept per topology."""
         impedance = complex(topology.fault_impedance) if topology.fault_bus is not None else None
-        key = (topology.fault_bus, impedance, topology.open)
+        key = (topology.fault_bus, impedance, topology.open, topology.loads_off)
         if key not in self._networks:
-            self._networks[key] = self.case.reduced(topology.fault_bus, impedance, topology.open)
+            self._networks[key] = self.case.reduced(topology.fault_bus, impedance, topology.open, topology.loads_off)
         return self._networks[key]
 
     @staticmethod

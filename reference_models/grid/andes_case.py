@@ -585,20 +585,13 @@ def network_data(ss, name: str) -> dict:
                          "x": float(L.x.v[i]) + 1e-8, "b": float(L.b.v[i]),
                          "kind": "transformer" if transformer else "line", "tap": tap, "phi": phi,
                          "andes": str(L.idx.v[i])})
-    # the power each load draws in the power flow (ANDES' Ppf, Qpf: p0, q0 within [vmin, vmax])
-    V = dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
     loads = {}
     replaced = _replaced_loads(ss)
     for i in range(ss.PQ.n):
         if ss.PQ.u.v[i] == 0 or ss.PQ.idx.v[i] in replaced:
             continue
-        v0, p0, q0 = float(V[ss.PQ.bus.v[i]]), float(ss.PQ.p0.v[i]), float(ss.PQ.q0.v[i])
-        vmin, vmax = float(ss.PQ.vmin.v[i]), float(ss.PQ.vmax.v[i])
-        if ss.PQ.config.pq2z and not vmin <= v0 <= vmax:  # ANDES' power flow turned it into an impedance
-            limit = vmin if v0 < vmin else vmax
-            p0, q0 = p0 * (v0 / limit) ** 2, q0 * (v0 / limit) ** 2
         bus = number[ss.PQ.bus.v[i]]
-        loads[bus] = loads.get(bus, 0j) + complex(p0, q0)
+        loads[bus] = loads.get(bus, 0j) + _pq_power(ss, i)
     shunts = {}
     for i in range(ss.Shunt.n):
         if ss.Shunt.u.v[i] == 0:
@@ -624,6 +617,18 @@ def network_data(ss, name: str) -> dict:
     return data
 
 
+def _pq_power(ss, i: int) -> complex:
+    """P + jQ [pu] PQ load i draws in the power flow (ANDES' Ppf, Qpf: p0, q0 within [vmin, vmax],
+    else the impedance its power flow turned it into at the limit)."""
+    v0 = float(ss.Bus.v.v[list(ss.Bus.idx.v).index(ss.PQ.bus.v[i])])
+    p0, q0 = float(ss.PQ.p0.v[i]), float(ss.PQ.q0.v[i])
+    vmin, vmax = float(ss.PQ.vmin.v[i]), float(ss.PQ.vmax.v[i])
+    if ss.PQ.config.pq2z and not vmin <= v0 <= vmax:
+        limit = vmin if v0 < vmin else vmax
+        p0, q0 = p0 * (v0 / limit) ** 2, q0 * (v0 / limit) ** 2
+    return complex(p0, q0)
+
+
 def events(ss, number) -> list:
     """The case's own enabled Toggle and Fault events as network-file entries."""
     out = []
@@ -635,6 +640,11 @@ def events(ss, number) -> list:
             target = ss.groups[target].idx2model(dev).class_name
         if target == "Line":
             out.append({"kind": "branch", "time": t, "branch": _branch_name(ss, dev, number), "status": "toggle"})
+        elif target == "PQ" and dev not in _replaced_loads(ss):
+            j = list(ss.PQ.idx.v).index(dev)
+            power = _pq_power(ss, j)
+            out.append({"kind": "load", "time": t, "bus": number[ss.PQ.bus.v[j]], "load": str(dev),
+                        "P": power.real, "Q": power.imag, "status": "toggle"})
         elif target in MACHINES + STATIC_GENERATORS:
             model = getattr(ss, target)
             j = list(model.idx.v).index(dev)
@@ -642,7 +652,7 @@ def events(ss, number) -> list:
             out.append({"kind": "generator", "time": t, "bus": number[model.bus.v[j]], "generator": generator,
                         "status": "toggle"})
         else:
-            raise CaseError(f"a Toggle of a {target} is not converted (Line, {', '.join(MACHINES + STATIC_GENERATORS)} "
+            raise CaseError(f"a Toggle of a {target} is not converted (Line, PQ, {', '.join(MACHINES + STATIC_GENERATORS)} "
                             "are)")
     for i in range(ss.Fault.n):
         if ss.Fault.u.v[i] == 0:
@@ -653,7 +663,7 @@ def events(ss, number) -> list:
     status = {}  # a toggle flips the device's status at its time (all start in service)
     for e in out:
         if e.get("status") == "toggle":
-            key = (e["kind"], e.get("branch"), e.get("generator"))
+            key = (e["kind"], e.get("branch"), e.get("generator"), e.get("load"))
             status[key] = 1 - status.get(key, 1)
             e["status"] = status[key]
     return out
@@ -781,8 +791,9 @@ def _load_units(ss, number) -> list:
                             f"{100 * share[1]:g} % of the reactive power of PQ {pq}: ANDES drops the rest, so its "
                             "simulation starts off its own load flow (make the percentages sum to 100)")
         entry = _entry(model, dname, i, ss)
-        out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": float(ss.PQ.Ppf.v[j]),
-                    "Q": float(ss.PQ.Qpf.v[j]), "load_device": entry, "fmu": {"kind": "reference"}})
+        power = _pq_power(ss, j)
+        out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": power.real, "Q": power.imag,
+                    "load_device": entry, "fmu": {"kind": "reference"}})
     for dname in LOADS:
         model = getattr(ss, dname)
         if hasattr(model, "pq") or dname not in STANDARD_MODELS:

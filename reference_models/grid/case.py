@@ -82,8 +82,9 @@ class GeneratorData:
 class Event:
     """One of a case's own events at `time` [s]: kind "fault" (a shunt of `impedance` [pu] at
     `bus` from `time` to `clear`), "branch" (branch `branch`, named as Network.branch takes it,
-    switched to `status`: 0 open, 1 closed) or "generator" (the unit of generator `generator`
-    switched to `status`: 0 tripped)."""
+    switched to `status`: 0 open, 1 closed), "generator" (the unit of generator `generator`
+    switched to `status`: 0 tripped) or "load" (the load `name` at `bus`, drawing `power` [pu] at
+    the load flow, switched to `status`: 0 off, 1 on again)."""
 
     kind: str
     time: float
@@ -93,6 +94,8 @@ class Event:
     branch: str | None = None
     generator: str | None = None
     status: int | None = None
+    name: str | None = None
+    power: complex | None = None
 
 
 @dataclass(frozen=True)
@@ -333,13 +336,18 @@ class Case:
     def buses(self) -> tuple:
         return self.network.buses
 
-    def reduced(self, fault_bus: int | None = None, fault_impedance: complex = 1e-6, out_of_service=()) -> Reduced:
-        """The topology with the loads (constant impedances at the load-flow voltages), a fault shunt
-        of `fault_impedance` [pu] at `fault_bus` (None: none) and the named branches open, reduced
-        to the generator buses (Kron; each bus once, in unit order, where several units share one)."""
+    def reduced(self, fault_bus: int | None = None, fault_impedance: complex = 1e-6, out_of_service=(),
+                loads_off=()) -> Reduced:
+        """The topology with the loads (constant impedances at the load-flow voltages; `loads_off`:
+        (bus, P + jQ) of loads switched off), a fault shunt of `fault_impedance` [pu] at `fault_bus`
+        (None: none) and the named branches open, reduced to the generator buses (Kron; each bus
+        once, in unit order, where several units share one)."""
         net = self.network
         opened = tuple(net.openable(b) for b in out_of_service)
-        Y = net.ybus(opened) + np.diag(self.flow.load_admittances())
+        S = self.flow.S_load.copy()
+        for bus, power in loads_off:
+            S[net.bus_index(bus)] -= power
+        Y = net.ybus(opened) + np.diag(np.conj(S) / self.flow.V ** 2)
         parts = []
         if fault_bus is not None:
             z = complex(fault_impedance)
@@ -350,6 +358,8 @@ class Case:
             parts.append(f"fault at bus {fault_bus}")
         if opened:
             parts.append("open " + ", ".join(br.name for br in opened))
+        if loads_off:
+            parts.append(f"{len(loads_off)} load{'s' if len(loads_off) > 1 else ''} off")
         g = list(dict.fromkeys(net.bus_index(u.bus) for u in self.units))  # units at one bus share it
         o = [i for i in range(len(net.buses)) if i not in g]
         n = len(g)
@@ -545,8 +555,11 @@ def load_events(path) -> tuple:
                 event = Event(kind, time, branch=str(e["branch"]), status=int(e["status"]))
             elif kind == "generator":
                 event = Event(kind, time, bus=int(e["bus"]), generator=str(e["generator"]), status=int(e["status"]))
+            elif kind == "load":
+                event = Event(kind, time, bus=int(e["bus"]), name=str(e["load"]), status=int(e["status"]),
+                              power=complex(_number(path, "load P", e["P"]), _number(path, "load Q", e["Q"])))
             else:
-                raise CaseError(f"{path}: unknown event kind {kind[:20]!r} (known: fault, branch, generator)")
+                raise CaseError(f"{path}: unknown event kind {kind[:20]!r} (known: fault, branch, generator, load)")
         except (KeyError, TypeError, ValueError) as exc:
             if isinstance(exc, CaseError):
                 raise

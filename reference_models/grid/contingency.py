@@ -9,6 +9,8 @@ co-simulation master switch between, at exact times. The case's events merge wit
 fault and trip:
 * a case fault is a shunt of its own impedance at its bus from its time to its clearing;
 * a branch event opens (status 0) or closes again (status 1) its branch;
+* a load event switches a load off (status 0: its constant-impedance admittance leaves the network;
+  Topology.loads_off) or on again (status 1);
 * a generator event with status 0 trips its unit (Topology.tripped: unit indices in the case's
   unit order, which is its load-flow generator order); a unit does not come back (status 1 after a
   trip is refused);
@@ -34,7 +36,8 @@ class Topology:
     """The network from `start` [s] on: a fault shunt of `fault_impedance` [pu] at `fault_bus`
     (None: none), the branches `open` (names "a-b" or "a-b:K", in the network's branch order) and
     the units `tripped` (indices in the case's unit order: each injects no current from `start` on,
-    its devices stand still and its rotor angle leaves the stability check)."""
+    its devices stand still and its rotor angle leaves the stability check) and the loads switched
+    off (`loads_off`: (bus, the power it drew at the load flow [pu])."""
 
     start: float
     fault_bus: int | None
@@ -42,6 +45,7 @@ class Topology:
     description: str
     tripped: tuple = ()
     fault_impedance: complex | None = None
+    loads_off: tuple = ()  # (bus, P + jQ drawn at the load flow) of each load switched off, by time
 
 
 @dataclass(frozen=True)
@@ -124,6 +128,12 @@ class Contingency:
                 if e.status not in (0, 1):
                     raise ValueError(f"the case's event of branch {name} has status {e.status!r} (0 or 1)")
                 out.append((float(e.time), ("branch", name, e.status), f"{name} {'closed' if e.status else 'opened'}"))
+            elif e.kind == "load":
+                net.bus_index(e.bus)
+                if e.status not in (0, 1):
+                    raise ValueError(f"the case's event of the load {e.name} at bus {e.bus} has status {e.status!r}")
+                out.append((float(e.time), ("load", e.name, e.bus, e.power, e.status),
+                            f"load {e.name} at bus {e.bus} switched {'on' if e.status else 'off'}"))
             elif e.kind == "generator":
                 unit = _unit_of(net, e)
                 if e.status != 0:
@@ -178,7 +188,7 @@ class Contingency:
         start). ValueError where the branches open at some time cut a generator in service off."""
         net = self.network
         order = {br.name: i for i, br in enumerate(net.branches)}
-        fault, opened, tripped = None, set(), set()
+        fault, opened, tripped, loads_off = None, set(), set(), {}
         kept = [Topology(0.0, None, (), "intact")]
         changes = self._changes()
         i = 0
@@ -195,6 +205,11 @@ class Contingency:
                     fault = None
                 elif change[0] == "branch":
                     (opened.discard if change[2] else opened.add)(change[1])
+                elif change[0] == "load":
+                    if change[4]:
+                        loads_off.pop(change[1], None)
+                    else:
+                        loads_off[change[1]] = (change[2], change[3])
                 else:
                     tripped.add(change[1])
                 if text:
@@ -205,7 +220,8 @@ class Contingency:
                 raise ValueError(f"at {t:g} s the open branches {', '.join(sorted(opened, key=order.get))} cut a "
                                  "generator off")
             topology = Topology(t, None if fault is None else fault[0], tuple(sorted(opened, key=order.get)),
-                                "; ".join(texts), tuple(sorted(tripped)), None if fault is None else fault[1])
+                                "; ".join(texts), tuple(sorted(tripped)), None if fault is None else fault[1],
+                                tuple(loads_off.values()))
             if t == 0:
                 kept[0] = topology
             else:

@@ -305,11 +305,12 @@ class System:
                                      f"bus voltage, but it is not (off by {abs(I - mapped):.3g} pu at {abs(probe):.3g} pu)")
 
     def network(self, fault_bus: int | None = None, fault_impedance: complex = BOLTED_FAULT_IMPEDANCE,
-                out_of_service=()) -> Reduced:
+                out_of_service=(), loads_off=()) -> Reduced:
         """Case.reduced, kept per topology."""
-        key = (fault_bus, complex(fault_impedance) if fault_bus is not None else None, tuple(out_of_service))
+        key = (fault_bus, complex(fault_impedance) if fault_bus is not None else None, tuple(out_of_service),
+               tuple(loads_off))
         if key not in self._networks:
-            self._networks[key] = self.case.reduced(fault_bus, fault_impedance, out_of_service)
+            self._networks[key] = self.case.reduced(fault_bus, fault_impedance, out_of_service, loads_off)
         return self._networks[key]
 
     def generator_voltages(self, y, network: Reduced, m=math, tripped=()):
@@ -646,7 +647,7 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
         a = tp.start
         b = topologies[n + 1].start if n + 1 < len(topologies) else stop
         last = n == len(topologies) - 1
-        network = system.network(tp.fault_bus, contingency.fault_impedance, tp.open)
+        network = system.network(tp.fault_bus, contingency.fault_impedance, tp.open, tp.loads_off)
         inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
         times = list(t_eval[inside])
         if event_rows and n > 0 and (not times or times[0] != a):
