@@ -17,7 +17,7 @@ import json
 import math
 import time
 
-FAULT_START = 1.0  # s
+FAULT_START = 2.0  # s: after the stock cases' own events (most toggle a line at 1 and 1.1 s)
 # stock case (path under ANDES' cases), fault bus, fault duration [s]: a bus next to the case's new
 # devices, where ANDES converges through a fault of its default impedance (1e-4j pu)
 CASES = [

@@ -301,3 +301,15 @@ def test_ieeex1_regulators_follow_andes_through_a_fault_that_drives_them_to_thei
     r = compare_trajectories("ieee39/ieee39_full.xlsx", 16, tf=1.2, names=["IEEEX1"], tol=1e-6)["IEEEX1"]
     assert r["devices"] == 10 and r["scale"] > 5.0, r
     assert r["state"] < 1.5e-2, r
+
+
+def test_rectifier_loading_is_one_for_any_negative_input_on_every_namespace():
+    """A negative exciter voltage in a transient makes IN = KC XadIfd / VE negative and large: FEX is 1
+    there, and the square root of its middle piece is never taken of a negative number (math raised a
+    domain error for IN < -0.866 in a monolithic run of ieee14_esac1a)."""
+    torch = pytest.importorskip("torch")
+    for IN in (-0.5, -0.9, -5.0, -1e3):
+        assert blocks.rectifier_loading(math, IN) == 1.0
+    values = np.array([-1e3, -0.9, 0.2, 0.6, 0.9, 2.0])
+    np.testing.assert_allclose(blocks.rectifier_loading(torch, torch.tensor(values)).numpy(),
+                               blocks.rectifier_loading(np, values), rtol=1e-15)
