@@ -215,9 +215,11 @@ def exponential_saturation(m, x, A: float, B: float):
 def rectifier_loading(m, IN):
     """ESST3A's rectifier loading factor FEX(IN) (IEEE 421.5 / ANDES' Piecewise): 1 for IN <= 0,
     1 - 0.577 IN up to 0.433, sqrt(0.75 - IN^2) up to 0.75, 1.732 (1 - IN) up to 1, 0 beyond."""
-    # the root's argument kept positive where its piece is not taken (IN <= 0: a negative exciter
-    # voltage during a transient; IN > 0.75)
-    root = m.sqrt(where(m, IN <= 0.0, 0.75 + 0.0 * IN, where(m, IN <= 0.75, 0.75 - IN * IN, 0.1875 + 0.0 * IN)))
+    # the root of |0.75 - IN^2|: the same on its piece (0 <= IN <= 0.75, where it is at least 0.1875),
+    # and defined elsewhere whatever branch a solver has locked (IN < -0.866 in a transient with a
+    # negative exciter voltage, IN > 0.866)
+    square = 0.75 - IN * IN
+    root = m.sqrt(m.sqrt(square * square))
     return where(m, IN <= 0.0, 1.0 + 0.0 * IN,
                  where(m, IN <= 0.433, 1.0 - 0.577 * IN,
                        where(m, IN <= 0.75, root,

@@ -305,8 +305,8 @@ def test_ieeex1_regulators_follow_andes_through_a_fault_that_drives_them_to_thei
 
 def test_rectifier_loading_is_one_for_any_negative_input_on_every_namespace():
     """A negative exciter voltage in a transient makes IN = KC XadIfd / VE negative and large: FEX is 1
-    there, and the square root of its middle piece is never taken of a negative number (math raised a
-    domain error for IN < -0.866 in a monolithic run of ieee14_esac1a)."""
+    there, and the middle piece's square root is defined whatever branch a solver has locked (math
+    raised a domain error for IN < -0.866 in a monolithic run of ieee14_esac1a, its branches locked)."""
     torch = pytest.importorskip("torch")
     for IN in (-0.5, -0.9, -5.0, -1e3):
         assert blocks.rectifier_loading(math, IN) == 1.0
