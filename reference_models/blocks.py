@@ -26,7 +26,7 @@ Limits (ANDES' terms, andes.core.discrete and andes.core.block):
   limits are all constant (IEEEX1's too, as ANDES 2.0.0 computes it: models/ieeex1.py).
 
 Saturation: `quadratic_saturation` (GENROU's S(x) = B (x - A)^2 / x above A, ANDES' ExcQuadSat
-coefficients from two points), `exponential_saturation` (ANDES' ExcExpSat: S(x) = A exp(B x)).
+coefficients from two points; ANDES 2.0.0 uses it for every exciter here, never ExcExpSat).
 `rectifier_loading`: ESST3A's FEX(IN).
 """
 from __future__ import annotations
@@ -195,21 +195,6 @@ def quadratic_saturation_product(m, x, A: float, B: float):
     if B == 0:
         return 0.0 * x
     return where(m, x >= A, B * (x - A) * (x - A), 0.0 * x)
-
-
-def exponential_saturation_coefficients(E1: float, SE1: float, E2: float, SE2: float) -> tuple:
-    """(A, B) of the exponential saturation x S(x) = A exp(B x) through the points (E1, SE1),
-    (E2, SE2) (ANDES' ExcExpSat); E1 = 0 or E2 = 0: no saturation (A = 0)."""
-    if E1 == 0 or E2 == 0:
-        return 0.0, 0.0
-    ratio = E2 * SE2 / (E1 * SE1)
-    B = -math.log(ratio) / (E1 - E2)
-    return E1 * SE1 * math.exp(E1 * math.log(ratio) / (E1 - E2)), B
-
-
-def exponential_saturation(m, x, A: float, B: float):
-    """A exp(B x) [pu]."""
-    return A * m.exp(B * x)
 
 
 def rectifier_loading(m, IN):
