@@ -754,6 +754,7 @@ class GridMaster:
         S = V_gen * np.conj(I_gen)
         for k, labels in enumerate(device_labels(self.case.units)):
             device_states[f"{labels[0]}_P"], device_states[f"{labels[0]}_Q"] = S.real[:, k], S.imag[:, k]
+            device_states[f"{labels[0]}_I_re"], device_states[f"{labels[0]}_I_im"] = I_gen.real[:, k], I_gen.imag[:, k]
         # bus voltages: the recovery of the topology in force at each row
         V_bus = np.empty((len(rows), len(self.case.buses)), dtype=complex)
         for i, t in enumerate(time_):

@@ -498,6 +498,7 @@ class System:
         S = V_gen * np.conj(I)
         for k in range(g):
             device_states[f"{labels[k][0]}_P"], device_states[f"{labels[k][0]}_Q"] = S.real[:, k], S.imag[:, k]
+            device_states[f"{labels[k][0]}_I_re"], device_states[f"{labels[k][0]}_I_im"] = I.real[:, k], I.imag[:, k]
         return {"time": np.asarray(t, dtype=float), "V_gen": V_gen, "V_bus": V_gen[:, list(self.first_unit)] @ network.recovery.T,
                 "Vs": np.abs(V_gen), "theta_vs": theta_vs, "P": S.real, "Q": S.imag, "states": states,
                 "machine_inputs": machine_inputs, "device_states": device_states, "rotor_angle": delta}

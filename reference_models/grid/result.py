@@ -15,7 +15,8 @@ command-line contract (`GridResult.columns(case)`): per unit with a rotor angle 
 [rad], the speed `omega_<unit>` [rad/s deviation from synchronous] and the field voltage
 `Efd_<unit>` [pu] (unit labels `<bus>`, or `<bus>_<k>` where a bus holds several units, k 1-based
 in the case's unit order), then `V_<bus>` [pu] for every bus, then `theta_<bus>`, then every
-device's states and each bus device's `P`, `Q` at its bus. `speed_deviation` and `field_voltage`
+device's states and each bus device's `P`, `Q` and current `I_re`, `I_im` at its bus (system base,
+generator convention, network frame). `speed_deviation` and `field_voltage`
 are decided from the ports (the speed output link and its unit, the field-voltage input link),
 never from a component's name.
 """
