@@ -208,8 +208,13 @@ def mismatch_limit(tolerance: float) -> float:
 
 def configure_andes_logging(andes, level: int = logging.CRITICAL + 1) -> None:
     """ANDES' log messages below `level` off, and no log file: ANDES' config_logger otherwise makes
-    an empty folder /tmp/andes-* for a log file at every call."""
+    an empty folder /tmp/andes-* for a log file at every call. Its stream handler writes to the
+    sys.stderr of now: ANDES makes it once per process, on the stream of then, which a caller that
+    swaps sys.stderr (pytest's capture) may have closed since."""
     andes.config_logger(stream_level=level, file=False, log_path=tempfile.gettempdir())
+    for handler in logging.getLogger("andes").handlers:
+        if isinstance(handler, logging.StreamHandler) and not isinstance(handler, logging.FileHandler):
+            handler.stream = sys.stderr  # not setStream: it flushes the old stream, which may be closed
 
 
 class _Kept(logging.Handler):
