@@ -856,9 +856,7 @@ def _entry(model, name: str, i: int, ss) -> dict:
     BusFreq at its bus where it measures its bus frequency as ANDES does)."""
     params = _params(model, name, i, ss)
     if name in BUS_FREQUENCY_PARAMETERS:
-        bus = model.bus.v[i] if hasattr(model, "bus") and name != "FLoad" else ss.PQ.bus.v[
-            list(ss.PQ.idx.v).index(model.pq.v[i])]
-        params.update(_bus_frequency(ss, bus, BUS_FREQUENCY_PARAMETERS[name]))
+        params.update(_bus_frequency(ss, model.bus.v[i], BUS_FREQUENCY_PARAMETERS[name]))  # FLoad's: its PQ's
     return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": params}
 
 
