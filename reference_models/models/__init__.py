@@ -34,9 +34,13 @@ from .ieeet3 import IEEET3
 from .ieeevc import IEEEVC
 from .ieeex1 import IEEEX1
 from .motor import Motor3, Motor5
+from .pll1 import PLL1
+from .pll2 import PLL2
 from .pvd1 import PVD1
 from .reeca1 import REECA1
+from .reecb1 import REECB1
 from .regca1 import REGCA1
+from .regcp1 import REGCP1
 from .repca1 import REPCA1
 from .sexs import SEXS
 from .st2cut import ST2CUT
@@ -61,6 +65,7 @@ STANDARD_MODELS = {
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
     "ZIP": ZIP,
     "REGCA1": REGCA1, "REECA1": REECA1,
+    "PLL1": PLL1, "PLL2": PLL2, "REGCP1": REGCP1, "REECB1": REECB1,
     "PVD1": PVD1, "ESD1": ESD1,
     "REPCA1": REPCA1,
     "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1, "WTTQA1": WTTQA1,

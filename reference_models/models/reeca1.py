@@ -209,10 +209,10 @@ def _headroom(m, Imax: float, current):
     return m.sqrt(where(m, rest <= 0.0, 0.0 * rest, rest))
 
 
-def _signals(x, u, p: REECA1Params, m) -> dict:
-    """The controller's rates (before freezing) and algebraic signals (ANDES' names) at x, u."""
-    s0, S1, PIQ_xi, s4_y, pfilt_y, s5_y, PIV_xi, tdip, Ipmaxh, dIpcmd = x
-    V, Pe, Qe, Pref, Qref, Vref, pfaref = u
+def reactive_power_control(m, V, Pe, Qe, Qref, pfaref, s0, S1, PIQ_xi, p) -> dict:
+    """The voltage and power filters, vp, PFsel and the reactive power PI (ANDES' names: rates d_s0,
+    d_S1, d_PIQ before freezing; s0_y, vp, PFsel, PIQ_u, PIQ_y) of REECA1 and REECB1 (parameters p
+    with their names)."""
     k = p.base_ratio
     d_s0, s0_y = lag(m, V, s0, 1.0, p.Trv)
     d_S1, S1_y = lag(m, Pe, S1, 1.0, p.Tp)
@@ -221,6 +221,39 @@ def _signals(x, u, p: REECA1Params, m) -> dict:
     Qerr = clip(m, PFsel, p.QMin * k, p.QMax * k) - Qe
     PIQ_u = Qerr if p.VFLAG else 0.0 * Qerr
     d_PIQ, PIQ_y = pi_tracking(m, PIQ_u, PIQ_xi, p.Kqp, p.Kqi, p.kqs, p.VMIN, p.VMAX)
+    return dict(d_s0=d_s0, d_S1=d_S1, d_PIQ=d_PIQ, s0_y=s0_y, vp=vp, PFsel=PFsel, PIQ_u=PIQ_u, PIQ_y=PIQ_y)
+
+
+def current_limits(m, p, priority_cap, held, PIV_u, PIV_xi, s4_y, Iqinj, s5_y, vp) -> dict:
+    """The voltage PI and the current commands within Imax, the priority axis (P: PQFLAG = 1, else Q)
+    capped at priority_cap [pu, system base], the other at the rest of Imax; held(Ipmax) the active
+    current limit in use (REECA1's hold after a dip). ANDES' names: d_PIV, Iqmax, Ipmax, Ipmax_now
+    (before held), IqHL_y, IpHL_y. REECA1's and REECB1's (parameters p with their names)."""
+    Imax = p.Imax * p.base_ratio
+    if p.PQFLAG:  # P priority: the active current first
+        Ipmax_now = priority_cap
+        Ipmax = held(Ipmax_now)
+        IpHL_y = clip_between(m, s5_y / vp, 0.0 * Ipmax, Ipmax)
+        Iqmax = _headroom(m, Imax, IpHL_y)
+        d_PIV, PIV_y = pi_tracking(m, PIV_u, PIV_xi, p.Kvp, p.Kvi, p.kvs, -Iqmax, Iqmax)
+        IqHL_y = clip_between(m, (PIV_y if p.QFLAG else s4_y) + Iqinj, -Iqmax, Iqmax)
+    else:  # Q priority: the reactive current first
+        Iqmax = priority_cap
+        d_PIV, PIV_y = pi_tracking(m, PIV_u, PIV_xi, p.Kvp, p.Kvi, p.kvs, -Iqmax, Iqmax)
+        IqHL_y = clip_between(m, (PIV_y if p.QFLAG else s4_y) + Iqinj, -Iqmax, Iqmax)
+        Ipmax_now = _headroom(m, Imax, IqHL_y)
+        Ipmax = held(Ipmax_now)
+        IpHL_y = clip_between(m, s5_y / vp, 0.0 * Ipmax, Ipmax)
+    return dict(d_PIV=d_PIV, Iqmax=Iqmax, Ipmax=Ipmax, Ipmax_now=Ipmax_now, IqHL_y=IqHL_y, IpHL_y=IpHL_y)
+
+
+def _signals(x, u, p: REECA1Params, m) -> dict:
+    """The controller's rates (before freezing) and algebraic signals (ANDES' names) at x, u."""
+    s0, S1, PIQ_xi, s4_y, pfilt_y, s5_y, PIV_xi, tdip, Ipmaxh, dIpcmd = x
+    V, Pe, Qe, Pref, Qref, Vref, pfaref = u
+    k = p.base_ratio
+    q = reactive_power_control(m, V, Pe, Qe, Qref, pfaref, s0, S1, PIQ_xi, p)
+    s0_y, vp, PFsel, PIQ_y = q["s0_y"], q["vp"], q["PFsel"], q["PIQ_y"]
     Vsel = clip(m, PIQ_y if p.VFLAG else p.Vref1 + PFsel, p.VMIN, p.VMAX)
     Iqv = p.Kqv * dead_band(m, Vref - s0_y, p.dbd1, p.dbd2)
     after = 0.0 * Iqv
@@ -233,27 +266,13 @@ def _signals(x, u, p: REECA1Params, m) -> dict:
             return Ipmax_now
         return _during_dip(m, V, p, Ipmax_now, where(m, tdip < p.Thld2, Ipmaxh, Ipmax_now))
 
-    Imax = p.Imax * k
     PIV_u = (Vsel - s0_y if not p.VFLAG else Vsel) if p.QFLAG else 0.0 * Vsel
-    if p.PQFLAG:  # P priority: the active current first
-        Ipmax_now = _limit(m, s0_y, p.current_cap("p"))
-        Ipmax = held(Ipmax_now)
-        IpHL_y = clip_between(m, s5_y / vp, 0.0 * Ipmax, Ipmax)
-        Iqmax = _headroom(m, Imax, IpHL_y)
-        d_PIV, PIV_y = pi_tracking(m, PIV_u, PIV_xi, p.Kvp, p.Kvi, p.kvs, -Iqmax, Iqmax)
-        IqHL_y = clip_between(m, (PIV_y if p.QFLAG else s4_y) + Iqinj, -Iqmax, Iqmax)
-    else:  # Q priority: the reactive current first
-        Iqmax = _limit(m, s0_y, p.current_cap("q"))
-        d_PIV, PIV_y = pi_tracking(m, PIV_u, PIV_xi, p.Kvp, p.Kvi, p.kvs, -Iqmax, Iqmax)
-        IqHL_y = clip_between(m, (PIV_y if p.QFLAG else s4_y) + Iqinj, -Iqmax, Iqmax)
-        Ipmax_now = _headroom(m, Imax, IqHL_y)
-        Ipmax = held(Ipmax_now)
-        IpHL_y = clip_between(m, s5_y / vp, 0.0 * Ipmax, Ipmax)
-    return dict(d_s0=d_s0, d_S1=d_S1, d_PIQ=d_PIQ, d_s4=(PFsel / vp - s4_y) / p.Tiq,
+    c = current_limits(m, p, _limit(m, s0_y, p.current_cap("p" if p.PQFLAG else "q")), held, PIV_u, PIV_xi, s4_y,
+                       Iqinj, s5_y, vp)
+    return dict(q, d_s4=(PFsel / vp - s4_y) / p.Tiq,
                 d_pfilt=lag_rate(m, Pref, pfilt_y, 1.0, p.tpfilt, p.dPmin * k, p.dPmax * k)[0],
-                d_s5=(pfilt_y - s5_y) / p.Tpord, d_PIV=d_PIV, s0_y=s0_y, vp=vp, PFsel=PFsel, PIQ_u=PIQ_u, PIQ_y=PIQ_y,
-                Vsel=Vsel, PIV_u=PIV_u, Iqinj=Iqinj, Iqmax=Iqmax, Ipmax=Ipmax, Ipmax_now=Ipmax_now,
-                IqHL_y=IqHL_y, IpHL_y=IpHL_y, Ipcmd=IpHL_y + dIpcmd, Iqcmd=-IqHL_y)
+                d_s5=(pfilt_y - s5_y) / p.Tpord, Vsel=Vsel, PIV_u=PIV_u, Iqinj=Iqinj, **c,
+                Ipcmd=c["IpHL_y"] + dIpcmd, Iqcmd=-c["IqHL_y"])
 
 
 def _timer_rate(m, tdip, V, p: REECA1Params):
