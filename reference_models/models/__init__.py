@@ -43,11 +43,13 @@ from .regca1 import REGCA1
 from .regcp1 import REGCP1
 from .repca1 import REPCA1
 from .sexs import SEXS
+from .shaft5 import SHAFT5
 from .st2cut import ST2CUT
 from .tg2 import TG2
 from .tgov1 import TGOV1
 from .tgov1n import TGOV1N
 from .wtara1 import WTARA1
+from .wtds import WTDS
 from .wtdta1 import WTDTA1
 from .wtpta1 import WTPTA1
 from .wttqa1 import WTTQA1
@@ -69,4 +71,5 @@ STANDARD_MODELS = {
     "PVD1": PVD1, "ESD1": ESD1,
     "REPCA1": REPCA1,
     "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1, "WTTQA1": WTTQA1,
+    "WTDS": WTDS, "SHAFT5": SHAFT5,
 }
