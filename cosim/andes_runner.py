@@ -141,7 +141,7 @@ class AndesRunner:
         x, y = np.asarray(ts.x), np.asarray(ts.y)
         if t[0] > 0.0:
             t, x, y = np.r_[0.0, t], np.vstack([start[0], x]), np.vstack([start[1], y])
-        from reference_models.grid.andes_case import CONVERTERS, MACHINES
+        from reference_models.grid.andes_case import CONVERTERS, MACHINES, device_generators
 
         topologies = contingency.topologies(stop)
         units = self.case.units
@@ -149,10 +149,11 @@ class AndesRunner:
         # (x or y, column) of delta, omega, vf, P, Q per unit (None: not in ANDES' result, NaN)
         cols = [None] * (5 * g)
         where = {(u.bus, u.generator): k for k, u in enumerate(units)}
+        named = device_generators(ss)
         for name in MACHINES + CONVERTERS:
             model = getattr(ss, name)
             for i in range(model.n):
-                key = (number[model.bus.v[i]], str(model.gen.v[i]))
+                key = (number[model.bus.v[i]], named.get((name, i), str(model.gen.v[i])))
                 k = where.get(key, where.get((key[0], None)))
                 if k is None:
                     continue

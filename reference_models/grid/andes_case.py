@@ -27,7 +27,14 @@ What is stored, all on the system base (ANDES' `config.mva`) unless said otherwi
   stored network's bus power mismatch at the stored solution must stay below mismatch_limit (1e-8 pu
   for all but the largest cases).
 * the generators: the Slack and PV devices (slack first, then PV, file order each), each named by
-  its ANDES idx; units are keyed by generator (a bus may hold several, npcc does).
+  its ANDES idx; units are keyed by generator (a bus may hold several, npcc does). A static
+  generator that several machines or converters share (ANDES' gen, each taking its gammap, gammaq
+  share of its power: ieee14_pvd1's ten PVD1) is one generator per device, named "GEN/DEVICE", with
+  its share of the load-flow power (the shares must sum to 1: otherwise ANDES starts off its own
+  load flow, refused); a Toggle of the static generator trips them all. A static generator in
+  service that no machine or converter names keeps its own equations in ANDES' time domain (a PV
+  holds P and |V|, the slack |V| and angle): its unit is a PV or Slack device
+  (reference_models.models.static_generator), stated in the notes.
 * the dynamic devices, one unit per synchronous machine (GENROU, GENCLS), linked by ANDES' `gen`
   (machine -> static generator), `syn` (exciter, governor -> machine) and `avr` (stabiliser ->
   exciter): devices "machine", "exciter", "governor", "stabiliser" with their component (the
@@ -48,7 +55,8 @@ with what the file gave each device (System.add's arguments) against what ANDES 
 * refused (CaseError, one line naming the file and each model, device, parameter and value): what
   ANDES drops: a dyr model it does not know (a misspelt one, IEEET2, ...: its records are dropped,
   a generator left without a model it had in the file is an error; the generators are named), a
-  model (sheet) it does not know, a field (column) of a converted model it does not know; and a value
+  model (sheet) it does not know, a field (column) of a converted model it does not know that reads as
+  a misspelt parameter the file does not give (`_misspelt`: the parameter would take its default); and a value
   ANDES replaces for a parameter the conversion uses of
   a device in service: a value the model cannot take (ANDES' non_zero, non_negative, non_positive
   checks: a zero it divides by such as an inertia M, a time constant TF1 or a Line's x, a negative
@@ -59,7 +67,9 @@ with what the file gave each device (System.add's arguments) against what ANDES 
   power-flow start guess replaced (Bus v0, a0: the solution does not depend on it), an infinite
   limit made 1e8, an empty cell or NaN of a parameter the conversion uses (ANDES' documented default
   is used: the stock files leave many cells empty so), a field (column) ANDES drops that is one of its
-  parameters spelt in other case, with the values ANDES uses (kundur_esdc2a's SWITCH: ANDES' Switch), and any other ANDES warning
+  parameters spelt in other case, with the values ANDES uses (kundur_esdc2a's SWITCH: ANDES' Switch), a field
+  ANDES drops that is no misspelling (a parameter of another version of the model: kundur_reg's REGCA1
+  Iqmax beside the Iqrmax it gives, kundur_wtdta1's WTDTA1 Ht, Hg), and any other ANDES warning
   (PSS/E raw conversion notes, two slack generators on a bus, ...) with ANDES' words;
 * an empty cell of a parameter the conversion does not use (TGOV1's Tn: Sn where not given) and a
   parameter the file does not give at all take ANDES' defaults, as ANDES documents, unstated.
@@ -71,6 +81,7 @@ MISMATCH_MARGIN times that tolerance).
 from __future__ import annotations
 
 import argparse
+import difflib
 import hashlib
 import io
 import logging
@@ -304,8 +315,11 @@ def read_back(ss, records, inputs: dict, path, dyr=None, notes=None) -> None:
             continue  # stated by _replaced with the file's value
         field = _FIELD_UNKNOWN.match(said)
         if field:
-            stated.append(f"ANDES does not know the field {field.group(2)} of {field.group(1)} and drops it: its "
-                          f"values are those of ANDES' {_same_but_case(ss, *field.groups())}")
+            same = _same_but_case(ss, *field.groups())
+            stated.append(f"ANDES does not know the field {field.group(2)} of {field.group(1)} and drops it: "
+                          + (f"its values are those of ANDES' {same}" if same else
+                             f"ANDES' {field.group(1)} has no such parameter (a field of another version of "
+                             "the model), and the case runs without it as in ANDES"))
             continue
         if r.levelno >= logging.ERROR:
             raise CaseError(f"{path}: ANDES: {_said(r, 200)}")
@@ -352,8 +366,10 @@ def _refuse_dropped(ss, records, inputs, path, dyr=None) -> list:
             dyr_models += [m.strip() for m in unknown.group(1).split(",") if m.strip()]
         elif _MODEL_UNKNOWN.match(said):
             dropped.append(f"the model {_MODEL_UNKNOWN.match(said).group(1)} with its devices")
-        elif field and _uses(ss, field.group(1)) is not None and not _harmless_field(ss, inputs, *field.groups()):
-            dropped.append(f"the field {field.group(2)} of {field.group(1)} with its values")
+        elif field and _uses(ss, field.group(1)) is not None and not _harmless_field(ss, inputs, *field.groups()) \
+                and _misspelt(ss, inputs, *field.groups()) is not None:
+            dropped.append(f"the field {field.group(2)} of {field.group(1)} with its values (a misspelt "
+                           f"{_misspelt(ss, inputs, *field.groups())}, left at ANDES' default?)")
         else:
             rest.append(r)
     if dyr_models:
@@ -362,6 +378,23 @@ def _refuse_dropped(ss, records, inputs, path, dyr=None) -> list:
         raise CaseError(f"{dyr if dyr_models and dyr else path}: ANDES does not know and drops {'; '.join(dropped)}"
                         + ("; a generator left without a model it had in the file is an error" if dyr_models else ""))
     return rest
+
+
+MISSPELLING_CUTOFF = 0.8  # difflib similarity from which a dropped field reads as a misspelt parameter
+
+
+def _misspelt(ss, inputs: dict, model: str, field: str) -> str | None:
+    """The parameter of `model` that a field ANDES drops looks like a misspelling of (difflib
+    similarity MISSPELLING_CUTOFF or more), where the file gives that parameter for none of its
+    devices (it then takes ANDES' default); None otherwise (a field of another version of the model,
+    such as kundur_reg's Iqmax beside the Iqrmax it gives)."""
+    known = ss.models.get(model)
+    if known is None:
+        return None
+    given = set().union(*(set(v) for v in inputs.get(model, {}).values()))
+    candidates = [p for p in known.params if p not in given and p not in ("idx", "u", "name")]
+    close = difflib.get_close_matches(field, candidates, n=1, cutoff=MISSPELLING_CUTOFF)
+    return close[0] if close else None
 
 
 def _idx_list(text: str) -> list:
@@ -417,7 +450,7 @@ def _replaced(ss, inputs: dict) -> tuple:
             i = model.uid.get(idx)
             if i is None:
                 continue
-            in_service = "u" not in model.params or float(model.u.v[i]) != 0
+            in_service = "u" not in model.params or _on(model, i)
             for param, raw in given.items():
                 p = model.num_params.get(param)
                 if p is None or callable(getattr(p, "iconvert", None)) or p.vin is None:
@@ -443,6 +476,9 @@ def _replaced(ss, inputs: dict) -> tuple:
                     why = (f"{name} is not converted" if uses is None else "out of service" if param in uses
                            else f"opfmu does not use {param}")
                     stated.append(f"{what} ({why})")
+                elif type(p).__name__ == "ExtParam":  # a parameter ANDES takes from the device it links to
+                    stated.append(f"{what} (ANDES takes {param} from the device its {p.indexer.name} names, and so "
+                                  "does opfmu)")
                 elif param in START_GUESSES.get(name, ()):
                     stated.append(f"{what} (a start guess of the power flow)")
                 else:
@@ -549,6 +585,14 @@ def _remove(folder: Path) -> None:
     shutil.rmtree(aside, ignore_errors=True)
 
 
+def _on(model, i: int) -> bool:
+    """Whether ANDES' device i of `model` is in service: its effective status `ue` (its own status
+    and its bus's, and for a device that names a static generator, that one's: a PV on a bus out of
+    service is out of service), else its status u."""
+    status = getattr(model, "ue", None)
+    return float((status if status is not None and len(status.v) == model.n else model.u).v[i]) != 0
+
+
 def _values(model, name) -> list:
     return [float(v) for v in getattr(model, name).v]
 
@@ -581,11 +625,12 @@ def network_data(ss, name: str) -> dict:
     base = float(ss.config.mva)
     bus_numbers = [_bus(b, "Bus") for b in ss.Bus.idx.v]
     number = dict(zip(ss.Bus.idx.v, bus_numbers))
-    buses = [{"number": n, "kv": float(kv)} for n, kv in zip(bus_numbers, ss.Bus.Vn.v)]
+    live = [i for i in range(ss.Bus.n) if _on(ss.Bus, i)]  # a bus out of service leaves with its devices
+    buses = [{"number": bus_numbers[i], "kv": float(ss.Bus.Vn.v[i])} for i in live]
     L = ss.Line
     branches = []
     for i in range(L.n):
-        if L.u.v[i] == 0:
+        if not _on(L, i):
             continue
         tap, phi = float(L.tap.v[i]), float(L.phi.v[i])
         transformer = bool(L.trans.v[i]) or tap != 1.0 or phi != 0.0
@@ -596,33 +641,97 @@ def network_data(ss, name: str) -> dict:
     loads = {}
     replaced = _replaced_loads(ss)
     for i in range(ss.PQ.n):
-        if ss.PQ.u.v[i] == 0 or ss.PQ.idx.v[i] in replaced:
+        if not _on(ss.PQ, i) or ss.PQ.idx.v[i] in replaced:
             continue
         bus = number[ss.PQ.bus.v[i]]
         loads[bus] = loads.get(bus, 0j) + _pq_power(ss, i)
     shunts = {}
     for i in range(ss.Shunt.n):
-        if ss.Shunt.u.v[i] == 0:
+        if not _on(ss.Shunt, i):
             continue
         bus = number[ss.Shunt.bus.v[i]]
         shunts[bus] = shunts.get(bus, 0j) + complex(float(ss.Shunt.g.v[i]), float(ss.Shunt.b.v[i]))
     generators, P, Q = [], [], []
-    for model, kind in ((ss.Slack, "slack"), (ss.PV, "pv")):
-        for i in range(model.n):
-            if model.u.v[i] == 0:
-                continue
-            generators.append({"bus": number[model.bus.v[i]], "kind": kind, "V": float(model.v0.v[i]),
-                               "P": None if kind == "slack" else float(model.p0.v[i]), "name": str(model.idx.v[i])})
-            P.append(float(model.p.v[i]))
-            Q.append(float(model.q.v[i]))
+    for model, kind, i, name, (share_p, share_q) in _network_generators(ss):
+        generators.append({"bus": number[model.bus.v[i]], "kind": kind, "V": float(model.v0.v[i]),
+                           "P": None if kind == "slack" else share_p * float(model.p0.v[i]), "name": name})
+        P.append(share_p * float(model.p.v[i]))
+        Q.append(share_q * float(model.q.v[i]))
     data = {"name": name, "source": "converted from ANDES' case by reference_models.grid.andes_case",
             "base_mva": base, "f_hz": float(ss.config.freq), "buses": buses, "branches": branches,
             "loads": [{"bus": b, "P": s.real, "Q": s.imag} for b, s in loads.items()],
             "shunts": [{"bus": b, "G": s.real, "B": s.imag} for b, s in shunts.items()],
             "generators": generators,
-            "load_flow": {"V": _values(ss.Bus, "v"), "theta": _values(ss.Bus, "a"), "P": P, "Q": Q},
+            "load_flow": {"V": [_values(ss.Bus, "v")[i] for i in live], "theta": [_values(ss.Bus, "a")[i] for i in live],
+                          "P": P, "Q": Q},
             "events": events(ss, number)}
     return data
+
+
+def _bus_devices(ss) -> dict:
+    """{static generator idx (text): [(model name, position, device idx)]}: the machines and
+    converters in service that name each static generator (ANDES' gen), in model and file order."""
+    out = {}
+    for dname in MACHINES + CONVERTERS:
+        model = getattr(ss, dname)
+        for i in range(model.n):
+            if _on(model, i):
+                out.setdefault(str(model.gen.v[i]), []).append((dname, i, model.idx.v[i]))
+    return out
+
+
+def device_generators(ss) -> dict:
+    """{(model name, position): the network generator's name} of every machine and converter in
+    service (the name its unit is keyed by)."""
+    return {(dname, i): _generator_name(static, idx, len(devices) > 1)
+            for static, devices in _bus_devices(ss).items() for dname, i, idx in devices}
+
+
+def _generator_name(static: str, device, shared: bool) -> str:
+    """The network generator's name of a bus device of static generator `static`: the static
+    generator's idx, or "STATIC/DEVICE" where several devices share it."""
+    return f"{static}/{device}" if shared else str(static)
+
+
+def _network_generators(ss) -> list:
+    """The network's generators (module docstring), in order: (ANDES model, kind, position, name,
+    (P share, Q share)); one per bus device where several share a static generator. CaseError where
+    the shares of a static generator's devices do not sum to 1."""
+    devices = _bus_devices(ss)
+    out = []
+    for model, kind in ((ss.Slack, "slack"), (ss.PV, "pv")):
+        for i in range(model.n):
+            if not _on(model, i):
+                continue
+            static = str(model.idx.v[i])
+            mine = devices.get(static, [])
+            if len(mine) <= 1:
+                shares = [(1.0, 1.0)]
+            else:
+                shares = [tuple(float(getattr(getattr(ss, d), k).v[j]) for k in ("gammap", "gammaq")) for d, j, _ in mine]
+            if mine:
+                total = tuple(sum(float(getattr(getattr(ss, d), k).v[j]) for d, j, _ in mine) for k in ("gammap", "gammaq"))
+                if any(abs(t - 1.0) > 1e-9 for t in total):
+                    raise CaseError(f"the devices {_listed([f'{d} {idx}' for d, _, idx in mine], 3)} of static generator "
+                                    f"{static} take {total[0]:g} of its active and {total[1]:g} of its reactive power "
+                                    "(gammap, gammaq): ANDES starts them off its own load flow (make each sum 1)")
+            for k, share in enumerate(shares):
+                name = _generator_name(static, mine[k][2], True) if len(mine) > 1 else static
+                out.append((model, kind, i, name, share))
+    return out
+
+
+def _static_generator_notes(ss) -> list:
+    """The notes of the static generators in service that no machine or converter names: ANDES
+    keeps their equations in the time domain, and so does their PV or Slack device."""
+    named = _bus_devices(ss)
+    bare = [f"{kind} {model.idx.v[i]}" for model, kind in ((ss.Slack, "Slack"), (ss.PV, "PV"))
+            for i in range(model.n) if _on(model, i) and str(model.idx.v[i]) not in named]
+    if not bare:
+        return []
+    return [f"{_listed(bare)} {'have' if len(bare) > 1 else 'has'} no machine or converter: as in ANDES' time domain, "
+            "a PV holds its active power and voltage, a slack its voltage and angle (a static_generator device, "
+            "within 1e-5 pu per pu of reactive power or current)"]
 
 
 def _pq_power(ss, i: int) -> complex:
@@ -640,6 +749,7 @@ def _pq_power(ss, i: int) -> complex:
 def events(ss, number) -> list:
     """The case's own enabled Toggle and Fault events as network-file entries."""
     out = []
+    devices = _bus_devices(ss)
     for i in range(ss.Toggle.n):
         if ss.Toggle.u.v[i] == 0:
             continue
@@ -653,15 +763,19 @@ def events(ss, number) -> list:
             power = _pq_power(ss, j)
             out.append({"kind": "load", "time": t, "bus": number[ss.PQ.bus.v[j]], "load": str(dev),
                         "P": power.real, "Q": power.imag, "status": "toggle"})
-        elif target in MACHINES + STATIC_GENERATORS:
+        elif target in MACHINES + CONVERTERS + STATIC_GENERATORS:
             model = getattr(ss, target)
             j = list(model.idx.v).index(dev)
-            generator = str(model.gen.v[j]) if target in MACHINES else str(model.idx.v[j])
-            out.append({"kind": "generator", "time": t, "bus": number[model.bus.v[j]], "generator": generator,
-                        "status": "toggle"})
+            static = str(model.idx.v[j]) if target in STATIC_GENERATORS else str(model.gen.v[j])
+            sharing = devices.get(static, [])
+            names = [_generator_name(static, d, len(sharing) > 1) for _, _, d in sharing] or [static]
+            if target not in STATIC_GENERATORS:
+                names = [_generator_name(static, dev, len(sharing) > 1)]
+            out += [{"kind": "generator", "time": t, "bus": number[model.bus.v[j]], "generator": name,
+                     "status": "toggle"} for name in names]
         else:
-            raise CaseError(f"a Toggle of a {target} is not converted (Line, PQ, {', '.join(MACHINES + STATIC_GENERATORS)} "
-                            "are)")
+            raise CaseError(f"a Toggle of a {target} is not converted (Line, PQ, "
+                            f"{', '.join(MACHINES + CONVERTERS + STATIC_GENERATORS)} are)")
     for i in range(ss.Fault.n):
         if ss.Fault.u.v[i] == 0:
             continue
@@ -681,7 +795,7 @@ def _branch_name(ss, dev, number) -> str:
     L = ss.Line
     i = list(L.idx.v).index(dev)
     ends = {L.bus1.v[i], L.bus2.v[i]}
-    k = sum(1 for j in range(i + 1) if {L.bus1.v[j], L.bus2.v[j]} == ends and L.u.v[j] != 0)
+    k = sum(1 for j in range(i + 1) if {L.bus1.v[j], L.bus2.v[j]} == ends and _on(L, j))
     name = f"{number[L.bus1.v[i]]}-{number[L.bus2.v[i]]}"
     return name + (f":{k}" if k > 1 else "")
 
@@ -725,7 +839,7 @@ def _alters(ss) -> list:
     notes, refused = [], []
     model = ss.Alter
     for i in range(model.n):
-        if model.u.v[i] == 0:
+        if not _on(model, i):
             continue
         target, dev, src, t = model.model.v[i], model.dev.v[i], model.src.v[i], float(model.t.v[i])
         what = f"Alter {model.idx.v[i]} ({target} {dev} {src} {model.method.v[i]} {model.amount.v[i]:g} at {t:g} s)"
@@ -749,7 +863,7 @@ def _replaced_loads(ss) -> dict:
         if not hasattr(model, "pq") or dname not in STANDARD_MODELS:
             continue
         for i in range(model.n):
-            if model.u.v[i] != 0:
+            if _on(model, i):
                 out[model.pq.v[i]] = (dname, i)
     return out
 
@@ -770,7 +884,7 @@ def _bus_frequency(ss, bus, prefix: str = "") -> dict:
     under the names `prefix`Tf, ... of the device that takes them."""
     model = ss.BusFreq
     for i in range(model.n):
-        if model.bus.v[i] == bus and model.u.v[i] != 0:
+        if model.bus.v[i] == bus and _on(model, i):
             values = (model.Tf.v[i], model.Tw.v[i], model.fn.v[i])
             break
     else:
@@ -807,7 +921,7 @@ def _load_units(ss, number) -> list:
         if hasattr(model, "pq") or dname not in STANDARD_MODELS:
             continue
         for i in range(model.n):
-            if model.u.v[i] != 0:
+            if _on(model, i):
                 out.append({"bus": number[model.bus.v[i]], "load": str(model.idx.v[i]), "P": float(model.p.v[i]),
                             "Q": float(model.q.v[i]), "load_device": _entry(model, dname, i, ss),
                             "fmu": {"kind": "reference"}})
@@ -871,38 +985,38 @@ def dynamic_data(ss, name: str) -> dict:
     train to the electrical control by `ree`, its aerodynamics, pitch and torque controls each to the
     one before)."""
     number = dict(zip(ss.Bus.idx.v, (_bus(b, "Bus") for b in ss.Bus.idx.v)))
-    units = {}  # bus device idx -> its unit's entry
-    owner = {None: {}}  # role -> {device idx: the unit's key}
-    for role, names in (("machine", MACHINES), ("converter", CONVERTERS)):
-        for dname in names:
+    units = {}  # (ANDES group, bus device idx) -> its unit's entry
+    owner = {None: {}}  # role -> {(ANDES group, device idx): the unit's key}
+    for static, devices in _bus_devices(ss).items():
+        for dname, i, idx in devices:
             model = getattr(ss, dname)
-            for i in range(model.n):
-                if model.u.v[i] == 0:
-                    continue
-                idx = model.idx.v[i]
-                units[idx] = {"bus": number[model.bus.v[i]], "generator": str(model.gen.v[i]),
-                              role: _entry(model, dname, i, ss)}
-                owner[None][idx] = idx
-    per_generator = {}
-    for idx, unit in units.items():
-        per_generator.setdefault(unit["generator"], []).append(str(idx))
-    shared = {g: devices for g, devices in per_generator.items() if len(devices) > 1}
-    if shared:
-        g, devices = next(iter(shared.items()))
-        raise CaseError(f"{len(devices)} devices ({_listed(devices, 3)}) share the static generator {g}, each with its "
-                        f"gammap, gammaq share{f' (and so for {len(shared) - 1} more generators)' if len(shared) > 1 else ''}"
-                        ": one bus device per generator is converted")
+            role = "machine" if dname in MACHINES else "converter"
+            units[(model.group, idx)] = {"bus": number[model.bus.v[i]],
+                                         "generator": _generator_name(static, idx, len(devices) > 1),
+                                         role: _entry(model, dname, i, ss)}
+            owner[None][(model.group, idx)] = (model.group, idx)
+    for model, dname in ((ss.Slack, "Slack"), (ss.PV, "PV")):
+        for i in range(model.n):
+            static = model.idx.v[i]
+            if _on(model, i) and str(static) not in {u["generator"].split("/")[0] for u in units.values()}:
+                units[("static", static)] = {"bus": number[model.bus.v[i]], "generator": str(static),
+                                             "static_generator": {"component": STANDARD_MODELS[dname].name,
+                                                                  "andes": str(static), "params": {}}}
     for role, names, link, target in _control_roles():
         owner[role] = {}
         for dname in names:
             model = getattr(ss, dname)
             for i in range(model.n):
-                if model.u.v[i] == 0:
+                if not _on(model, i):
                     continue
                 if dname == "IEEEG1" and model.syn2.v[i] is not None:
                     raise CaseError(f"IEEEG1 {model.idx.v[i]} drives two machines (syn2), which opfmu does not model")
                 controlled = getattr(model, link).v[i]
-                key = owner.get(target, {}).get(controlled)
+                named = getattr(model, link).model  # the group (or model) the link names: idx are unique in a group
+                group = ss.models[named].group if named in ss.models else named
+                found = [k for (g, idx), k in owner.get(target, {}).items()
+                         if idx == controlled and (group is None or g == group)]
+                key = found[0] if len(found) == 1 else None
                 if key is None:
                     raise CaseError(f"{dname} {model.idx.v[i]} names no {target or 'machine or converter'} in "
                                     f"service ({controlled})")
@@ -913,17 +1027,12 @@ def dynamic_data(ss, name: str) -> dict:
                     extra = MEASURING[dname](ss, model, i, number)
                     units[key][role]["measures"] = extra["measures"]
                     units[key][role]["params"].update(extra["params"])
-                owner[role][model.idx.v[i]] = key
+                owner[role][(model.group, model.idx.v[i])] = key
     for unit in units.values():
         unit["fmu"] = {"kind": "reference"}
-    generators = [str(g) for m in (ss.Slack, ss.PV) for g in m.idx.v]
-    in_service = [str(g) for m in (ss.Slack, ss.PV) for g, u in zip(m.idx.v, m.u.v) if u != 0]
-    bare = [g for g in in_service if g not in {u["generator"] for u in units.values()}]
-    if bare:
-        raise CaseError(f"the generator{'s' if len(bare) > 1 else ''} {', '.join(bare[:5])}"
-                        f"{' ...' if len(bare) > 5 else ''} {'have' if len(bare) > 1 else 'has'} no machine or "
-                        f"converter ({', '.join(MACHINES + CONVERTERS)}) in the case")
-    order = sorted(units.values(), key=lambda u: generators.index(u["generator"]))
+    generators = [name for _, _, _, name, _ in _network_generators(ss)]
+    order = sorted((u for u in units.values() if u["generator"] in generators),
+                   key=lambda u: generators.index(u["generator"]))
     loads = _load_units(ss, number)
     return {"case": name, "description": "converted from ANDES' case by reference_models.grid.andes_case: one unit per "
             "machine or converter (with its exciter, governor, stabiliser, compensator, electrical and plant "
@@ -960,7 +1069,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    notes += _alters(ss) + _measurements_left_out(ss)
+    notes += _alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss)
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
     worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])

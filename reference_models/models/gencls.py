@@ -31,7 +31,7 @@ from .common import check_ranges, dq_voltage, finite_inputs, machine_initialisat
 
 PARAMETER_RANGES = {
     "fn": (16.0, 400.0, "Hz"), "Sn": (1e-3, 1e5, "MVA"), "Sb": (1e-3, 1e5, "MVA"),
-    "M": (0.1, 2000.0, "s"), "D": (0.0, 1000.0, "pu"), "ra": (0.0, 1.0, "pu"),
+    "M": (0.01, 2000.0, "s"), "D": (0.0, 1000.0, "pu"), "ra": (0.0, 1.0, "pu"),  # M: ieee14_wt3n has 0.01
     "xd1": (1e-5, 10.0, "pu"),  # EI_33 models stiff sources as GENCLS with xd1 = 1e-4
 }
 
