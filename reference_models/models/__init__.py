@@ -45,6 +45,7 @@ from .repca1 import REPCA1
 from .sexs import SEXS
 from .shaft5 import SHAFT5
 from .st2cut import ST2CUT
+from .static_generator import PV, SLACK
 from .tg2 import TG2
 from .tgov1 import TGOV1
 from .tgov1n import TGOV1N
@@ -66,6 +67,7 @@ STANDARD_MODELS = {
     "IEEEVC": IEEEVC,
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
     "ZIP": ZIP,
+    "PV": PV, "Slack": SLACK,
     "REGCA1": REGCA1, "REECA1": REECA1,
     "PLL1": PLL1, "PLL2": PLL2, "REGCP1": REGCP1, "REECB1": REECB1,
     "PVD1": PVD1, "ESD1": ESD1,
