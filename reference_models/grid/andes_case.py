@@ -106,7 +106,7 @@ ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_ful
 NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault", "Alter")
 # measurements that act on no device of a converted case, and the case's description: left out, each
 # measurement stated in the case's notes (a device that reads a BusFreq takes its time constants)
-IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "COI", "Summary")
+IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "COI", "Summary", "FreqDiv", "PMU")
 MACHINES = ("GENROU", "GENCLS")
 STATIC_GENERATORS = ("PV", "Slack")  # a Toggle of one trips its machine's unit (ANDES passes the status on)
 EXCITERS = ("IEEEX1", "EXDC2", "EXST1", "ESST3A", "SEXS", "EXAC1", "EXAC4", "ESAC1A", "ESST1A", "ESST4B",
@@ -122,7 +122,7 @@ WIND_CONTROLS = ("WTDTA1", "WTARA1", "WTPTA1", "WTTQA1")  # type-3 wind: drive t
 DRIVE_TRAINS = ("WTDTA1", "WTDS")  # a wind turbine's drive train, linked by `ree` to its electrical control
 SHAFTS = ("SHAFT5",)  # a machine's multi-mass torsional shaft, linked by `syn` to its machine
 PLLS = ("PLL1", "PLL2")  # phase-locked loops: a control device of the converter that names them (pll)
-CACHE_FORMAT = 2  # version of what convert writes: a new one keys new cache entries (2: notes, refusals of issue 33)
+CACHE_FORMAT = 3  # version of what convert writes: a new one keys new cache entries (3: shared and static generators)
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
 ROUNDING_MARGIN = 10  # pflow_tolerance: times the rounding error of the largest bus power balance
@@ -962,7 +962,7 @@ def _control_roles() -> tuple:
             ("electrical_control", ELECTRICAL_CONTROLS, "reg", None),
             ("stabiliser", STABILISERS, "avr", "exciter"), ("compensator", COMPENSATORS, "avr", "exciter"),
             ("plant_control", PLANT_CONTROLS, "ree", "electrical_control"),
-            ("drive_train", WIND_CONTROLS[:1], "ree", "electrical_control"),
+            ("drive_train", DRIVE_TRAINS, "ree", "electrical_control"), ("shaft", SHAFTS, "syn", None),
             ("aerodynamics", WIND_CONTROLS[1:2], "rego", "drive_train"),
             ("pitch_control", WIND_CONTROLS[2:3], "rea", "aerodynamics"),
             ("torque_control", WIND_CONTROLS[3:], "rep", "pitch_control"))

@@ -143,15 +143,15 @@ class Network:
                     return br
         raise ValueError(f"{self.name} has no branch {a}-{b} (branches: {', '.join(br.name for br in self.branches)})")
 
-    def connected_buses(self, out_of_service=()) -> set:
-        """The buses connected to the first generator's bus with the given branches open."""
+    def connected_buses(self, out_of_service=(), start: int | None = None) -> set:
+        """The buses connected to bus `start` (default: the first generator's) with the given branches open."""
         removed = {self.branch(b) for b in out_of_service}
         neighbours = {}
         for br in self.branches:
             if br not in removed:
                 neighbours.setdefault(br.from_bus, []).append(br.to_bus)
                 neighbours.setdefault(br.to_bus, []).append(br.from_bus)
-        start = self.generators[0].bus
+        start = self.generators[0].bus if start is None else start
         reach, frontier = {start}, [start]
         while frontier:
             for other in neighbours.get(frontier.pop(), ()):
@@ -159,6 +159,16 @@ class Network:
                     reach.add(other)
                     frontier.append(other)
         return reach
+
+    def islands(self, out_of_service=()) -> list:
+        """The sets of buses connected to each other with the given branches open (bus order of
+        their first bus)."""
+        left, out = list(self.buses), []
+        while left:
+            island = self.connected_buses(out_of_service, left[0])
+            out.append(island)
+            left = [b for b in left if b not in island]
+        return out
 
     def disconnects_generator(self, trip) -> bool:
         """Whether opening branch `trip` leaves a generator bus cut off from the others."""
@@ -343,7 +353,7 @@ class Case:
         (None: none) and the named branches open, reduced to the generator buses (Kron; each bus
         once, in unit order, where several units share one)."""
         net = self.network
-        opened = tuple(net.openable(b) for b in out_of_service)
+        opened = tuple(net.branch(b) for b in out_of_service)  # what may open: Contingency checks it
         S = self.flow.S_load.copy()
         for bus, power in loads_off:
             S[net.bus_index(bus)] -= power
@@ -358,6 +368,8 @@ class Case:
             parts.append(f"fault at bus {fault_bus}")
         if opened:
             parts.append("open " + ", ".join(br.name for br in opened))
+            isolated = np.flatnonzero(~np.any(Y != 0, axis=1))  # a bus cut off with nothing on it
+            Y[isolated, isolated] = 1.0  # grounded: its voltage 0, undefined otherwise (nothing flows there)
         if loads_off:
             parts.append(f"{len(loads_off)} load{'s' if len(loads_off) > 1 else ''} off")
         g = list(dict.fromkeys(net.bus_index(u.bus) for u in self.units))  # units at one bus share it
