@@ -307,3 +307,13 @@ def bus_frequency(m, theta, theta_f, theta_w, Tf: float, Tw: float, fn: float):
     d_f, filtered = lag(m, theta, theta_f, 1.0, Tf)
     d_w, deviation = washout(m, filtered, theta_w, 1.0 / (2.0 * math.pi * fn), Tw)
     return d_f, d_w, 1.0 + deviation
+
+
+def lag_non_windup_between(m, u, x, K: float, T: float, low, high):
+    """`lag_non_windup` with limits that are values of the namespace (e.g. proportional to an input):
+    (dx/dt, y = x). T = 0: the state is held and y = K u clipped to [low, high] (its reset:
+    `lag_non_windup_reset`, which takes such limits). A limit may also be a Python float."""
+    if T > 0:
+        return non_windup_between(m, (K * u - x) / T, x, low, high), x
+    y = K * u
+    return 0.0 * x, clip_between(m, y, low + 0.0 * y, high + 0.0 * y)

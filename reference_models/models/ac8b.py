@@ -16,10 +16,12 @@ PIDTrackAW):
         Td dPID_WO_x/dt = vi - PID_WO_x,  ys = kP vi + PID_xi + kD (vi - PID_WO_x) / Td,
         PID_y = ys clipped to [VPMIN, VPMAX] (windup),  dPID_xi/dt = kI (vi - ks (ys - PID_y))
     non-windup lag KA / (1 + s TA) of PID_y:  TA dLA_y/dt = KA PID_y - LA_y,  VRMIN <= LA_y <= VRMAX
-        (reset: LA_y at or beyond a limit while its unlimited rate pushes outward is placed on it)
+        (reset: LA_y at or beyond a limit while its unlimited rate pushes outward is placed on it);
+        its output VR = LA_y; TA = 0: LA_y held, VR = KA PID_y clipped to [VRMIN, VRMAX] (ANDES:
+        the lag's equation algebraic, pegged by its limiter)
     VFE = KE INT_y + Se + KD XadIfd,  Se = B (INT_y - A)^2 where INT_y >= A, else 0 (quadratic
         saturation through (E1, SE1), (E2, SE2), ANDES' ExcQuadSat)
-    TE dINT_y/dt = LA_y - VFE
+    TE dINT_y/dt = VR - VFE
     IN = KC XadIfd / INT_y,  Efd = FEX(IN) INT_y  (blocks.rectifier_loading)
 
 At rest (ANDES' initialisation): INT_y solves INT_y FEX(KC XadIfd / INT_y) = Efd, LA_y = VFE,
@@ -49,7 +51,7 @@ from ..ports import Link, Ports
 from .common import check_limits, check_ranges, controller_initialisation, finite_inputs, set_point
 
 PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "kP": (0.0, 1000.0, "pu"), "kI": (0.001, 1000.0, "pu/s"),
-                    "kD": (0.0, 1000.0, "pu s"), "Td": (0.001, 10.0, "s"), "TA": (0.001, 10.0, "s"),
+                    "kD": (0.0, 1000.0, "pu s"), "Td": (0.001, 10.0, "s"), "TA": (0.0, 10.0, "s"),
                     "KA": (0.01, 5000.0, "pu"), "TE": (0.001, 10.0, "s"), "E1": (0.0, 20.0, "pu"),
                     "SE1": (0.0, 10.0, "pu"), "E2": (0.0, 20.0, "pu"), "SE2": (0.0, 10.0, "pu"),
                     "KE": (-1.0, 10.0, "pu"), "KD": (0.0, 10.0, "pu"), "KC": (0.0, 10.0, "pu"),
@@ -122,8 +124,8 @@ def derivatives(x, u, p: AC8BParams, m):
     u = (Vt, Vref, Vss, XadIfd)."""
     d_LG, d_xi, d_WO, PID_y = _regulator(x, u, p, m)
     LA_y, INT_y = x[3], x[4]
-    d_LA, _ = lag_non_windup(m, PID_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
-    return d_LG, d_xi, d_WO, d_LA, (LA_y - _feedback(INT_y, u[3], p, m)) / p.TE
+    d_LA, VR = lag_non_windup(m, PID_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
+    return d_LG, d_xi, d_WO, d_LA, (VR - _feedback(INT_y, u[3], p, m)) / p.TE
 
 
 def reset(x, u, p: AC8BParams, m):

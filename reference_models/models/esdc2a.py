@@ -18,8 +18,10 @@ Equations (ANDES 2.0.0, andes/models/exciter/esdc2a.py):
     lead-lag (1 + s TC) / (1 + s TB) of vi -> LL_y  (TB = 0: a gain of 1)
     non-windup lag KA / (1 + s TA):  TA dLA_y/dt = KA LL_y - LA_y,  VRMIN Vt <= LA_y <= VRMAXc Vt,
         VRMAXc = VRMAX, or 999 where VRMAX = 0 (ANDES: "0 - unlimited")
-        (reset: LA_y at or beyond a limit while KA LL_y - LA_y pushes outward is placed on it)
-    TE dINT_y/dt = LA_y - KE INT_y - Se,  Se = B (INT_y - A)^2 where INT_y >= A, else 0
+        (reset: LA_y at or beyond a limit while KA LL_y - LA_y pushes outward is placed on it);
+        its output VR = LA_y; TA = 0: LA_y held, VR = KA LL_y clipped to the limits (ANDES: the
+        lag's equation algebraic, 0 = KA LL_y - LA_y, pegged by its limiter)
+    TE dINT_y/dt = VR - KE INT_y - Se,  Se = B (INT_y - A)^2 where INT_y >= A, else 0
         (quadratic saturation through (E1, SE1), (E2, SE2): ANDES' ExcQuadSat; the defaults
         E2 = SE2 = 0 give B = 0, no saturation)
     Efd = INT_y
@@ -50,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import (lag, lead_lag, non_windup_between, non_windup_reset, quadratic_saturation_coefficients,
+from ..blocks import (lag, lag_non_windup_between, lag_non_windup_reset, lead_lag, quadratic_saturation_coefficients,
                       quadratic_saturation_product, washout)
 from ..component import Component, Parameters, Quantity
 from ..ports import Link, Ports
@@ -59,7 +61,7 @@ from .exdc2 import DC_INPUTS, dc_equilibrium, dc_initialise
 
 UNLIMITED_CEILING = 999.0  # pu: the regulator ceiling where the data give VRMAX = 0 (ANDES' VRMAXc)
 
-PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.001, 10.0, "s"),
+PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.0, 10.0, "s"),
                     "TB": (0.0, 100.0, "s"), "TC": (0.0, 100.0, "s"), "KE": (-1.0, 10.0, "pu"),
                     "TE": (0.001, 10.0, "s"), "KF": (0.0, 10.0, "pu"), "TF1": (0.001, 100.0, "s"),
                     "E1": (0.0, 20.0, "pu"), "SE1": (0.0, 10.0, "pu"), "E2": (0.0, 20.0, "pu"),
@@ -118,11 +120,11 @@ class ESDC2AParams(Parameters):
         return saturation_of(self)
 
 
-def exciter_rate(m, LA_y, INT_y, p):
-    """dINT_y/dt of the DC exciter: TE dINT_y/dt = LA_y - KE INT_y - B (INT_y - A)^2 [INT_y >= A]
-    (ESDC1A, ESDC2A, IEEET1)."""
+def exciter_rate(m, VR, INT_y, p):
+    """dINT_y/dt of the DC exciter: TE dINT_y/dt = VR - KE INT_y - B (INT_y - A)^2 [INT_y >= A]
+    (ESDC1A, ESDC2A, IEEET1), VR the regulator's output."""
     A, B = p.saturation
-    return (LA_y - p.KE * INT_y - quadratic_saturation_product(m, INT_y, A, B)) / p.TE
+    return (VR - p.KE * INT_y - quadratic_saturation_product(m, INT_y, A, B)) / p.TE
 
 
 def _limits(Vt, p: ESDC2AParams, proportional: bool) -> tuple:
@@ -133,27 +135,29 @@ def _limits(Vt, p: ESDC2AParams, proportional: bool) -> tuple:
 
 
 def _regulator(x, u, p: ESDC2AParams, m):
-    """(dLG_y/dt, dLL_x/dt, dWF_x/dt, unlimited dLA_y/dt)."""
+    """(dLG_y/dt, dLL_x/dt, dWF_x/dt, the regulator lag's input LL_y)."""
     LG_y, LL_x, LA_y, INT_y, WF_x = x
     Vt, Vref, Vss = u
     d_LG, _ = lag(m, Vt, LG_y, 1.0, p.TR)  # ANDES' sensing lag: a state nothing reads
     d_WF, WF_y = washout(m, INT_y, WF_x, p.KF, p.TF1)
     d_LL, LL_y = lead_lag(m, Vref - Vt - WF_y + Vss, LL_x, 1.0, p.TC, p.TB)
-    return d_LG, d_LL, d_WF, (p.KA * LL_y - LA_y) / p.TA
+    return d_LG, d_LL, d_WF, LL_y
 
 
 def _esdc_derivatives(x, u, p: ESDC2AParams, m, proportional: bool):
     """(dLG_y, dLL_x, dLA_y, dINT_y, dWF_x)/dt for x = (LG_y, LL_x, LA_y, INT_y, WF_x),
     u = (Vt, Vref, Vss); the regulator's limits proportional to Vt (ESDC2A) or constant (ESDC1A)."""
-    d_LG, d_LL, d_WF, rate = _regulator(x, u, p, m)
+    d_LG, d_LL, d_WF, LL_y = _regulator(x, u, p, m)
     low, high = _limits(u[0], p, proportional)
-    return d_LG, d_LL, non_windup_between(m, rate, x[2], low, high), exciter_rate(m, x[2], x[3], p), d_WF
+    d_LA, VR = lag_non_windup_between(m, LL_y, x[2], p.KA, p.TA, low, high)
+    return d_LG, d_LL, d_LA, exciter_rate(m, VR, x[3], p), d_WF
 
 
 def _esdc_reset(x, u, p: ESDC2AParams, m, proportional: bool):
-    """x after the reset of the regulator's non-windup limit (blocks.non_windup_reset)."""
+    """x after the reset of the regulator's non-windup limit (blocks.lag_non_windup_reset)."""
     low, high = _limits(u[0], p, proportional)
-    return x[0], x[1], non_windup_reset(m, _regulator(x, u, p, m)[3], x[2], low, high), x[3], x[4]
+    LA_y = lag_non_windup_reset(m, _regulator(x, u, p, m)[3], x[2], p.KA, p.TA, low, high)
+    return x[0], x[1], LA_y, x[3], x[4]
 
 
 def esdc_initialise(Efd: float, u, p: ESDC2AParams) -> tuple:

@@ -14,8 +14,10 @@ Equations (ANDES 2.0 model reference, Exciter: EXDC2):
     vi = Vref - LS_y - W_y + Vss
     lead-lag (1 + s TC) / (1 + s TB) of vi (TB = 0: a gain of 1)
     non-windup lag KA / (1 + s TA):  TA dLA_y/dt = KA LL_y - LA_y,  VRMIN <= LA_y <= VRMAX
-        (reset: LA_y at or beyond a limit while KA LL_y - LA_y pushes outward is placed on it)
-    TE dvp/dt = LA_y - KE vp - Se vp,  Se vp = B (vp - A)^2 where Efd >= A, else 0
+        (reset: LA_y at or beyond a limit while KA LL_y - LA_y pushes outward is placed on it);
+        its output VR = LA_y; TA = 0: LA_y held, VR = KA LL_y clipped to [VRMIN, VRMAX] (ANDES
+        makes the lag's equation algebraic, 0 = KA LL_y - LA_y, its limiter then pegs LA_y)
+    TE dvp/dt = VR - KE vp - Se vp,  Se vp = B (vp - A)^2 where Efd >= A, else 0
         (quadratic saturation through (E1, SE1), (E2, SE2), ANDES' ExcQuadSat)
     Efd = omega vp
 """
@@ -31,7 +33,7 @@ from ..piecewise import where
 from ..ports import Link, Ports
 from .common import check_limits, check_ranges, controller_initialisation, finite_inputs, set_point
 
-PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "TA": (0.001, 10.0, "s"), "TC": (0.0, 100.0, "s"),
+PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "TA": (0.0, 10.0, "s"), "TC": (0.0, 100.0, "s"),
                     "TB": (0.0, 100.0, "s"), "TE": (0.001, 10.0, "s"), "TF1": (0.001, 100.0, "s"),
                     "KF1": (0.0, 10.0, "pu"), "KA": (0.01, 5000.0, "pu"), "KE": (-1.0, 10.0, "pu"),
                     "E1": (0.0, 20.0, "pu"), "SE1": (0.0, 10.0, "pu"), "E2": (0.0, 20.0, "pu"),
@@ -85,22 +87,24 @@ def dc_derivatives(x, Vt, Vref, Vss, omega, p: EXDC2Params, m):
     LS_y, LL_x, LA_y, vp, W_x = x
     A, B = p.saturation
     d_LS, d_LL, d_W, LL_y = _regulator_input(x, Vt, Vref, Vss, p, m)
-    d_LA, _ = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
+    d_LA, VR = lag_non_windup(m, LL_y, LA_y, p.KA, p.TA, p.VRMIN, p.VRMAX)
     out = vp if omega is None else omega * vp
     saturation = where(m, out >= A, B * (vp - A) * (vp - A), 0.0 * vp) if B != 0 else 0.0 * vp
-    d_vp = (LA_y - p.KE * vp - saturation) / p.TE
+    d_vp = (VR - p.KE * vp - saturation) / p.TE
     return d_LS, d_LL, d_LA, d_vp, d_W
 
 
 def dc_reset(x, Vt, Vref, Vss, p: EXDC2Params, m) -> tuple:
     """The DC exciter's states after the reset of the regulator's non-windup limit (LA_y placed on
-    a limit it is at or beyond while its unlimited rate pushes outward; blocks.lag_non_windup_reset)."""
+    a limit it is at or beyond while its unlimited rate pushes outward; blocks.lag_non_windup_reset;
+    TA = 0: LA_y held)."""
     LA_y = lag_non_windup_reset(m, _regulator_input(x, Vt, Vref, Vss, p, m)[3], x[2], p.KA, p.TA, p.VRMIN, p.VRMAX)
     return x[0], x[1], LA_y, x[3], x[4]
 
 
 def dc_initialise(Efd: float, Vt: float, Vss: float, omega: float, p: EXDC2Params) -> tuple:
-    """(x [5], Vref): the DC exciter at rest with field voltage Efd (ANDES' initialisation)."""
+    """(x [5], Vref): the DC exciter at rest with field voltage Efd (ANDES' initialisation; LA_y
+    starts at the regulator output also where TA = 0 holds it)."""
     A, B = p.saturation
     vp = Efd / omega
     Se = B * (vp - A) ** 2 / vp if Efd > A and B != 0 else 0.0

@@ -13,8 +13,10 @@ Equations (ANDES 2.0.0, andes/models/exciter/ieeet1.py):
     vi = Vref - LG_y + Vss
     non-windup lag KA / (1 + s TA) of vi - WF_y:  TA dLA_y/dt = KA (vi - WF_y) - LA_y,
         VRMIN <= LA_y <= VRMAXc, VRMAXc = VRMAX, or 999 where VRMAX = 0
-        (reset: LA_y at or beyond a limit while its unlimited rate pushes outward is placed on it)
-    TE dINT_y/dt = LA_y - KE INT_y - Se,  Se = B (INT_y - A)^2 where INT_y >= A, else 0
+        (reset: LA_y at or beyond a limit while its unlimited rate pushes outward is placed on it);
+        its output VR = LA_y; TA = 0 (ei/EI_33): LA_y held, VR = KA (vi - WF_y) clipped to
+        [VRMIN, VRMAXc] (ANDES: the lag's equation algebraic, pegged by its limiter)
+    TE dINT_y/dt = VR - KE INT_y - Se,  Se = B (INT_y - A)^2 where INT_y >= A, else 0
         (quadratic saturation, ANDES' ExcQuadSat; esdc2a.exciter_rate)
     Efd = INT_y
 
@@ -42,7 +44,7 @@ from .common import controller_initialisation, finite_inputs
 from .esdc2a import ESDC_PORTS, ceiling, check_dc_exciter, exciter_rate, saturation_of
 from .exdc2 import DC_INPUTS, dc_equilibrium, dc_initialise
 
-PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.001, 10.0, "s"),
+PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.0, 10.0, "s"),
                     "KE": (-1.0, 10.0, "pu"), "TE": (0.001, 10.0, "s"), "KF": (0.0, 10.0, "pu"),
                     "TF": (0.001, 100.0, "s"), "E1": (0.0, 20.0, "pu"), "SE1": (0.0, 10.0, "pu"),
                     "E2": (0.0, 20.0, "pu"), "SE2": (0.0, 10.0, "pu")}
@@ -87,8 +89,8 @@ def _regulator(x, u, p: IEEET1Params, m):
 def derivatives(x, u, p: IEEET1Params, m):
     """(dLG_y, dLA_y, dINT_y, dWF_x)/dt for x = (LG_y, LA_y, INT_y, WF_x), u = (Vt, Vref, Vss)."""
     d_LG, d_WF, error = _regulator(x, u, p, m)
-    d_LA, _ = lag_non_windup(m, error, x[1], p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
-    return d_LG, d_LA, exciter_rate(m, x[1], x[2], p), d_WF
+    d_LA, VR = lag_non_windup(m, error, x[1], p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
+    return d_LG, d_LA, exciter_rate(m, VR, x[2], p), d_WF
 
 
 def reset(x, u, p: IEEET1Params, m):

@@ -15,11 +15,13 @@ Equations (ANDES 2.0.0, andes/models/exciter/ieeet3.py):
     vi = Vref - LG_y + Vss  (ANDES' UEL = OEL = 0)
     non-windup lag KA / (1 + s TA) of vi - WF_y:  TA dLA3_y/dt = KA (vi - WF_y) - LA3_y,
         VRMIN <= LA3_y <= VRMAXc, VRMAXc = VRMAX, or 999 where VRMAX = 0
-        (reset: LA3_y at or beyond a limit while its unlimited rate pushes outward is placed on it)
+        (reset: LA3_y at or beyond a limit while its unlimited rate pushes outward is placed on it);
+        its output VR = LA3_y; TA = 0: LA3_y held, VR = KA (vi - WF_y) clipped to [VRMIN, VRMAXc]
+        (ANDES: the lag's equation algebraic, pegged by its limiter)
     VE = |KP V + j KI I|,  V = Vt exp(j theta_vs), I = I_re + j I_im (ANDES' dq form
         |KP (vd + j vq) + j KI (Id + j Iq)|: both phasors rotate alike, so the magnitude is the same)
     SQE = VE^2 - (0.78 XadIfd)^2
-    VB = LA3_y + sqrt(SQE) where SQE > 0, else LA3_y
+    VB = VR + sqrt(SQE) where SQE > 0, else VR
     lag 1 / (KE + s TE) of VB clipped to [0, VBMAX] (windup limiter):
         TE dLA1_y/dt = min(max(VB, 0), VBMAX) - KE LA1_y
     Efd = LA1_y
@@ -47,7 +49,7 @@ from .common import check_ranges, controller_initialisation, finite_inputs
 from .esdc2a import ceiling
 from .esst3a import ESST3A, INPUTS
 
-PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.001, 10.0, "s"),
+PARAMETER_RANGES = {"TR": (0.0, 10.0, "s"), "KA": (0.01, 5000.0, "pu"), "TA": (0.0, 10.0, "s"),
                     "VBMAX": (0.01, 1000.0, "pu"), "KE": (-1.0, 10.0, "pu"), "TE": (0.001, 10.0, "s"),
                     "KF": (0.0, 10.0, "pu"), "TF": (0.001, 100.0, "s"), "KP": (0.0, 100.0, "pu"),
                     "KI": (0.0, 100.0, "pu")}
@@ -85,28 +87,30 @@ def source_voltage_squared(Vt, theta_vs, I_re, I_im, XadIfd, p: IEEET3Params, m)
 
 
 def _signals(x, u, p: IEEET3Params, m):
-    """(dLG_y/dt, dWF_x/dt, the regulator's input vi - WF_y, the exciter lag's input VB clipped)."""
+    """(dLG_y/dt, dLA3_y/dt, dWF_x/dt, the regulator's input vi - WF_y, the exciter lag's input VB
+    clipped)."""
     LG_y, LA3_y, LA1_y, WF_x = x
     Vt, theta_vs, I_re, I_im, Vref, Vss, XadIfd = u
     d_LG, sensed = lag(m, Vt, LG_y, 1.0, p.TR)
     d_WF, WF_y = washout(m, LA1_y, WF_x, p.KF, p.TF)
     SQE = source_voltage_squared(Vt, theta_vs, I_re, I_im, XadIfd, p, m)
     root = m.sqrt(where(m, SQE > 0.0, SQE, 1.0 + 0.0 * SQE))
-    VB = LA3_y + where(m, SQE > 0.0, root, 0.0 * SQE)
-    return d_LG, d_WF, Vref - sensed + Vss - WF_y, clip(m, VB, 0.0, p.VBMAX)
+    error = Vref - sensed + Vss - WF_y
+    d_LA3, VR = lag_non_windup(m, error, LA3_y, p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
+    VB = VR + where(m, SQE > 0.0, root, 0.0 * SQE)
+    return d_LG, d_LA3, d_WF, error, clip(m, VB, 0.0, p.VBMAX)
 
 
 def derivatives(x, u, p: IEEET3Params, m):
     """(dLG_y, dLA3_y, dLA1_y, dWF_x)/dt for x = (LG_y, LA3_y, LA1_y, WF_x),
     u = (Vt, theta_vs, I_re, I_im, Vref, Vss, XadIfd)."""
-    d_LG, d_WF, error, VB = _signals(x, u, p, m)
-    d_LA3, _ = lag_non_windup(m, error, x[1], p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
+    d_LG, d_LA3, d_WF, _, VB = _signals(x, u, p, m)
     return d_LG, d_LA3, (VB - p.KE * x[2]) / p.TE, d_WF
 
 
 def reset(x, u, p: IEEET3Params, m):
     """x after the reset of LA3_y's limits VRMIN, VRMAXc (blocks.lag_non_windup_reset)."""
-    LA3_y = lag_non_windup_reset(m, _signals(x, u, p, m)[2], x[1], p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
+    LA3_y = lag_non_windup_reset(m, _signals(x, u, p, m)[3], x[1], p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
     return x[0], LA3_y, x[2], x[3]
 
 
