@@ -34,8 +34,8 @@ solve). The other buses' voltages follow from the units' buses'.
 Events: the topologies of the contingency (Contingency.topologies: a fault, a shunt of impedance
 `fault_impedance`, default 1e-6 pu: bolted, at a bus from `fault_start` to `clear_s`, absolute
 times in s; branches opened; units tripped: they inject no current, their devices stand still and
-their rotor angles leave the stability check); scipy's DOP853 (rtol 1e-10 by default) restarts at
-every topology change. Limiters, switches and saturations (reference_models.piecewise.where) run on
+their rotor angles leave the stability check); scipy's DOP853 (rtol 1e-10 by default), or Radau
+where the case is stiff (STIFF_RATE), restarts at every topology change. Limiters, switches and saturations (reference_models.piecewise.where) run on
 locked branches, their switchings located and the solve restarted there with the components' limit
 resets applied (`simulate`). A run is stable when no rotor-angle difference between two units in
 service exceeds pi before `stop` (located on the solver's dense output).
@@ -284,7 +284,18 @@ class System:
                               if any(s.kind == "measured" for s in self.wiring[k][j].values())]
                           for k, u in enumerate(case.units)}
         self.measuring = {k: v for k, v in self.measuring.items() if v}
+        self._rates = {}  # controls -> largest_rate(controls)
         self._check_affine_currents()
+
+    def largest_rate(self, controls: bool = True) -> float:
+        """The largest |eigenvalue| [1/s] of the right-hand side's Jacobian at the start, intact network,
+        branches and limits as they hold there (_largest_rate); kept per `controls`."""
+        if controls not in self._rates:
+            f = _Locked(self, self.network(), controls, (), lambda t: None)
+            y = f.reset(self.x0, 0.0, 0.0)[0]
+            f.lock(0.0, y)
+            self._rates[controls] = _largest_rate(f, 0.0, y)
+        return self._rates[controls]
 
     def _check_affine_currents(self) -> None:
         """ValueError where a bus device declares its current affine in its bus voltage
@@ -522,6 +533,15 @@ SWITCHING_RESOLUTION = 1e-12
 # a moving limit sampled every ZENO_DWELL at most, as ANDES' fixed step of that size does (off the
 # limit by at most the limit's motion over ZENO_DWELL), instead of stalling.
 ZENO_GAP, ZENO_DWELL = 1e-6, 1e-3
+# Stiffness. An explicit method's step is bounded by its stability, whatever the accuracy asks for:
+# |h lambda| <= about 6 for DOP853 on the negative real axis. A case with a fast inner loop (ESST3A's
+# TM dVM/dt = KM (VR - KG VB VM) - VM with KM = 500, TM = 0.1: lambda = -(KM KG VB + 1) / TM, about
+# -2.2e4 1/s in kundur_esst3a) takes steps of 0.3 ms at rest and runs out of the budget (4,000
+# evaluations per second: DOP853's 12 per step at 3 ms steps, a rate of 2,000 1/s). Where the
+# Jacobian's largest |eigenvalue| at the start (System.largest_rate) exceeds STIFF_RATE, `simulate`
+# uses the implicit STIFF_METHOD (its steps bounded by accuracy alone). The shipped cases without such
+# a loop: 50-160 1/s (kundur_full, ieee14_full, ieee39_full, npcc, EI_33).
+STIFF_RATE, STIFF_METHOD = 2000.0, "Radau"
 
 
 class _Stalled(Exception):
@@ -597,8 +617,35 @@ class _Locked:
         return float(np.max(angles) - np.min(angles)) - math.pi
 
 
+def _largest_rate(f: _Locked, t: float, y) -> float:
+    """The largest |eigenvalue| [1/s] of the Jacobian of f.rhs (its locked branches) at (t, y), from
+    finite-difference products J v: the dense Jacobian for a few states, else ARPACK (about 20
+    evaluations of the right-hand side, to 1 %)."""
+    from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigs
+
+    y = np.asarray(y, dtype=float)
+    f0, n = f.rhs(t, y), y.size
+
+    def product(v):
+        v = np.ravel(v).real
+        size = float(np.linalg.norm(v))
+        if size == 0:
+            return np.zeros(n)
+        d = math.sqrt(np.finfo(float).eps) * (1.0 + float(np.linalg.norm(y))) / size
+        return (f.rhs(t, y + d * v) - f0) / d
+
+    if n <= 32:
+        return float(np.abs(np.linalg.eigvals(np.column_stack([product(e) for e in np.eye(n)]))).max())
+    try:
+        values = eigs(LinearOperator((n, n), matvec=product, dtype=float), k=1, which="LM", tol=1e-2,
+                      return_eigenvectors=False)
+    except ArpackNoConvergence as partial:
+        values = partial.eigenvalues
+    return float(np.abs(values).max()) if len(values) else 0.0
+
+
 def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval=None, *, step: float = 0.01,
-             controls: bool = True, method: str = "DOP853", rtol: float = 1e-10, atol: float = 1e-12,
+             controls: bool = True, method: str | None = None, rtol: float = 1e-10, atol: float = 1e-12,
              event_rows: bool = False, stop_at_loss: bool = False, resets: bool = True) -> GridResult:
     """The case from its load-flow equilibrium through `contingency` until `stop` [s].
 
@@ -609,7 +656,7 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
 
     Each topology of the contingency (Contingency.topologies: fault, clearing, opened branches,
     tripped units, whose devices stand still and inject nothing) is integrated by scipy's `method`
-    with the conditions of every device's equations locked to the branches they take at its start
+    (None: DOP853, or STIFF_METHOD where System.largest_rate exceeds STIFF_RATE) with the conditions of every device's equations locked to the branches they take at its start
     (the native reference FMU's scheme, fmu_export/c/dopri5.c), so the right-hand side is smooth
     within each step; after each accepted step the branches holding at its end are compared with
     the locked ones, and where they differ (and give another right-hand side) the first instant they
@@ -629,6 +676,8 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
     t_eval = np.asarray(t_eval, dtype=float)
     if t_eval.ndim != 1 or np.any(np.diff(t_eval) < 0) or t_eval[0] < 0 or t_eval[-1] > stop:
         raise ValueError("t_eval must be increasing times within [0, stop]")
+    if method is None:
+        method = STIFF_METHOD if system.largest_rate(controls) > STIFF_RATE else "DOP853"
     solver_type = getattr(scipy.integrate, method)
     topologies = contingency.topologies(stop)
     if topologies[0].fault_bus is not None or topologies[0].open or topologies[0].tripped:
