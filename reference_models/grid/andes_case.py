@@ -977,6 +977,45 @@ def _entry(model, name: str, i: int, ss) -> dict:
     return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": params}
 
 
+def _add_plls(ss, units: dict) -> set:
+    """Puts the PLL each converter names (ANDES' REGCP1 `pll`) into that converter's unit as its
+    "pll" device (CaseError where it measures another bus); a REGCP1 without one is ANDES' REGCA1
+    (the exact bus angle) and is converted as one. Returns the (model, idx) of the PLLs placed."""
+    placed = set()
+    for unit in units.values():
+        entry = unit.get("converter")
+        if entry is None or "REGCP1" not in CONVERTERS or entry["component"] != STANDARD_MODELS["REGCP1"].name:
+            continue
+        model = ss.REGCP1
+        i = list(map(str, model.idx.v)).index(entry["andes"])
+        named = model.pll.v[i]
+        if named is None:
+            entry["component"] = STANDARD_MODELS["REGCA1"].name
+            entry["params"] = _params(model, "REGCA1", i, ss)
+            continue
+        for pname in PLLS:
+            pll = getattr(ss, pname)
+            if named in pll.idx.v:
+                j = list(pll.idx.v).index(named)
+                if pll.bus.v[j] != model.bus.v[i]:
+                    raise CaseError(f"REGCP1 {model.idx.v[i]} takes the angle of {pname} {named} at bus {pll.bus.v[j]}, "
+                                    f"not at its own bus {model.bus.v[i]}: opfmu's PLL measures its converter's bus")
+                unit["pll"] = _entry(pll, pname, j, ss)
+                placed.add((pname, named))
+                break
+        else:
+            raise CaseError(f"REGCP1 {model.idx.v[i]} names no PLL in service ({named})")
+    return placed
+
+
+def _plls_left_out(ss, placed: set) -> list:
+    """The note of the PLLs no converter takes: measurements acting on nothing, left out."""
+    left = [f"{name} {idx}" for name in PLLS for i, idx in enumerate(getattr(ss, name).idx.v)
+            if _on(getattr(ss, name), i) and (name, idx) not in placed]
+    return [f"{_listed(left)} (a phase-locked loop no converter takes: a measurement that acts on no converted "
+            "device) left out: its outputs are not in the result"] if left else []
+
+
 def dynamic_data(ss, name: str) -> dict:
     """The dynamic-data file's content (see the module docstring) of ANDES' System: a unit per bus
     device of a static generator (a machine, or an inverter's converter, linked by `gen`) with the
@@ -1002,6 +1041,7 @@ def dynamic_data(ss, name: str) -> dict:
                 units[("static", static)] = {"bus": number[model.bus.v[i]], "generator": str(static),
                                              "static_generator": {"component": STANDARD_MODELS[dname].name,
                                                                   "andes": str(static), "params": {}}}
+    used = _add_plls(ss, units)
     for role, names, link, target in _control_roles():
         owner[role] = {}
         for dname in names:
@@ -1034,11 +1074,12 @@ def dynamic_data(ss, name: str) -> dict:
     order = sorted((u for u in units.values() if u["generator"] in generators),
                    key=lambda u: generators.index(u["generator"]))
     loads = _load_units(ss, number)
+    notes = _plls_left_out(ss, used)
     return {"case": name, "description": "converted from ANDES' case by reference_models.grid.andes_case: one unit per "
             "machine or converter (with its exciter, governor, stabiliser, compensator, electrical and plant "
             "controls), parameters as the case file gives them (machine base Sn; Sb the system base), keyed by bus "
             "and load-flow generator; a unit per load device with the power it draws (\"loads\", where there are any)",
-            "generators": order, **({"loads": loads} if loads else {})}
+            "generators": order, **({"loads": loads} if loads else {}), **({"notes": notes} if notes else {})}
 
 
 def mismatch(network: dict, device_loads=()) -> float:
@@ -1069,7 +1110,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    notes += _alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss)
+    notes += _alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss) + dynamic.pop("notes", [])
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
     worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])
