@@ -900,22 +900,18 @@ BUS_FREQUENCY_PARAMETERS = {"FLoad": "", "PVD1": "busf_", "ESD1": "busf_"}
 def _load_units(ss, number) -> list:
     """The dynamic-data entries of the load devices (module docstring): a unit per device at its bus
     with the power P, Q it draws at the load flow: a device that replaces a PQ (FLoad) its share of
-    the PQ's power-flow power Ppf, Qpf (CaseError where the share is not all of it: ANDES drops the
-    rest and starts off its load flow), a motor what ANDES' power flow gives it. An FLoad measures
+    the PQ's power-flow power Ppf, Qpf (ANDES drops the rest: _dropped_loads), a motor what ANDES'
+    power flow gives it. An FLoad measures
     its bus frequency with the BusFreq of its bus (Tf, Tw) at the case's frequency."""
     out = []
     for pq, (dname, i) in _replaced_loads(ss).items():
         model = getattr(ss, dname)
         j = list(ss.PQ.idx.v).index(pq)
         share = _share(model, dname, i)
-        if any(abs(f - 1.0) > 1e-9 for f in share):
-            raise CaseError(f"{dname} {model.idx.v[i]} draws {100 * share[0]:g} % of the active and "
-                            f"{100 * share[1]:g} % of the reactive power of PQ {pq}: ANDES drops the rest, so its "
-                            "simulation starts off its own load flow (make the percentages sum to 100)")
         entry = _entry(model, dname, i, ss)
         power = _pq_power(ss, j)
-        out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": power.real, "Q": power.imag,
-                    "load_device": entry, "fmu": {"kind": "reference"}})
+        out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": share[0] * power.real,
+                    "Q": share[1] * power.imag, "load_device": entry, "fmu": {"kind": "reference"}})
     for dname in LOADS:
         model = getattr(ss, dname)
         if hasattr(model, "pq") or dname not in STANDARD_MODELS:
@@ -926,6 +922,26 @@ def _load_units(ss, number) -> list:
                             "Q": float(model.q.v[i]), "load_device": _entry(model, dname, i, ss),
                             "fmu": {"kind": "reference"}})
     return out
+
+
+def _dropped_loads(ss, number) -> tuple:
+    """(notes, [(bus, P, Q)]): the part of a PQ's power-flow load that the device replacing it does
+    not draw (its percentages short of 100: ANDES drops the rest and its simulation starts off its
+    own load flow, as opfmu's then does), stated, with that power per bus."""
+    notes, dropped = [], []
+    for pq, (dname, i) in _replaced_loads(ss).items():
+        model = getattr(ss, dname)
+        share = _share(model, dname, i)
+        if all(abs(f - 1.0) <= 1e-9 for f in share):
+            continue
+        j = list(ss.PQ.idx.v).index(pq)
+        power = _pq_power(ss, j)
+        rest = complex((1 - share[0]) * power.real, (1 - share[1]) * power.imag)
+        dropped.append((number[ss.PQ.bus.v[j]], rest.real, rest.imag))
+        notes.append(f"{dname} {model.idx.v[i]} draws {100 * share[0]:g} % of the active and {100 * share[1]:g} % of "
+                     f"the reactive power of PQ {pq}: ANDES drops the rest ({rest.real:.4g} + j{rest.imag:.4g} pu), so "
+                     "the simulation starts off its own load flow, in ANDES as here (percentages summing to 100 avoid it)")
+    return notes, dropped
 
 
 def _plant_measures(ss, model, i, number) -> dict:
@@ -1110,10 +1126,12 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    notes += _alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss) + dynamic.pop("notes", [])
+    dropped_notes, dropped = _dropped_loads(ss, {b: _bus(b, "Bus") for b in ss.Bus.idx.v})
+    notes += (_alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss) + dynamic.pop("notes", [])
+              + dropped_notes)
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
-    worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())])
+    worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())] + dropped)
     if worst > mismatch_limit(float(ss.PFlow.config.tol)):
         raise CaseError(f"{source}: the converted network misses ANDES' load flow by {worst:.3g} pu")
     out = Path(out_dir)
