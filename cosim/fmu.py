@@ -14,8 +14,10 @@ Two ways to drive it:
   `set_inputs(values)`, `set_input_derivatives(rates)`, `outputs()`, `output_jacobian(rows,
   columns)`, `do_step(t, h)`, `save()` / `restore(state)` / `free(state)`, `rewind()`; and the
   calls a master makes most in one: `advance(t, h, values, rates)` (inputs, their rates, the step,
-  the outputs), `evaluate()` (the inputs as `inputs_now` holds them set, the outputs read),
-  `checkpoint()` / `rollback()` (one kept state, its memory reused). For FMI 2.0 these call the
+  the outputs), `evaluate()` (the inputs as `inputs_now` holds them set, the outputs read into
+  `outputs_now`), `step_inputs(t, h)` (advance with the inputs and rates as their buffers hold
+  them), `share(...)` (the buffers moved into a master's numpy arrays), `checkpoint()` /
+  `rollback()` (one kept state, its memory reused). For FMI 2.0 these call the
   binary's functions through plain C function pointers with their arguments built at bind (fmpy's
   prototypes convert every argument on every call: about half of a call's cost).
 
@@ -364,47 +366,75 @@ class FMU:
             self._check(self._dll.fmi3GetFloat64(self._c, self._out_vr, n, self._out, n), "fmi3GetFloat64")
         return self._out[:]
 
-    def evaluate(self) -> list:
-        """The bound inputs as they stand in `inputs_now` set, and the bound outputs read: a master's
-        Newton iteration, which changes a few entries of `inputs_now` between calls."""
+    def evaluate(self) -> None:
+        """The bound inputs as they stand in `inputs_now` set, and the bound outputs read into
+        `outputs_now`: a master's Newton iteration, which changes a few entries of `inputs_now`
+        between calls."""
         fast = self._fast
         if fast is None:
             self.set_inputs(self._in[:])
-            return self.outputs()
+            self.outputs()
+            return
         if fast.set_real(*fast.set_args) > 1:
             self._check(2, "fmi2SetReal")
         if fast.get_real(*fast.get_args) > 1:
             self._check(2, "fmi2GetReal")
-        return self._out[:]
 
     @property
     def inputs_now(self):
         """The bound inputs' buffer (a ctypes array, bind order): what set_inputs last set, or what
-        evaluate() sets next."""
+        evaluate() and step_inputs() set next."""
         return self._in
 
-    def advance(self, t: float, h: float, values, rates=None) -> list:
-        """set_inputs(values), set_input_derivatives(rates) unless None, do_step(t, h), and the bound
-        outputs at the step's end (outputs()), in one call."""
+    @property
+    def outputs_now(self):
+        """The bound outputs' buffer (a ctypes array, bind order): what the last call read."""
+        return self._out
+
+    def share(self, inputs, rates, outputs, derivatives) -> None:
+        """The buffers of the bound inputs, their rates, the bound outputs and the directional
+        derivatives moved into `inputs`, `rates`, `outputs`, `derivatives` (float64 numpy arrays of
+        the bound lengths, e.g. views into a master's arrays of all its FMUs, which then sets and
+        reads them in one numpy operation each), their present values kept."""
+        for name, memory in (("_in", inputs), ("_du", rates), ("_out", outputs), ("_dd", derivatives)):
+            buffer = getattr(self, name)
+            if memory.shape != (len(buffer),) or memory.dtype.itemsize != ctypes.sizeof(self._Real):
+                raise ValueError(f"{self.name}: {name[1:]} needs {len(buffer)} float64 values, got {memory.shape}")
+            memory[:] = buffer[:]
+            setattr(self, name, (self._Real * len(buffer)).from_buffer(memory))
+        self._fast = _Calls(self) if self.version == 2 else None
+
+    def step_inputs(self, t: float, h: float, rates: bool | None = None) -> None:
+        """A step from t [s] by h [s] with the bound inputs as `inputs_now` holds them and, where
+        `rates` (default: where the FMU interpolates), their rates as the rates' buffer holds them
+        (fmi2SetRealInputDerivatives; see share); the bound outputs read into `outputs_now`."""
+        if rates is None:
+            rates = self.interpolates
         fast = self._fast
         if fast is None:
-            self.set_inputs(values)
-            if rates is not None:
-                self.set_input_derivatives(rates)
+            self.set_inputs(self._in[:])
+            if rates:
+                self.set_input_derivatives(self._du[:])
             self.do_step(t, h)
-            return self.outputs()
-        self._in[:] = values
+            self.outputs()
+            return
         if fast.set_real(*fast.set_args) > 1:
             self._check(2, "fmi2SetReal")
-        if rates is not None:
-            self._du[:] = rates
-            if fast.set_derivatives(*fast.derivative_args) > 1:
-                self._check(2, "fmi2SetRealInputDerivatives")
+        if rates and fast.set_derivatives(*fast.derivative_args) > 1:
+            self._check(2, "fmi2SetRealInputDerivatives")
         fast.t.value, fast.h.value = t, h
         if fast.do_step(*fast.step_args) > 1:
             self._check(2, f"the step at t = {t:.6g} s")
         if fast.get_real(*fast.get_args) > 1:
             self._check(2, "fmi2GetReal")
+
+    def advance(self, t: float, h: float, values, rates=None) -> list:
+        """set_inputs(values), set_input_derivatives(rates) unless None, do_step(t, h), and the bound
+        outputs at the step's end (outputs()), in one call."""
+        self._in[:] = values
+        if rates is not None:
+            self._du[:] = rates
+        self.step_inputs(t, h, rates is not None)
         return self._out[:]
 
     def output_jacobian(self, rows, columns) -> list:

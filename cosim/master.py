@@ -312,47 +312,17 @@ class _Unit:
         self.current_rows = tuple(outputs_index for outputs_index in
                                   (self.fmus[0].output_names.index(n) for n in bus.current))
         self.voltage_columns = tuple(self.inputs[0].index(n) for n in bus.voltage)
-        # each device in step order: (index, FMU, plan, (link key, output row) of the links it gives, interpolates)
-        self.schedule = tuple((j, self.fmus[j], tuple(self.plan[j]),
-                               tuple(((j, name), row) for name, row in self.link_rows[j].items()),
-                               self.fmus[j].interpolates) for j in self.order)
         # the machine's inputs that take the bus voltage's magnitude and angle (codes 0, 1)
         self.bus_columns = tuple(tuple(i for i, (code, _, _) in enumerate(self.plan[0]) if code == c) for c in (0, 1))
         angle = rotor_angle_state(unit.machine.component)
         self.angle_row = None if angle is None else unit.machine.component.state_names.index(angle)
         self.impedance = external_impedance(unit.machine)
-        # link values at the start of the coming step (first: the consumers' start values), at the
-        # start of the step before (None: none to extrapolate from) and at its end (guessed, then
-        # each pass's outputs)
+        # the links' values at the start of a run: the consumers' start values
         self.initial_links = {}
         for j, sources in enumerate(self.sources):
             for source, held in zip(sources, self.held[j]):
                 if source.kind == "device":
                     self.initial_links[(source.device, source.variable)] = held
-        self.rewind()
-
-    def rewind(self) -> None:
-        """The links back to their start values."""
-        self.links, self.before, self.ends = dict(self.initial_links), None, dict(self.initial_links)
-
-    def advance(self) -> None:
-        """The step done: its end values start the next."""
-        self.before, self.links = self.links, dict(self.ends)
-
-    def machine_links(self, outputs) -> None:
-        """The machine's link outputs (its electrical power, which jumps with the network at an
-        event) set to `outputs` (its bound outputs now), as the start and end values of the coming
-        step."""
-        for name, row in self.link_rows[0].items():
-            self.links[(0, name)] = self.ends[(0, name)] = outputs[row]
-
-    def guess_ends(self, ratio: float | None) -> None:
-        """The coming step's end values guessed: extrapolated linearly from the step before (`ratio`:
-        the coming step's length over that one's), or held (None)."""
-        if ratio is None or self.before is None:
-            self.ends = dict(self.links)
-        else:
-            self.ends = {key: value + (value - self.before[key]) * ratio for key, value in self.links.items()}
 
     def close(self) -> None:
         for f in self.fmus:
@@ -374,7 +344,7 @@ class GridMaster:
         self.kinds = tuple(f.kind for f in self.files)
         self.units = []
         self._networks = {}
-        self._solve_plans = {}
+        self._solve_plans, self._step_plans = {}, {}
         buses = list(dict.fromkeys(case.generator_buses))  # the reduced network's buses (Case.reduced's order)
         self._slot = [buses.index(b) for b in case.generator_buses]  # unit -> its bus in the reduced network
         self._first = [self._slot.index(i) for i in range(len(buses))]  # bus -> the first unit on it
@@ -385,6 +355,7 @@ class GridMaster:
             self.close()
             raise
         self.fmus = [fmu for u in self.units for fmu in u.fmus]
+        self._layout()
         self._measuring = any(u.measuring for u in self.units)
         self._angles = any(code == 3 for u in self.units for plan in u.plan for code, _, _ in plan)
         self.rolls_back = all(s.rolls_back for s in self.fmus)
@@ -415,32 +386,161 @@ class GridMaster:
             self._networks[key] = self.case.reduced(topology.fault_bus, impedance, topology.open, topology.loads_off)
         return self._networks[key]
 
-    @staticmethod
-    def _machine_inputs(unit, Vs, theta):
-        """The machine's bound inputs at the step's end: the bus voltage (Vs, theta) and its links at
-        their end values."""
-        links = unit.ends
-        return [Vs if code == 0 else theta if code == 1 else links[key] if code == 4 else held
-                for code, key, held in unit.plan[0]]
+    def _layout(self) -> None:
+        """Every FMU's buffers in the master's arrays (FMU.share), so that an input, rate or output
+        of any FMU is set or read in one numpy operation with the others: `_inputs`, `_rates` (the
+        bound inputs and their rates), `_outputs`, `_derivatives` (the bound outputs and their
+        directional derivatives), device j of unit k at `_in_at[k][j]`, `_out_at[k][j]`. And
+        `_values`, where every input finds its value at a step's start and at its end, in regions
+        (`_region`): "start", "end" (4 g each: per unit its bus voltage magnitude, angle and
+        terminal voltage magnitude, angle: code * g + unit), "links", "ends" (each link's value at
+        the step's start and end: `_link[(unit, (device, variable))]`, given by the output
+        `_givers[link]`), "held" (each input's held value, by its index in `_inputs`),
+        "measured", "measured_end" (the measurements at the step's start and end:
+        `_measured_at[(unit, device)]` = (offset, count)); `_sources` = (start, end) indices in
+        `_values` per input."""
+        g = len(self.units)
+        self._in_at, self._out_at = [], []
+        n_in = n_out = 0
+        for u in self.units:
+            self._in_at.append([])
+            self._out_at.append([])
+            for f in u.fmus:
+                self._in_at[-1].append(n_in)
+                self._out_at[-1].append(n_out)
+                n_in, n_out = n_in + len(f.input_names), n_out + len(f.output_names)
+        self._inputs, self._rates = np.zeros(n_in), np.zeros(n_in)
+        self._outputs, self._derivatives = np.zeros(n_out), np.zeros(n_out)
+        for k, u in enumerate(self.units):
+            for j, f in enumerate(u.fmus):
+                i, o = self._in_at[k][j], self._out_at[k][j]
+                ni, no = len(f.input_names), len(f.output_names)
+                f.share(self._inputs[i:i + ni], self._rates[i:i + ni], self._outputs[o:o + no],
+                        self._derivatives[o:o + no])
+        self._link, givers, initial = {}, [], []
+        for k, u in enumerate(self.units):
+            for key, value in u.initial_links.items():
+                self._link[(k, key)] = len(givers)
+                givers.append(self._out_at[k][key[0]] + u.link_rows[key[0]][key[1]])
+                initial.append(value)
+        self._givers = np.array(givers, dtype=np.intp)
+        self._initial_links = np.array(initial, dtype=float)
+        self._measured_at, n_measured = {}, 0
+        for k, u in enumerate(self.units):
+            for j, _ in u.measuring:
+                count = 1 + max(key[1] for code, key, _ in u.plan[j] if code == 6)
+                self._measured_at[(k, j)] = (n_measured, count)
+                n_measured += count
+        sizes = (("start", 4 * g), ("end", 4 * g), ("links", len(givers)), ("ends", len(givers)), ("held", n_in),
+                 ("measured", n_measured), ("measured_end", n_measured))
+        self._region, at = {}, 0
+        for name, size in sizes:
+            self._region[name] = at
+            at += size
+        self._values = np.zeros(at)
+        self._links = slice(self._region["links"], self._region["links"] + len(givers))
+        self._ends = slice(self._region["ends"], self._region["ends"] + len(givers))
+        self._before = np.zeros(len(givers))  # the links at the start of the step before
+        self._extrapolates = False  # whether _before holds them (not on a run's first step)
+        r = self._region
+        starts, ends = np.zeros(n_in, dtype=np.intp), np.zeros(n_in, dtype=np.intp)
+        for k, u in enumerate(self.units):
+            for j, plan in enumerate(u.plan):
+                for i, (code, key, held) in enumerate(plan):
+                    p = self._in_at[k][j] + i
+                    if code < 4:
+                        starts[p], ends[p] = r["start"] + code * g + k, r["end"] + code * g + k
+                    elif code == 4:
+                        starts[p], ends[p] = r["links"] + self._link[(k, key)], r["ends"] + self._link[(k, key)]
+                    elif code == 6:
+                        at = self._measured_at[(k, key[0])][0] + key[1]
+                        starts[p], ends[p] = r["measured"] + at, r["measured_end"] + at
+                    else:
+                        starts[p] = ends[p] = r["held"] + p
+                    self._values[r["held"] + p] = held
+        self._sources = (starts, ends)
 
-    def _solve_plan(self, active) -> tuple:
-        """What _solve needs of the `active` units (kept per set of them): per unit (index, its bus's
-        row in the reduced network, machine FMU, its input buffer, its inputs that take the bus
-        voltage's magnitude and angle, its current rows, its voltage columns), and where each
-        machine's d(I_re, I_im) / d(V_re, V_im) goes in the Jacobian (rows, columns; accumulated at a
-        shared bus)."""
+    def _rewind_links(self) -> None:
+        """The links back to their start values."""
+        self._values[self._links] = self._values[self._ends] = self._initial_links
+        self._extrapolates = False
+
+    def _guess_ends(self, ratio: float | None) -> None:
+        """The coming step's end values of the links guessed: extrapolated linearly from the step
+        before (`ratio`: the coming step's length over that one's), or held (None)."""
+        values = self._values
+        links = values[self._links]
+        values[self._ends] = links if ratio is None or not self._extrapolates else links + (links - self._before) * ratio
+
+    def _advance_links(self) -> None:
+        """The step done: its links' end values start the next."""
+        self._before[:] = self._values[self._links]
+        self._values[self._links] = self._values[self._ends]
+        self._extrapolates = True
+
+    def _machine_links(self, k: int) -> None:
+        """Unit k's machine's link outputs (its electrical power, which jumps with the network at an
+        event) as its outputs now hold them, as the start and end values of the coming step."""
+        values, r = self._values, self._region
+        for name in self.units[k].link_rows[0]:
+            link = self._link[(k, (0, name))]
+            values[r["links"] + link] = values[r["ends"] + link] = self._outputs[self._givers[link]]
+
+    def _set_voltages(self, region: str, V, theta, Vt) -> None:
+        """The bus voltages V [g] (complex), angles theta [g] and terminal voltages Vt (_terminal's)
+        into the `region` ("start" or "end") of `_values`."""
+        g, at, values = len(self.units), self._region[region], self._values
+        values[at:at + g] = [abs(v) for v in V.tolist()]
+        values[at + g:at + 2 * g] = theta
+        values[at + 2 * g:at + 3 * g] = Vt[0]
+        if Vt[1] is not None:
+            values[at + 3 * g:at + 4 * g] = Vt[1]
+
+    def _set_measured(self, region: str, measured: dict) -> None:
+        """_measure's values into the `region` ("measured" or "measured_end") of `_values`."""
+        at = self._region[region]
+        for key, found in measured.items():
+            offset, count = self._measured_at[key]
+            self._values[at + offset:at + offset + count] = found[:count]
+
+    def _solve_plan(self, active) -> dict:
+        """What _solve needs of the `active` units (kept per set of them): their indices, their bus's
+        rows in the reduced network, their machines' evaluate and (FMU, current rows, voltage
+        columns) for block; in `_inputs`, the machine inputs (their sources in `_values`: a link's
+        end value or the held value), those that take the bus voltage's magnitude and angle (and
+        the active unit each takes it of); in `_outputs`, the currents and each machine's outputs;
+        where each machine's d(I_re, I_im) / d(V_re, V_im) goes in the Jacobian (rows, columns;
+        accumulated at a shared bus)."""
         key = tuple(active)
         plan = self._solve_plans.get(key)
-        if plan is None:
-            entries = []
-            for k in active:
-                u = self.units[k]
-                m = u.fmus[0]
-                entries.append((k, 2 * self._slot[k], m, m.inputs_now, u.bus_columns[0], u.bus_columns[1],
-                                u.current_rows, u.voltage_columns))
-            at = [(r + i, r + j) for _, r, *_ in entries for i in (0, 1) for j in (0, 1)]
-            at = (np.array([i for i, _ in at], dtype=np.intp), np.array([j for _, j in at], dtype=np.intp))
-            plan = self._solve_plans[key] = (entries, at)
+        if plan is not None:
+            return plan
+        ends, r = self._sources[1], self._region
+        machine_at, machine_from, magnitude, angle, currents, out = [], [], ([], []), ([], []), ([], []), []
+        for n, k in enumerate(active):
+            u = self.units[k]
+            i, o = self._in_at[k][0], self._out_at[k][0]
+            for c, (code, _, _) in enumerate(u.plan[0]):
+                machine_at.append(i + c)
+                machine_from.append(ends[i + c] if code == 4 else r["held"] + i + c)
+            for where, columns in zip((magnitude, angle), u.bus_columns):
+                where[0].extend(i + c for c in columns)
+                where[1].extend([n] * len(columns))
+            for where, row in zip(currents, u.current_rows):
+                where.append(o + row)
+            out.append((o, o + len(u.fmus[0].output_names)))
+        rows = [2 * self._slot[k] for k in active]
+        at = [(q + i, q + j) for q in rows for i in (0, 1) for j in (0, 1)]
+        intp = lambda values: np.array(values, dtype=np.intp)  # noqa: E731
+        plan = self._solve_plans[key] = {
+            "units": intp(active), "rows": rows, "bus_rows": intp(rows),
+            "evaluate": tuple(self.units[k].fmus[0].evaluate for k in active),
+            "blocks": tuple((self.units[k].fmus[0], self.units[k].current_rows, self.units[k].voltage_columns)
+                            for k in active),
+            "machine_at": intp(machine_at), "machine_from": intp(machine_from),
+            "magnitude": tuple(intp(x) for x in magnitude), "angle": tuple(intp(x) for x in angle),
+            "currents": tuple(intp(x) for x in currents), "outputs": out,
+            "jacobian": (intp([i for i, _ in at]), intp([j for _, j in at]))}
         return plan
 
     def _solve(self, network, V, theta_ref, active, timing: Timing):
@@ -459,33 +559,29 @@ class GridMaster:
         v[0::2], v[1::2] = Vb.real, Vb.imag
         Y = network.Y_real
         g = len(units)
-        theta = [0.0] * g
-        current = [0.0] * (2 * g)
-        machine = [None] * g
-        refs = theta_ref.tolist()
-        entries, at = self._solve_plan(active)
-        for k, _, _, buffer, *_ in entries:  # each machine's inputs but the bus voltage's, for every iteration
-            buffer[:] = self._machine_inputs(units[k], 0.0, 0.0)
-        pi, two_pi = math.pi, 2.0 * math.pi
+        plan = self._solve_plan(active)
+        inputs, outputs = self._inputs, self._outputs
+        inputs[plan["machine_at"]] = self._values[plan["machine_from"]]  # all but the bus voltage, for every iteration
+        refs = theta_ref[plan["units"]].tolist()
+        rows, bus_rows = plan["rows"], plan["bus_rows"]
+        (magnitude_at, magnitude_of), (angle_at, angle_of) = plan["magnitude"], plan["angle"]
+        current_re, current_im = plan["currents"]
+        atan2, hypot, pi, two_pi = math.atan2, math.hypot, math.pi, 2.0 * math.pi
         last = None  # the last Newton step: (its start, the step, the mismatch there), for backtracking
         for iteration in range(s.newton_iterations + 1):
             values = v.tolist()
-            i_bus = [0.0] * (2 * b)
-            for k, r, m, buffer, magnitude, angles, (row_re, row_im), _ in entries:
-                re, im = values[r], values[r + 1]
-                ref = refs[k]
-                theta[k] = angle = ref + ((math.atan2(im, re) - ref + pi) % two_pi - pi)  # _wrap
-                if magnitude:
-                    Vs = math.hypot(re, im)
-                    for c in magnitude:
-                        buffer[c] = Vs
-                for c in angles:
-                    buffer[c] = angle
-                out = m.evaluate()
-                machine[k] = out
-                current[2 * k], current[2 * k + 1] = i_re, i_im = out[row_re], out[row_im]
-                i_bus[r] += i_re
-                i_bus[r + 1] += i_im
+            re = [values[q] for q in rows]
+            im = [values[q + 1] for q in rows]
+            angles = [ref + ((atan2(y, x) - ref + pi) % two_pi - pi) for x, y, ref in zip(re, im, refs)]  # _wrap
+            Vs = [hypot(x, y) for x, y in zip(re, im)]
+            inputs[magnitude_at] = np.array(Vs)[magnitude_of]
+            inputs[angle_at] = np.array(angles)[angle_of]
+            for evaluate in plan["evaluate"]:
+                evaluate()
+            i_re, i_im = outputs[current_re], outputs[current_im]
+            i_bus = np.zeros(2 * b)
+            np.add.at(i_bus, bus_rows, i_re)
+            np.add.at(i_bus, bus_rows + 1, i_im)
             F = Y @ v - i_bus
             mismatch = float(np.max(np.abs(F)))
             if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
@@ -496,29 +592,34 @@ class GridMaster:
                 last = start, 0.5 * step, before
                 v = start - last[1]
                 continue
-            blocks = []
-            for k, r, m, _, _, _, rows, columns in entries:
-                re, im = values[r], values[r + 1]
-                Vs = math.hypot(re, im)
-                c, sn = re / Vs, im / Vs
-                a, bb, d, e = m.block(rows, columns)  # d(I_re, I_im) / d(Vs, theta), row by row
-                # chain rule with d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
-                blocks += (a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs)
+            # d(I_re, I_im) / d(Vs, theta), row by row; the chain rule with
+            # d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
+            a, bb, d, e = np.array([m.block(r, c) for m, r, c in plan["blocks"]]).T
+            Vs = np.array(Vs)
+            c, sn = np.array(re) / Vs, np.array(im) / Vs
+            blocks = np.stack((a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs),
+                              axis=1)
             M = Y.copy()
-            np.subtract.at(M, at, blocks)
+            np.subtract.at(M, plan["jacobian"], blocks.ravel())
             last = v, np.linalg.solve(M, F), mismatch
             v = v - last[1]
             timing.newton_iterations += 1
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")
+        theta, current, machine = np.zeros(g), np.zeros((2, g)), [None] * g
+        theta[plan["units"]] = angles
+        current[0, plan["units"]], current[1, plan["units"]] = i_re, i_im
+        for k, (o, o_end) in zip(active, plan["outputs"]):
+            machine[k] = outputs[o:o_end].tolist()
         values = v.tolist()
         for k in range(g):
             if machine[k] is None:  # not active: the bus angle, continuous with its reference
-                r = 2 * slot[k]
-                theta[k] = refs[k] + _wrap(math.atan2(values[r + 1], values[r]) - refs[k])
+                q = 2 * slot[k]
+                ref = float(theta_ref[k])
+                theta[k] = ref + _wrap(math.atan2(values[q + 1], values[q]) - ref)
         timing.network_s += time.perf_counter() - started
         Vb = v[0::2] + 1j * v[1::2]
-        return Vb[slot], np.array(current[0::2]) + 1j * np.array(current[1::2]), np.array(theta), machine
+        return Vb[slot], current[0] + 1j * current[1], theta, machine
 
     def _terminal(self, V, I, theta):
         """The terminal voltage behind each machine's external impedance: (magnitudes [g], angles [g],
@@ -544,52 +645,59 @@ class GridMaster:
                 out[(k, j)] = values
         return out
 
-    def _step(self, t0, h, V0, theta0, Vt0, V1, theta1, Vt1, active, timing, measured=({}, {})):
-        """One pass over [t0, t0 + h]: every `active` unit's devices stepped in their order, each input linear
-        from its start value to its end value (bus voltage and terminal voltage: V0, Vt0 to V1, Vt1;
-        a link from a device stepped before in this pass: to its new output; from a device stepped
-        after it: to that device's end value from the pass before, or its extrapolation on the first
-        pass; a measurement: from its value at the start to that at V1, `measured` = (start, end) of
-        _measure), or held at the start values with coupling "held". Returns every active unit's
-        outputs per device at t0 + h (None for the others), and sets the units' link end values to
-        this pass's outputs."""
+    def _step_plan(self, active) -> tuple:
+        """What _step needs of the `active` units (kept per set of them): per layer (the devices at
+        one place of their unit's step order) the indices in `_inputs` of its FMUs that interpolate
+        and their sources (start, end) in `_values`, the same of those that do not, their
+        step_inputs, and the links they give (indices in `_values` of their end values, in
+        `_outputs` of the outputs that give them)."""
+        key = tuple(active)
+        plan = self._step_plans.get(key)
+        if plan is not None:
+            return plan
+        starts, ends = self._sources
+        layers = []
+        for place in range(max((len(self.units[k].order) for k in active), default=0)):
+            inputs, steps, links, givers = ([], []), [], [], []
+            for k in active:
+                u = self.units[k]
+                if place >= len(u.order):
+                    continue
+                j = u.order[place]
+                fmu = u.fmus[j]
+                inputs[0 if fmu.interpolates else 1].extend(range(self._in_at[k][j], self._in_at[k][j] + len(fmu.input_names)))
+                steps.append(fmu.step_inputs)
+                for name, row in u.link_rows[j].items():
+                    links.append(self._region["ends"] + self._link[(k, (j, name))])
+                    givers.append(self._out_at[k][j] + row)
+            layer = []
+            for at in inputs:
+                at = np.array(at, dtype=np.intp)
+                layer += [at, starts[at], ends[at]]
+            layers.append((*layer, tuple(steps), np.array(links, dtype=np.intp), np.array(givers, dtype=np.intp)))
+        plan = self._step_plans[key] = tuple(layers)
+        return plan
+
+    def _step(self, t0, h, active, timing) -> None:
+        """One pass over [t0, t0 + h]: every `active` unit's devices stepped in their order, each input
+        linear from its start value to its end value as `_values` holds them (bus voltage and
+        terminal voltage: _set_voltages; a link from a device stepped before in this pass: to its
+        new output; from a device stepped after it: to that device's end value from the pass before,
+        or its extrapolation on the first pass; a measurement: _set_measured), or held at the start
+        values with coupling "held". The devices' outputs at t0 + h are left in `_outputs`, and the
+        links' end values are set to this pass's outputs."""
         started = time.perf_counter()
-        held_coupling = self.settings.coupling == "held"
-        ends = (([abs(v) for v in V0.tolist()], [abs(v) for v in V1.tolist()]), (theta0.tolist(), theta1.tolist()),
-                (Vt0[0], Vt1[0]), (Vt0[1], Vt1[1]))
-        outputs = [None] * len(self.units)
-        for k in active:
-            u = self.units[k]
-            links, new_links = u.links, u.ends
-            unit_out = [None] * len(u.fmus)
-            for j, fmu, plan, link_rows, interpolates in u.schedule:
-                a, b = [], []
-                for code, key, held in plan:
-                    if code < 4:
-                        start, end = ends[code]
-                        a.append(start[k])
-                        b.append(end[k])
-                    elif code == 4:
-                        a.append(links[key])
-                        b.append(new_links[key])
-                    elif code == 6:
-                        a.append(measured[0][(k, key[0])][key[1]])
-                        b.append(measured[1][(k, key[0])][key[1]])
-                    else:
-                        a.append(held)
-                        b.append(held)
-                if held_coupling:
-                    out = fmu.advance(t0, h, a, [0.0] * len(a) if interpolates else None)
-                elif interpolates:
-                    out = fmu.advance(t0, h, a, [(y - x) / h for x, y in zip(a, b)])
-                else:
-                    out = fmu.advance(t0, h, [0.5 * (x + y) for x, y in zip(a, b)])
-                unit_out[j] = out
-                for key, row in link_rows:
-                    new_links[key] = out[row]
-            outputs[k] = unit_out
+        held = self.settings.coupling == "held"
+        values, inputs, rates, outputs = self._values, self._inputs, self._rates, self._outputs
+        for at, start, end, at_held, start_held, end_held, steps, links, givers in self._step_plan(active):
+            a = values[start]
+            inputs[at] = a
+            rates[at] = 0.0 if held else (values[end] - a) / h
+            inputs[at_held] = values[start_held] if held else 0.5 * (values[start_held] + values[end_held])
+            for step in steps:
+                step(t0, h)
+            values[links] = outputs[givers]
         timing.fmu_step_s += time.perf_counter() - started
-        return outputs
 
     def run(self, contingency: Contingency, stop: float = 5.0) -> CosimResult:
         """The system from its load-flow equilibrium through `contingency` until `stop` [s]. A unit
@@ -605,8 +713,7 @@ class GridMaster:
         if self._runs:
             for fmu in self.fmus:
                 fmu.rewind()
-            for u in self.units:
-                u.rewind()
+        self._rewind_links()
         self._runs += 1
         topologies = contingency.topologies(stop)
         topology = topologies[0]
@@ -619,7 +726,7 @@ class GridMaster:
         V = self.case.flow.V_complex[self._gen_rows].copy()
         V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, active, timing)
         for k in active:
-            standing[k][0] = list(machine[k])
+            standing[k][0] = machine[k]
         rows = [self._row(0.0, V, I, theta, standing, active)]
         lost = None
         V_prev, h_prev = None, None
@@ -627,14 +734,13 @@ class GridMaster:
         points = communication_points(s.step, stop, topologies[1:])
         for t1, new_topology, recorded in refined_points(points, s.event_refinement):
             h = t1 - t0
-            Vt0 = self._terminal(V, I, theta)
-            measured_start = self._measure(V, theta, topology, active)
+            self._set_voltages("start", V, theta, self._terminal(V, I, theta))
+            self._set_measured("measured", self._measure(V, theta, topology, active))
             if V_prev is not None and s.coupling != "held":
                 V1 = V + (V - V_prev) * (h / h_prev)
             else:
                 V1 = V.copy()
-            for k in active:
-                self.units[k].guess_ends(h / h_prev if V_prev is not None and s.coupling != "held" else None)
+            self._guess_ends(h / h_prev if V_prev is not None and s.coupling != "held" else None)
             theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), theta.tolist())])
             I1 = I
             live = [f for k in active for f in self.units[k].fmus]
@@ -652,9 +758,9 @@ class GridMaster:
                     for fmu in live:
                         fmu.rollback()
                     timing.rollback_s += time.perf_counter() - t_save
-                Vt1 = self._terminal(V1, I1, theta1)
-                measured = (measured_start, self._measure(V1, theta1, topology, active))
-                outputs = self._step(t0, h, V, theta, Vt0, V1, theta1, Vt1, active, timing, measured)
+                self._set_voltages("end", V1, theta1, self._terminal(V1, I1, theta1))
+                self._set_measured("measured_end", self._measure(V1, theta1, topology, active))
+                self._step(t0, h, active, timing)
                 timing.passes += 1
                 new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
                 residual = new_V - V1
@@ -674,16 +780,18 @@ class GridMaster:
             timing.steps += 1
             V_prev, h_prev = V, h
             V, I, theta = V1, I1, theta1
+            self._advance_links()
+            outputs = self._outputs
             for k in active:
-                self.units[k].advance()
-                standing[k] = [list(machine[k])] + [list(o) for o in outputs[k][1:]]
+                standing[k] = [machine[k]] + [outputs[o:o + len(f.output_names)].tolist()
+                                              for o, f in zip(self._out_at[k][1:], self.units[k].fmus[1:])]
             if new_topology is not None:
                 topology = new_topology
                 active = self._active(topology)
                 V, I, theta, machine = self._solve(self.network(topology), V, theta, active, timing)
                 for k in active:
-                    standing[k] = [list(machine[k])] + standing[k][1:]
-                    self.units[k].machine_links(machine[k])
+                    standing[k] = [machine[k]] + standing[k][1:]
+                    self._machine_links(k)
                 V_prev = None  # no extrapolation across the jump
             if not recorded:
                 t0 = t1
@@ -714,7 +822,7 @@ class GridMaster:
         off = [k for k in range(len(self.units)) if k not in active]
         I[off] = 0.0
         return {"time": t, "devices": list(devices), "V": V.copy(), "I": I,
-                "theta": theta.copy(), "inputs": [list(u.fmus[0]._in) for u in self.units]}
+                "theta": theta.copy(), "inputs": [list(u.fmus[0].inputs_now) for u in self.units]}
 
     def _loss_time(self, rows, active) -> float | None:
         """The time two rotor angles of the `active` units first got pi apart, linear between the last

@@ -198,6 +198,8 @@ def plot(path, runs: dict, title: str, case=None) -> None:
     axes = fig.subplots(2, 2, sharex=True)
     first = next(iter(runs.values()))
     colors = rcParams["axes.prop_cycle"].by_key()["color"]
+    # a legend entry per machine while each machine has a colour of its own; beyond that one per run
+    per_machine = len(first.gen_buses) <= len(colors)
     for kind, result in runs.items():
         style = STYLES.get(kind, {})
         nan = np.full(result.Vs.shape, np.nan)
@@ -206,7 +208,8 @@ def plot(path, runs: dict, title: str, case=None) -> None:
         for k, bus in enumerate(result.gen_buses):
             color = style.get("color", colors[k % len(colors)])
             kw = {key: v for key, v in style.items() if key != "color"}
-            label = f"{LABELS.get(kind, kind)}, machine {bus}"
+            label = (f"{LABELS.get(kind, kind)}, machine {bus}" if per_machine else
+                     f"{LABELS.get(kind, kind)}, {len(result.gen_buses)} machines" if k == 0 else None)
             if k > 0:
                 axes[0, 0].plot(result.time, np.degrees(result.angle_difference(bus)), color=color, label=label, **kw)
             axes[0, 1].plot(result.time, omega[:, k], color=color, label=label, **kw)
