@@ -35,9 +35,9 @@ Events: the topologies of the contingency (Contingency.topologies: a fault, a sh
 `fault_impedance`, default 1e-6 pu: bolted, at a bus from `fault_start` to `clear_s`, absolute
 times in s; branches opened; units tripped: they inject no current, their devices stand still and
 their rotor angles leave the stability check); scipy's DOP853 (rtol 1e-10 by default), or Radau
-where the case is stiff (STIFF_RATE), restarts at every topology change. Limiters, switches and saturations (reference_models.piecewise.where) run on
-locked branches, their switchings located and the solve restarted there with the components' limit
-resets applied (`simulate`). A run is stable when no rotor-angle difference between two units in
+where the case is stiff (STIFF_RATE), restarts at every topology change. Limiters, switches and
+saturations (reference_models.piecewise.where) run on locked branches, their switchings located and
+the solve restarted there with the components' limit resets applied (`simulate`). A run is stable when no rotor-angle difference between two units in
 service exceeds pi before `stop` (located on the solver's dense output).
 """
 from __future__ import annotations
