@@ -37,8 +37,9 @@ times in s; branches opened; units tripped: they inject no current, their device
 their rotor angles leave the stability check); scipy's DOP853 (rtol 1e-10 by default), or Radau
 where the case is stiff (STIFF_RATE), restarts at every topology change. Limiters, switches and
 saturations (reference_models.piecewise.where) run on locked branches, their switchings located and
-the solve restarted there with the components' limit resets applied (`simulate`). A run is stable when no rotor-angle difference between two units in
-service exceeds pi before `stop` (located on the solver's dense output).
+the solve restarted there with the components' limit resets applied (`simulate`). A run is stable
+when no rotor-angle difference between two units in service exceeds pi before `stop` (located on
+the solver's dense output).
 """
 from __future__ import annotations
 
