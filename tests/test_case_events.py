@@ -81,8 +81,6 @@ def test_a_generator_trip_is_the_tripped_unit_in_case_order():
     ((Event("generator", 1.5, bus=3, generator="3", status=0), Event("generator", 2.0, bus=3, generator="3", status=1)),
      "a unit coming into service is not modelled"),
     ((Event("generator", 1.5, bus=3, generator="9", status=0),), "no generator 9 at bus 3"),
-    ((Event("branch", 1.0, branch="8-9", status=0), Event("branch", 1.2, branch="8-9:2", status=0)),
-     "cut a generator off"),
     ((Event("branch", 1.0, branch="1-9", status=0),), "no branch 1-9"),
     ((Event("fault", 1.0, bus=7, clear=0.9, impedance=1e-4j),), "never cleared"),
     ((Event("fault", 1.0, bus=7, clear=1.1, impedance=0j),), "nonzero"),
@@ -90,6 +88,27 @@ def test_a_generator_trip_is_the_tripped_unit_in_case_order():
 def test_case_events_that_cannot_happen_are_refused(events, message):
     with pytest.raises(ValueError, match=message):
         kundur(*events)
+
+
+def test_an_island_with_loads_runs_on_and_one_without_trips_its_generators():
+    tops = kundur(Event("branch", 1.0, branch="7-8", status=0), Event("branch", 1.0, branch="7-8:2", status=0),
+                  Event("branch", 1.0, branch="7-8:3", status=0)).topologies(3.0)
+    assert tops[-1].open == ("7-8", "7-8:2", "7-8:3") and not tops[-1].tripped  # load 7 west, load 8 east
+    tops = kundur(Event("branch", 1.0, branch="8-9", status=0), Event("branch", 1.2, branch="8-9:2", status=0)).topologies(3.0)
+    assert [tp.tripped for tp in tops] == [(), (), (2, 3)]  # generators 3, 4 left with no load
+    tops = kundur(Event("branch", 1.0, branch="5-6", status=0), Event("branch", 1.0, branch="5-6:2", status=0),
+                  Event("branch", 1.2, branch="6-7", status=0), Event("branch", 1.2, branch="6-7:2", status=0)).topologies(3)
+    assert [tp.tripped for tp in tops] == [(), (0,), (0, 1)]  # the dead island 1-5 stays dead
+
+
+def test_a_dead_island_is_grounded_so_the_network_still_solves():
+    reduced = KUNDUR.reduced(out_of_service=("5-6", "5-6:2", "1-5"))
+    assert np.all(np.isfinite(reduced.Y_real)) and np.linalg.matrix_rank(reduced.Y) == len(KUNDUR.buses)
+
+
+def test_a_generator_left_open_circuited_trips_as_andes_holds_it():
+    tops = kundur(Event("branch", 1.0, branch="1-5", status=0)).topologies(3.0)
+    assert tops[-1].tripped == (0,) and "generator 1 open-circuited: tripped" in tops[-1].description
 
 
 def test_units_sharing_a_bus_are_numbered_in_case_order():

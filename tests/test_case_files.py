@@ -143,8 +143,8 @@ def test_a_text_file_that_is_not_a_case_is_one_line_and_caches_nothing(tmp_path,
 
 @pytest.mark.andes
 def test_a_case_with_a_model_opfmu_does_not_have_names_it(tmp_path):
-    with pytest.raises(CaseError, match=r"^the case uses the model PLL1, which opfmu does not have"):
-        case_from_file(andes_case("ieee14/ieee14_pll1.xlsx"), cache_dir=tmp_path)
+    with pytest.raises(CaseError, match=r"^the case uses the model Fortescue, which opfmu does not have"):
+        case_from_file(andes_case("5bus_fortescue.xlsx"), cache_dir=tmp_path)
 
 
 @pytest.mark.andes

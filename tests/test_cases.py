@@ -181,7 +181,7 @@ def test_converted_events_are_the_case_files_own(tmp_path):
 
 @pytest.mark.andes
 @pytest.mark.parametrize("source, message", [
-    ("ieee14/ieee14_pll1.xlsx", "the case uses the model PLL1, which opfmu does not have"),
+    ("kundur/kundur_vsc.xlsx", "the case uses the models Node, Ground, R, VSCShunt, which opfmu does not have"),
     ("kundur/kundur_ieeeg1.xlsx", "IEEEG1 3 drives two machines"),
     ("no_such_case.xlsx", "no case file no_such_case.xlsx"),
 ])

@@ -368,8 +368,10 @@ class Case:
             parts.append(f"fault at bus {fault_bus}")
         if opened:
             parts.append("open " + ", ".join(br.name for br in opened))
-            isolated = np.flatnonzero(~np.any(Y != 0, axis=1))  # a bus cut off with nothing on it
-            Y[isolated, isolated] = 1.0  # grounded: its voltage 0, undefined otherwise (nothing flows there)
+            for island in net.islands(tuple(br.name for br in opened)):  # an island with no load or shunt is dead:
+                rows = [net.bus_index(b) for b in island]  # one bus grounded, its voltages 0 (undefined otherwise)
+                if not np.any(np.abs(np.sum(Y[np.ix_(rows, rows)], axis=1)) > 0):
+                    Y[rows[0], rows[0]] += 1.0
         if loads_off:
             parts.append(f"{len(loads_off)} load{'s' if len(loads_off) > 1 else ''} off")
         g = list(dict.fromkeys(net.bus_index(u.bus) for u in self.units))  # units at one bus share it

@@ -185,9 +185,8 @@ class Contingency:
     def topologies(self, stop: float) -> list:
         """The Topology sequence up to `stop` [s]: the intact network from 0, then the network after
         each time at which something changes before `stop` (a change at 0 replaces the intact
-        start). ValueError where the branches open at some time leave an island without a generator in
-        service that has a bus without a load or shunt (its voltage undefined). An island of generators
-        with loads runs on its own; generators left with nothing to supply (no load, no shunt in their
+        start). An island of generators with loads runs on its own (an island with nothing in service
+        is dead: Case.reduced grounds it); generators left with nothing to supply (no load, no shunt in their
         island: kundur_gentrip's machine behind its opened step-up transformer) trip, as ANDES holds them."""
         net = self.network
         order = {br.name: i for i, br in enumerate(net.branches)}
@@ -227,10 +226,7 @@ class Contingency:
                     texts.append(f"generator{'s' if len(cut) > 1 else ''} "
                                  f"{', '.join(str(net.generators[k].name or net.generators[k].bus) for k in cut)} "
                                  "open-circuited: tripped")
-                elif not island & live and bare:
-                    raise ValueError(f"at {t:g} s the open branches {', '.join(sorted(opened, key=order.get))} leave "
-                                     f"bus{'es' if len(bare) > 1 else ''} {', '.join(map(str, bare[:5]))} without a "
-                                     "generator, load or shunt to hold their voltage")
+
             topology = Topology(t, None if fault is None else fault[0], tuple(sorted(opened, key=order.get)),
                                 "; ".join(texts), tuple(sorted(tripped)), None if fault is None else fault[1],
                                 tuple(loads_off.values()))
