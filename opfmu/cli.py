@@ -8,6 +8,11 @@ import os
 import sys
 from pathlib import Path
 
+# numpy's BLAS on one thread unless OPENBLAS_NUM_THREADS says otherwise (set before numpy loads):
+# the matrices here are small (a reduced network of some hundred rows, a machine's states), and
+# BLAS threads waiting for work spin on the cores: a grid run of npcc spent up to a fifth more CPU
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 from opfmu.checks import MAX_COUNT, check_fields, json_object_file, output_file, output_folder
 from opfmu.errors import UserError
 
