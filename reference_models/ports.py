@@ -93,8 +93,6 @@ SIGNALS = {
                     "input"),
     "generator_speed_reference": ("wr0", "pu", "speed reference of a wind turbine's single-mass drive train (WTDS): "
                                   "its torque controller's power-speed characteristic fPe"),
-    "shaft_torque": ("Tsh", "pu", "torque a multi-mass shaft (SHAFT5) applies to its generator's rotor, machine base: "
-                     "the shaft's output, which its machine takes in place of the governor's mechanical power"),
     "pll_angle": ("am", "rad", "voltage angle a phase-locked loop measures (network frame): the PLL's output, its "
                   "converter's input (the frame of its d/q voltages and currents)"),
 }

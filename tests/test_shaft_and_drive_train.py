@@ -331,3 +331,14 @@ def test_single_mass_drive_train_rate_matches_andes_mid_fault_and_after_clearing
     ours = WTDS.rhs(x, u, p)[0]
     assert abs(point["rate"]) > 1e-4  # not at rest
     assert ours == pytest.approx(point["rate"], rel=0.0, abs=1e-9 * abs(point["rate"]) + GAIN * point["residual"])
+
+
+def test_a_shaft_sits_in_series_between_the_governor_and_the_rotor():
+    from reference_models.grid.case import Source, unit_wiring
+    from reference_models.models import STANDARD_MODELS
+
+    machine, governor, shaft = (STANDARD_MODELS[n] for n in ("GENROU", "TGOV1", "SHAFT5"))
+    wiring = unit_wiring([machine.ports, governor.ports, shaft.ports])
+    pm = machine.ports.input("mechanical_power")
+    assert wiring[0][pm] == Source("device", device=2, variable="Tsh")  # the rotor takes the shaft's torque
+    assert wiring[2]["tm"] == Source("device", device=1, variable=governor.ports.output("mechanical_power"))

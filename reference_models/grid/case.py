@@ -804,8 +804,10 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
     the output link of the same signal of another device; `terminal_voltage` and
     `terminal_voltage_angle` with no giver come from the bus (behind the machine's external
     impedance), `terminal_current_real` and `_imaginary` with no giver from the machine's bus-port
-    current outputs (system base, network frame); any other input link nothing gives is held. CaseError where two devices give one
-    signal or the first device has no bus port."""
+    current outputs (system base, network frame); any other input link nothing gives is held. A
+    device that takes and gives one signal sits in series on it (a multi-mass shaft between the
+    governor and the rotor: `mechanical_power`): it takes the other giver's, and the other takers
+    take its. CaseError where two devices give one signal otherwise or the first device has no bus port."""
     ports = list(ports)
     if not ports or ports[0] is None or ports[0].bus is None:
         raise CaseError(f"{where}: its machine declares no bus port")
@@ -821,6 +823,9 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
             wires[p.bus.voltage[1]] = Source("bus", index=1)
         for link in p.inputs:
             givers = [(i, q.output(link.signal)) for i, q in enumerate(ports) if i != j and q.output(link.signal)]
+            series = [(i, v) for i, v in givers if ports[i].input(link.signal)]
+            if len(givers) == 2 and len(series) == 1:  # a device in series on the signal gives it to the rest
+                givers = series
             if len(givers) > 1:
                 raise CaseError(f"{where}: {len(givers)} devices give the signal {link.signal}")
             if givers:

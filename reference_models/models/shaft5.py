@@ -19,8 +19,9 @@ Equations (ANDES 2.0 model reference, DynShaft: SHAFT5), wB = 2 pi fn:
 
 ANDES adds -tm + Tsh to its machine's swing equation, M domega/dt = tm - te - D (omega - 1): the
 generator rotor then moves by M domega/dt = Tsh - te - D (omega - 1), which is the machine's own
-equation with its mechanical power input Pm = Tsh (its `mechanical_power` input taking this
-`shaft_torque` output), the governor's tm driving the HP mass instead. The machine's rotor angle
+equation with its mechanical power input Pm = Tsh, the governor's tm driving the HP mass instead:
+the shaft takes and gives `mechanical_power`, in series on it (case.unit_wiring: it takes the
+governor's, the machine takes its). The machine's rotor angle
 and speed are the generator mass's; the angles are electrical radians in the network frame, as
 the machine's delta.
 
@@ -146,6 +147,6 @@ SHAFT5 = Component(
     equilibrium=equilibrium,
     state_scales=(0.05, 0.001, 0.05, 0.001, 0.05, 0.001, 0.05, 0.001),
     ports=Ports(inputs=(Link("mechanical_power", "tm"), Link("rotor_speed", "omega"), Link("rotor_angle", "delta")),
-                outputs=(Link("shaft_torque", "Tsh"),)),
+                outputs=(Link("mechanical_power", "Tsh"),)),  # in series: the governor's in, the rotor's out
     initialisation=Initialisation(("tm",), _start),
 )
