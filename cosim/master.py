@@ -424,6 +424,9 @@ class GridMaster:
                 givers.append(self._out_at[k][key[0]] + u.link_rows[key[0]][key[1]])
                 initial.append(value)
         self._givers = np.array(givers, dtype=np.intp)
+        # per unit, its control devices' outputs in `_outputs` (start, end)
+        self._controls = [[(o, o + len(f.output_names)) for o, f in zip(self._out_at[k][1:], u.fmus[1:])]
+                          for k, u in enumerate(self.units)]
         self._initial_links = np.array(initial, dtype=float)
         self._measured_at, n_measured = {}, 0
         for k, u in enumerate(self.units):
@@ -731,6 +734,7 @@ class GridMaster:
         lost = None
         V_prev, h_prev = None, None
         t0 = 0.0
+        checkpoints, rollbacks = self._live(active)
         points = communication_points(s.step, stop, topologies[1:])
         for t1, new_topology, recorded in refined_points(points, s.event_refinement):
             h = t1 - t0
@@ -743,20 +747,19 @@ class GridMaster:
             self._guess_ends(h / h_prev if V_prev is not None and s.coupling != "held" else None)
             theta1 = np.array([t + _wrap(cmath.phase(v) - t) for v, t in zip(V1.tolist(), theta.tolist())])
             I1 = I
-            live = [f for k in active for f in self.units[k].fmus]
             passes = s.passes if s.coupling == "iterated" else 1
             saved = passes > 1 and self.rolls_back  # each live FMU's state at t0 kept (FMU.checkpoint)
             if saved:
                 t_save = time.perf_counter()
-                for fmu in live:
-                    fmu.checkpoint()
+                for checkpoint in checkpoints:
+                    checkpoint()
                 timing.rollback_s += time.perf_counter() - t_save
             relax, previous = np.ones(n), None
             for p in range(passes if saved else 1):
                 if p > 0:
                     t_save = time.perf_counter()
-                    for fmu in live:
-                        fmu.rollback()
+                    for rollback in rollbacks:
+                        rollback()
                     timing.rollback_s += time.perf_counter() - t_save
                 self._set_voltages("end", V1, theta1, self._terminal(V1, I1, theta1))
                 self._set_measured("measured_end", self._measure(V1, theta1, topology, active))
@@ -781,13 +784,13 @@ class GridMaster:
             V_prev, h_prev = V, h
             V, I, theta = V1, I1, theta1
             self._advance_links()
-            outputs = self._outputs
+            outputs = self._outputs.tolist()
             for k in active:
-                standing[k] = [machine[k]] + [outputs[o:o + len(f.output_names)].tolist()
-                                              for o, f in zip(self._out_at[k][1:], self.units[k].fmus[1:])]
+                standing[k] = [machine[k]] + [outputs[o:o_end] for o, o_end in self._controls[k]]
             if new_topology is not None:
                 topology = new_topology
                 active = self._active(topology)
+                checkpoints, rollbacks = self._live(active)
                 V, I, theta, machine = self._solve(self.network(topology), V, theta, active, timing)
                 for k in active:
                     standing[k] = [machine[k]] + standing[k][1:]
@@ -806,6 +809,11 @@ class GridMaster:
         result = self._result(rows, topologies, lost)
         messages = {u.bus: list(dict.fromkeys(m for f in u.fmus for m in f.messages)) for u in self.units}
         return CosimResult(result=result, timing=timing, kinds=self.kinds, messages=messages, notes=self.notes)
+
+    def _live(self, active) -> tuple:
+        """The checkpoint and rollback methods of the `active` units' FMUs."""
+        live = [f for k in active for f in self.units[k].fmus]
+        return [f.checkpoint for f in live], [f.rollback for f in live]
 
     def _active(self, topology) -> list:
         """The indices of the units in service in `topology` (not among its tripped ones)."""
