@@ -233,6 +233,13 @@ WIND_MODES = {"stock": {}, "converter Sn = 1000 MVA, damping 2": {"REGCA1": {"Sn
 WIND = (WTTQA1, WTDS, WTPTA1, WTARA1)
 
 
+def _plant_term(ss) -> float:
+    """What ANDES' plant controller adds to its electrical controller's Pref (Fflag s6_y; 0 without one):
+    our WTTQA1 takes it as Pext - Pref0."""
+    plant = ss.REPCA1
+    return float(plant.Fflag.v[0] * plant.s6_y.v[0]) if plant.n else 0.0
+
+
 def _wind_params(ss) -> dict:
     from andes_reference import params
 
@@ -251,7 +258,8 @@ def _wind_points(ss) -> dict:
             "wtara1": (np.zeros(0), np.array([_v(a.theta), _v(d.Pe0)])),
             "wtpta1": (np.array([_v(p.PIc_xi), _v(p.PIw_xi), _v(p.LG_y)]),
                        np.array([_v(d.s1_y), _v(r.s5_y), _v(r.Pref), _v(p.wref)])),
-            "wttqa1": (np.array([_v(t.s1_y), _v(t.s2_y), _v(t.PI_xi), _v(t.Pref0)]), np.array([_v(g.Pe), _v(d.s1_y)]))}
+            "wttqa1": (np.array([_v(t.s1_y), _v(t.s2_y), _v(t.PI_xi), _v(t.Pref0)]),
+                       np.array([_v(g.Pe), _v(d.s1_y), _v(t.Pref0) + _plant_term(ss)]))}
 
 
 @pytest.mark.andes

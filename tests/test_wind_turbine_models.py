@@ -125,12 +125,12 @@ def test_torque_controller_characteristic_and_limits_are_on_the_turbine_base():
     assert p.speed_of_power(math, 0.7) == pytest.approx(0.72 + 0.7 / 2.0 * (0.7 - 0.8))
     assert p.speed_of_power(math, 0.3) == 0.58 and p.speed_of_power(math, 2.0) == 1.0
     x = np.array([0.7, 0.9, 2.3, 0.7])
-    assert WTTQA1.output_values(x, np.array([0.7, 0.8]), p)[0] == pytest.approx(2.4 * 0.8)  # Temax = 1.2 Sn / Sb
-    assert WTTQA1.rhs(x, np.array([0.7, 0.8]), p)[2] == pytest.approx(0.1 * 0.1)  # Tsel = s2_y - wg
-    assert WTTQA1.rhs(np.array([0.7, 0.9, 2.4, 0.7]), np.array([0.7, 0.8]), p)[2] == 0.0  # held at Temax
+    assert WTTQA1.output_values(x, np.array([0.7, 0.8, 0.7]), p)[0] == pytest.approx(2.4 * 0.8)  # Temax = 1.2 Sn / Sb
+    assert WTTQA1.rhs(x, np.array([0.7, 0.8, 0.7]), p)[2] == pytest.approx(0.1 * 0.1)  # Tsel = s2_y - wg
+    assert WTTQA1.rhs(np.array([0.7, 0.9, 2.4, 0.7]), np.array([0.7, 0.8, 0.7]), p)[2] == 0.0  # held at Temax
     power_error = WTTQA1.params({"Tflag": 1.0})
     x[2] = 0.5
-    assert WTTQA1.rhs(x, np.array([0.9, 0.8]), power_error)[2] == pytest.approx(0.1 * 0.2 / 0.8)
+    assert WTTQA1.rhs(x, np.array([0.9, 0.8, 0.7]), power_error)[2] == pytest.approx(0.1 * 0.2 / 0.8)
 
 
 # --- ANDES 2.0.0 --------------------------------------------------------------------------------
@@ -180,6 +180,13 @@ def _v(var) -> float:
     return float(var.v[0])
 
 
+def _plant_term(ss) -> float:
+    """What ANDES' plant controller adds to its electrical controller's Pref (Fflag s6_y; 0 without one):
+    our WTTQA1 takes it as Pext - Pref0."""
+    plant = ss.REPCA1
+    return float(plant.Fflag.v[0] * plant.s6_y.v[0]) if plant.n else 0.0
+
+
 def _andes_points(ss) -> dict:
     """{component name: (x, u)} of the four wind devices at ANDES' present point, our states and inputs
     from ANDES' variables."""
@@ -188,7 +195,8 @@ def _andes_points(ss) -> dict:
             "wtara1": (np.zeros(0), np.array([_v(a.theta), _v(d.Pe0)])),
             "wtpta1": (np.array([_v(p.PIc_xi), _v(p.PIw_xi), _v(p.LG_y)]),
                        np.array([_v(d.s1_y), _v(r.s5_y), _v(r.Pref), _v(p.wref)])),
-            "wttqa1": (np.array([_v(t.s1_y), _v(t.s2_y), _v(t.PI_xi), _v(t.Pref0)]), np.array([_v(g.Pe), _v(d.s2_y)]))}
+            "wttqa1": (np.array([_v(t.s1_y), _v(t.s2_y), _v(t.PI_xi), _v(t.Pref0)]),
+                       np.array([_v(g.Pe), _v(d.s2_y), _v(t.Pref0) + _plant_term(ss)]))}
 
 
 def _andes_rates(ss) -> dict:

@@ -4,7 +4,8 @@ drives its electrical controller's active power reference.
 States  x = (s1_y [pu] filtered active power; s2_y [pu] speed reference (filtered power-speed
         characteristic); PI_xi [pu] the torque PI's integrator (non-windup); Pref0 [pu] the active
         power reference at the start, held)
-Inputs  u = (Pe [pu] the converter's active power; wg [pu] the generator speed (its drive train's))
+Inputs  u = (Pe [pu] the converter's active power; wg [pu] the generator speed (its drive train's);
+        Pext [pu] the plant controller's active power reference, where there is one (else held))
 Outputs y = (Pref [pu]: the electrical controller's active power reference)
 
 Equations (ANDES 2.0 model reference, RenTorque: WTTQA1), on the system base:
@@ -15,7 +16,12 @@ Equations (ANDES 2.0 model reference, RenTorque: WTTQA1), on the system base:
     Twref ds2_y/dt = fPe - s2_y
     Tsel = (Pe - Pref0) / wg (Tflag = 1: power error) or s2_y - wg (Tflag = 0: speed error)
     dPI_xi/dt = Kip Tsel, non-windup within [Temin, Temax];  PI_y = Kpp Tsel + PI_xi clipped to [Temin, Temax]
-    Pref = PI_y wg,  dPref0/dt = 0
+    Pref = PI_y wg + (Pext - Pref0),  dPref0/dt = 0
+
+The plant controller's command adds to the torque controller's (ANDES: both add their terms to
+REECA1's Pref equation, the plant's Pext as its change from the start): the torque controller
+sits in series on `active_power_reference` (case.unit_wiring), taking REPCA1's Pext and giving
+the sum; without a plant controller Pext is held at its start value, and adds nothing.
 
 Bases: the powers and torques on the system base Sb, as ANDES computes them. The parameters are as
 the case data give them: p1..p4, Temax, Temin on the turbine's base Sn (ANDES: Tn, or its
@@ -29,7 +35,8 @@ changes nothing. The PI is not frozen during a voltage dip (ANDES notes that fre
 
 Start (ANDES' initialisation): given its power Pe and the reference Pref its electrical controller
 demands (else Pe): s1_y = Pe, the generator speed wg = s2_y = fPe, which its drive train then has
-to give, Pref0 = Pref, PI_xi = Pref / wg (ANDES' Pref0 / fPe).
+to give, Pref0 = Pref, PI_xi = Pref / wg (ANDES' Pref0 / fPe), Pext = Pref (what a plant
+controller then has to give).
 """
 from __future__ import annotations
 
@@ -102,7 +109,7 @@ class WTTQA1Params(Parameters):
 def _signals(x, u, p: WTTQA1Params, m) -> tuple:
     """(ds1_y/dt, ds2_y/dt, Tsel, PI_y) at x, u."""
     s1, s2_y, PI_xi, Pref0 = x
-    Pe, wg = u
+    Pe, wg = u[0], u[1]
     d_s1, s1_y = lag(m, Pe, s1, 1.0, p.Tp)
     d_s2, _ = lag(m, p.speed_of_power(m, s1_y), s2_y, 1.0, p.Twref)
     Tsel = (Pe - Pref0) / wg if p.Tflag else s2_y - wg
@@ -111,7 +118,7 @@ def _signals(x, u, p: WTTQA1Params, m) -> tuple:
 
 
 def derivatives(x, u, p: WTTQA1Params, m):
-    """(ds1_y, ds2_y, dPI_xi, dPref0)/dt for x = (s1_y, s2_y, PI_xi, Pref0), u = (Pe, wg)."""
+    """(ds1_y, ds2_y, dPI_xi, dPref0)/dt for x = (s1_y, s2_y, PI_xi, Pref0), u = (Pe, wg, Pext)."""
     d_s1, d_s2, Tsel, _ = _signals(x, u, p, m)
     low, high = p.torque_limits
     return d_s1, d_s2, integrator_non_windup(m, Tsel, x[2], p.Kip, 1.0, low, high)[0], 0.0 * x[3]
@@ -125,8 +132,8 @@ def reset(x, u, p: WTTQA1Params, m):
 
 
 def outputs(x, u, p: WTTQA1Params, m):
-    """(Pref,) [pu, system base]: PI_y wg."""
-    return (_signals(x, u, p, m)[3] * u[1],)
+    """(Pref,) [pu, system base]: PI_y wg plus the plant controller's change Pext - Pref0."""
+    return (_signals(x, u, p, m)[3] * u[1] + u[2] - x[3],)
 
 
 def _start(given, p: WTTQA1Params) -> tuple:
@@ -137,14 +144,14 @@ def _start(given, p: WTTQA1Params) -> tuple:
     if not low <= Pref / wg <= high:
         raise ValueError(f"WTTQA1: the torque {Pref / wg:.6g} pu of its power reference at the speed {wg:.6g} pu "
                          f"lies outside [Temin, Temax]")
-    return np.array([Pe, wg, Pref / wg, Pref]), {"wg": wg}
+    return np.array([Pe, wg, Pref / wg, Pref]), {"wg": wg, "Pext": Pref}
 
 
 def equilibrium(u, p: WTTQA1Params) -> np.ndarray:
-    """The steady state [4] at constant (Pe, wg): the filters at their inputs, Pref0 = Pe, the PI's
+    """The steady state [4] at constant (Pe, wg, Pext): the filters at their inputs, Pref0 = Pe, the PI's
     integrator on the limit its input drives it to where that input is not 0, else at the torque
     Pe / wg (its reference the power delivered) within the limits."""
-    Pe, wg = finite_inputs(u, "WTTQA1")
+    Pe, wg, _ = finite_inputs(u, "WTTQA1")
     if not wg > 0:
         raise ValueError(f"WTTQA1: no steady state at the generator speed {wg:.6g} pu")
     x = np.array([Pe, p.speed_of_power(math, Pe), 0.0, Pe])
@@ -162,7 +169,9 @@ WTTQA1 = Component(
             Quantity("PI_xi", "pu", "torque PI integrator (non-windup, system base)"),
             Quantity("Pref0", "pu", "active power reference at the start (held, system base)")),
     inputs=(Quantity("Pe", "pu", "the converter's active power (system base)", start=0.5, operating_range=(0.0, 1.0)),
-            Quantity("wg", "pu", "generator speed", start=0.79, operating_range=(0.6, 1.2), minimum=0.0)),
+            Quantity("wg", "pu", "generator speed", start=0.79, operating_range=(0.6, 1.2), minimum=0.0),
+            Quantity("Pext", "pu", "the plant controller's active power reference (system base)", start=0.5,
+                     operating_range=(0.0, 1.0))),
     outputs=(Quantity("Pref", "pu", "active power reference of the electrical controller (system base)"),),
     params_type=WTTQA1Params,
     derivatives=derivatives,
@@ -170,7 +179,8 @@ WTTQA1 = Component(
     equilibrium=equilibrium,
     state_scales=(0.1, 0.05, 0.1, 0.1),
     reset=reset,
-    ports=Ports(inputs=(Link("active_power", "Pe"), Link("generator_speed", "wg")),
+    ports=Ports(inputs=(Link("active_power", "Pe"), Link("generator_speed", "wg"),
+                        Link("active_power_reference", "Pext")),
                 outputs=(Link("active_power_reference", "Pref"),)),
-    initialisation=Initialisation(("wg",), _start),
+    initialisation=Initialisation(("wg", "Pext"), _start),
 )
