@@ -176,11 +176,13 @@ class FMU:
                                 if v.causality == "output" and getattr(self.variables.get(f"{v.name}0"), "causality", None) == "parameter")
         self.t = 0.0
         if self.version == 2:
+            from fmpy.fmi2 import FMU2Slave
+
             from cosim import fmi2_logging
 
             self._callbacks, self._log_key = fmi2_logging.callbacks(self._log)
             try:
-                self.fmu = _slave2()(guid=md.guid, unzipDirectory=str(self.directory),
+                self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(self.directory),
                                      modelIdentifier=cs.modelIdentifier, instanceName=self.name)
                 self.fmu.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
             except Exception as exc:
@@ -600,36 +602,6 @@ class FMU:
 
     def __exit__(self, *exc):
         self.close()
-
-
-_SLAVE2 = None
-
-
-def _slave2():
-    """fmpy's FMU2Slave with the prototypes of the FMI functions (argument and result types, which
-    fmpy reads from its methods' signatures for every instance: 1 ms each) made for the first
-    instance of the process and set on the library of each later one."""
-    global _SLAVE2
-    if _SLAVE2 is None:
-        from fmpy import fmi2
-
-        class FMU2Slave(fmi2.FMU2Slave):  # the name: fmpy picks the functions' prefix by it
-            prototypes = None  # {function name: (argument names, argument types, result type)}
-
-            def _loadFunctions(self) -> None:
-                kept = FMU2Slave.prototypes
-                if kept is None:
-                    super()._loadFunctions()
-                    FMU2Slave.prototypes = {name: (f.argnames, f.argtypes, f.restype)
-                                            for name, f in self._functions.items()}
-                    return
-                for name, (argnames, argtypes, restype) in kept.items():
-                    f = getattr(self.dll, name)
-                    f.argnames, f.argtypes, f.restype = argnames, argtypes, restype
-                    self._functions[name] = f
-
-        _SLAVE2 = FMU2Slave
-    return _SLAVE2
 
 
 class _Calls:
