@@ -88,3 +88,16 @@ def test_a_dropped_field_of_another_model_version_is_stated_and_devices_of_two_g
     assert any("ANDES does not know the field Iqmax of REGCA1" in n for n in case_notes(case))
     assert case.units[-1].machine.component.name == "regca1"  # GENROU 1 and REGCA1 1 share idx 1: both kept
     assert [u.machine.component.name for u in case.units].count("genrou") == 3
+
+
+@pytest.mark.andes
+def test_a_limit_andes_widens_at_its_initialisation_is_widened_too_and_stated(tmp_path):
+    import json
+
+    from reference_models.grid.andes_case import case_notes
+
+    case = _convert(tmp_path, "kundur/kundur_wtdta1.xlsx")  # 7 pu on a converter whose WTTQA1 allows 1.2
+    assert any("WTTQA1 1: Temax = 1.2 in the file, which ANDES widens to 7" in n for n in case_notes(case))
+    data = json.loads(Path(case.dynamic_data).read_text())
+    torque = next(u["torque_control"] for u in data["generators"] if "torque_control" in u)
+    assert torque["params"]["Temax"] == pytest.approx(7.0, rel=1e-12)

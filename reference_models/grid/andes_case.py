@@ -1098,6 +1098,50 @@ def dynamic_data(ss, name: str) -> dict:
             "generators": order, **({"loads": loads} if loads else {}), **({"notes": notes} if notes else {})}
 
 
+def _limits_widened(ss, dynamic: dict) -> list:
+    """The limits ANDES' time-domain initialisation widens to a start beyond them (its limiters'
+    allow_adjust, told at INFO level only: kundur_wtdta1's WTTQA1 Temax 1.2 -> 7): TDS.init is run
+    on ss (after the conversion has read it: it switches the static generators off), each converted
+    device's parameters compared before and after, a changed one set in `dynamic`'s device entry
+    (the file's value scaled as ANDES scaled it) and stated; the notes. Nothing where TDS.init
+    fails (ANDES cannot run the case then either)."""
+    import andes
+
+    names = {c.name: n for n, c in STANDARD_MODELS.items()}
+    entries = {}
+    for unit in dynamic.get("generators", []) + dynamic.get("loads", []):
+        for entry in unit.values():
+            if isinstance(entry, dict) and entry.get("component") in names and "andes" in entry:
+                entries[(names[entry["component"]], entry["andes"])] = entry
+    before = {}
+    for (name, idx), entry in entries.items():
+        model = getattr(ss, name, None)
+        if model is None or idx not in map(str, model.idx.v):
+            continue
+        i = list(map(str, model.idx.v)).index(idx)
+        for field in entry["params"]:
+            param = model.num_params.get(field)
+            if param is not None and isinstance(param.v, np.ndarray) and param.v.dtype != object:
+                before[(name, idx, field)] = (i, float(param.v[i]))
+    try:
+        with _silenced(andes):
+            ss.TDS.init()
+    except Exception:  # noqa: BLE001 - ANDES' own failure: it does not run the case, nothing to read
+        return []
+    notes = []
+    for (name, idx, field), (i, old) in before.items():
+        new = float(getattr(ss, name).num_params[field].v[i])
+        if new == old or not math.isfinite(new):
+            continue
+        entry = entries[(name, idx)]
+        given = entry["params"][field]
+        entry["params"][field] = given * new / old if old != 0 else new
+        notes.append(f"{name} {idx}: {field} = {given:g} in the file, which ANDES widens to {entry['params'][field]:g} "
+                     "at its initialisation (the start lies beyond it; ANDES tells it at INFO level only), and so "
+                     "does opfmu")
+    return notes
+
+
 def mismatch(network: dict, device_loads=()) -> float:
     """The largest bus power mismatch [pu] of a network file's content at its stored load flow:
     generation - load - V conj(Y V), the loads including `device_loads` ((bus, P, Q) drawn by load
@@ -1128,7 +1172,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
     dropped_notes, dropped = _dropped_loads(ss, {b: _bus(b, "Bus") for b in ss.Bus.idx.v})
     notes += (_alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss) + dynamic.pop("notes", [])
-              + dropped_notes)
+              + dropped_notes + _limits_widened(ss, dynamic))
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
     worst = mismatch(network, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())] + dropped)
