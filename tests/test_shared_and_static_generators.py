@@ -101,3 +101,11 @@ def test_a_limit_andes_widens_at_its_initialisation_is_widened_too_and_stated(tm
     data = json.loads(Path(case.dynamic_data).read_text())
     torque = next(u["torque_control"] for u in data["generators"] if "torque_control" in u)
     assert torque["params"]["Temax"] == pytest.approx(7.0, rel=1e-12)
+
+
+@pytest.mark.andes
+def test_a_time_series_of_a_constant_impedance_loads_power_is_left_out_stated(tmp_path):
+    from reference_models.grid.andes_case import case_notes
+
+    case = _convert(tmp_path, "ieee14/ieee14_timeseries.xlsx")  # plays PQ_1's Ppf, Qpf, which ANDES never reads
+    assert any(n.startswith("TimeSeries 1 (PQ PQ_1 Ppf, Qpf from pqts.xlsx) changes nothing") for n in case_notes(case))

@@ -605,6 +605,8 @@ def _bus(value, where: str) -> int:
 
 def _check_supported(ss) -> None:
     known = set(NETWORK_MODELS) | set(IGNORED_MODELS) | set(STANDARD_MODELS)
+    if _time_series_without_effect(ss):
+        known.add("TimeSeries")
     missing = [name for name, model in ss.models.items() if model.n > 0 and name not in known]
     if missing:  # all of them in one line
         raise CaseError(f"the case uses the model{'s' if len(missing) > 1 else ''} {', '.join(missing)}, which opfmu "
@@ -830,6 +832,25 @@ def _measurements_left_out(ss) -> list:
             "is left out: its outputs are not in the result"
             for name, model in ss.models.items() if name in IGNORED_MODELS and name not in ("Area", "Summary")
             and model.n > 0]
+
+
+def _time_series_without_effect(ss) -> list:
+    """The notes of the case's TimeSeries where each one in service plays a PQ's power, which
+    ANDES' constant-impedance load never reads in the time domain (ieee14_timeseries: ANDES' bus
+    voltages identical with and without it); [] where there is none or one plays anything else
+    (then TimeSeries is a model opfmu does not have)."""
+    model = getattr(ss, "TimeSeries", None)
+    if model is None or model.n == 0:
+        return []
+    live = [i for i in range(model.n) if model.u.v[i] != 0]
+    dests = {i: [str(d).strip() for d in (model.dests.v[i] if not isinstance(model.dests.v[i], str)
+                                          else model.dests.v[i].split(","))] for i in live}
+    if not all(model.model.v[i] in _ALTERS_WITHOUT_EFFECT and set(dests[i]) <= set(_ALTERS_WITHOUT_EFFECT[model.model.v[i]])
+               for i in live):
+        return []
+    return [f"TimeSeries {model.idx.v[i]} ({model.model.v[i]} {model.dev.v[i]} {', '.join(dests[i])} from "
+            f"{model.path.v[i]}) changes nothing in ANDES' simulation (its constant-impedance load keeps the impedance "
+            "of the start) and is left out" for i in live] or [f"TimeSeries ({model.n} out of service) left out"]
 
 
 def _alters(ss) -> list:
@@ -1171,7 +1192,8 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
     dropped_notes, dropped = _dropped_loads(ss, {b: _bus(b, "Bus") for b in ss.Bus.idx.v})
-    notes += (_alters(ss) + _measurements_left_out(ss) + _static_generator_notes(ss) + dynamic.pop("notes", [])
+    notes += (_alters(ss) + _time_series_without_effect(ss) + _measurements_left_out(ss) + _static_generator_notes(ss)
+              + dynamic.pop("notes", [])
               + dropped_notes + _limits_widened(ss, dynamic))
     if notes:  # what ANDES adjusted, stated (case_notes)
         dynamic["notes"] = notes
