@@ -109,3 +109,11 @@ def test_a_time_series_of_a_constant_impedance_loads_power_is_left_out_stated(tm
 
     case = _convert(tmp_path, "ieee14/ieee14_timeseries.xlsx")  # plays PQ_1's Ppf, Qpf, which ANDES never reads
     assert any(n.startswith("TimeSeries 1 (PQ PQ_1 Ppf, Qpf from pqts.xlsx) changes nothing") for n in case_notes(case))
+
+
+@pytest.mark.andes
+def test_a_jumper_joins_its_buses_into_one(tmp_path):
+    case = _convert(tmp_path, "ieee14/ieee14_jumper.xlsx")  # J9-10: a zero impedance, ANDES holds one voltage
+    assert 10 not in case.buses and 9 in case.buses
+    assert not any({br.from_bus, br.to_bus} == {9, 10} for br in case.network.branches)
+    assert any(9 in (br.from_bus, br.to_bus) and 11 in (br.from_bus, br.to_bus) for br in case.network.branches)

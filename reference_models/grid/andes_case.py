@@ -103,7 +103,7 @@ from .case import DATA_DIR, Case, CaseError, load_case
 #: The shipped cases converted from ANDES' own files: name -> ANDES case.
 ANDES_CASES = {"kundur": "kundur/kundur_full.xlsx", "ieee14": "ieee14/ieee14_full.xlsx",
                "ieee39": "ieee39/ieee39_full.xlsx", "npcc": "npcc/npcc.xlsx"}
-NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault", "Alter")
+NETWORK_MODELS = ("Bus", "Line", "PQ", "PV", "Slack", "Shunt", "Toggle", "Fault", "Alter", "Jumper")
 # measurements that act on no device of a converted case, and the case's description: left out, each
 # measurement stated in the case's notes (a device that reads a BusFreq takes its time constants)
 IGNORED_MODELS = ("Area", "BusFreq", "BusROCOF", "ACEc", "COI", "Summary", "FreqDiv", "PMU")
@@ -625,17 +625,22 @@ def network_data(ss, name: str) -> dict:
     """The network file's content (see the module docstring) of ANDES' System after its power flow."""
     _check_supported(ss)
     base = float(ss.config.mva)
-    bus_numbers = [_bus(b, "Bus") for b in ss.Bus.idx.v]
-    number = dict(zip(ss.Bus.idx.v, bus_numbers))
-    live = [i for i in range(ss.Bus.n) if _on(ss.Bus, i)]  # a bus out of service leaves with its devices
-    buses = [{"number": bus_numbers[i], "kv": float(ss.Bus.Vn.v[i])} for i in live]
+    number = bus_numbers(ss)
+    # a bus out of service leaves with its devices; a bus a Jumper ties to another is that one
+    live = [i for i, b in enumerate(ss.Bus.idx.v) if _on(ss.Bus, i) and number[b] == _bus(b, "Bus")]
+    buses = [{"number": number[ss.Bus.idx.v[i]], "kv": float(ss.Bus.Vn.v[i])} for i in live]
     L = ss.Line
-    branches = []
+    branches, shorted = [], {}
     for i in range(L.n):
         if not _on(L, i):
             continue
         tap, phi = float(L.tap.v[i]), float(L.phi.v[i])
         transformer = bool(L.trans.v[i]) or tap != 1.0 or phi != 0.0
+        if number[L.bus1.v[i]] == number[L.bus2.v[i]]:  # in parallel with a Jumper: its charging stays
+            if transformer:
+                raise CaseError(f"the transformer {L.idx.v[i]} is shorted by a Jumper")
+            shorted[number[L.bus1.v[i]]] = shorted.get(number[L.bus1.v[i]], 0.0) + float(L.b.v[i])
+            continue
         branches.append({"from": number[L.bus1.v[i]], "to": number[L.bus2.v[i]], "r": float(L.r.v[i]) + 1e-8,
                          "x": float(L.x.v[i]) + 1e-8, "b": float(L.b.v[i]),
                          "kind": "transformer" if transformer else "line", "tap": tap, "phi": phi,
@@ -647,7 +652,7 @@ def network_data(ss, name: str) -> dict:
             continue
         bus = number[ss.PQ.bus.v[i]]
         loads[bus] = loads.get(bus, 0j) + _pq_power(ss, i)
-    shunts = {}
+    shunts = {bus: complex(0.0, b) for bus, b in shorted.items()}
     for i in range(ss.Shunt.n):
         if not _on(ss.Shunt, i):
             continue
@@ -793,11 +798,30 @@ def events(ss, number) -> list:
     return out
 
 
+def bus_numbers(ss) -> dict:
+    """{ANDES Bus idx: the bus number in the converted network}: its own (an integer), or where a
+    Jumper in service ties it to another bus (a zero impedance: ANDES holds both at one voltage),
+    the number of the bus it joins (bus1's, followed along chains of jumpers)."""
+    number = {b: _bus(b, "Bus") for b in ss.Bus.idx.v}
+    jumper = getattr(ss, "Jumper", None)
+    joined = {}
+    for i in range(jumper.n if jumper is not None else 0):
+        if _on(jumper, i):
+            joined[jumper.bus2.v[i]] = jumper.bus1.v[i]
+    for b in number:
+        seen, root = {b}, b
+        while root in joined and joined[root] not in seen:
+            root = joined[root]
+            seen.add(root)
+        number[b] = _bus(root, "Bus")
+    return number
+
+
 def _branch_name(ss, dev, number) -> str:
     L = ss.Line
     i = list(L.idx.v).index(dev)
-    ends = {L.bus1.v[i], L.bus2.v[i]}
-    k = sum(1 for j in range(i + 1) if {L.bus1.v[j], L.bus2.v[j]} == ends and _on(L, j))
+    ends = {number[L.bus1.v[i]], number[L.bus2.v[i]]}
+    k = sum(1 for j in range(i + 1) if {number[L.bus1.v[j]], number[L.bus2.v[j]]} == ends and _on(L, j))
     name = f"{number[L.bus1.v[i]]}-{number[L.bus2.v[i]]}"
     return name + (f":{k}" if k > 1 else "")
 
@@ -1060,7 +1084,7 @@ def dynamic_data(ss, name: str) -> dict:
     stabiliser and compensator to the exciter by `avr`; plant control and a wind turbine's drive
     train to the electrical control by `ree`, its aerodynamics, pitch and torque controls each to the
     one before)."""
-    number = dict(zip(ss.Bus.idx.v, (_bus(b, "Bus") for b in ss.Bus.idx.v)))
+    number = bus_numbers(ss)
     units = {}  # (ANDES group, bus device idx) -> its unit's entry
     owner = {None: {}}  # role -> {(ANDES group, device idx): the unit's key}
     for static, devices in _bus_devices(ss).items():
@@ -1191,7 +1215,7 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     notes = []
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
-    dropped_notes, dropped = _dropped_loads(ss, {b: _bus(b, "Bus") for b in ss.Bus.idx.v})
+    dropped_notes, dropped = _dropped_loads(ss, bus_numbers(ss))
     notes += (_alters(ss) + _time_series_without_effect(ss) + _measurements_left_out(ss) + _static_generator_notes(ss)
               + dynamic.pop("notes", [])
               + dropped_notes + _limits_widened(ss, dynamic))
