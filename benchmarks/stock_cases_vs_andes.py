@@ -27,6 +27,12 @@ CASES = [
     ("ieee14/ieee14_gast.xlsx", 7, 0.1), ("ieee14/ieee14_hygov.xlsx", 7, 0.1), ("ieee14/ieee14_hygovdb.xlsx", 7, 0.1),
     ("ieee14/ieee14_ieesgo.xlsx", 7, 0.1), ("5bus/pjm5bus.xlsx", 3, 0.05), ("kundur/kundur_st2cut.xlsx", 8, 0.1),
     ("ieee14/ieee14_solar.xlsx", 7, 0.1), ("ieee14/ieee14_fload.json", 9, 0.1), ("wecc/wecc_full.xlsx", 15, 0.05),
+    # the second round of issue 33: shared static generators, PLLs, REECB1, SHAFT5, WT3 with its plant
+    # controller, a ZIP short of its PQ, an open-circuited generator, a time series left out
+    ("ieee14/ieee14_pvd1.xlsx", 9, 0.1), ("ieee14/ieee14_esd1.xlsx", 9, 0.1), ("ieee14/ieee14_regcp1.xlsx", 7, 0.1),
+    ("ieee14/ieee14_reecb1.json", 7, 0.1), ("ieee14/ieee14_shaft5.json", 2, 0.05), ("ieee14/ieee14_wt3.xlsx", 9, 0.1),
+    ("ieee14/ieee14_zip.json", 9, 0.1), ("ieee14/ieee14_timeseries.xlsx", 9, 0.1), ("kundur/kundur_gentrip.xlsx", 8, 0.1),
+    ("kundur/kundur_wtdta1.xlsx", 8, 0.05), ("ei/EI_33.xlsx", 67, 0.05),
 ]
 
 
