@@ -242,6 +242,18 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _stepped(v, step, polar: bool):
+    """v [2b] (V_re, V_im per bus) after a Newton step: v - step, or where `polar` the step in
+    (|V|, angle) per bus."""
+    if not polar:
+        return v - step
+    rho = np.hypot(v[0::2], v[1::2]) - step[0::2]
+    angle = np.arctan2(v[1::2], v[0::2]) - step[1::2]
+    out = np.empty_like(v)
+    out[0::2], out[1::2] = rho * np.cos(angle), rho * np.sin(angle)
+    return out
+
+
 class _Unit:
     """The FMUs of one unit under the master: `fmus` (device order, the machine first), the wiring of
     their inputs from their ports, the bound inputs and outputs of each and where in them the
@@ -570,8 +582,16 @@ class GridMaster:
         (magnitude_at, magnitude_of), (angle_at, angle_of) = plan["magnitude"], plan["angle"]
         current_re, current_im = plan["currents"]
         atan2, hypot, pi, two_pi = math.atan2, math.hypot, math.pi, 2.0 * math.pi
+        start = v.copy()
+        polar = False  # Newton in (V_re, V_im) per bus; again in (|V|, angle) where that fails
         last = None  # the last Newton step: (its start, the step, the mismatch there), for backtracking
-        for iteration in range(s.newton_iterations + 1):
+        for iteration in range(2 * s.newton_iterations + 2):
+            if iteration == s.newton_iterations + 1:
+                if mismatch < s.newton_tolerance:
+                    break
+                # a stiff voltage-holding device (a static PV generator: reactive power Kv (V0 - |V|)) bends its
+                # current along the angle, where a step in (V_re, V_im) overshoots: from the start again in polar
+                polar, last, v = True, None, start.copy()
             values = v.tolist()
             re = [values[q] for q in rows]
             im = [values[q + 1] for q in rows]
@@ -587,13 +607,15 @@ class GridMaster:
             np.add.at(i_bus, bus_rows + 1, i_im)
             F = Y @ v - i_bus
             mismatch = float(np.max(np.abs(F)))
-            if mismatch < s.newton_tolerance or iteration == s.newton_iterations:
+            if mismatch < s.newton_tolerance and (polar or iteration <= s.newton_iterations):
                 break
+            if iteration == s.newton_iterations or iteration == 2 * s.newton_iterations + 1:
+                continue
             if last is not None and mismatch > last[2]:
                 # the full step made it worse (a constant-power load at a deep voltage dip): half of it
-                start, step, before = last
-                last = start, 0.5 * step, before
-                v = start - last[1]
+                before_step, step, before = last
+                last = before_step, 0.5 * step, before
+                v = _stepped(before_step, last[1], polar)
                 continue
             # d(I_re, I_im) / d(Vs, theta), row by row; the chain rule with
             # d(Vs, theta) / d(V_re, V_im) = [[c, sn], [-sn / Vs, c / Vs]]
@@ -602,10 +624,18 @@ class GridMaster:
             c, sn = np.array(re) / Vs, np.array(im) / Vs
             blocks = np.stack((a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs),
                               axis=1)
-            M = Y.copy()
+            if polar:  # columns by d(V_re, V_im) / d(|V|, angle) per bus; the devices' blocks as they are
+                c_all, s_all = v[0::2] / np.hypot(v[0::2], v[1::2]), v[1::2] / np.hypot(v[0::2], v[1::2])
+                rho = np.hypot(v[0::2], v[1::2])
+                M = np.empty_like(Y)
+                M[:, 0::2] = Y[:, 0::2] * c_all + Y[:, 1::2] * s_all
+                M[:, 1::2] = rho * (Y[:, 1::2] * c_all - Y[:, 0::2] * s_all)
+                blocks = np.stack((a, bb, d, e), axis=1)
+            else:
+                M = Y.copy()
             np.subtract.at(M, plan["jacobian"], blocks.ravel())
             last = v, np.linalg.solve(M, F), mismatch
-            v = v - last[1]
+            v = _stepped(v, last[1], polar)
             timing.newton_iterations += 1
         if not mismatch < max(s.newton_tolerance, 1e-8):
             raise CouplingError(f"the network solve did not converge (current mismatch {mismatch:.3g} pu)")

@@ -625,6 +625,8 @@ def _largest_rate(f: _Locked, t: float, y) -> float:
     from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigs
 
     y = np.asarray(y, dtype=float)
+    if y.size == 0:  # no state (a case of static devices alone)
+        return 0.0
     f0, n = f.rhs(t, y), y.size
 
     def product(v):
