@@ -402,7 +402,8 @@ class GridMaster:
         """Every FMU's buffers in the master's arrays (FMU.share), so that an input, rate or output
         of any FMU is set or read in one numpy operation with the others: `_inputs`, `_rates` (the
         bound inputs and their rates), `_outputs`, `_derivatives` (the bound outputs and their
-        directional derivatives), device j of unit k at `_in_at[k][j]`, `_out_at[k][j]`. And
+        directional derivatives), device j of unit k at `_in_at[k][j]`, `_out_at[k][j]` (its
+        control devices' outputs: `_controls[k]`, (start, end) each). And
         `_values`, where every input finds its value at a step's start and at its end, in regions
         (`_region`): "start", "end" (4 g each: per unit its bus voltage magnitude, angle and
         terminal voltage magnitude, angle: code * g + unit), "links", "ends" (each link's value at
@@ -485,7 +486,10 @@ class GridMaster:
         before (`ratio`: the coming step's length over that one's), or held (None)."""
         values = self._values
         links = values[self._links]
-        values[self._ends] = links if ratio is None or not self._extrapolates else links + (links - self._before) * ratio
+        if ratio is None or not self._extrapolates:
+            values[self._ends] = links
+        else:
+            values[self._ends] = links + (links - self._before) * ratio
 
     def _advance_links(self) -> None:
         """The step done: its links' end values start the next."""
@@ -697,8 +701,8 @@ class GridMaster:
                 if place >= len(u.order):
                     continue
                 j = u.order[place]
-                fmu = u.fmus[j]
-                inputs[0 if fmu.interpolates else 1].extend(range(self._in_at[k][j], self._in_at[k][j] + len(fmu.input_names)))
+                fmu, first = u.fmus[j], self._in_at[k][j]
+                inputs[0 if fmu.interpolates else 1].extend(range(first, first + len(fmu.input_names)))
                 steps.append(fmu.step_inputs)
                 for name, row in u.link_rows[j].items():
                     links.append(self._region["ends"] + self._link[(k, (j, name))])
