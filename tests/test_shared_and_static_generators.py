@@ -137,3 +137,13 @@ def test_a_case_of_static_generators_runs_through_a_line_trip_holding_their_volt
     V0 = np.array([case.flow.V[case.buses.index(u.bus)] for u in case.units])
     np.testing.assert_allclose(result.Vs[:, held], np.broadcast_to(V0, result.Vs.shape), atol=1e-4)
     assert np.ptp(result.V_bus[:, case.buses.index(5)]) > 1e-3  # the trip moved the network
+
+
+@pytest.mark.andes
+def test_buses_islanded_from_the_slack_are_held_where_andes_freezes_them(tmp_path):
+    from reference_models.grid.andes_case import case_notes
+
+    case = _convert(tmp_path, "ieee14/ieee14_island.xlsx")  # buses 8 (a machine) and 14 (a load) cut off
+    holders = [u for u in case.units if str(u.generator).startswith("island ")]
+    assert [(u.bus, u.machine.component.name) for u in holders] == [(8, "slack"), (14, "slack")]
+    assert any("buses 8, 14 lie in islands without a slack" in n for n in case_notes(case))

@@ -1191,6 +1191,12 @@ def mismatch(network: dict, device_loads=()) -> float:
     """The largest bus power mismatch [pu] of a network file's content at its stored load flow:
     generation - load - V conj(Y V), the loads including `device_loads` ((bus, P, Q) drawn by load
     devices: the dynamic-data file's "loads")."""
+    return float(np.abs(list(_imbalance(network, device_loads).values())).max())
+
+
+def _imbalance(network: dict, device_loads=()) -> dict:
+    """{bus: V conj(Y V) + load - generation [pu]} of a network file's content at its stored load
+    flow (`mismatch`)."""
     import tempfile
 
     from .case import load_network
@@ -1205,7 +1211,35 @@ def mismatch(network: dict, device_loads=()) -> float:
         S[net.bus_index(bus)] += complex(P, Q)
     for k, bus in enumerate(flow.generator_buses):
         S[net.bus_index(bus)] -= complex(flow.P_gen[k], flow.Q_gen[k])
-    return float(np.abs(S).max())
+    return dict(zip(net.buses, S.tolist()))
+
+
+def _hold_islands(ss, network: dict, dynamic: dict, device_loads) -> list:
+    """Holds the buses of the islands without a slack at the voltages ANDES freezes them at (its
+    power flow leaves them out and its time domain keeps their voltage equations off: Bus
+    islanded_a, islanded_v): a Slack device at each, a generator of the network named "island BUS"
+    supplying what the bus lacks there (its imbalance at the stored load flow), appended to
+    `network` and `dynamic`; the note."""
+    number = bus_numbers(ss)
+    kept = {i for island in ss.Bus.island_sets for i in island}
+    held = [number[ss.Bus.idx.v[i]] for i in range(ss.Bus.n) if i not in kept and _on(ss.Bus, i)]
+    held = list(dict.fromkeys(b for b in held if b in {e["number"] for e in network["buses"]}))
+    if not held:
+        return []
+    lacking = _imbalance(network, device_loads)
+    for bus in held:
+        i = [e["number"] for e in network["buses"]].index(bus)
+        network["generators"].append({"bus": bus, "kind": "slack", "V": network["load_flow"]["V"][i], "P": None,
+                                      "name": f"island {bus}"})
+        network["load_flow"]["P"].append(lacking[bus].real)
+        network["load_flow"]["Q"].append(lacking[bus].imag)
+        dynamic["generators"].append({"bus": bus, "generator": f"island {bus}",
+                                      "static_generator": {"component": STANDARD_MODELS["Slack"].name,
+                                                           "andes": f"Bus {bus}", "params": {}},
+                                      "fmu": {"kind": "reference"}})
+    return [f"bus{'es' if len(held) > 1 else ''} {_listed(map(str, held))} {'lie' if len(held) > 1 else 'lies'} in "
+            "islands without a slack: ANDES leaves them out of its power flow and freezes their voltages in its time "
+            "domain; opfmu holds them there with a Slack device each (a generator named \"island BUS\")"]
 
 
 def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
@@ -1216,6 +1250,8 @@ def convert(source, out_dir, name: str | None = None, dyr=None) -> tuple:
     ss = load_andes(source, dyr, notes)
     network, dynamic = network_data(ss, name), dynamic_data(ss, name)
     dropped_notes, dropped = _dropped_loads(ss, bus_numbers(ss))
+    dropped_notes += _hold_islands(ss, network, dynamic, [(u["bus"], u["P"], u["Q"]) for u in dynamic.get("loads", ())]
+                                   + dropped)
     notes += (_alters(ss) + _time_series_without_effect(ss) + _measurements_left_out(ss) + _static_generator_notes(ss)
               + dynamic.pop("notes", [])
               + dropped_notes + _limits_widened(ss, dynamic))

@@ -191,6 +191,7 @@ class Contingency:
         net = self.network
         order = {br.name: i for i, br in enumerate(net.branches)}
         fault, opened, tripped, loads_off = None, set(), set(), {}
+        intact = net.islands()  # islands of the network as it stands (ANDES' islands held apart: andes_case)
         kept = [Topology(0.0, None, (), "intact")]
         changes = self._changes()
         i = 0
@@ -220,7 +221,8 @@ class Contingency:
             live = {g.bus for k, g in enumerate(net.generators) if k not in tripped}
             for island in net.islands(opened) if opened else ():
                 bare = sorted(b for b in island if b not in net.loads and b not in net.shunts)
-                if island & live and len(bare) == len(island):  # generators open-circuited: tripped, as ANDES has them
+                if island & live and len(bare) == len(island) and island not in intact:
+                    # generators cut off by the opened branches with nothing to supply: tripped, as ANDES has them
                     cut = [k for k, g in enumerate(net.generators) if g.bus in island and k not in tripped]
                     tripped.update(cut)
                     texts.append(f"generator{'s' if len(cut) > 1 else ''} "
