@@ -32,7 +32,7 @@ CASES = [
     ("ieee14/ieee14_pvd1.xlsx", 9, 0.1), ("ieee14/ieee14_esd1.xlsx", 9, 0.1), ("ieee14/ieee14_regcp1.xlsx", 7, 0.1),
     ("ieee14/ieee14_reecb1.json", 7, 0.1), ("ieee14/ieee14_shaft5.json", 2, 0.05), ("ieee14/ieee14_wt3.xlsx", 9, 0.1),
     ("ieee14/ieee14_zip.json", 9, 0.1), ("ieee14/ieee14_timeseries.xlsx", 9, 0.1), ("kundur/kundur_gentrip.xlsx", 8, 0.1),
-    ("kundur/kundur_wtdta1.xlsx", 8, 0.05), ("ei/EI_33.xlsx", 67, 0.05),
+    ("ieee14/ieee14_island.xlsx", 9, 0.1), ("kundur/kundur_esst3a.xlsx", 7, 0.1),
 ]
 
 
