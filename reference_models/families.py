@@ -355,9 +355,13 @@ def case_contingencies(case) -> list:
 
     network = case.network
 
+    opened_by_events = tuple(e.branch for e in case.events if e.kind == "branch" and e.status == 0)
+    whole = len(network.islands())
+
     def contingency(bus, trip, k, z):
         args = (bus, CASE_FAULT_START_S + CASE_CLEARING_S[k], trip, CASE_FAULT_START_S, z, network)
-        if k % 2 == 1 and case.events:
+        apart = trip is not None and len(network.islands(opened_by_events + (trip,))) > whole
+        if k % 2 == 1 and case.events and not apart:  # not where both together cut the network apart
             try:
                 return Contingency(*args, case.events)
             except ValueError:  # the case's events and this contingency exclude each other

@@ -659,9 +659,9 @@ def network_data(ss, name: str) -> dict:
         bus = number[ss.Shunt.bus.v[i]]
         shunts[bus] = shunts.get(bus, 0j) + complex(float(ss.Shunt.g.v[i]), float(ss.Shunt.b.v[i]))
     generators, P, Q = [], [], []
-    for model, kind, i, name, (share_p, share_q) in _network_generators(ss):
+    for model, kind, i, generator, (share_p, share_q) in _network_generators(ss):
         generators.append({"bus": number[model.bus.v[i]], "kind": kind, "V": float(model.v0.v[i]),
-                           "P": None if kind == "slack" else share_p * float(model.p0.v[i]), "name": name})
+                           "P": None if kind == "slack" else share_p * float(model.p0.v[i]), "name": generator})
         P.append(share_p * float(model.p.v[i]))
         Q.append(share_q * float(model.q.v[i]))
     data = {"name": name, "source": "converted from ANDES' case by reference_models.grid.andes_case",
