@@ -56,7 +56,8 @@ RUNS = {
     "FLoad": ((0.1, {}), (0.3, {"Vs": 0.6, "theta_vs": 0.2}), (1.0, {})),
     "REPCA1": ((0.1, {}), (0.4, {"Vm": 0.6, "Vref": 1.2}), (0.8, {"Plant_pref": 0.7, "theta_m": 0.2}), (1.2, {})),
     "ZIP": ((0.1, {}), (0.3, {"Vs": 0.6}), (1.0, {})),
-    "PV": ((0.1, {}), (0.3, {"Vs": 0.9}), (1.0, {})),  # the voltage held: reactive power Kv (V0 - Vs)
+    "PV": ((0.1, {}), (0.3, {"Vs": 0.9}), (1.0, {})),
+    "ShuntSw": ((0.1, {}), (0.3, {"Vs": 0.9}), (1.0, {"Vs": 1.1})),  # steps in below the band, out above it  # the voltage held: reactive power Kv (V0 - Vs)
     "Slack": ((0.1, {}), (0.3, {"Vs": 0.9, "theta_vs": 0.05}), (1.0, {})),
     "PLL1": ((0.1, {}), (0.6, {"theta_vs": 0.3}), (1.2, {})),
     "PLL2": ((0.1, {}), (0.6, {"theta_vs": 0.3, "Vt": 0.5}), (1.2, {})),
@@ -80,7 +81,8 @@ RUNS = {
 # parameters other than the defaults: SEXS's ceiling (99 pu by default) within reach of the dip; the
 # regulator ceilings of ESAC1A and ESST1A (999 pu); ESST4B's gains (at its defaults it crosses no limit)
 PARAMS = {"SEXS": {"EMAX": 3.0, "EMIN": 0.0}, "ESAC1A": {"VAMAX": 8.0, "VAMIN": -8.0},
-          "ESST1A": {"VAMAX": 8.0, "VAMIN": -8.0}, "ESST4B": {"KPR": 10.0, "KIR": 20.0, "KIM": 2.0}}
+          "ESST1A": {"VAMAX": 8.0, "VAMIN": -8.0}, "ESST4B": {"KPR": 10.0, "KIR": 20.0, "KIM": 2.0},
+          "ShuntSw": {"B1": 0.05, "B2": 0.1, "B3": 0.15, "n": 3.0, "dt": 0.12}}  # ANDES' default: no step; a delay off the step grid
 
 
 def params(name):

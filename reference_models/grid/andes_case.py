@@ -957,6 +957,7 @@ def _load_units(ss, number) -> list:
         power = _pq_power(ss, j)
         out.append({"bus": number[ss.PQ.bus.v[j]], "load": str(pq), "P": share[0] * power.real,
                     "Q": share[1] * power.imag, "load_device": entry, "fmu": {"kind": "reference"}})
+    out += _switched_shunts(ss, number)
     for dname in LOADS:
         model = getattr(ss, dname)
         if hasattr(model, "pq") or dname not in STANDARD_MODELS:
@@ -966,6 +967,32 @@ def _load_units(ss, number) -> list:
                 out.append({"bus": number[model.bus.v[i]], "load": str(model.idx.v[i]), "P": float(model.p.v[i]),
                             "Q": float(model.q.v[i]), "load_device": _entry(model, dname, i, ss),
                             "fmu": {"kind": "reference"}})
+    return out
+
+
+def _switched_shunts(ss, number) -> list:
+    """The dynamic-data "loads" entries of ANDES' switched shunts in service (ShuntSw): a unit at
+    its bus drawing, at the load flow, what its steps in after ANDES' power flow draw; its tables
+    of the admittance with k steps in (ANDES' SwBlock, system base), its band and its delay."""
+    from reference_models.models.shuntsw import MAX_STEPS
+
+    model = getattr(ss, "ShuntSw", None)
+    out = []
+    for i in range(model.n if model is not None else 0):
+        if not _on(model, i):
+            continue
+        B, G = (np.asarray(block.bcs[i], dtype=float) for block in (model.beff, model.geff))
+        steps = int(model.beff.maxsel[i])
+        if steps > MAX_STEPS:
+            raise CaseError(f"ShuntSw {model.idx.v[i]} has {steps} steps (opfmu takes {MAX_STEPS} at most)")
+        sel = int(model.beff.sel[i])
+        V = float(ss.Bus.v.v[list(ss.Bus.idx.v).index(model.bus.v[i])])
+        params = {**{f"B{k}": float(B[k]) for k in range(len(B))}, **{f"G{k}": float(G[k]) for k in range(len(G))},
+                  "n": float(steps), **{k: float(getattr(model, k).v[i]) for k in ("vref", "dv", "dt")}}
+        out.append({"bus": number[model.bus.v[i]], "load": str(model.idx.v[i]), "P": float(G[sel]) * V * V,
+                    "Q": -float(B[sel]) * V * V, "load_device": {"component": STANDARD_MODELS["ShuntSw"].name,
+                                                                 "andes": str(model.idx.v[i]), "params": params},
+                    "fmu": {"kind": "reference"}})
     return out
 
 

@@ -44,6 +44,7 @@ from .regcp1 import REGCP1
 from .repca1 import REPCA1
 from .sexs import SEXS
 from .shaft5 import SHAFT5
+from .shuntsw import SHUNTSW
 from .st2cut import ST2CUT
 from .static_generator import PV, SLACK
 from .tg2 import TG2
@@ -67,7 +68,7 @@ STANDARD_MODELS = {
     "IEEEVC": IEEEVC,
     "FLoad": FLoad, "Motor5": Motor5, "Motor3": Motor3,
     "ZIP": ZIP,
-    "PV": PV, "Slack": SLACK,
+    "PV": PV, "Slack": SLACK, "ShuntSw": SHUNTSW,
     "REGCA1": REGCA1, "REECA1": REECA1,
     "PLL1": PLL1, "PLL2": PLL2, "REGCP1": REGCP1, "REECB1": REECB1,
     "PVD1": PVD1, "ESD1": ESD1,
