@@ -629,8 +629,8 @@ class GridMaster:
             blocks = np.stack((a * c - bb * sn / Vs, a * sn + bb * c / Vs, d * c - e * sn / Vs, d * sn + e * c / Vs),
                               axis=1)
             if polar:  # columns by d(V_re, V_im) / d(|V|, angle) per bus; the devices' blocks as they are
-                c_all, s_all = v[0::2] / np.hypot(v[0::2], v[1::2]), v[1::2] / np.hypot(v[0::2], v[1::2])
                 rho = np.hypot(v[0::2], v[1::2])
+                c_all, s_all = v[0::2] / rho, v[1::2] / rho
                 M = np.empty_like(Y)
                 M[:, 0::2] = Y[:, 0::2] * c_all + Y[:, 1::2] * s_all
                 M[:, 1::2] = rho * (Y[:, 1::2] * c_all - Y[:, 0::2] * s_all)

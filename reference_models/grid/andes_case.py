@@ -712,16 +712,14 @@ def _network_generators(ss) -> list:
                 continue
             static = str(model.idx.v[i])
             mine = devices.get(static, [])
-            if len(mine) <= 1:
+            shares = [tuple(float(getattr(getattr(ss, d), k).v[j]) for k in ("gammap", "gammaq")) for d, j, _ in mine]
+            total = tuple(map(sum, zip(*shares))) if mine else (1.0, 1.0)
+            if any(abs(t - 1.0) > 1e-9 for t in total):
+                raise CaseError(f"the devices {_listed([f'{d} {idx}' for d, _, idx in mine], 3)} of static generator "
+                                f"{static} take {total[0]:g} of its active and {total[1]:g} of its reactive power "
+                                "(gammap, gammaq): ANDES starts them off its own load flow (make each sum 1)")
+            if len(mine) <= 1:  # one device (or none: a PV or Slack device) takes all of it
                 shares = [(1.0, 1.0)]
-            else:
-                shares = [tuple(float(getattr(getattr(ss, d), k).v[j]) for k in ("gammap", "gammaq")) for d, j, _ in mine]
-            if mine:
-                total = tuple(sum(float(getattr(getattr(ss, d), k).v[j]) for d, j, _ in mine) for k in ("gammap", "gammaq"))
-                if any(abs(t - 1.0) > 1e-9 for t in total):
-                    raise CaseError(f"the devices {_listed([f'{d} {idx}' for d, _, idx in mine], 3)} of static generator "
-                                    f"{static} take {total[0]:g} of its active and {total[1]:g} of its reactive power "
-                                    "(gammap, gammaq): ANDES starts them off its own load flow (make each sum 1)")
             for k, share in enumerate(shares):
                 name = _generator_name(static, mine[k][2], True) if len(mine) > 1 else static
                 out.append((model, kind, i, name, share))
@@ -1114,7 +1112,8 @@ def dynamic_data(ss, name: str) -> dict:
     number = bus_numbers(ss)
     units = {}  # (ANDES group, bus device idx) -> its unit's entry
     owner = {None: {}}  # role -> {(ANDES group, device idx): the unit's key}
-    for static, devices in _bus_devices(ss).items():
+    named = _bus_devices(ss)
+    for static, devices in named.items():
         for dname, i, idx in devices:
             model = getattr(ss, dname)
             role = "machine" if dname in MACHINES else "converter"
@@ -1125,7 +1124,7 @@ def dynamic_data(ss, name: str) -> dict:
     for model, dname in ((ss.Slack, "Slack"), (ss.PV, "PV")):
         for i in range(model.n):
             static = model.idx.v[i]
-            if _on(model, i) and str(static) not in {u["generator"].split("/")[0] for u in units.values()}:
+            if _on(model, i) and str(static) not in named:
                 units[("static", static)] = {"bus": number[model.bus.v[i]], "generator": str(static),
                                              "static_generator": {"component": STANDARD_MODELS[dname].name,
                                                                   "andes": str(static), "params": {}}}
@@ -1250,7 +1249,8 @@ def _hold_islands(ss, network: dict, dynamic: dict, device_loads) -> list:
     number = bus_numbers(ss)
     kept = {i for island in ss.Bus.island_sets for i in island}
     held = [number[ss.Bus.idx.v[i]] for i in range(ss.Bus.n) if i not in kept and _on(ss.Bus, i)]
-    held = list(dict.fromkeys(b for b in held if b in {e["number"] for e in network["buses"]}))
+    in_network = {e["number"] for e in network["buses"]}
+    held = list(dict.fromkeys(b for b in held if b in in_network))
     if not held:
         return []
     lacking = _imbalance(network, device_loads)

@@ -191,7 +191,7 @@ class Contingency:
         net = self.network
         order = {br.name: i for i, br in enumerate(net.branches)}
         fault, opened, tripped, loads_off = None, set(), set(), {}
-        intact = net.islands()  # islands of the network as it stands (ANDES' islands held apart: andes_case)
+        intact = None  # islands of the network as it stands (ANDES' islands held apart: andes_case), once needed
         kept = [Topology(0.0, None, (), "intact")]
         changes = self._changes()
         i = 0
@@ -219,6 +219,8 @@ class Contingency:
                     texts.append(text)
                 i += 1
             live = {g.bus for k, g in enumerate(net.generators) if k not in tripped}
+            if opened and intact is None:
+                intact = net.islands()
             for island in net.islands(opened) if opened else ():
                 bare = sorted(b for b in island if b not in net.loads and b not in net.shunts)
                 if island & live and len(bare) == len(island) and island not in intact:
