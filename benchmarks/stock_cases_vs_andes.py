@@ -33,6 +33,8 @@ CASES = [
     ("ieee14/ieee14_reecb1.json", 7, 0.1), ("ieee14/ieee14_shaft5.json", 2, 0.05), ("ieee14/ieee14_wt3.xlsx", 9, 0.1),
     ("ieee14/ieee14_zip.json", 9, 0.1), ("ieee14/ieee14_timeseries.xlsx", 9, 0.1), ("kundur/kundur_gentrip.xlsx", 8, 0.1),
     ("ieee14/ieee14_island.xlsx", 9, 0.1), ("kundur/kundur_esst3a.xlsx", 7, 0.1),
+    # the third round: IEEEG1 driving two machines (generators 3 and 4 on one turbine)
+    ("kundur/kundur_ieeeg1.xlsx", 8, 0.1),
 ]
 
 

@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference_models.grid.case import Case, external_impedance, measured_values, step_order, unit_wiring
+from reference_models.grid.case import Case, external_impedance, measured_values, remote_wiring, step_order, unit_wiring
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.result import GridResult, device_labels, rotor_angle_state
 
@@ -259,16 +259,18 @@ class _Unit:
     their inputs from their ports, the bound inputs and outputs of each and where in them the
     master finds the bus current, the rotor angle, the states and the link outputs."""
 
-    def __init__(self, unit, start, files, scratch=None):
+    def __init__(self, unit, start, files, scratch=None, remote=None, given=None):
         self.bus = unit.bus
         self.fmus = []
         try:
-            self._open(unit, start, files, scratch)
+            self._open(unit, start, files, scratch, remote or {}, given or {})
         except BaseException:
             self.close()
             raise
 
-    def _open(self, unit, start, files, scratch) -> None:
+    def _open(self, unit, start, files, scratch, remote: dict, given: dict) -> None:
+        """remote: the unit's signals from other units (case.remote_wiring); given: {device: [outputs
+        other units take]}."""
         for device, path in zip(unit.devices, files.paths):
             self.fmus.append(FMU(path, f"{device.name} at bus {unit.bus}", init=False, scratch=scratch))
         for fmu in self.fmus:
@@ -280,7 +282,7 @@ class _Unit:
         from reference_models.grid.case import CaseError
 
         try:
-            self.wiring = unit_wiring([f.ports for f in self.fmus], f"generator at bus {unit.bus}")
+            self.wiring = unit_wiring([f.ports for f in self.fmus], f"generator at bus {unit.bus}", remote)
         except CaseError as exc:
             raise CouplingError(str(exc)) from None
         for device, begin, fmu in zip(unit.devices, start, self.fmus):
@@ -288,10 +290,10 @@ class _Unit:
             values.update(begin.inputs)
             fmu.initialise(values, keep=True)
         self.order = step_order(self.wiring)
-        needed = {j: [] for j in range(len(self.fmus))}
+        needed = {j: list(given.get(j, ())) for j in range(len(self.fmus))}
         for wires in self.wiring:
             for source in wires.values():
-                if source.kind == "device" and source.variable not in needed[source.device]:
+                if source.kind == "device" and source.unit is None and source.variable not in needed[source.device]:
                     needed[source.device].append(source.variable)
         bus = self.fmus[0].ports.bus
         self.inputs, self.sources, self.held, self.state_rows, self.link_rows = [], [], [], [], []
@@ -309,7 +311,7 @@ class _Unit:
                               for n in names])
             self.state_rows.append(len(device.component.state_names))
             self.link_rows.append({n: outputs.index(n) for n in needed[j]})
-        self.plan = [[(_code(source), (source.device, source.variable) if source.kind == "device" else
+        self.plan = [[(_code(source), (source.unit, source.device, source.variable) if source.kind == "device" else
                        (j, source.index) if source.kind == "measured" else None, held)
                       for source, held in zip(sources, helds)]
                      for j, (sources, helds) in enumerate(zip(self.sources, self.held))]
@@ -329,12 +331,13 @@ class _Unit:
         angle = rotor_angle_state(unit.machine.component)
         self.angle_row = None if angle is None else unit.machine.component.state_names.index(angle)
         self.impedance = external_impedance(unit.machine)
-        # the links' values at the start of a run: the consumers' start values
+        # the links' values at the start of a run: the consumers' start values, by (giving unit: None for
+        # this one, device, variable)
         self.initial_links = {}
         for j, sources in enumerate(self.sources):
             for source, held in zip(sources, self.held[j]):
                 if source.kind == "device":
-                    self.initial_links[(source.device, source.variable)] = held
+                    self.initial_links[(source.unit, source.device, source.variable)] = held
 
     def close(self) -> None:
         for f in self.fmus:
@@ -360,9 +363,14 @@ class GridMaster:
         buses = list(dict.fromkeys(case.generator_buses))  # the reduced network's buses (Case.reduced's order)
         self._slot = [buses.index(b) for b in case.generator_buses]  # unit -> its bus in the reduced network
         self._first = [self._slot.index(i) for i in range(len(buses))]  # bus -> the first unit on it
+        remote = remote_wiring(case.units)
+        given = [{} for _ in case.units]  # per unit {device: [the outputs other units take]}
+        for wires in remote:
+            for source in wires.values():
+                given[source.unit].setdefault(source.device, []).append(source.variable)
         try:
             for k, f in enumerate(self.files):
-                self.units.append(_Unit(case.units[k], case.starts[k], f, scratch))
+                self.units.append(_Unit(case.units[k], case.starts[k], f, scratch, remote[k], given[k]))
         except BaseException:
             self.close()
             raise
@@ -432,10 +440,12 @@ class GridMaster:
                         self._derivatives[o:o + no])
         self._link, givers, initial = {}, [], []
         for k, u in enumerate(self.units):
-            for key, value in u.initial_links.items():
-                self._link[(k, key)] = len(givers)
-                givers.append(self._out_at[k][key[0]] + u.link_rows[key[0]][key[1]])
-                initial.append(value)
+            for (unit, device, variable), value in u.initial_links.items():
+                giver = k if unit is None else unit
+                if (giver, (device, variable)) not in self._link:
+                    self._link[(giver, (device, variable))] = len(givers)
+                    givers.append(self._out_at[giver][device] + self.units[giver].link_rows[device][variable])
+                    initial.append(value)
         self._givers = np.array(givers, dtype=np.intp)
         # per unit, its control devices' outputs in `_outputs` (start, end)
         self._controls = [[(o, o + len(f.output_names)) for o, f in zip(self._out_at[k][1:], u.fmus[1:])]
@@ -467,7 +477,8 @@ class GridMaster:
                     if code < 4:
                         starts[p], ends[p] = r["start"] + code * g + k, r["end"] + code * g + k
                     elif code == 4:
-                        starts[p], ends[p] = r["links"] + self._link[(k, key)], r["ends"] + self._link[(k, key)]
+                        link = self._link[(k if key[0] is None else key[0], key[1:])]
+                        starts[p], ends[p] = r["links"] + link, r["ends"] + link
                     elif code == 6:
                         at = self._measured_at[(k, key[0])][0] + key[1]
                         starts[p], ends[p] = r["measured"] + at, r["measured_end"] + at

@@ -38,6 +38,9 @@ from pathlib import Path
 SIGNALS = {
     "field_voltage": ("Efd", "pu", "field voltage: an exciter's output, a machine's input"),
     "mechanical_power": ("Pm", "pu", "mechanical power: a governor's output, a machine's input"),
+    "second_mechanical_power": ("Pm2", "pu", "mechanical power a turbine gives a second machine, that machine's base "
+                                "(IEEEG1's low-pressure stages): the case takes it to that machine's unit as its "
+                                "mechanical_power (Unit.takes)"),
     "terminal_voltage": ("Vt", "pu", "terminal voltage magnitude: an exciter's input"),
     "speed": ("omega", "rad/s", "rotor speed deviation: a machine's output, a governor's or stabiliser's input"),
     "electrical_power": ("Pe", "pu", "electrical power: a machine's output, a stabiliser's input"),

@@ -170,9 +170,12 @@ def compare(case: str) -> dict:
             x, Vref = module.initialise(_v(_machine(ss, model.syn.v[i])[0].vf, _machine(ss, model.syn.v[i])[1]), u, p)
             set_diff = abs(Vref - u[ref_at])
         elif name in GOVERNORS:
-            s = _machine_signals(ss, model.syn.v[i])
-            x, Pref = module.initialise(s["Pm"], u, p)
-            set_diff = abs(Pref - u[1])
+            # the governor's own start, given its speed and the mechanical power its machine demands
+            solved = component.initialisation.solves
+            given = {n: float(v) for n, v in zip(component.input_names, u) if n not in solved}
+            power = component.ports.output("mechanical_power")
+            x, found = component.start({**given, power: _machine_signals(ss, model.syn.v[i])["Pm"]}, p)
+            set_diff = max(abs(found[n] - u[component.input_names.index(n)]) for n in solved)
         else:
             x, set_diff = component.steady_state(u, p), 0.0
         _record(results, name, state=np.abs(x - x_andes).max(), set_point=set_diff,

@@ -182,7 +182,6 @@ def test_converted_events_are_the_case_files_own(tmp_path):
 @pytest.mark.andes
 @pytest.mark.parametrize("source, message", [
     ("kundur/kundur_vsc.xlsx", "the case uses the models Node, Ground, R, VSCShunt, which opfmu does not have"),
-    ("kundur/kundur_ieeeg1.xlsx", "IEEEG1 3 drives two machines"),
     ("no_such_case.xlsx", "no case file no_such_case.xlsx"),
 ])
 def test_a_case_the_converter_cannot_take_is_refused_in_one_line(source, message, tmp_path, capsys):

@@ -122,7 +122,7 @@ WIND_CONTROLS = ("WTDTA1", "WTARA1", "WTPTA1", "WTTQA1")  # type-3 wind: drive t
 DRIVE_TRAINS = ("WTDTA1", "WTDS")  # a wind turbine's drive train, linked by `ree` to its electrical control
 SHAFTS = ("SHAFT5",)  # a machine's multi-mass torsional shaft, linked by `syn` to its machine
 PLLS = ("PLL1", "PLL2")  # phase-locked loops: a control device of the converter that names them (pll)
-CACHE_FORMAT = 4  # version of what convert writes: a new one keys new cache entries (4: shared and static generators, islands)
+CACHE_FORMAT = 5  # version of what convert writes: a new one keys new cache entries (4: shared and static generators, islands)
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
 ROUNDING_MARGIN = 10  # pflow_tolerance: times the rounding error of the largest bus power balance
@@ -834,7 +834,7 @@ def _params(model, name: str, i: int, ss) -> dict:
         param = getattr(model, field, None)
         if param is not None and hasattr(param, "vin"):
             values[field] = float(param.vin[i])
-    for field, value in (("Sb", float(ss.config.mva)), ("Sn", None), ("fn", None)):
+    for field, value in (("Sb", float(ss.config.mva)), ("Sn", None), ("fn", None), ("Sg", None), ("Sg2", None)):
         if field in fields and (value is not None or hasattr(model, field)):
             values[field] = value if value is not None else float(getattr(model, field).v[i])
     if "Vb" in fields:  # the nominal voltage [kV] of the device's bus
@@ -1102,6 +1102,29 @@ def _plls_left_out(ss, placed: set) -> list:
             "device) left out: its outputs are not in the result"] if left else []
 
 
+# the controls that may drive a second machine: model -> (the link naming it, the signal it gives that
+# machine, the signal that machine takes): IEEEG1's syn2, on its low-pressure stages
+SECOND_MACHINE_LINKS = {"IEEEG1": ("syn2", "second_mechanical_power", "mechanical_power")}
+
+
+def _second_machine(units: dict, key, model, i: int, link: str, gives: str, takes: str) -> None:
+    """Where device i of `model` (a control of the unit `key`) names a second machine by `link`, that
+    machine's unit takes the signal `takes` from it (the unit's "takes": the device's signal `gives`
+    of the generator of unit `key`); CaseError where it names no machine in service or one that
+    already takes the signal."""
+    second = getattr(model, link).v[i]
+    if second is None:
+        return
+    found = [k for k in units if k[0] == "SynGen" and k[1] == second]
+    if len(found) != 1:
+        raise CaseError(f"{model.class_name} {model.idx.v[i]} names no machine in service as {link} ({second})")
+    unit = units[found[0]]
+    if found[0] == key or "governor" in unit or takes in unit.get("takes", {}):
+        raise CaseError(f"{model.class_name} {model.idx.v[i]} drives machine {second} ({link}), which has its own "
+                        "governor or another turbine")
+    unit.setdefault("takes", {})[takes] = {"generator": units[key]["generator"], "signal": gives}
+
+
 def dynamic_data(ss, name: str) -> dict:
     """The dynamic-data file's content (see the module docstring) of ANDES' System: a unit per bus
     device of a static generator (a machine, or an inverter's converter, linked by `gen`) with the
@@ -1129,6 +1152,7 @@ def dynamic_data(ss, name: str) -> dict:
                                              "static_generator": {"component": STANDARD_MODELS[dname].name,
                                                                   "andes": str(static), "params": {}}}
     used = _add_plls(ss, units)
+    drives = []  # the controls that may drive a second machine: (their unit's key, model, index)
     for role, names, link, target in _control_roles():
         owner[role] = {}
         for dname in names:
@@ -1136,8 +1160,6 @@ def dynamic_data(ss, name: str) -> dict:
             for i in range(model.n):
                 if not _on(model, i):
                     continue
-                if dname == "IEEEG1" and model.syn2.v[i] is not None:
-                    raise CaseError(f"IEEEG1 {model.idx.v[i]} drives two machines (syn2), which opfmu does not model")
                 controlled = getattr(model, link).v[i]
                 named = getattr(model, link).model  # the group (or model) the link names: idx are unique in a group
                 group = ss.models[named].group if named in ss.models else named
@@ -1155,6 +1177,10 @@ def dynamic_data(ss, name: str) -> dict:
                     units[key][role]["measures"] = extra["measures"]
                     units[key][role]["params"].update(extra["params"])
                 owner[role][(model.group, model.idx.v[i])] = key
+                if dname in SECOND_MACHINE_LINKS:
+                    drives.append((key, model, i))
+    for key, model, i in drives:
+        _second_machine(units, key, model, i, *SECOND_MACHINE_LINKS[model.class_name])
     for unit in units.values():
         unit["fmu"] = {"kind": "reference"}
     generators = [name for _, _, _, name, _ in _network_generators(ss)]

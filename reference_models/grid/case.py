@@ -280,18 +280,31 @@ class DeviceStart:
 
 
 @dataclass(frozen=True)
+class Remote:
+    """A signal a unit takes from a device of another unit (a turbine driving a second machine): its
+    input links of `signal` take the output link of signal `gives` of the unit of load-flow generator
+    `generator` (its name, or its bus number where the bus has one generator)."""
+
+    signal: str
+    generator: str
+    gives: str
+
+
+@dataclass(frozen=True)
 class Unit:
     """The devices at `bus` around one bus device (the one with a bus port: a machine, an inverter's
     converter, a load), which comes first, then its control components; `fmu`: the dynamic data's
     fmu entry, as given (for the co-simulation); `generator`: the load-flow generator's name where
     the data give one; `load`: for a unit that is a load (not a generator), the power it draws at
-    the load-flow point, P + jQ [pu, system base] (None: a generator's unit)."""
+    the load-flow point, P + jQ [pu, system base] (None: a generator's unit); `takes`: the signals
+    its devices take from a device of another unit (`Remote`)."""
 
     bus: int
     devices: tuple
     fmu: object = None
     generator: str | None = None
     load: complex | None = None
+    takes: tuple = ()  # Remote: the signals it takes from a device of another unit
 
     @property
     def machine(self) -> Device:
@@ -489,8 +502,8 @@ def load_units(path, generator_buses, generator_names=None) -> tuple:
         where = f"{path}: generator at bus {bus}" + (f" ({generator})" if generator else "")
         if (bus, generator) in by_key:
             raise CaseError(f"{where}: the bus has two generator entries")
-        by_key[(bus, generator)] = Unit(bus, _devices(path, g, where, ("bus", "fmu", "generator")), g.get("fmu"),
-                                        generator)
+        by_key[(bus, generator)] = Unit(bus, _devices(path, g, where, ("bus", "fmu", "generator", "takes")),
+                                        g.get("fmu"), generator, takes=_takes(g.get("takes"), where))
     keys = [(bus, name if (bus, name) in by_key else None) for bus, name in zip(generator_buses, names)]
     if sorted(by_key, key=str) != sorted(keys, key=str):
         raise CaseError(f"{path}: needs one generator at each of the buses {tuple(generator_buses)}, "
@@ -507,6 +520,51 @@ def load_units(path, generator_buses, generator_names=None) -> tuple:
         where = f"{path}: load at bus {bus}" + (f" ({e['load']})" if e.get("load") is not None else "")
         loads.append(Unit(bus, _devices(path, e, where, ("bus", "fmu", "load", "P", "Q")), e.get("fmu"), None, drawn))
     return tuple(by_key[key] for key in keys) + tuple(loads)
+
+
+def _takes(entry, where: str) -> tuple:
+    """The Remote links of a unit entry's "takes" {signal: {"generator": name, "signal": the signal
+    given there}} (none where it has none)."""
+    from ..ports import SIGNALS
+
+    if entry is None:
+        return ()
+    out = []
+    try:
+        for signal, source in entry.items():
+            remote = Remote(str(signal), str(source["generator"]), str(source["signal"]))
+            unknown = [n for n in (remote.signal, remote.gives) if n not in SIGNALS]
+            if unknown:
+                raise CaseError(f"{where}: takes the unknown signal {unknown[0][:40]!r}")
+            out.append(remote)
+    except (AttributeError, KeyError, TypeError):
+        raise CaseError(f"{where}: takes must map each signal to the generator and the signal it comes from") from None
+    return tuple(out)
+
+
+def remote_wiring(units) -> tuple:
+    """Per unit {signal: Source} of the signals it takes from other units (Unit.takes), each the
+    device of the named generator's unit that gives the signal; CaseError where no unit or no device
+    there gives it."""
+    out = []
+    for k, unit in enumerate(units):
+        wires = {}
+        for remote in unit.takes:
+            found = [i for i, u in enumerate(units) if u.load is None and i != k and
+                     (u.generator == remote.generator or (u.generator is None and str(u.bus) == remote.generator))]
+            where = f"generator at bus {unit.bus}" + (f" ({unit.generator})" if unit.generator else "")
+            if len(found) != 1:
+                raise CaseError(f"{where} takes {remote.signal} from generator {remote.generator[:40]}, which the case "
+                                "does not have (or has twice)")
+            giver = units[found[0]]
+            devices = [(j, d.component.ports.output(remote.gives)) for j, d in enumerate(giver.devices)
+                       if d.component.ports is not None and d.component.ports.output(remote.gives)]
+            if len(devices) != 1:
+                raise CaseError(f"{where} takes {remote.signal} from generator {remote.generator}, where "
+                                f"{'no device' if not devices else 'more than one device'} gives {remote.gives}")
+            wires[remote.signal] = Source("device", device=devices[0][0], variable=devices[0][1], unit=found[0])
+        out.append(wires)
+    return tuple(out)
 
 
 def _measurement(entry, where: str) -> Measurement | None:
@@ -604,11 +662,12 @@ def _operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
     return {"V": float(flow.V[i]), "theta": float(flow.theta[i]), "P": -unit.load.real, "Q": -unit.load.imag}
 
 
-def unit_start(unit: Unit, op: dict, measured: dict | None = None) -> tuple:
+def unit_start(unit: Unit, op: dict, measured: dict | None = None, remote=None) -> tuple:
     """The DeviceStart of every device of `unit` at the load-flow operating point op (V, theta, P, Q
     of its share of the bus injection): the bus device from its own initialisation (Component.start
     with the load-flow point), then its control devices (`at_rest`); measured {device index: the
-    MEASURED values of its Measurement at the load flow}."""
+    MEASURED values of its Measurement at the load flow}; remote: what it takes from other units
+    (RemoteStart)."""
     device = unit.machine
     component = device.component
     bus = component.ports.bus
@@ -619,10 +678,22 @@ def unit_start(unit: Unit, op: dict, measured: dict | None = None) -> tuple:
         x0, inputs = component.start(given, device.params)
     except ValueError as exc:
         raise CaseError(f"{where} has no start at the load flow: {' '.join(str(exc).split())[:160]}") from None
-    return at_rest(unit.devices, x0, inputs, where, measured)
+    return at_rest(unit.devices, x0, inputs, where, measured, remote)
 
 
-def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measured: dict | None = None) -> tuple:
+@dataclass(frozen=True)
+class RemoteStart:
+    """What a unit's start takes from other units: `wiring` (its remote_wiring), `values`
+    {(unit, device, variable): the start value of another unit's output it takes}, `demands`
+    {device: {output: the value a device of another unit solved for it}}."""
+
+    wiring: dict
+    values: dict = field(default_factory=dict)
+    demands: dict = field(default_factory=dict)
+
+
+def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measured: dict | None = None,
+            remote: RemoteStart | None = None) -> tuple:
     """The DeviceStart of every device of a unit whose bus device (devices[0]) is at rest in state x0
     under `bus_device_inputs` (every input by name), the control devices started from what the
     devices they drive need (Component.start).
@@ -633,10 +704,12 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measu
     to give): a stabiliser at rest before the exciter that takes its signal, the exciter after the
     machine that solved the field voltage, a plant controller after the electrical controller that
     solved its references. A device's outputs that others solved for are checked at its start.
-    measured: {device index: its MEASURED values} for the devices that measure the network."""
+    measured: {device index: its MEASURED values} for the devices that measure the network; remote:
+    what the unit takes from other units and what they solved for its devices' outputs."""
     devices = list(devices)
     ports = [d.component.ports for d in devices]
-    wiring = unit_wiring(ports, where)
+    remote = remote or RemoteStart({})
+    wiring = unit_wiring(ports, where, remote.wiring)
     machine = devices[0]
     component = machine.component
     bus = component.ports.bus
@@ -664,6 +737,8 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measu
                 raise CaseError(f"{where}: {devices[j].name} ({devices[j].component.name}) measures the network, "
                                 "but its entry names no measured bus (\"measures\")")
             return float(measured[j][source.index])
+        if source.kind == "device" and source.unit is not None:
+            return remote.values.get((source.unit, source.device, source.variable))
         if source.kind == "device":
             return outputs[source.device][source.variable] if source.device in starts else None
         return None
@@ -671,10 +746,10 @@ def at_rest(devices, x0, bus_device_inputs: dict, where: str = "the unit", measu
     def demands(j) -> dict:
         """{output variable of device j: the value a started device solved for it} (None: one that solves
         an input taken from j has not started)."""
-        out = {}
+        out = dict(remote.demands.get(j, {}))
         for k, wires in enumerate(wiring):
             for name, source in wires.items():
-                if source.kind == "device" and source.device == j and name in solves(k):
+                if source.kind == "device" and source.unit is None and source.device == j and name in solves(k):
                     if k not in starts:
                         return None
                     out[source.variable] = starts[k].inputs[name]
@@ -727,13 +802,49 @@ def _outputs(device: Device, start: DeviceStart) -> dict:
     return {**dict(zip(comp.state_names, (float(v) for v in x))), **dict(zip(comp.output_names, (float(v) for v in y)))}
 
 
+def _start_units(network: Network, flow: LoadFlow, units) -> tuple:
+    """The DeviceStart of every device of every unit (unit_start). A unit that takes a signal from
+    another unit (remote_wiring) starts first where its device solves that input (the giver then has
+    to give that value: a machine's mechanical power), after the giver otherwise (it needs the value)."""
+    remotes = remote_wiring(units)
+    links = []  # (taker unit, its device, its input, the giving Source, whether the taker solves it)
+    for k, unit in enumerate(units):
+        if remotes[k]:
+            wiring = unit_wiring([d.component.ports for d in unit.devices], f"generator at bus {unit.bus}", remotes[k])
+            for j, (device, wires) in enumerate(zip(unit.devices, wiring)):
+                init = device.component.initialisation
+                for name, source in wires.items():
+                    if source.unit is not None:
+                        links.append((k, j, name, source, init is not None and name in init.solves))
+    starts, values, demands = {}, {}, {}
+    pending = list(range(len(units)))
+    while pending:
+        ready = [k for k in pending
+                 if all(source.unit in starts for taker, _, _, source, solved in links if taker == k and not solved)
+                 and all(taker in starts for taker, _, _, source, solved in links if source.unit == k and solved)]
+        if not ready:
+            raise CaseError("the units that take signals from each other have no order to start in (generators at "
+                            f"buses {', '.join(str(units[k].bus) for k in pending)})")
+        k = ready[0]
+        pending.remove(k)
+        unit = units[k]
+        remote = RemoteStart(remotes[k], values, {j: d for (unit_k, j), d in demands.items() if unit_k == k})
+        starts[k] = unit_start(unit, _operating_point(unit, k, flow), _measured_at_rest(network, flow, unit), remote)
+        for taker, j, name, source, solved in links:
+            if taker == k and solved:
+                demands.setdefault((source.unit, source.device), {})[source.variable] = starts[k][j].inputs[name]
+            if source.unit == k:
+                values[(k, source.device, source.variable)] = _outputs(unit.devices[source.device],
+                                                                       starts[k][source.device])[source.variable]
+    return tuple(starts[k] for k in range(len(units)))
+
+
 def load_case(network_file, dynamic_data, name: str | None = None, source: tuple | None = None) -> Case:
     """The Case of a network file and a dynamic-data file; `source`: (case file, dyr file or None)
     where they were converted from a file ANDES reads (Case.source)."""
     network, flow = load_network(network_file)
     units = load_units(dynamic_data, network.generator_buses, [g.name for g in network.generators])
-    starts = tuple(unit_start(u, _operating_point(u, k, flow), _measured_at_rest(network, flow, u))
-                   for k, u in enumerate(units))
+    starts = _start_units(network, flow, units)
     return Case(name or network.name, network, flow, units, starts, load_events(network_file), Path(dynamic_data),
                 source)
 
@@ -787,8 +898,8 @@ TERMINAL_CURRENT = ("terminal_current_real", "terminal_current_imaginary")  # th
 
 @dataclass(frozen=True)
 class Source:
-    """Where a device input comes from within its unit: `bus` (the bus voltage: index 0 its
-    magnitude, 1 its angle), `device` (output `variable` of device `device` of the unit),
+    """Where a device input comes from: `bus` (the bus voltage: index 0 its magnitude, 1 its
+    angle), `device` (output `variable` of device `device` of the unit, or of unit `unit`),
     `terminal` (the terminal voltage: index 0 its magnitude, 1 its angle), `measured` (MEASURED[index]
     of the device's Measurement) or `held` (a set point at its start value)."""
 
@@ -796,9 +907,10 @@ class Source:
     device: int | None = None
     variable: str | None = None
     index: int | None = None
+    unit: int | None = None  # a device of another unit (its index in the case): a signal the unit takes (Unit.takes)
 
 
-def unit_wiring(ports, where: str = "a unit") -> tuple:
+def unit_wiring(ports, where: str = "a unit", remote=None) -> tuple:
     """The wiring of a unit from its devices' Ports (the machine, with the bus port, first): per
     device a dict {input variable: Source} over its bus-port and link inputs. An input link takes
     the output link of the same signal of another device; `terminal_voltage` and
@@ -807,7 +919,9 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
     current outputs (system base, network frame); any other input link nothing gives is held. A
     device that takes and gives one signal sits in series on it (a multi-mass shaft between the
     governor and the rotor: `mechanical_power`): it takes the other giver's, and the other takers
-    take its. CaseError where two devices give one signal otherwise or the first device has no bus port."""
+    take its. A signal no device of the unit gives and the unit takes from another (`remote`: its
+    remote_wiring, {signal: Source}) comes from there. CaseError where two devices give one signal
+    otherwise or the first device has no bus port."""
     ports = list(ports)
     if not ports or ports[0] is None or ports[0].bus is None:
         raise CaseError(f"{where}: its machine declares no bus port")
@@ -828,8 +942,12 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
                 givers = series
             if len(givers) > 1:
                 raise CaseError(f"{where}: {len(givers)} devices give the signal {link.signal}")
+            if givers and remote and link.signal in remote:
+                raise CaseError(f"{where}: takes {link.signal} from another unit, and a device of its own gives it")
             if givers:
                 wires[link.variable] = Source("device", device=givers[0][0], variable=givers[0][1])
+            elif remote and link.signal in remote:
+                wires[link.variable] = remote[link.signal]
             elif link.signal in TERMINAL:
                 wires[link.variable] = Source("terminal", index=TERMINAL.index(link.signal))
             elif link.signal in MEASURED:
@@ -846,12 +964,13 @@ def unit_wiring(ports, where: str = "a unit") -> tuple:
 def step_order(wiring) -> tuple:
     """The order in which a master steps a unit's devices: the control devices, each after the
     control devices it takes a signal from (where they do not take one from each other), then the
-    machine (device 0) last, so that it gets every control signal at the step's end."""
+    machine (device 0) last, so that it gets every control signal at the step's end (a signal from
+    another unit: as the master's pass has it)."""
     controls = list(range(1, len(wiring)))
     order = []
     while controls:
         ready = [j for j in controls if all(s.device in order or s.device in (0, j) or s.kind != "device"
-                                            for s in wiring[j].values())] or controls[:1]
+                                            or s.unit is not None for s in wiring[j].values())] or controls[:1]
         order.append(ready[0])
         controls.remove(ready[0])
     return tuple(order) + (0,)

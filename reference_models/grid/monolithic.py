@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from .case import Case, Reduced, external_impedance, held_inputs, measured_values, unit_wiring
+from .case import Case, Reduced, external_impedance, held_inputs, measured_values, remote_wiring, unit_wiring
 from .contingency import BOLTED_FAULT_IMPEDANCE, Contingency, Topology
 from .result import GridResult, device_labels, rotor_angle_state
 
@@ -128,12 +128,13 @@ def _current_map(component, x, p, m, u0=None, at=None):
 
 
 def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, controls: bool = True, m=math,
-                held=None, measured=None) -> list:
+                held=None, measured=None, remote=None) -> list:
     """The inputs of every device of a unit (tuples in component order), wired by `wiring`
     (case.unit_wiring): the bus voltage V_re + j V_im (scalars, m = math; arrays, m = numpy), the
     devices' states `state(j)` (lists in component order), the terminal voltage behind `impedance`,
     set points at their start values in `starts` (or `held` {variable: value} of the machine where
-    given), network measurements from `measured` {device index: its MEASURED values}.
+    given), network measurements from `measured` {device index: its MEASURED values}, a signal from
+    another unit by `remote(source)`.
     controls=False: the machine's links from other devices held at their start values."""
     if _scalar(m):
         Vs, theta = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
@@ -179,6 +180,8 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
                     values.append(terminal(source.index))
                 elif source.kind == "measured":
                     values.append(measured[j][source.index])
+                elif source.unit is not None:
+                    values.append(remote(source))
                 else:
                     values.append(value(source.device, source.variable))
             inputs[j] = tuple(values)
@@ -242,8 +245,8 @@ class System:
     def __init__(self, case: Case):
         self.case = case
         self.units = case.units
-        self.wiring = tuple(unit_wiring([d.component.ports for d in u.devices], f"generator at bus {u.bus}")
-                            for u in case.units)
+        self.wiring = tuple(unit_wiring([d.component.ports for d in u.devices], f"generator at bus {u.bus}", remote)
+                            for u, remote in zip(case.units, remote_wiring(case.units)))
         self.impedance = tuple(external_impedance(u.machine) for u in case.units)
         slots = max(len(u.devices) for u in case.units)
         slices = [[None] * len(u.devices) for u in case.units]
@@ -269,11 +272,12 @@ class System:
                              for k, u in enumerate(case.units)]
         # the machine inputs its bus current is read at: start values, or the state of the device giving them
         self.machine_links = tuple(
-            tuple((i, self.slices[k][w[name].device].start
-                   + u.devices[w[name].device].component.state_names.index(w[name].variable))
+            tuple((i, self.slices[giver][w[name].device].start
+                   + self.units[giver].devices[w[name].device].component.state_names.index(w[name].variable))
                   for i, name in enumerate(u.machine.component.input_names)
+                  for giver in [k if w.get(name) is None or w[name].unit is None else w[name].unit]
                   if name in w and w[name].kind == "device"
-                  and w[name].variable in u.devices[w[name].device].component.state_names)
+                  and w[name].variable in self.units[giver].devices[w[name].device].component.state_names)
             for k, (u, w) in enumerate(zip(case.units, (wi[0] for wi in self.wiring))))
         buses = list(dict.fromkeys(u.bus for u in case.units))  # the reduced network's buses, in Case.reduced's order
         self.bus_slot = tuple(buses.index(u.bus) for u in case.units)
@@ -400,19 +404,33 @@ class System:
             u[i] = y[at] if _scalar(m) else y[:, at]
         return u
 
-    def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math, measured=None) -> list:
+    def unit_inputs(self, k: int, y, V_re, V_im, controls: bool = True, m=math, measured=None, _through=()) -> list:
         """The inputs of every device of unit k (tuples in component order) at state y (scalars, m =
-        math; or arrays over rows, m = numpy) and bus voltage V_re + j V_im; `measured`: the network's
-        measurements of every unit (System.measured)."""
-        slices = self.slices[k]
-        if _scalar(m):
-            def state(j):
-                return [y[i] for i in range(slices[j].start, slices[j].stop)]
-        else:
-            def state(j):
-                return [y[:, i] for i in range(slices[j].start, slices[j].stop)]
-        return unit_inputs(self.units[k].devices, self.wiring[k], self.case.starts[k], self.impedance[k], state,
-                           V_re, V_im, controls, m, measured=None if measured is None else measured.get(k))
+        math; or arrays over rows, m = numpy) and the units' bus voltages V_re + j V_im ([g], or
+        [n, g]); `measured`: the network's measurements of every unit (System.measured). A signal
+        from another unit is that unit's device's state, or its output at that unit's inputs."""
+        scalar = _scalar(m)
+
+        def state_of(unit, j):
+            at = self.slices[unit][j]
+            return [y[i] for i in range(at.start, at.stop)] if scalar else [y[:, i] for i in range(at.start, at.stop)]
+
+        def remote(source):
+            if source.unit in _through + (k,):
+                raise ValueError(f"the units at buses {self.units[k].bus} and {self.units[source.unit].bus} take "
+                                 "signals from each other through their outputs")
+            d = self.units[source.unit].devices[source.device]
+            x = state_of(source.unit, source.device)
+            if source.variable in d.component.state_names:
+                return x[d.component.state_names.index(source.variable)]
+            inputs = self.unit_inputs(source.unit, y, V_re, V_im, controls, m, measured, _through + (k,))
+            return d.component.output_equations(x, inputs[source.device], d.params, m)[
+                d.component.output_names.index(source.variable)]
+
+        own = (V_re[k], V_im[k]) if scalar else (V_re[:, k], V_im[:, k])
+        return unit_inputs(self.units[k].devices, self.wiring[k], self.case.starts[k], self.impedance[k],
+                           lambda j: state_of(k, j), *own, controls, m,
+                           measured=None if measured is None else measured.get(k), remote=remote)
 
     def measured(self, V_re, V_im, network: Reduced) -> dict | None:
         """{unit: {device: its MEASURED values}} at the unit-bus voltages V_re + j V_im ([g], or [n, g]),
@@ -444,7 +462,7 @@ class System:
                 continue
             if m is not math:
                 m.owner = (k, None)
-            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, m, measured)
+            inputs = self.unit_inputs(k, y, V_re, V_im, controls, m, measured)
             for j, d in enumerate(unit.devices):
                 if j > 0 and not controls:
                     continue
@@ -463,7 +481,7 @@ class System:
         for k, unit in enumerate(self.units):
             if k in tripped:
                 continue
-            inputs = self.unit_inputs(k, y, V_re[k], V_im[k], controls, measured=measured)
+            inputs = self.unit_inputs(k, y, V_re, V_im, controls, measured=measured)
             for j, d in enumerate(unit.devices):
                 if j > 0 and not controls:
                     continue
@@ -491,7 +509,7 @@ class System:
         states, machine_inputs, device_states = {}, {}, {}
         labels = device_labels(self.units)
         for k, unit in enumerate(self.units):
-            inputs = self.unit_inputs(k, y, V_re[:, k], V_im[:, k], controls, np, measured)
+            inputs = self.unit_inputs(k, y, V_re, V_im, controls, np, measured)
             machine = unit.machine
             bus = machine.component.ports.bus
             u = np.stack([np.broadcast_to(np.asarray(v, dtype=float), (n,)) for v in inputs[0]], -1)
