@@ -16,9 +16,11 @@ P, Q}], shunts [{bus, G, B}], generators [{bus, kind slack|pv, V, P, name}] and 
 (V, theta per bus, P, Q per generator; per unit on base_mva, rad), and optionally the case's own
 events [{kind, time, ...}] (`Event`). A dynamic-data file (JSON): "generators": [{"bus": n,
 "generator": name, "<device>": {"component": name, "file": machine file | "params": {...}}, ...,
-"fmu": {...}}] - every key besides bus, generator and fmu is a device, in file order; `generator`
-(optional) names the load-flow generator where a bus has several; `fmu` is kept as it is for the
-co-simulation layer (which FMUs run the unit).
+"fmu": {...}}] - every key besides bus, generator, takes and fmu is a device, in file order;
+`generator` (optional) names the load-flow generator where a bus has several; `fmu` is kept as it is
+for the co-simulation layer (which FMUs run the unit); `takes` (optional) {signal: {"generator":
+name, "signal": given}}: a signal the unit takes from a device of another generator's unit (`Remote`:
+a turbine's second machine takes its mechanical power from the first one's governor).
 
 Every device starts at rest from the load flow by the initialisation its component declares
 (Component.initialisation, `unit_start`, `at_rest`): the bus device from its share of the load-flow
