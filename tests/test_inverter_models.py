@@ -74,6 +74,17 @@ def test_a_voltage_dip_freezes_the_controller_and_injects_reactive_current_beyon
     assert Iqcmd_normal - Iqcmd_dip == pytest.approx(2.0 * (1.0 - 0.7 - 0.02), rel=1e-12)
 
 
+def test_the_held_active_current_limit_is_sampled_during_a_dip_only():
+    _, (xr, ur, pr) = _chain_start(reeca1={"Kqv": 2.0, "Vref0": 1.0, "Thld": -0.5, "Thld2": 0.3, "Imax": 1.0})
+    x = xr.copy()
+    x[8] = 0.3  # a value sampled long ago
+    assert REECA1.reset_states(x, ur, pr)[8] == 0.3  # no dip: kept (the moving limit is not followed)
+    dip = ur.copy()
+    dip[0] = 0.6
+    sampled = REECA1.reset_states(x, dip, pr)[8]
+    assert sampled != 0.3 and sampled == pytest.approx(xr[8], rel=1e-12)  # the limit of now, at rest's states
+
+
 def test_after_a_dip_the_hold_timer_counts_and_keeps_the_injection_and_the_active_current_limit():
     p = {"Kqv": 2.0, "Vref0": 1.0, "Thld": -0.5, "Thld2": 0.3, "Imax": 1.0}
     _, (xr, ur, pr) = _chain_start(reeca1=p)

@@ -43,10 +43,10 @@ Equations (ANDES 2.0 model reference, RenExciter: REECA1), all on the system bas
 
 The hold timers (ANDES' ExtendedEvent fThld, fThld2) are the state tdip: 0 during a dip (its reset
 places it there, its rate is 0), then counting seconds up to max(|Thld|, Thld2). Ipmaxh is a
-sample: where Thld2 > 0 the reset places it on the present Ipmax wherever Ipmax is not held, at
-each restart of an integrator (each communication step's start, each located switching), so after
-a dip it holds the value of the dip's last restart (ANDES: of its last Newton iterate, one step
-later). dIpcmd carries ANDES' offset: the converter's command equation is
+sample: where Thld2 > 0 the reset places it on the present Ipmax during a dip, at each restart of
+an integrator (each communication step's start, each located switching: the dip's start is one), so
+after a dip it holds the value of the dip's last restart (ANDES: of its last Newton iterate, one
+step later). dIpcmd carries ANDES' offset: the converter's command equation is
 Ipcmd = Ipcmd0_LVG + IpHL_y - p0 / V0, so where the converter's low-voltage gain is below 1 at the
 start its command exceeds IpHL_y by a constant.
 
@@ -300,7 +300,9 @@ def derivatives(x, u, p: REECA1Params, m):
 
 def reset(x, u, p: REECA1Params, m):
     """x after the resets: s5_y's non-windup limits (at its frozen rate), tdip to 0 during a dip,
-    Ipmaxh on the present Ipmax wherever it is not held (Thld2 > 0)."""
+    Ipmaxh on the present Ipmax during a dip (Thld2 > 0; kept otherwise: it is read only for Thld2
+    after a dip, and sampling the moving limit outside dips would restart an integrator at every
+    sample)."""
     V = u[0]
     s = _signals(x, u, p, m)
     k = p.base_ratio
@@ -308,7 +310,7 @@ def reset(x, u, p: REECA1Params, m):
     tdip = _during_dip(m, V, p, 0.0 * x[7], x[7]) if p.timer_cap > 0 else x[7]
     Ipmaxh = x[8]
     if p.Thld2 > 0:
-        Ipmaxh = _during_dip(m, V, p, s["Ipmax_now"], where(m, x[7] < p.Thld2, x[8], s["Ipmax_now"]))
+        Ipmaxh = _during_dip(m, V, p, s["Ipmax_now"], x[8])
     return x[0], x[1], x[2], x[3], x[4], s5_y, x[6], tdip, Ipmaxh, x[9]
 
 
