@@ -1,8 +1,11 @@
 """What a grid run leaves in its folder: result.csv (the columns of docs/grid.md, "What a run
 leaves": time, delta, omega [rad/s deviation], Efd per unit and V per bus, then the rest of
-GridResult.columns),
+GridResult.columns; a second line `# s,rad,...` gives each column's unit, and the times are
+rounded to 1 ns, so that a time on the step grid reads as the multiple of the step it is),
 a figure of rotor angles relative to machine 1, speeds, terminal voltages and field voltages with
-every compared run on the same axes, and a Markdown report. All written atomically."""
+every compared run on the same axes (beyond 10 machines the ones that swing most are coloured and
+named, the others grey), and a Markdown report. All written atomically; a result set whole or not
+at all, into a folder made only then."""
 from __future__ import annotations
 
 import csv
@@ -37,14 +40,19 @@ class OutputError(ValueError):
 
 
 def check_output(out, names) -> Path:
-    """The folder `out`, created if absent, checked to take the files `names`: OutputError when it is a
-    file, cannot be written or one of the targets exists and is not a file."""
+    """The folder `out` (not made here: result_set makes it), checked to take the files `names`:
+    OutputError when `out` is empty text, a file, under a file, in a folder that cannot be written
+    (its nearest existing folder is probed), or one of the targets exists and is not a file."""
+    if not str(out).strip():
+        raise OutputError(f"--out must name a folder, got {str(out)!r}")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise OutputError(f"--out {out} is a file, not a folder")
+    existing = next(p for p in (out, *out.parents, Path.cwd()) if p.exists())
+    if not existing.is_dir():
+        raise OutputError(f"cannot write into the output folder {out} ({existing} is a file)")
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = tempfile.NamedTemporaryFile(dir=out, prefix=".opfmu-probe-")
+        probe = tempfile.NamedTemporaryFile(dir=existing, prefix=".opfmu-probe-")
         probe.close()
     except OSError as exc:
         raise OutputError(f"cannot write into the output folder {out} ({exc.strerror or 'not writable'})") from None
@@ -57,11 +65,15 @@ def check_output(out, names) -> Path:
 
 @contextmanager
 def result_set(out, names):
-    """Writes a set of files whole or not at all: yields a staging folder beside them in `out`; when
-    the block ends without an error every file `names` written there is moved into `out` (each
-    move atomic), and the staging folder is removed in any case."""
+    """Writes a set of files whole or not at all: makes `out` where it is absent and yields a staging
+    folder in it; when the block ends without an error every file `names` written there is moved
+    into `out` (each move atomic). The staging folder is removed in any case, and where the block
+    fails, so are the folders made here that it left empty."""
     out = check_output(out, names)
+    made = [p for p in (out, *out.parents) if not p.exists()]  # the folders made here, innermost first
+    out.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(dir=out, prefix=".opfmu-staging-"))
+    written = False
     try:
         yield staging
         missing = [n for n in names if not (staging / n).is_file()]
@@ -69,8 +81,15 @@ def result_set(out, names):
             raise OutputError(f"the result set lacks {', '.join(missing)}")
         for name in names:
             os.replace(staging / name, out / name)
+        written = True
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        if not written:
+            for folder in made:
+                try:
+                    folder.rmdir()  # only while empty
+                except OSError:
+                    break
 
 
 def _figure(figsize):
@@ -83,16 +102,50 @@ def _figure(figsize):
     return fig
 
 
+TIME_DECIMALS = 9  # result.csv's times are rounded to 1 ns (EVENT_TOLERANCE): 0.3, not 0.30000000000000004
+
+
+def column_units(columns, case=None) -> list:
+    """The unit of each of the result columns `columns` (names of GridResult.columns(case)): s, rad,
+    rad/s (a speed deviation), pu (voltages, field voltages, and P, Q, I_re, I_im on the system
+    base), and for a device's state the unit its component gives ("" where unknown: without the
+    `case`, or a state no component of it names)."""
+    from reference_models.grid.result import device_labels
+
+    fixed = {"time": "s", "delta": "rad", "omega": "rad/s", "Efd": "pu", "V": "pu", "theta": "rad", "Vs": "pu",
+             "theta_vs": "rad", "P": "pu", "Q": "pu"}
+    states = {}
+    if case is not None:
+        for unit, labels in zip(case.units, device_labels(case.units)):
+            for device, label in zip(unit.devices, labels):
+                states.update({f"{label}_{q.name}": q.unit for q in device.component.states})
+                states.update({f"{label}_{n}": "pu" for n in ("P", "Q", "I_re", "I_im")})
+    out = []
+    for name in columns:
+        prefix = "theta_vs" if name.startswith("theta_vs_") else name.partition("_")[0]
+        out.append(states.get(name, fixed.get(prefix, "")))
+    return out
+
+
+def _time_text(t: float) -> str:
+    """A time [s] rounded to TIME_DECIMALS, without trailing zeros."""
+    return (f"{t:.{TIME_DECIMALS}f}".rstrip("0").rstrip(".") or "0") if math.isfinite(t) else f"{t}"
+
+
 def write_csv(path, result, case=None) -> None:
-    """result.csv: one row per communication point (17 significant digits); `case`: the Case the
-    result is of (speeds as deviations in rad/s, every unit's field voltage: GridResult.columns)."""
+    """result.csv: a header line of the column names, a second line `# ` and each column's unit
+    (column_units; readers skip it as a comment: numpy's genfromtxt(names=True), pandas'
+    read_csv(comment="#")), then one row per communication point: the time rounded to 1 ns, the
+    rest to 17 significant digits. `case`: the Case the result is of (speeds as deviations in
+    rad/s, every unit's field voltage: GridResult.columns)."""
     columns = result.columns(case)
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     text = io.StringIO()
     csv.writer(text, lineterminator="\n").writerow(names)
-    row = ",".join(["%.17g"] * len(names))  # one format per row: the same text as csv's, 3 times faster
-    text.write("".join(row % tuple(values) + "\n" for values in data.tolist()))
+    text.write("# " + ",".join(column_units(names, case)) + "\n")
+    row = ",".join(["%s"] + ["%.17g"] * (len(names) - 1))  # one format per row: as csv's text, 3 times faster
+    text.write("".join(row % (_time_text(values[0]), *values[1:]) + "\n" for values in data.tolist()))
     with atomic_path(path) as tmp:
         tmp.write_text(text.getvalue())
 
@@ -187,35 +240,63 @@ def _largest(values) -> float:
     return float(finite.max()) if finite.size else math.nan
 
 
+def _coloured(result, omega, colours: int) -> list:
+    """The machines (unit indices of `result`) drawn in colours of their own, at most `colours`: all
+    where there are no more, else those whose speed deviation `omega` [n, units] swings most (the
+    rotor angle's excursion where there is no speed; a unit with neither last)."""
+    n = len(result.gen_buses)
+    if n <= colours:
+        return list(range(n))
+    angle = result.angles
+    with np.errstate(invalid="ignore"):
+        swing = np.nanmax(np.abs(omega), axis=0, initial=-np.inf, where=np.isfinite(omega))
+        excursion = np.nanmax(np.abs(angle - angle[:1]), axis=0, initial=-np.inf, where=np.isfinite(angle))
+    has_speed = np.isfinite(swing) & np.any(np.isfinite(omega), axis=0)
+    key = [(bool(has_speed[k]), swing[k] if has_speed[k] else excursion[k]) for k in range(n)]
+    return sorted(sorted(range(n), key=lambda k: key[k], reverse=True)[:colours])
+
+
 def plot(path, runs: dict, title: str, case=None) -> None:
     """The figure: runs {kind: GridResult}, 2 x 2 panels; with the `case` they are of, speeds as
     deviations [rad/s] and every unit's field voltage (GridResult's speed_deviation,
-    field_voltage), else the states of those names as stored."""
+    field_voltage), else the states of those names as stored. A machine's colour is the same in
+    every run and a run's line style the same for every machine; the legend, below the panels in
+    columns, names each coloured machine and each run. Beyond 10 machines (the colour cycle) the
+    10 that swing most (`_coloured`) are coloured and the others drawn thin and grey, as one entry."""
     from matplotlib import rcParams
+    from matplotlib.lines import Line2D
 
-    from reference_models.grid.result import field_voltage, speed_deviation
+    from reference_models.grid.result import field_voltage, speed_deviation, unit_labels
 
     fig = _figure((12, 7.5))
     axes = fig.subplots(2, 2, sharex=True)
     first = next(iter(runs.values()))
     colors = rcParams["axes.prop_cycle"].by_key()["color"]
-    # a legend entry per machine while each machine has a colour of its own; beyond that one per run
-    per_machine = len(first.gen_buses) <= len(colors)
+    omega_first = speed_deviation(first, case) if case is not None else np.full(first.Vs.shape, np.nan)
+    coloured = _coloured(first, omega_first, len(colors))
+    colour_of = {k: colors[i] for i, k in enumerate(coloured)}
+    others = dict(color="0.6", lw=0.6, alpha=0.6)
     for kind, result in runs.items():
-        style = STYLES.get(kind, {})
+        style = {key: v for key, v in STYLES.get(kind, {}).items() if key != "color"}
         nan = np.full(result.Vs.shape, np.nan)
         omega = speed_deviation(result, case) if case is not None else nan
         Efd = field_voltage(result, case) if case is not None else nan
         for k, bus in enumerate(result.gen_buses):
-            color = style.get("color", colors[k % len(colors)])
-            kw = {key: v for key, v in style.items() if key != "color"}
-            label = (f"{LABELS.get(kind, kind)}, machine {bus}" if per_machine else
-                     f"{LABELS.get(kind, kind)}, {len(result.gen_buses)} machines" if k == 0 else None)
+            kw = {**style, "color": colour_of[k]} if k in colour_of else {**style, **others}
             if k > 0:
-                axes[0, 0].plot(result.time, np.degrees(result.angle_difference(bus)), color=color, label=label, **kw)
-            axes[0, 1].plot(result.time, omega[:, k], color=color, label=label, **kw)
-            axes[1, 0].plot(result.time, result.Vs[:, k], color=color, label=label, **kw)
-            axes[1, 1].plot(result.time, Efd[:, k], color=color, label=label, **kw)
+                axes[0, 0].plot(result.time, np.degrees(result.angle_difference(bus)), **kw)
+            axes[0, 1].plot(result.time, omega[:, k], **kw)
+            axes[1, 0].plot(result.time, result.Vs[:, k], **kw)
+            axes[1, 1].plot(result.time, Efd[:, k], **kw)
+    labels = unit_labels(first.gen_buses)
+    handles = [Line2D([], [], color=colour_of[k], lw=1.5, label=f"machine {labels[k]}") for k in coloured]
+    rest = len(first.gen_buses) - len(coloured)
+    if rest:
+        handles.append(Line2D([], [], **{**others, "lw": 1.0}, label=f"the other {rest} machines"))
+    handles += [Line2D([], [], color="0.25", **{key: v for key, v in STYLES.get(kind, {}).items() if key != "color"},
+                       label=LABELS.get(kind, kind)) for kind in runs]
+    columns = min(len(handles), 6)
+    rows = -(-len(handles) // columns)
     axes[0, 0].set_ylabel(f"rotor angle - machine {first.gen_buses[0]} [deg]")
     axes[0, 1].set_ylabel("speed deviation [rad/s]")
     axes[1, 0].set_ylabel("terminal voltage [pu]")
@@ -224,9 +305,10 @@ def plot(path, runs: dict, title: str, case=None) -> None:
         ax.set_xlabel("time [s]")
     for ax in axes.flat:
         ax.grid(alpha=0.3)
-    axes[0, 1].legend(fontsize=7, ncol=1 if len(runs) < 3 else 2)
+    fig.legend(handles=handles, loc="lower center", ncol=columns, fontsize=8, frameon=False)
     fig.suptitle(title)
-    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.07, top=0.93, wspace=0.2, hspace=0.08)  # tight_layout's, fixed
+    legend = 0.03 * rows + 0.02  # figure fraction under the panels that the legend takes
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.07 + legend, top=0.93, wspace=0.2, hspace=0.08)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110, pil_kwargs=PNG)
 

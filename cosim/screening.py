@@ -8,25 +8,52 @@ FMUs through the master, the monolithic DAE or ANDES' own simulation (kind "ande
 The default faults of a case (`default_fault_buses`) are its buses without a generator: wscc9's
 4-9, Kundur's 5-10 (the two areas and the tie), and for ieee14, ieee39 and npcc every load and
 transmission bus; a fault at a generator's own terminal is left out (a screening names it if wanted). FMUs are built
-once, before any task is sent; a worker opens them once and reuses them for every task it gets
-(the master rewinds them between runs). They are extracted under one scratch folder of the
-screening (also the local workers' own folder), removed at its end whatever happened (also on an
-interrupt); local workers ignore Ctrl-C, so an interrupt is reported once, by the command.
+once, before any task is sent.
+
+On dask the files a task needs (its FMUs, the case file ANDES reads) travel by content: the client
+reads each once and scatters its bytes, keyed by their sha256, to every worker; a worker writes each
+into a folder of its own (under its dask local directory, in its own temporary folder) the first
+time a task needs it, so a worker needs no access to the client's disk. A worker opens the FMUs
+once per thread and reuses them for every task it gets (the master rewinds them between runs); at
+the end of a screening every worker closes them and removes its folder. In this process (workers
+0) the files are used where they are. The client's own scratch folder (the local workers' folder,
+and where FMUs are extracted without dask) is removed at the end whatever happened (also on an
+interrupt). The local workers are forked from a fork server that ignores SIGINT, which they inherit: a
+Ctrl-C reaches the command alone (also while they start), and is reported once, by it.
 """
 from __future__ import annotations
 
+import hashlib
+import ipaddress
 import logging
 import math
+import re
 import shutil
 import signal
+import socket
+import struct
 import tempfile
+import threading
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 
+from reference_models.files import atomic_path
 from reference_models.grid.contingency import Contingency
 
 from .master import MasterSettings
 from .stability import critical_clearing_time, default_stop, first_swing_peak, run_verdict, runner_stable
+
+DASK_SCHEDULER_PORT = 8786  # dask's default scheduler port: an address without one gets it
+SCHEDULER_TIMEOUT_S = 5.0  # s: reaching a scheduler and its answer, each
+_HANDSHAKE_LIMIT = 1 << 16  # bytes: a dask handshake is a few hundred; more is another protocol
+_HOST_NAME = re.compile(r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?(\.[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?)*")
+
+
+class SchedulerError(ValueError):
+    """A dask scheduler address that cannot be used: malformed, of another scheme, unreachable, or
+    not a dask scheduler (one line)."""
+
 
 @dataclass(frozen=True)
 class ScreeningTask:
@@ -45,6 +72,15 @@ class ScreeningTask:
     resolution: float
     scratch: str | None = None
     cct: bool = True
+
+
+@dataclass(frozen=True)
+class Content:
+    """A file that travels to the workers by its content: the sha256 of its bytes (hex) and its name
+    (kept: ANDES reads a case file by its suffix)."""
+
+    sha256: str
+    name: str
 
 
 def default_fault_buses(network) -> list:
@@ -67,14 +103,167 @@ def contingencies(network, buses, trips: str = "each") -> list:
     return out
 
 
+def scheduler_address(text: str) -> tuple:
+    """(host, port) of a dask scheduler address, `tcp://HOST:PORT` or `HOST:PORT` (the port may be
+    left out: DASK_SCHEDULER_PORT; an IPv6 host in brackets); SchedulerError for anything else."""
+    address = text.strip()
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    if scheme.lower() != "tcp":
+        raise SchedulerError(f"--scheduler {text!r}: a dask scheduler address is tcp://HOST:PORT, not a {scheme!r} "
+                             "address")
+    if rest.startswith("["):
+        host, bracket, tail = rest[1:].partition("]")
+        if not bracket or (tail and not tail.startswith(":")):
+            raise SchedulerError(f"--scheduler {text!r} is not an address (tcp://HOST:PORT)")
+        port = tail[1:] if tail else None
+        try:
+            ipaddress.IPv6Address(host)
+        except ValueError:
+            raise SchedulerError(f"--scheduler {text!r}: {host!r} is not an IPv6 address") from None
+    else:
+        host, colon, port = rest.partition(":")
+        port = port if colon else None
+        if not _HOST_NAME.fullmatch(host) or len(host) > 253:
+            raise SchedulerError(f"--scheduler {text!r} is not an address (tcp://HOST:PORT)")
+    if port is None:
+        return host, DASK_SCHEDULER_PORT
+    if not (port.isascii() and port.isdigit() and 0 < int(port) < 65536):
+        raise SchedulerError(f"--scheduler {text!r}: the port must be a number in [1, 65535]")
+    return host, int(port)
+
+
+def check_scheduler(text: str, timeout: float = SCHEDULER_TIMEOUT_S) -> str:
+    """The tcp:// address of the dask scheduler `text` names, once it has answered as one: its host
+    resolved and connected within `timeout` [s], and its first message a dask handshake (a length
+    of at most _HANDSHAKE_LIMIT bytes, then that many bytes naming a pickle protocol) within
+    `timeout` more. SchedulerError (one line) otherwise: nothing larger is read from a server that
+    speaks another protocol."""
+    host, port = scheduler_address(text)
+    found = {}
+
+    def resolve():
+        try:
+            found["addresses"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            found["error"] = exc
+
+    resolving = threading.Thread(target=resolve, daemon=True)  # getaddrinfo has no timeout of its own
+    resolving.start()
+    resolving.join(timeout)
+    if "addresses" not in found:
+        reason = found["error"].strerror if "error" in found else f"no answer in {timeout:g} s"
+        raise SchedulerError(f"--scheduler {text!r}: cannot resolve {host} ({reason})")
+    family, kind, proto, _, where = found["addresses"][0]
+    try:
+        with socket.socket(family, kind, proto) as connection:
+            connection.settimeout(timeout)
+            connection.connect(where)
+            length = _receive(connection, 8)
+            (size,) = struct.unpack("Q", length)  # dask's frame header: the message's length, native order
+            if not 0 < size <= _HANDSHAKE_LIMIT or b"pickle-protocol" not in _receive(connection, size):
+                raise SchedulerError(f"--scheduler {text!r}: the server at {host}:{port} is not a dask scheduler")
+    except socket.timeout:
+        raise SchedulerError(f"--scheduler {text!r}: no dask scheduler answered at {host}:{port} within "
+                             f"{timeout:g} s") from None
+    except OSError as exc:
+        raise SchedulerError(f"--scheduler {text!r}: cannot reach {host}:{port} "
+                             f"({exc.strerror or type(exc).__name__})") from None
+    return f"tcp://[{host}]:{port}" if ":" in host else f"tcp://{host}:{port}"
+
+
+def _receive(connection, size: int) -> bytes:
+    """`size` bytes from `connection`; ConnectionError where it closes before."""
+    data = b""
+    while len(data) < size:
+        chunk = connection.recv(size - len(data))
+        if not chunk:
+            raise ConnectionError(0, "closed by the server")
+        data += chunk
+    return data
+
+
+def travelling(tasks) -> tuple:
+    """(tasks, blobs): the tasks with every file they name (their FMUs, the case file and dyr of an
+    ANDES case converted from one) replaced by its Content, and blobs {sha256: bytes} of each
+    distinct file, each read once."""
+    blobs, contents, cases = {}, {}, {}
+
+    def content(path):
+        if path is None:
+            return None
+        path = Path(path)
+        if path not in contents:
+            data = path.read_bytes()
+            digest = hashlib.sha256(data).hexdigest()
+            blobs.setdefault(digest, data)
+            contents[path] = Content(digest, path.name)
+        return contents[path]
+
+    out = []
+    for task in tasks:
+        files = tuple(replace(f, paths=tuple(content(p) for p in f.paths)) for f in task.files)
+        case = task.case
+        if getattr(case, "source", None) is not None:
+            if id(case) not in cases:
+                cases[id(case)] = replace(case, source=tuple(content(p) for p in case.source))
+            case = cases[id(case)]
+        out.append(replace(task, files=files, case=case))
+    return out, blobs
+
+
 _RUNNERS = {}
+_FOLDER = {}  # this process's folder for the files that travelled ("path")
+_LOCK = threading.Lock()
+
+
+def _folder(scratch) -> Path:
+    """This process's folder for the files that travelled: made once, under its dask worker's local
+    directory (a remote worker's own temporary folder), else under `scratch`."""
+    with _LOCK:
+        if "path" not in _FOLDER:
+            from distributed import get_worker
+
+            try:
+                base = get_worker().local_directory
+            except ValueError:  # not in a dask worker
+                base = scratch
+            _FOLDER["path"] = Path(tempfile.mkdtemp(prefix="opfmu_screen_", dir=base))
+        return _FOLDER["path"]
+
+
+def _arrived(item, blobs: dict, folder: Path):
+    """The local path of `item` (a Content: written from `blobs` into `folder`/<sha256>/<name> the
+    first time, checked against its sha256; anything else as it is)."""
+    if not isinstance(item, Content):
+        return item
+    path = folder / item.sha256 / item.name
+    with _LOCK:
+        if not path.is_file():
+            data = blobs[item.sha256]
+            if hashlib.sha256(data).hexdigest() != item.sha256:
+                raise RuntimeError(f"{item.name} arrived damaged (its sha256 differs)")
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(data)
+    return path
+
+
+def screen_travelled(task: ScreeningTask, blobs: dict) -> dict:
+    """screen_one of a task from `travelling`, with blobs {sha256: bytes} of its files, in a worker."""
+    folder = _folder(task.scratch)
+    files = tuple(replace(f, paths=tuple(_arrived(p, blobs, folder) for p in f.paths)) for f in task.files)
+    case = task.case
+    if getattr(case, "source", None) is not None and any(isinstance(p, Content) for p in case.source):
+        case = replace(case, source=tuple(_arrived(p, blobs, folder) for p in case.source))
+    return screen_one(replace(task, files=files, case=case, scratch=str(folder)))
 
 
 def _runner(task: ScreeningTask):
-    """A runner per (kind, files, settings), opened once per worker process."""
+    """A runner per (kind, files, settings, scratch) and thread, opened once per worker thread."""
     from .runners import MasterRunner, MonolithicRunner
 
-    key = (task.kind, task.files, task.settings, task.scratch)
+    key = (task.kind, task.files, task.settings, task.scratch, threading.get_ident())
     if key not in _RUNNERS:
         if task.kind == "monolithic":
             _RUNNERS[key] = MonolithicRunner(task.case, task.settings.step, 1e-9)
@@ -88,10 +277,15 @@ def _runner(task: ScreeningTask):
 
 
 def close_runners() -> None:
-    """Closes the runners this process opened (their FMUs and extracted files)."""
+    """Closes the runners this process opened (their FMUs and extracted files) and removes its folder
+    of the files that travelled."""
     while _RUNNERS:
         _, runner = _RUNNERS.popitem()
         runner.close()
+    with _LOCK:
+        folder = _FOLDER.pop("path", None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def screen_one(task: ScreeningTask) -> dict:
@@ -110,19 +304,64 @@ def screen_one(task: ScreeningTask) -> dict:
     return row
 
 
-def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
-    """The rows of every task (in the tasks' order), run on dask: `scheduler` (an address) or a
-    LocalCluster of `workers` processes (0: in this process, no dask); progress: a bar on a terminal,
-    a line every few seconds elsewhere (reference_models.progress)."""
-    from dataclasses import replace
+WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an error (a start that failed)
 
+
+def _local_cluster(workers: int, scratch: str):
+    """(cluster, client): a LocalCluster of `workers` single-threaded processes with `scratch` as their
+    folder, and its client. The workers are forked from multiprocessing's fork server, started with
+    SIGINT ignored: they inherit that, so a Ctrl-C reaches this process alone, which keeps its own
+    handler and is interruptible while they start (the cluster is then closed, its workers with it,
+    and the KeyboardInterrupt raised again). RuntimeError where they are not all up within
+    WORKER_START_TIMEOUT_S."""
+    import multiprocessing.forkserver
+
+    import dask
+    from dask.distributed import Client, LocalCluster
+    from distributed.utils import get_mp_context
+
+    with warnings.catch_warnings(), dask.config.set({"temporary-directory": scratch,
+                                                     "distributed.worker.multiprocessing-method": "forkserver"}):
+        warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
+        get_mp_context()  # the fork server's preloaded modules (distributed's)
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the fork server
+        try:
+            multiprocessing.forkserver.ensure_running()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+        cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.CRITICAL, local_directory=scratch)
+        client = None
+        try:
+            cluster.scale(workers)
+            client = Client(cluster)
+            try:
+                client.wait_for_workers(workers, timeout=WORKER_START_TIMEOUT_S)
+            except TimeoutError:
+                raise RuntimeError(f"the {workers} local dask workers did not start within "
+                                   f"{WORKER_START_TIMEOUT_S:g} s") from None
+        except BaseException:
+            if client is not None:
+                client.close()
+            cluster.close()
+            raise
+    return cluster, client
+
+
+def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
+    """The rows of every task (in the tasks' order), run on dask: `scheduler` (an address, see
+    check_scheduler) or a LocalCluster of `workers` processes (0: in this process, no dask); the
+    files of the tasks travel to the workers by content (`travelling`); progress: a bar on a
+    terminal, a line every few seconds elsewhere (reference_models.progress). SchedulerError where
+    the scheduler cannot be used."""
     from reference_models.progress import progress_bar
 
     scratch = None if scheduler else tempfile.mkdtemp(prefix="opfmu_screen_")  # remote workers: their own
-    tasks = [replace(t, scratch=scratch) for t in tasks]
-    report = progress_bar(len(tasks), "contingencies", "runs", enabled=progress)
-    rows = [None] * len(tasks)
+    report = None
     try:
+        tasks = [replace(t, scratch=scratch) for t in tasks]
+        report = progress_bar(len(tasks), "contingencies", "runs", enabled=progress)
+        rows = [None] * len(tasks)
         if not scheduler and workers == 0:
             try:
                 for i, task in enumerate(tasks):
@@ -131,25 +370,22 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool
             finally:
                 close_runners()
             return rows
-        import dask
-        from dask.distributed import Client, LocalCluster, as_completed
+        from dask.distributed import Client, as_completed
 
+        tasks, blobs = travelling(tasks)
         cluster = None
         if scheduler:
-            client = Client(scheduler, timeout="20s")
-        else:
-            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the worker processes
             try:
-                with warnings.catch_warnings(), dask.config.set({"temporary-directory": scratch}):
-                    warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
-                    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=logging.CRITICAL,
-                                           local_directory=scratch)
-            finally:
-                signal.signal(signal.SIGINT, previous)
-            client = Client(cluster)
+                client = Client(check_scheduler(scheduler), timeout=f"{SCHEDULER_TIMEOUT_S:g}s")
+            except (OSError, TimeoutError) as exc:
+                raise SchedulerError(f"--scheduler {scheduler!r}: {' '.join(str(exc).split())}") from None
+        else:
+            cluster, client = _local_cluster(workers, scratch)
         try:
-            futures = {client.submit(screen_one, task, pure=False): i for i, task in enumerate(tasks)}
+            sent = client.scatter({f"opfmu-file-{d}": data for d, data in blobs.items()}, broadcast=True,
+                                  hash=False) if blobs else {}
+            arrived = {key[len("opfmu-file-"):]: future for key, future in sent.items()}
+            futures = {client.submit(screen_travelled, task, arrived, pure=False): i for i, task in enumerate(tasks)}
             for future in as_completed(futures):
                 rows[futures[future]] = future.result()
                 report.update()
@@ -163,6 +399,7 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool
                 cluster.close()
         return rows
     finally:
-        report.close()
+        if report is not None:
+            report.close()
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)

@@ -17,15 +17,23 @@ fault opens the branch at --clear. What ANDES adjusted in a case file (the case'
 reference_models.grid.andes_case) and which devices run as surrogate FMUs are printed on stderr
 and written into the report (run, screen) and summary.json (run); --fmus surrogate for a case
 where no machine has an operator is refused.
-Everything a command is asked is checked before any work (one line, exit code 2); a result set is
-written whole or not at all.
+Everything a command is asked is checked before any work and before anything is printed (one line,
+exit code 2): also that --out names a folder (not "", not a file; it is made only when the results
+are written, and removed again where that fails and leaves it empty), that screen's --workers are at
+most the cores this process may use, and that its --scheduler is a tcp:// address of a dask
+scheduler that answers within a few seconds. A result set is written whole or not at all; the FMUs
+are extracted under a scratch folder of the command, removed at its end whatever happened (also on
+Ctrl-C, which is honoured while screen's local workers start).
 """
 from __future__ import annotations
 
 import json
 import math
+import shutil
 import sys
+import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from opfmu.errors import UserError
@@ -143,8 +151,12 @@ def add_grid_parser(sub) -> None:
                      help="end of each run in s (default: 3 for wscc9; 4 s after the fault start for the other cases, "
                           "so that a loss on the second swing of an inter-area mode is seen)")
     scr.add_argument("--resolution", type=float, default=1e-3, help="CCT resolution in s (default 0.001)")
-    scr.add_argument("--workers", type=int, default=2, help="local dask worker processes (0: no dask; default 2)")
-    scr.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing dask scheduler instead")
+    scr.add_argument("--workers", type=int, default=None,
+                     help="local dask worker processes, at most the cores this process may use (0: no dask; "
+                          "default 2, or 1 on one core)")
+    scr.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                     help="an existing dask scheduler instead, tcp://HOST:PORT (default port 8786); the FMUs travel "
+                          "to its workers, which need no access to this machine's files")
     scr.add_argument("--out", required=True, metavar="DIR", help="output folder")
     scr.add_argument("--quiet", action="store_true", help="no progress report")
     _common(scr, trip=False)
@@ -153,6 +165,27 @@ def add_grid_parser(sub) -> None:
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())[:300] or type(exc).__name__
+
+
+def _check_out(out, names) -> None:
+    """UserError unless `out` (--out) names a folder that can take the files `names` (made only when
+    they are written: cosim.outputs.result_set)."""
+    from cosim import outputs
+
+    try:
+        outputs.check_output(out, names)
+    except outputs.OutputError as exc:
+        raise UserError(str(exc)) from None
+
+
+@contextmanager
+def _scratch():
+    """A scratch folder of the command for the FMUs it extracts, removed at its end whatever happened."""
+    folder = tempfile.mkdtemp(prefix="opfmu_run_")
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def _case(args):
@@ -337,7 +370,8 @@ def _progress(text: str) -> None:
 
 
 def _open(kind, case, settings, args, progress, **options):
-    """The runner of `kind`; ANDES integrates at min(--step, REFERENCE_STEP), its rows every --step."""
+    """The runner of `kind` (options: open_runner's, e.g. the scratch folder FMUs are extracted
+    under); ANDES integrates at min(--step, REFERENCE_STEP), its rows every --step."""
     from cosim.fmu import CouplingError
     from cosim.runners import open_runner
 
@@ -354,6 +388,7 @@ def _open(kind, case, settings, args, progress, **options):
 def cmd_run(args) -> None:
     from cosim import outputs
 
+    _check_out(args.out, outputs.RUN_FILES)
     case = _case(args)
     _fault_start(args)
     settings = _settings(args)
@@ -371,28 +406,25 @@ def cmd_run(args) -> None:
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
     for kind in kinds:
         _check_fmus(case, kind, args.fmu_cache, contingency)
-    try:
-        outputs.check_output(args.out, outputs.RUN_FILES)
-    except outputs.OutputError as exc:
-        raise UserError(str(exc)) from None
     stated = _case_notes(case)  # on stderr and into the report and summary
     for text in dict.fromkeys(_surrogates(case, kind) for kind in kinds):
         if text:
             stated.append(text)
             print(f"note: {text}", file=sys.stderr)
     runs, timings = {}, {}
-    for kind in kinds:
-        runner = _open(kind, case, settings, args, _progress)
-        try:
-            result, timing = runner.run(contingency, args.stop)
-        except RuntimeError as exc:
-            if kind != "andes":
-                raise
-            raise UserError(_one_line(exc)) from None
-        finally:
-            runner.close()
-        label = kind or main_kind
-        runs[label], timings[label] = result, timing
+    with _scratch() as scratch:
+        for kind in kinds:
+            runner = _open(kind, case, settings, args, _progress, scratch=scratch)
+            try:
+                result, timing = runner.run(contingency, args.stop)
+            except RuntimeError as exc:
+                if kind != "andes":
+                    raise
+                raise UserError(_one_line(exc)) from None
+            finally:
+                runner.close()
+            label = kind or main_kind
+            runs[label], timings[label] = result, timing
     main = runs[main_kind]
     title = f"{CASE_TITLES.get(args.case, args.case)}: {contingency.label}"
     messages = {k: t.pop("messages", {}) for k, t in timings.items()}
@@ -469,32 +501,61 @@ def cmd_cct(args) -> None:
     _stop_after_fault(stop, contingency)
     _check_fmus(case, args.fmus, args.fmu_cache, contingency)
     _state(case, args.fmus)
-    runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9)
-    try:
-        cct = critical_clearing_time(runner_stable(runner, stop), contingency, args.resolution)
-    finally:
-        runner.close()
+    with _scratch() as scratch:
+        runner = _open(args.fmus, case, settings, args, None if args.json else _progress, monolithic_rtol=1e-9,
+                       scratch=scratch)
+        try:
+            cct = critical_clearing_time(runner_stable(runner, stop), contingency, args.resolution)
+        finally:
+            runner.close()
     kind = _main_kind(case, args.fmus)
+    after = None if cct.cct_s is None else round(cct.cct_s - args.fault_start, 9)  # the critical fault duration [s]
     if args.json:
         print(json.dumps({"case": args.case, "fault": args.fault, "trip": contingency.trip,
-                          "fault_start_s": args.fault_start, "stop_s": stop, "fmus": kind, **cct.to_dict()}))
+                          "fault_start_s": args.fault_start, "stop_s": stop, "fmus": kind, **cct.to_dict(),
+                          "cct_after_fault_start_s": after}))
         return
     label = contingency.label.split(", cleared")[0]
+    start = f"the fault start at {args.fault_start:g} s"
     if cct.cct_s is None:
         print(f"{label}: unstable even when cleared {args.resolution * 1e3:g} ms after the fault")
     elif not cct.bounded:
-        print(f"{label}: stable for every clearing up to {cct.cct_s:g} s")
+        print(f"{label}: stable for every clearing up to {cct.cct_s:g} s ({after:g} s after {start})")
     else:
         print(f"{label}{', ' + contingency.trip + ' opened' if contingency.trip else ''}: critical clearing time "
-              f"{cct.cct_s:.4f} s (unstable at {cct.unstable_s:.4f} s; {len(cct.runs)} runs, {_label(kind)})")
+              f"{cct.cct_s:.4f} s, CCT {after:.4f} s after {start} (unstable at {cct.unstable_s:.4f} s; "
+              f"{len(cct.runs)} runs, {_label(kind)})")
+
+
+def _workers(workers) -> int:
+    """--workers (None: 2, or 1 on one core); UserError outside [0, the cores this process may use]:
+    each worker is a single-threaded process, and more than the cores gain nothing."""
+    from opfmu.cli import usable_cores
+
+    cores = usable_cores()
+    if workers is None:
+        return min(2, cores)
+    if not 0 <= workers <= cores:
+        raise UserError(f"--workers must lie in [0, {cores}] (the cores this process may use), got {workers}")
+    return workers
 
 
 def cmd_screen(args) -> None:
     from cosim import outputs
     from cosim.fmu import CouplingError
     from cosim.fmus import generator_files
-    from cosim.screening import ScreeningTask, contingencies, default_fault_buses, screen
+    from cosim.screening import SchedulerError, ScreeningTask, contingencies, default_fault_buses, screen
 
+    _check_out(args.out, outputs.SCREENING_FILES)
+    workers = _workers(args.workers)
+    scheduler = None
+    if args.scheduler is not None:
+        from cosim.screening import check_scheduler
+
+        try:
+            scheduler = check_scheduler(args.scheduler)
+        except SchedulerError as exc:
+            raise UserError(_one_line(exc)) from None
     case = _case(args)
     _fault_start(args)
     settings = _settings(args)
@@ -506,8 +567,6 @@ def cmd_screen(args) -> None:
         if not all(parts) or not all(p.lstrip("-").isdigit() for p in parts):
             raise UserError(f"--faults must be bus numbers separated by commas, got {args.faults!r}")
         buses = [int(b) for b in parts]
-    if args.workers < 0:
-        raise UserError("--workers must be >= 0")
     try:
         pairs = contingencies(case.network, buses, args.trips)
     except ValueError as exc:
@@ -527,10 +586,6 @@ def cmd_screen(args) -> None:
         raise UserError(f"the clearing at {clear:g} s must come before the stop at {stop:g} s")
     for c in tasks_contingencies if args.fmus == "andes" else tasks_contingencies[:1]:
         _check_fmus(case, args.fmus, args.fmu_cache, c)
-    try:
-        outputs.check_output(args.out, outputs.SCREENING_FILES)
-    except outputs.OutputError as exc:
-        raise UserError(str(exc)) from None
     stated = _state(case, args.fmus)
     try:
         files = () if args.fmus in REFERENCE_KINDS else tuple(generator_files(case, args.fmus, args.fmu_cache,
@@ -546,7 +601,10 @@ def cmd_screen(args) -> None:
         settings = replace(settings, step=min(settings.step, REFERENCE_STEP))
     tasks = [ScreeningTask(case, c, kind, files, settings, stop, args.resolution) for c in tasks_contingencies]
     started = time.perf_counter()
-    rows = screen(tasks, args.workers, args.scheduler, progress=not args.quiet)
+    try:
+        rows = screen(tasks, workers, scheduler, progress=not args.quiet)
+    except SchedulerError as exc:  # the scheduler went away since it was checked
+        raise UserError(_one_line(exc)) from None
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.SCREENING_FILES) as staging:
