@@ -123,10 +123,12 @@ def cached_surrogate_fmu(onnx_path, model_name: str = "SM4Surrogate", platforms=
 
 def cached_native_reference_fmu(model_name: str = "SM4Reference", component=None, params=None,
                                 operating_point: dict | None = None, platforms=None, fmi_version: int = 2,
-                                cache=None, progress: Callable[[str], None] | None = None) -> Path:
+                                cache=None, progress: Callable[[str], None] | None = None,
+                                system_base_mva: float | None = None) -> Path:
     """The native reference FMU (fmu_export.native_reference_fmu.build_native_reference_fmu, same
-    arguments; component None: SM4), from the cache or built into it. Keyed by the component, its
-    parameters in full (defaults filled in), the operating point, the platforms and the FMI version."""
+    arguments; component None: SM4; system_base_mva None: the builder's default), from the cache or
+    built into it. Keyed by the component, its parameters in full (defaults filled in), the operating
+    point, the platforms, the FMI version and a system base other than the default."""
     from reference_models.component import ParameterError
     from reference_models.sm4 import SM4
 
@@ -139,8 +141,10 @@ def cached_native_reference_fmu(model_name: str = "SM4Reference", component=None
     except ParameterError as exc:
         raise NativeReferenceError(str(exc)) from None
     names = _platform_names(platforms)
-    return cached_fmu(model_name, ("reference", component.name, full.to_dict(), operating_point, names, fmi_version),
+    base = {} if system_base_mva is None else {"system_base_mva": system_base_mva}
+    return cached_fmu(model_name, ("reference", component.name, full.to_dict(), operating_point, names, fmi_version,
+                                   *base.values()),
                       lambda out: build_native_reference_fmu(out, model_name=model_name, component=component,
                                                              params=full, operating_point=operating_point,
-                                                             platforms=names, fmi_version=fmi_version),
+                                                             platforms=names, fmi_version=fmi_version, **base),
                       cache, progress)

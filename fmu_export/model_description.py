@@ -11,6 +11,7 @@ type="org.opfmu.ports">, the last element of the document.
 """
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 
 from reference_models.ports import FMI3_ANNOTATION_TYPE, TOOL_NAME
@@ -19,14 +20,23 @@ from reference_models.version import __version__
 from .variables import TIME, Variable, VariableTable, fmi3_value_references
 
 
-# SI base-unit exponents of the units components use; a unit not listed is declared without them
-BASE_UNITS = {"rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "s": {"s": "1"}, "pu": {},
-              "Hz": {"s": "-1"}, "1/s": {"s": "-1"}}
+# SI base-unit exponents (and factor) of the units components use; a unit not listed is declared
+# without them. pu and 1 are dimensionless.
+BASE_UNITS = {"rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "s": {"s": "1"}, "pu": {}, "1": {},
+              "Hz": {"s": "-1"}, "1/s": {"s": "-1"}, "deg": {"rad": "1", "factor": repr(math.pi / 180.0)}}
+DIMENSIONLESS = ("", "-")  # how a variable without a unit may say so: declared as the unit "1"
+
+
+def unit_of(v: Variable) -> str | None:
+    """The unit a Real variable declares (every one declares one: "1" where it has none), None for another type."""
+    if v.kind != "Real":
+        return None
+    return "1" if v.unit in DIMENSIONLESS else v.unit
 
 
 def unit_names(variables: list[Variable]) -> list[str]:
-    """The units the variables use, in order of first use (pu, dimensionless, declared all the same)."""
-    return list(dict.fromkeys(v.unit for v in variables if v.unit))
+    """The units the Real variables declare, in order of first use."""
+    return list(dict.fromkeys(unit_of(v) for v in variables if v.kind == "Real"))
 
 
 LOG_CATEGORIES = (("logStatusWarning", "warnings: inputs or states outside the trained envelope"),
@@ -67,7 +77,7 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         sv = ET.SubElement(mv, "ScalarVariable", {"name": v.name, "valueReference": str(v.vr),
                                                  "causality": v.causality, "description": v.description,
                                                  **_variability(v)})
-        type_attrs = {"unit": v.unit} if v.unit and v.unit != "pu" else {}
+        type_attrs = {"unit": unit_of(v)} if v.kind == "Real" else {}
         if v.start is not None:
             type_attrs["start"] = repr(float(v.start))
         ET.SubElement(sv, v.kind, type_attrs)
@@ -99,8 +109,8 @@ def _fmi3_document(model_name: str, guid: str, variables: list[Variable], descri
     for v in variables:
         attrs = {"name": v.name, "valueReference": str(refs[v.name]), "causality": v.causality,
                  "description": v.description, **_variability(v)}
-        if v.unit and v.unit != "pu":
-            attrs["unit"] = v.unit
+        if v.kind == "Real":
+            attrs["unit"] = unit_of(v)
         if v.start is not None:
             attrs["start"] = repr(float(v.start)) if v.kind == "Real" else ("true" if v.start else "false")
         ET.SubElement(mv, "Float64" if v.kind == "Real" else v.kind, attrs)

@@ -26,6 +26,10 @@ solver (re)locks the branches of the right-hand side: at the start of each step,
 inputs, and at each located switching. A step the solver cannot complete within the tolerance is
 refused with fmi2Error and a logged reason. fmi2GetDirectionalDerivative gives the outputs' exact
 derivatives with respect to the inputs. The default initial state is the machine's equilibrium at the inputs' start values.
+A component with a bus port also gives the port's outputs (variables.BUS_OUTPUTS, computed in
+c/variables.c from the exact derivatives of its bus current): its Norton equivalent for the step to
+come and P, Q at the bus, on the system base it is built for (`system_base_mva`, declared in the
+model description's ports).
 
 The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
 """
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import tempfile
 from pathlib import Path
@@ -49,7 +54,7 @@ from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
 from .python_reference_fmu import machine_params
-from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables, start_state, vr_header
+from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, fmu_variables, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "cosimulation.h", "model.h",
@@ -68,12 +73,14 @@ class NativeReferenceError(BuildError):
 def native_reference_variables(component: Component = SM4, params=None):
     """The native reference FMU's variables for that machine (the pythonfmu reference FMU's table)."""
     params = machine_params(component, params)
-    return fmu_variables(component, params, _start_state(component, params), REFERENCE_EXTRAS, SOLVER_STARTS)
+    return fmu_variables(component, params, _start_state(component, params), REFERENCE_EXTRAS, SOLVER_STARTS,
+                         bus_outputs=True)
 
 
 def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
                                params=None, operating_point: dict | None = None, platforms=None,
-                               fmi_version: int = 2, start_state=None) -> dict:
+                               fmi_version: int = 2, start_state=None,
+                               system_base_mva: float = SYSTEM_BASE_MVA) -> dict:
     """Write the native reference FMU of `component` with parameters `params` (None: its defaults; a
     mapping of some of them; or a parameter object) to `out`, atomically; its inputs start at
     `operating_point` ({input: value}, the rest at the component's start values) and its initial
@@ -81,7 +88,8 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     elsewhere, e.g. a grid case's load flow, where the equilibrium search could find another of
     several). platforms: the binaries it carries (platforms.Platform objects or
     names; None: the host's only); fmi_version: the FMI version, 2 or 3 (the same model code, another
-    plumbing). Binaries of other platforms are run here, and compared with the host's, where an
+    plumbing); system_base_mva: the system base [MVA] the parameters' per-unit values are on, which
+    the model description declares for the bus port's currents, powers and admittance. Binaries of other platforms are run here, and compared with the host's, where an
     emulator is installed (cross_check).
 
     Returns {"path", "size_bytes", "guid", "params", "binaries", "checks"} (params: every parameter
@@ -93,6 +101,8 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         check_model_name(model_name)
         params = machine_params(component, params)
         version, chosen = check_fmi_version(fmi_version), targets(platforms)
+        if not (isinstance(system_base_mva, (int, float)) and math.isfinite(system_base_mva) and system_base_mva > 0):
+            raise BuildError(f"the system base {system_base_mva!r} MVA is not a positive number")
     except (BuildError, ParameterError) as exc:
         raise NativeReferenceError(str(exc)) from None
     if start_state is None:
@@ -101,7 +111,8 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         x_start = np.asarray(start_state, dtype=float)
         if x_start.shape != (component.n_states,) or not np.all(np.isfinite(x_start)):
             raise NativeReferenceError(f"the start state must be {component.n_states} finite values")
-    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point)
+    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point,
+                              bus_outputs=True, base_mva=system_base_mva)
     n_switching, switching = switching_c_source(component, params, linkage="OPFMU_INTERNAL")
     reset = reset_c_source(component, params, linkage="OPFMU_INTERNAL")
     generated = {
@@ -111,7 +122,7 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         "derivatives.c": derivatives_source(component, params),
     }
     guid = _guid(model_name, component, params, generated, operating_point, version,
-                 None if start_state is None else x_start.tolist())
+                 None if start_state is None else x_start.tolist(), system_base_mva)
     generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching,
                                           bool(reset))
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
@@ -166,14 +177,15 @@ def _start_state(component: Component, params, operating_point=None) -> np.ndarr
 
 
 def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None,
-          version: int = 2, start_state=None) -> str:
-    """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary:
-    name, machine, operating point, FMI version and C sources."""
+          version: int = 2, start_state=None, system_base_mva: float = SYSTEM_BASE_MVA) -> str:
+    """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary
+    or declared beside it: name, machine, operating point, FMI version, C sources and system base."""
     digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
                             + json.dumps(params.to_dict(), sort_keys=True).encode() + b"\0"
                             + json.dumps(operating_point or {}, sort_keys=True).encode()
                             + (b"" if version == 2 else b"\0fmi3")
-                            + (b"" if start_state is None else json.dumps(start_state).encode()))
+                            + (b"" if start_state is None else json.dumps(start_state).encode())
+                            + (b"" if system_base_mva == SYSTEM_BASE_MVA else repr(float(system_base_mva)).encode()))
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())
     for name in (PLUMBING[version], *MODEL_SOURCES):

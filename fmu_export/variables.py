@@ -2,15 +2,21 @@
 
 Real value references, in this order: the component's inputs, its states (outputs at the
 communication point), its derived outputs, the initial-state parameters `<state>0`, then the
-variables a kind of FMU adds (`SURROGATE_EXTRAS`, `REFERENCE_EXTRAS`) in the order listed. Boolean
-value references count from 0 on their own. For SM4 this is Vs 0, theta_vs 1, Pm 2, Efd 3,
-delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, then 18 on. The C sources get the same table as generated
-`#define`s (`vr_header`); tests, benchmarks and importers read the model description.
+variables a kind of FMU adds (`SURROGATE_EXTRAS`, `REFERENCE_EXTRAS`) in the order listed, then,
+where the FMU offers them (the native reference FMU of a component with a bus port), the bus port's
+outputs (`BUS_OUTPUTS`: the Norton equivalent and P, Q at the bus). Booleans come after every Real,
+so that a value reference names one variable whatever its type (FMI 2.0 allows types to share
+them; importers that read by value reference alone do not). For SM4's native reference FMU this is
+Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, rtol 18, atol 19,
+I_N_re..Q_bus 20-27. The C sources get the same table as generated `#define`s (`vr_header`); tests,
+benchmarks and importers read the model description.
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+
+from dataclasses import replace
 
 from reference_models.component import Component
 from reference_models.ports import Ports
@@ -71,6 +77,23 @@ REFERENCE_EXTRAS = (
     Extra("rtol", "parameter", "relative tolerance of RK45 over each step"),
     Extra("atol", "parameter", "absolute tolerance of RK45 over each step"),
 )
+# The bus port's outputs (native reference FMU of a component with a bus port), in this order: the
+# Norton equivalent at the port for the step to come, I = I_N + Y_N V to first order in the bus
+# voltage V at the current state (exactly where the current is affine in V), and the power into the
+# bus. All on the system base, network frame (fmu_export/c/variables.c computes them).
+BUS_OUTPUTS = (
+    ("I_N_re", "Norton current source at the bus for the step to come (I = I_N + Y_N V), real part, network frame"),
+    ("I_N_im", "Norton current source at the bus for the step to come (I = I_N + Y_N V), imaginary part, "
+               "network frame"),
+    ("Y_N_11", "Norton admittance at the bus for the step to come: d I_re / d V_re"),
+    ("Y_N_12", "Norton admittance at the bus for the step to come: d I_re / d V_im"),
+    ("Y_N_21", "Norton admittance at the bus for the step to come: d I_im / d V_re"),
+    ("Y_N_22", "Norton admittance at the bus for the step to come: d I_im / d V_im"),
+    ("P_bus", "active power into the bus, Re(V conj(I)), generator convention"),
+    ("Q_bus", "reactive power into the bus, Im(V conj(I)), generator convention"),
+)
+SYSTEM_BASE_MVA = 100.0  # the system base an FMU declares unless its builder is told another
+
 # defaults of rtol, atol in both reference FMUs. The tolerance bounds each solver step's error, and
 # over 60 s of 10 ms steps an undamped machine (D = 0) accumulates them to 6e-8 rad/s in omega at
 # 1e-8, 1e-10 (1e-9 at these), against DOP853 at 1e-11; the default machine stays within 1e-9 at
@@ -104,48 +127,73 @@ def start_state(component: Component, params, operating_point: dict | None = Non
     return x
 
 
+def fmu_ports(component: Component, base_mva: float | None = SYSTEM_BASE_MVA) -> Ports:
+    """The ports an FMU with the bus port's outputs (BUS_OUTPUTS) declares: its component's, the bus
+    port with those outputs and the system base `base_mva` [MVA] added. A component without a bus
+    port: its own ports."""
+    ports = component.ports
+    if ports.bus is None:
+        return ports
+    names = [name for name, _ in BUS_OUTPUTS]
+    return replace(ports, bus=replace(ports.bus, norton=tuple(names[:6]), power=tuple(names[6:]),
+                                      base_mva=None if base_mva is None else float(base_mva)))
+
+
 def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
-                  operating_point: dict | None = None) -> VariableTable:
+                  operating_point: dict | None = None, bus_outputs: bool = False,
+                  base_mva: float = SYSTEM_BASE_MVA) -> VariableTable:
     """The variable table of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
-    their start values by name (parameters need one); the inputs start at start_inputs. The table
-    carries the component's ports for the model description."""
+    their start values by name (parameters need one); the inputs start at start_inputs. bus_outputs:
+    a component with a bus port gets its outputs (BUS_OUTPUTS), on the system base `base_mva` [MVA].
+    The table carries the ports for the model description (fmu_ports where it has the bus outputs).
+    ValueError where a bus output's name is one of the component's."""
     starts = starts or {}
     dependencies = output_input_dependencies(component, params)
     u_start = start_inputs(component, operating_point)
-    out = [Variable(q.name, i, "input", q.description, q.unit, float(u_start[i])) for i, q in enumerate(component.inputs)]
-    out += [Variable(q.name, len(out) + i, "output", f"{q.description} at the communication point", q.unit)
-            for i, q in enumerate(component.states)]
-    out += [Variable(q.name, len(out) + i, "output", q.description, q.unit, dependencies=deps)
-            for i, (q, deps) in enumerate(zip(component.outputs, dependencies))]
-    out += [Variable(f"{q.name}0", len(out) + i, "parameter", f"initial {q.description}", q.unit, float(x_start[i]))
-            for i, q in enumerate(component.states)]
-    next_vr = {"Real": len(out), "Boolean": 0}
+    # value references are numbered once the table is complete (below); -1 until then
+    out = [Variable(q.name, -1, "input", q.description, q.unit, float(u)) for q, u in zip(component.inputs, u_start)]
+    out += [Variable(q.name, -1, "output", f"{q.description} at the communication point", q.unit)
+            for q in component.states]
+    out += [Variable(q.name, -1, "output", q.description, q.unit, dependencies=deps)
+            for q, deps in zip(component.outputs, dependencies)]
+    out += [Variable(f"{q.name}0", -1, "parameter", f"initial {q.description}", q.unit, float(x))
+            for q, x in zip(component.states, x_start)]
     for extra in extras:
         start = starts.get(extra.name)
         if extra.causality == "parameter" and start is None:
             raise ValueError(f"parameter {extra.name} needs a start value")
         deps = component.input_names if extra.feedthrough else ()
-        out.append(Variable(extra.name, next_vr[extra.kind], extra.causality, extra.description, extra.unit, start,
-                            extra.kind, deps))
-        next_vr[extra.kind] += 1
-    return VariableTable(out, component.ports)
+        out.append(Variable(extra.name, -1, extra.causality, extra.description, extra.unit, start, extra.kind, deps))
+    bus = component.ports.bus if bus_outputs else None
+    if bus is not None:
+        taken = {v.name for v in out}
+        clash = [name for name, _ in BUS_OUTPUTS if name in taken]
+        if clash:
+            raise ValueError(f"{component.name}: the bus port's output {clash[0]!r} is also one of its variables")
+        # what the bus outputs are computed from: the bus current and the bus voltage
+        by_output = dict(zip(component.output_names, dependencies))
+        reads = set(bus.voltage).union(*(by_output.get(name, ()) for name in bus.current))
+        deps = tuple(name for name in component.input_names if name in reads)
+        base = f", pu on the system base Sb = {float(base_mva):g} MVA"
+        out += [Variable(name, -1, "output", text + base, "pu", dependencies=deps) for name, text in BUS_OUTPUTS]
+    # Real value references in table order, then the Booleans' after the last Real
+    n_real = sum(v.kind == "Real" for v in out)
+    counters = {"Real": 0, "Boolean": n_real}
+    numbered = []
+    for v in out:
+        numbered.append(replace(v, vr=counters[v.kind]))
+        counters[v.kind] += 1
+    return VariableTable(numbered, fmu_ports(component, base_mva) if bus is not None else component.ports)
 
 
 TIME = "time"  # the independent variable FMI 3.0 requires
 
 
-def fmi3_first_boolean(variables: list[Variable]) -> int:
-    """The FMI 3.0 value reference of the first Boolean: one past the last Real."""
-    return sum(v.kind == "Real" for v in variables)
-
-
 def fmi3_value_references(variables: list[Variable]) -> dict[str, int]:
-    """FMI 3.0 value references by name (unique across types, as FMI 3.0 requires): every Real keeps
-    its FMI 2.0 one, Boolean b is fmi3_first_boolean + b, and the independent variable `time` comes
-    last."""
-    first_boolean = fmi3_first_boolean(variables)
-    refs = {v.name: v.vr + (first_boolean if v.kind == "Boolean" else 0) for v in variables}
+    """FMI 3.0 value references by name: the variables' own (unique across types in both versions),
+    and the independent variable `time` last."""
+    refs = {v.name: v.vr for v in variables}
     if TIME in refs:
         raise ValueError(f"a variable may not be named {TIME!r}: FMI 3.0 reserves it for the independent variable")
     refs[TIME] = len(variables)
@@ -163,8 +211,11 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     value reference of each of its groups (VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT,
     VR_FIRST_START: inputs, states, derived outputs, initial-state parameters, each contiguous in the
     component's order; an empty group, as a component without states has two, starts at 0, where
-    IN_GROUP over its no values finds none). ValueError for a name that is not a C identifier or that
-    collides in upper case."""
+    IN_GROUP over its no values finds none). Where the table has the bus port's outputs (BUS_OUTPUTS,
+    contiguous in that order): VR_FIRST_BUS, BUS_N_OUTPUTS, the bus voltage's inputs by index
+    (BUS_VOLTAGE_MAGNITUDE, BUS_VOLTAGE_ANGLE) and the bus current's value references
+    (VR_BUS_CURRENT_REAL, VR_BUS_CURRENT_IMAGINARY). ValueError for a name that is not a C
+    identifier or that collides in upper case."""
     lines = ["/* Generated by opfmu: value references of the model description. */",
              f"#ifndef {guard}", f"#define {guard}"]
     seen = {}
@@ -180,10 +231,10 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     if [v.vr for v in reals] != list(range(len(reals))):
         raise ValueError("Real value references must be 0, 1, ... without gaps")
     booleans = [v for v in variables if v.kind == "Boolean"]
+    if [v.vr for v in booleans] != list(range(len(reals), len(reals) + len(booleans))):
+        raise ValueError("Boolean value references must follow the last Real's without gaps")
     fmi3 = fmi3_value_references(variables)
     lines += [f"#define VR_REAL_COUNT {len(reals)}u", f"#define VR_BOOLEAN_COUNT {len(booleans)}u",
-              f"#define FMI3_VR_FIRST_BOOLEAN {fmi3_first_boolean(variables)}u /* FMI 3.0: Boolean b is "
-              "FMI3_VR_FIRST_BOOLEAN + b */",
               f"#define FMI3_VR_TIME {fmi3[TIME]}u /* FMI 3.0: the independent variable */",
               "#define VR_REAL_KINDS {" + ", ".join(KIND_TOKENS[v.causality] for v in reals) + "}"]
     if component is not None:
@@ -195,5 +246,15 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
             if refs != list(range(refs[0], refs[0] + len(refs))):
                 raise ValueError(f"the {group.lower()} value references of {component.name} are not contiguous")
             lines.append(f"#define VR_FIRST_{group} {refs[0]}u")
+        if BUS_OUTPUTS[0][0] in by_name:
+            refs = [by_name[name] for name, _ in BUS_OUTPUTS]
+            if refs != list(range(refs[0], refs[0] + len(refs))):
+                raise ValueError(f"the bus port's value references of {component.name} are not contiguous")
+            bus = component.ports.bus
+            lines += [f"#define VR_FIRST_BUS {refs[0]}u", f"#define BUS_N_OUTPUTS {len(refs)}",
+                      f"#define BUS_VOLTAGE_MAGNITUDE {component.input_names.index(bus.voltage[0])}",
+                      f"#define BUS_VOLTAGE_ANGLE {component.input_names.index(bus.voltage[1])}",
+                      f"#define VR_BUS_CURRENT_REAL {by_name[bus.current[0]]}u",
+                      f"#define VR_BUS_CURRENT_IMAGINARY {by_name[bus.current[1]]}u"]
     lines += ["#endif", ""]
     return "\n".join(lines)

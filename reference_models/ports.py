@@ -22,13 +22,22 @@ grid master, for an FMU the project did not build) finds them without knowing th
     FMI 3.0: <Annotations><Annotation type="org.opfmu.ports"><Ports>...</Ports></Annotation></Annotations>
 
     <Ports>
-      <Bus voltageMagnitude="Vs" voltageAngle="theta_vs" currentReal="I_re" currentImaginary="I_im"/>
+      <Bus voltageMagnitude="Vs" voltageAngle="theta_vs" currentReal="I_re" currentImaginary="I_im"
+           activePower="P_bus" reactivePower="Q_bus" systemBaseMVA="100.0">
+        <Norton currentReal="I_N_re" currentImaginary="I_N_im" g11="Y_N_11" g12="Y_N_12" g21="Y_N_21" g22="Y_N_22"/>
+      </Bus>
       <Input signal="field_voltage" variable="Efd"/>
       <Output signal="speed" variable="omega"/>
     </Ports>
+
+The attributes activePower, reactivePower and systemBaseMVA and the <Norton> element are what an
+FMU adds to its component's bus port (fmu_export.variables.fmu_ports: the native reference FMU's
+outputs P and Q at the bus and its Norton equivalent, docs/design.md); a description without them
+reads as a bus port without them.
 """
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
@@ -101,6 +110,8 @@ SIGNALS = {
 }
 
 TOOL_NAME = "opfmu"
+# the attributes of <Norton>, in BusPort.norton's order
+NORTON_ATTRIBUTES = ("currentReal", "currentImaginary", "g11", "g12", "g21", "g22")
 FMI3_ANNOTATION_TYPE = "org.opfmu.ports"
 
 
@@ -112,10 +123,17 @@ class PortError(ValueError):
 class BusPort:
     """The connection to a bus: `voltage` = (magnitude input [pu], angle input [rad]), `current` =
     (real part output [pu], imaginary part output [pu]) of the current injected into the bus, both
-    phasors in the network frame."""
+    phasors in the network frame. What an FMU adds to its component's port (empty in a component's
+    declaration): `power` = (active, reactive) power outputs into the bus [pu, generator convention],
+    `norton` = the outputs of its Norton equivalent for the step to come (I_N real and imaginary part
+    [pu], then the admittance d(I_re, I_im)/d(V_re, V_im) row by row, g11 g12 g21 g22 [pu]: I = I_N +
+    Y_N V), and `base_mva`, the system base [MVA] its per-unit powers, currents and admittances are on."""
 
     voltage: tuple = ("Vs", "theta_vs")
     current: tuple = ("I_re", "I_im")
+    power: tuple = ()
+    norton: tuple = ()
+    base_mva: float | None = None
 
 
 @dataclass(frozen=True)
@@ -152,10 +170,12 @@ class Ports:
         if self.bus is not None:
             if len(self.bus.voltage) != 2 or len(self.bus.current) != 2:
                 raise PortError(f"{owner}: a bus port has two voltage inputs and two current outputs")
+            if len(self.bus.power) not in (0, 2) or len(self.bus.norton) not in (0, 6):
+                raise PortError(f"{owner}: a bus port has two power outputs and six Norton outputs, or none")
             for name in self.bus.voltage:
                 need(name, inputs, "bus voltage")
-            for name in self.bus.current:
-                need(name, outputs, "bus current")
+            for name in self.bus.current + self.bus.power + self.bus.norton:
+                need(name, outputs, "bus output")
         for links, pool, what in ((self.inputs, inputs, "input"), (self.outputs, outputs, "output")):
             signals = [link.signal for link in links]
             if len(set(signals)) != len(signals):
@@ -170,7 +190,14 @@ class Ports:
         root = ET.Element("Ports")
         if self.bus is not None:
             (vm, va), (ir, ii) = self.bus.voltage, self.bus.current
-            ET.SubElement(root, "Bus", voltageMagnitude=vm, voltageAngle=va, currentReal=ir, currentImaginary=ii)
+            bus = ET.SubElement(root, "Bus", voltageMagnitude=vm, voltageAngle=va, currentReal=ir, currentImaginary=ii)
+            if self.bus.power:
+                bus.set("activePower", self.bus.power[0])
+                bus.set("reactivePower", self.bus.power[1])
+            if self.bus.base_mva is not None:
+                bus.set("systemBaseMVA", repr(float(self.bus.base_mva)))
+            if self.bus.norton:
+                ET.SubElement(bus, "Norton", dict(zip(NORTON_ATTRIBUTES, self.bus.norton)))
         for tag, links in (("Input", self.inputs), ("Output", self.outputs)):
             for link in links:
                 ET.SubElement(root, tag, signal=link.signal, variable=link.variable)
@@ -185,8 +212,7 @@ class Ports:
                 if child.tag == "Bus":
                     if bus is not None:
                         raise PortError("a <Ports> element has more than one <Bus>")
-                    a = child.attrib
-                    bus = BusPort((a["voltageMagnitude"], a["voltageAngle"]), (a["currentReal"], a["currentImaginary"]))
+                    bus = _bus_port(child)
                 elif child.tag in ("Input", "Output"):
                     link = Link(child.attrib["signal"], child.attrib["variable"])
                     if link.signal not in SIGNALS:
@@ -195,6 +221,23 @@ class Ports:
         except KeyError as exc:
             raise PortError(f"a <{child.tag}> element of <Ports> has no attribute {exc.args[0]}") from None
         return cls(bus, tuple(inputs), tuple(outputs))
+
+
+def _bus_port(element: ET.Element) -> BusPort:
+    """The BusPort of a <Bus> element (KeyError for a missing attribute, PortError for a malformed one)."""
+    a = element.attrib
+    power = (a["activePower"], a["reactivePower"]) if "activePower" in a or "reactivePower" in a else ()
+    base = None
+    if "systemBaseMVA" in a:
+        try:
+            base = float(a["systemBaseMVA"])
+        except ValueError:
+            base = math.nan
+        if not (math.isfinite(base) and base > 0.0):
+            raise PortError(f"systemBaseMVA {a['systemBaseMVA'][:40]!r} of <Bus> is not a positive number")
+    norton = element.find("Norton")
+    return BusPort((a["voltageMagnitude"], a["voltageAngle"]), (a["currentReal"], a["currentImaginary"]), power,
+                   () if norton is None else tuple(norton.attrib[k] for k in NORTON_ATTRIBUTES), base)
 
 
 @dataclass(frozen=True)

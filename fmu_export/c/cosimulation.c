@@ -255,10 +255,11 @@ int cs_derivatives_refused(Instance *inst, const char *function, const unsigned 
             fail(inst, STATUS_ERROR, "%s", message);
             return 1;
         }
-        if (IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) {
+        if (model_partials_from_jacobian(vr)) {
             derived = 1;
         } else if (!IN_GROUP(vr, VR_FIRST_STATE, OPFMU_N_STATES)) {
-            const char *reason = model_no_derivative(vr);
+            const char *reason = component_no_derivative(vr);
+            if (!reason) reason = model_no_derivative(vr);
             snprintf(message, sizeof message, "%s: output %u: %s", function, vr,
                      reason ? reason : "has no directional derivative");
             fail(inst, STATUS_ERROR, "%s", message);
@@ -267,12 +268,6 @@ int cs_derivatives_refused(Instance *inst, const char *function, const unsigned 
     }
     if (derived) model_output_jacobian(&inst->model, J);
     return 0;
-}
-
-double cs_partial(const double J[], unsigned int unknown, unsigned int known)
-{
-    if (!IN_GROUP(unknown, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) return 0.0;
-    return J[(unknown - VR_FIRST_OUTPUT) * OPFMU_N_COLUMNS + OPFMU_N_STATES + (known - VR_FIRST_INPUT)];
 }
 
 /* --- FMU states --- */

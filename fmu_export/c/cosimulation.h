@@ -88,16 +88,14 @@ OPFMU_INTERNAL Status cs_set_input_derivative(Instance *inst, const char *functi
 OPFMU_INTERNAL Status cs_do_step(Instance *inst, const char *function, double t, double h);
 
 /* The checks of a directional or adjoint derivative request: knowns must be inputs, unknowns
-   outputs (a model's diagnostic output is refused with its reason), each seed (of value reference
-   seeded[j]) finite. Where an unknown is a derived output, the outputs' Jacobian goes into J.
-   Nonzero: refused (logged). */
+   outputs (a model's diagnostic output and the bus port's Norton outputs are refused with their
+   reason), each seed (of value reference seeded[j]) finite. Where an unknown's derivatives come from
+   the outputs' Jacobian (model_partials_from_jacobian), it goes into J; model_partial then gives
+   d unknown / d known. Nonzero: refused (logged). */
 OPFMU_INTERNAL int cs_derivatives_refused(Instance *inst, const char *function, const unsigned int unknowns[],
                                           size_t n_unknowns, const unsigned int knowns[], size_t n_knowns,
                                           const unsigned int seeded[], const double seed[], size_t n_seed,
                                           double J[]);
-/* d unknown / d known (a request cs_derivatives_refused accepted): zero for a state, which does not
-   depend on the inputs directly; the component's exact partial derivative for a derived output */
-OPFMU_INTERNAL double cs_partial(const double J[], unsigned int unknown, unsigned int known);
 
 /* FMU states: *state NULL gets a new one; a non-NULL one must be one this instance handed out */
 OPFMU_INTERNAL Status cs_get_state(Instance *inst, const char *function, void **state);

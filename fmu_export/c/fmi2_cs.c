@@ -192,7 +192,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 }
 
 /* dvUnknown[i] = sum over k of d unknown_i / d known_k * dvKnown[k], outputs with respect to inputs at
-   the current state and inputs (cs_partial); nothing is written unless every reference is valid */
+   the current state and inputs (model_partial); nothing is written unless every reference is valid */
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
                                         const fmi2ValueReference vKnown_ref[], size_t nKnown,
                                         const fmi2Real dvKnown[], fmi2Real dvUnknown[])
@@ -207,7 +207,8 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
         return fmi2Error;
     for (size_t i = 0; i < nUnknown; ++i) {
         double sum = 0.0;
-        for (size_t k = 0; k < nKnown; ++k) sum += cs_partial(J, vUnknown_ref[i], vKnown_ref[k]) * dvKnown[k];
+        for (size_t k = 0; k < nKnown; ++k)
+            sum += model_partial(&inst->model, J, vUnknown_ref[i], vKnown_ref[k]) * dvKnown[k];
         dvUnknown[i] = sum;
     }
     return fmi2OK;

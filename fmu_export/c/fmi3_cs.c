@@ -1,7 +1,7 @@
 /* The FMI 3.0 API of both native FMUs over the shared plumbing (cosimulation.c), the counterpart of
-   fmi2_cs.c: its types, how its arguments map onto the shared functions (FMI 3.0 value references
-   are unique across types: a Real keeps its model value reference (Float64), Boolean b of the model
-   is FMI3_VR_FIRST_BOOLEAN + b, and FMI3_VR_TIME is the independent variable `time`), and what FMI
+   fmi2_cs.c: its types, how its arguments map onto the shared functions (value references are
+   unique across types, the model's in either version: the Booleans' follow the last Real's, and
+   FMI3_VR_TIME is the independent variable `time`), and what FMI
    3.0 refuses on its own: Model Exchange, Scheduled Execution, clocks, event mode (initialization
    goes straight to step mode) and the variable types the FMU does not have. Every misuse returns
    fmi3Error with a reason through the importer's logger; nothing aborts. */
@@ -196,11 +196,11 @@ fmi3Status fmi3GetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
     if (not_allowed(inst, "fmi3GetBoolean", ST_ANY)) return fmi3Error;
     if (bad_arrays(inst, "fmi3GetBoolean", vr, nvr, values, nValues)) return fmi3Error;
     for (size_t i = 0; i < nvr; ++i) {
-        if (vr[i] < FMI3_VR_FIRST_BOOLEAN || !model_boolean_exists(vr[i] - FMI3_VR_FIRST_BOOLEAN)) {
+        if (!model_boolean_exists(vr[i])) {
             snprintf(detail, sizeof detail, "%u", vr[i]);
             return (fmi3Status)fail(inst, STATUS_ERROR, "fmi3GetBoolean: no Boolean variable with value reference %s", detail);
         }
-        values[i] = model_get_boolean(&inst->model, vr[i] - FMI3_VR_FIRST_BOOLEAN) ? fmi3True : fmi3False;
+        values[i] = model_get_boolean(&inst->model, vr[i]) ? fmi3True : fmi3False;
     }
     return fmi3OK;
 }
@@ -362,13 +362,15 @@ fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueRe
                                         const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                         size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
+    Instance *inst = (Instance *)instance;
     double J[OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS : 1];
-    if (derivatives_refused((Instance *)instance, "fmi3GetDirectionalDerivative", 0, unknowns, nUnknowns, knowns,
+    if (derivatives_refused(inst, "fmi3GetDirectionalDerivative", 0, unknowns, nUnknowns, knowns,
                             nKnowns, seed, nSeed, sensitivity, nSensitivity, J))
         return fmi3Error;
     for (size_t i = 0; i < nUnknowns; ++i) {
         double sum = 0.0;
-        for (size_t k = 0; k < nKnowns; ++k) sum += cs_partial(J, unknowns[i], knowns[k]) * seed[k];
+        for (size_t k = 0; k < nKnowns; ++k)
+            sum += model_partial(&inst->model, J, unknowns[i], knowns[k]) * seed[k];
         sensitivity[i] = sum;
     }
     return fmi3OK;
@@ -379,13 +381,15 @@ fmi3Status fmi3GetAdjointDerivative(fmi3Instance instance, const fmi3ValueRefere
                                     const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[],
                                     size_t nSeed, fmi3Float64 sensitivity[], size_t nSensitivity)
 {
+    Instance *inst = (Instance *)instance;
     double J[OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS : 1];
-    if (derivatives_refused((Instance *)instance, "fmi3GetAdjointDerivative", 1, unknowns, nUnknowns, knowns,
+    if (derivatives_refused(inst, "fmi3GetAdjointDerivative", 1, unknowns, nUnknowns, knowns,
                             nKnowns, seed, nSeed, sensitivity, nSensitivity, J))
         return fmi3Error;
     for (size_t k = 0; k < nKnowns; ++k) {
         double sum = 0.0;
-        for (size_t i = 0; i < nUnknowns; ++i) sum += seed[i] * cs_partial(J, unknowns[i], knowns[k]);
+        for (size_t i = 0; i < nUnknowns; ++i)
+            sum += seed[i] * model_partial(&inst->model, J, unknowns[i], knowns[k]);
         sensitivity[k] = sum;
     }
     return fmi3OK;

@@ -68,6 +68,14 @@ OPFMU_INTERNAL ModelStatus model_get_real(const ModelState *m, unsigned int vr, 
 OPFMU_INTERNAL ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size);
 /* the derived outputs' Jacobian at the current state and inputs, J[i * OPFMU_N_COLUMNS + j] */
 OPFMU_INTERNAL void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+/* nonzero where output vr's derivatives with respect to the inputs come from that Jacobian: a derived
+   output, or the bus port's P_bus, Q_bus */
+OPFMU_INTERNAL int model_partials_from_jacobian(unsigned int vr);
+/* d unknown / d known (an output and an input, by value reference) at m, from the outputs' Jacobian J
+   there: zero for a state, which does not depend on the inputs directly */
+OPFMU_INTERNAL double model_partial(const ModelState *m, const double J[], unsigned int unknown, unsigned int known);
+/* why the component's output vr has no directional derivative (the bus port's Norton outputs), or NULL */
+OPFMU_INTERNAL const char *component_no_derivative(unsigned int vr);
 /* every field of m zero but the component's: inputs at their start values, the initial state and
    the state at the default initial state */
 OPFMU_INTERNAL void component_defaults(ModelState *m);
@@ -78,8 +86,9 @@ OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned in
    and the inputs at or above their lower bounds, as the setters and steps keep them */
 OPFMU_INTERNAL ModelStatus check_component_state(const ModelState *m, char *why, size_t size);
 /* MODEL_ERROR (message written) where an input with a nonzero derivative ends a step at u_end
-   non-finite or below its lower bound (an input held over the step is u_end itself, already checked) */
-OPFMU_INTERNAL ModelStatus check_inputs_at_step_end(const ModelState *m, const double u_end[OPFMU_N_INPUTS],
+   non-finite or below its lower bound beyond the tolerance (an input held over the step is u_end
+   itself, already checked); an end value within the tolerance below its bound is set to the bound */
+OPFMU_INTERNAL ModelStatus check_inputs_at_step_end(const ModelState *m, double u_end[OPFMU_N_INPUTS],
                                                     char *message, size_t size);
 /* the index of the first of the n values at v that is not finite, or -1 */
 OPFMU_INTERNAL int first_non_finite(const double *v, int n);

@@ -2,7 +2,16 @@
    outputs and initial-state parameters (contiguous groups, from the generated variables.h, the model
    description's table), the kind of every Real, the checks of what may be written, the inputs'
    derivatives, and the check of the component's fields of a state. The model's own variables (those
-   after the groups) are the model's: model_get_extra, model_set_extra. */
+   after the groups) are the model's: model_get_extra, model_set_extra.
+
+   Where the FMU has the bus port's outputs (VR_FIRST_BUS: fmu_export.variables.BUS_OUTPUTS) they are
+   computed here from the component's bus current and its exact derivatives: the Norton equivalent
+   for the step to come, I = I_N + Y_N V with Y_N = d(I_re, I_im)/d(V_re, V_im) at the current state
+   and inputs (the chain rule from the port's polar inputs: V_re = Vm cos(Va), V_im = Vm sin(Va)) and
+   I_N = I - Y_N V, and the power into the bus P + jQ = V conj(I).
+
+   An input's lower bound is kept with a tolerance: a value at most BOUND_TOLERANCE max(1, |bound|)
+   below it (a magnitude of -1e-12 pu from a host's round-off) is taken as the bound itself. */
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
@@ -12,9 +21,116 @@
 
 static const unsigned char REAL_KINDS[VR_REAL_COUNT] = VR_REAL_KINDS;
 
+#define BOUND_TOLERANCE 1e-6 /* [the input's unit] per unit of max(1, |bound|) */
+
+/* value if it is at or above input c's lower bound, the bound if it lies within the tolerance
+   below it; NAN (refused) if it is further below or not a number */
+static double within_bound(int c, double value)
+{
+    const double bound = OPFMU_INPUT_MIN[c];
+    if (value >= bound) return value;
+    return value >= bound - BOUND_TOLERANCE * fmax(1.0, fabs(bound)) ? bound : NAN;
+}
+
 int model_real_kind(unsigned int vr)
 {
     return vr < VR_REAL_COUNT ? (int)REAL_KINDS[vr] : -1;
+}
+
+/* the size of an array of the outputs' Jacobian: at least 1, as C requires */
+#define JACOBIAN_SIZE (OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS : 1)
+
+#ifdef VR_FIRST_BUS
+#define VR_BUS_POWER (VR_FIRST_BUS + 6u) /* P_bus, then Q_bus: after the six Norton outputs */
+#define MAGNITUDE_FLOOR 1e-9 /* [pu] the smallest voltage magnitude the admittance is evaluated at */
+
+/* the bus voltage's real and imaginary part [pu] at the current inputs */
+static void bus_voltage(const ModelState *m, double v[2])
+{
+    v[0] = m->u[BUS_VOLTAGE_MAGNITUDE] * cos(m->u[BUS_VOLTAGE_ANGLE]);
+    v[1] = m->u[BUS_VOLTAGE_MAGNITUDE] * sin(m->u[BUS_VOLTAGE_ANGLE]);
+}
+
+/* the bus current's real and imaginary part [pu] at the current state and inputs */
+static void bus_current(const ModelState *m, double i[2])
+{
+    model_get_real(m, VR_BUS_CURRENT_REAL, &i[0]);
+    model_get_real(m, VR_BUS_CURRENT_IMAGINARY, &i[1]);
+}
+
+/* the bus port's outputs (BUS_OUTPUTS' order): I_N_re, I_N_im, Y_N_11, Y_N_12, Y_N_21, Y_N_22, P_bus,
+   Q_bus. The current's derivatives with respect to the magnitude Vm and angle Va give, by the chain
+   rule, d/dV_re = cos(Va) d/dVm - sin(Va)/Vm d/dVa and d/dV_im = sin(Va) d/dVm + cos(Va)/Vm d/dVa;
+   they are taken at a magnitude of at least MAGNITUDE_FLOOR (the same for a current affine in V,
+   whose admittance does not depend on V; for another, the limit as the magnitude falls to 0). */
+static void bus_outputs(const ModelState *m, double out[BUS_N_OUTPUTS])
+{
+    double J[JACOBIAN_SIZE], u[OPFMU_N_INPUTS], v[2], i[2];
+    const double c = cos(m->u[BUS_VOLTAGE_ANGLE]), s = sin(m->u[BUS_VOLTAGE_ANGLE]);
+    memcpy(u, m->u, sizeof u);
+    if (fabs(u[BUS_VOLTAGE_MAGNITUDE]) < MAGNITUDE_FLOOR) u[BUS_VOLTAGE_MAGNITUDE] = MAGNITUDE_FLOOR;
+    component_output_jacobian(m->x, u, J);
+    bus_voltage(m, v);
+    bus_current(m, i);
+    const unsigned int parts[2] = {VR_BUS_CURRENT_REAL, VR_BUS_CURRENT_IMAGINARY};
+    for (int r = 0; r < 2; ++r) {
+        const double by_magnitude = model_partial(m, J, parts[r], VR_FIRST_INPUT + BUS_VOLTAGE_MAGNITUDE);
+        const double by_angle = model_partial(m, J, parts[r], VR_FIRST_INPUT + BUS_VOLTAGE_ANGLE)
+                                / u[BUS_VOLTAGE_MAGNITUDE];
+        double *y = &out[2 + 2 * r];
+        y[0] = c * by_magnitude - s * by_angle;
+        y[1] = s * by_magnitude + c * by_angle;
+        out[r] = i[r] - y[0] * v[0] - y[1] * v[1];
+    }
+    out[6] = v[0] * i[0] + v[1] * i[1];
+    out[7] = v[1] * i[0] - v[0] * i[1];
+}
+
+/* d (P_bus or Q_bus) / d input c, from the bus current's partial derivatives in J: P + jQ = V conj(I) */
+static double bus_power_partial(const ModelState *m, const double J[], unsigned int unknown, unsigned int known)
+{
+    const int c = (int)(known - VR_FIRST_INPUT);
+    const double vm = m->u[BUS_VOLTAGE_MAGNITUDE], va = m->u[BUS_VOLTAGE_ANGLE];
+    const double dv_re = c == BUS_VOLTAGE_MAGNITUDE ? cos(va) : c == BUS_VOLTAGE_ANGLE ? -vm * sin(va) : 0.0;
+    const double dv_im = c == BUS_VOLTAGE_MAGNITUDE ? sin(va) : c == BUS_VOLTAGE_ANGLE ? vm * cos(va) : 0.0;
+    const double di_re = model_partial(m, J, VR_BUS_CURRENT_REAL, known);
+    const double di_im = model_partial(m, J, VR_BUS_CURRENT_IMAGINARY, known);
+    double v[2], i[2];
+    bus_voltage(m, v);
+    bus_current(m, i);
+    if (unknown == VR_BUS_POWER) return dv_re * i[0] + v[0] * di_re + dv_im * i[1] + v[1] * di_im;
+    return dv_im * i[0] + v[1] * di_re - dv_re * i[1] - v[0] * di_im;
+}
+#endif
+
+double model_partial(const ModelState *m, const double J[], unsigned int unknown, unsigned int known)
+{
+    (void)m;
+    if (IN_GROUP(unknown, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS))
+        return J[(unknown - VR_FIRST_OUTPUT) * OPFMU_N_COLUMNS + OPFMU_N_STATES + (known - VR_FIRST_INPUT)];
+#ifdef VR_FIRST_BUS
+    if (IN_GROUP(unknown, VR_BUS_POWER, 2)) return bus_power_partial(m, J, unknown, known);
+#endif
+    return 0.0;
+}
+
+int model_partials_from_jacobian(unsigned int vr)
+{
+#ifdef VR_FIRST_BUS
+    if (IN_GROUP(vr, VR_BUS_POWER, 2)) return 1;
+#endif
+    return IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS);
+}
+
+const char *component_no_derivative(unsigned int vr)
+{
+#ifdef VR_FIRST_BUS
+    if (IN_GROUP(vr, VR_FIRST_BUS, 6))
+        return "the Norton equivalent is itself the derivative of the bus current: its own derivatives (second "
+               "derivatives of the current) are not provided";
+#endif
+    (void)vr;
+    return NULL;
 }
 
 void component_defaults(ModelState *m)
@@ -45,6 +161,14 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
         *value = m->x_start[vr - VR_FIRST_START];
         return MODEL_OK;
     }
+#ifdef VR_FIRST_BUS
+    if (IN_GROUP(vr, VR_FIRST_BUS, BUS_N_OUTPUTS)) {
+        double out[BUS_N_OUTPUTS];
+        bus_outputs(m, out);
+        *value = out[vr - VR_FIRST_BUS];
+        return MODEL_OK;
+    }
+#endif
     return model_get_extra(m, vr, value);
 }
 
@@ -56,12 +180,13 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
     }
     if (IN_GROUP(vr, VR_FIRST_INPUT, OPFMU_N_INPUTS)) {
         const unsigned int c = vr - VR_FIRST_INPUT;
-        if (value < OPFMU_INPUT_MIN[c]) {
+        const double kept = within_bound((int)c, value);
+        if (isnan(kept)) {
             snprintf(message, size, "%s = %g %s is below its lower bound %g %s", OPFMU_INPUT_NAMES[c], value,
                      OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c], OPFMU_INPUT_UNITS[c]);
             return MODEL_ERROR;
         }
-        m->u[c] = value;
+        m->u[c] = kept;
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_START, OPFMU_N_STATES)) {
@@ -122,17 +247,19 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
     return MODEL_OK;
 }
 
-ModelStatus check_inputs_at_step_end(const ModelState *m, const double u_end[OPFMU_N_INPUTS], char *message,
-                                     size_t size)
+ModelStatus check_inputs_at_step_end(const ModelState *m, double u_end[OPFMU_N_INPUTS], char *message, size_t size)
 {
     for (int c = 0; c < OPFMU_N_INPUTS; ++c) {
-        if (m->du[c] != 0.0 && (!isfinite(u_end[c]) || u_end[c] < OPFMU_INPUT_MIN[c])) {
-            snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the "
-                     "step, below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c],
-                     m->du[c], OPFMU_INPUT_UNITS[c], u_end[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c],
-                     OPFMU_INPUT_UNITS[c]);
-            return MODEL_ERROR;
+        if (m->du[c] == 0.0) continue;
+        const double kept = within_bound(c, u_end[c]);
+        if (isfinite(kept)) {
+            u_end[c] = kept;
+            continue;
         }
+        snprintf(message, size, "t = %.9g s: %s = %g %s with derivative %g %s/s reaches %g %s at the end of the step, "
+                 "below its lower bound %g %s", m->time, OPFMU_INPUT_NAMES[c], m->u[c], OPFMU_INPUT_UNITS[c], m->du[c],
+                 OPFMU_INPUT_UNITS[c], u_end[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c], OPFMU_INPUT_UNITS[c]);
+        return MODEL_ERROR;
     }
     return MODEL_OK;
 }
