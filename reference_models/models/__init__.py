@@ -41,6 +41,9 @@ from .reeca1 import REECA1
 from .reecb1 import REECB1
 from .regca1 import REGCA1
 from .regcp1 import REGCP1
+from .regf1 import REGF1
+from .regf2 import REGF2
+from .regf3 import REGF3
 from .repca1 import REPCA1
 from .sexs import SEXS
 from .shaft5 import SHAFT5
@@ -75,4 +78,5 @@ STANDARD_MODELS = {
     "REPCA1": REPCA1,
     "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1, "WTTQA1": WTTQA1,
     "WTDS": WTDS, "SHAFT5": SHAFT5,
+    "REGF1": REGF1, "REGF2": REGF2, "REGF3": REGF3,
 }
