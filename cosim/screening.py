@@ -34,7 +34,6 @@ import socket
 import struct
 import tempfile
 import threading
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -310,29 +309,33 @@ WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an 
 def _local_cluster(workers: int, scratch: str):
     """(cluster, client): a LocalCluster of `workers` single-threaded processes with `scratch` as their
     folder, and its client. The workers are forked from multiprocessing's fork server, started with
-    SIGINT ignored: they inherit that, so a Ctrl-C reaches this process alone, which keeps its own
-    handler and is interruptible while they start (the cluster is then closed, its workers with it,
-    and the KeyboardInterrupt raised again). RuntimeError where they are not all up within
-    WORKER_START_TIMEOUT_S."""
+    SIGINT ignored: they inherit that, so a Ctrl-C reaches this process alone. A Ctrl-C while the
+    scheduler starts (a fraction of a second) is held until it is up; one while the workers start
+    is taken at once. Either closes the cluster, its workers with it, and raises KeyboardInterrupt.
+    RuntimeError where the workers are not all up within WORKER_START_TIMEOUT_S."""
     import multiprocessing.forkserver
 
     import dask
     from dask.distributed import Client, LocalCluster
     from distributed.utils import get_mp_context
 
-    with warnings.catch_warnings(), dask.config.set({"temporary-directory": scratch,
-                                                     "distributed.worker.multiprocessing-method": "forkserver"}):
-        warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
+    with dask.config.set({"temporary-directory": scratch, "distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # the fork server's preloaded modules (distributed's)
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the fork server
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the fork server (milliseconds)
         try:
             multiprocessing.forkserver.ensure_running()
+            held = []
+            signal.signal(signal.SIGINT, lambda *_: held.append(True))
+            # no dashboard; the scheduler's HTTP server on a free local port (its default 8787 may be taken)
+            cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                   silence_logs=logging.CRITICAL, local_directory=scratch)
         finally:
             signal.signal(signal.SIGINT, previous)
-        cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.CRITICAL, local_directory=scratch)
         client = None
         try:
+            if held:
+                raise KeyboardInterrupt
             cluster.scale(workers)
             client = Client(cluster)
             try:
