@@ -21,6 +21,7 @@ from cosim.fmu import FMU as Slave, CouplingError
 from fmu_export.binaries import fmi_headers
 from fmu_export.build_cache import cached_native_reference_fmu
 from fmu_export.c_equations import equations_c_source
+from fmu_export.variables import BUS_OUTPUTS, fmu_ports
 from reference_models.models import STANDARD_MODELS
 from reference_models.models.zip import ZIP, ZIPParams, zip_current, zip_power
 from reference_models.ports import ports_of_fmu
@@ -154,15 +155,15 @@ def test_a_component_without_states_has_no_operator_to_learn():
 def test_the_fmus_validate_with_no_state_variables_and_carry_the_bus_port(zip_fmus, version):
     path = zip_fmus[version]
     assert validate_fmu(str(path)) == []
-    assert ports_of_fmu(path) == ZIP.ports
+    assert ports_of_fmu(path) == fmu_ports(ZIP)
     md = read_model_description(str(path))
     outputs = [v.name for v in md.modelVariables if v.causality == "output"]
-    assert outputs == ["I_re", "I_im", "P", "Q"]
+    assert outputs == ["I_re", "I_im", "P", "Q", *(name for name, _ in BUS_OUTPUTS)]
     assert [v.name for v in md.modelVariables if v.causality == "parameter"] == ["rtol", "atol"]
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(ZIP.input_names)
     depends = {u.variable.name: {v.name for v in u.dependencies} for u in md.outputs}
     assert depends == {"I_re": set(ZIP.input_names), "I_im": set(ZIP.input_names), "P": {"Vs", "P0", "V0"},
-                       "Q": {"Vs", "Q0", "V0"}}
+                       "Q": {"Vs", "Q0", "V0"}, **{name: set(ZIP.input_names) for name, _ in BUS_OUTPUTS}}
 
 
 @pytest.mark.parametrize("version", [2, 3])
