@@ -149,7 +149,7 @@ class Refs:
 
     inputs: list        # [(vr, start value)]
     outputs: list       # Real outputs' vrs
-    derived: list       # outputs that depend directly on inputs (their directional derivatives)
+    derived: list       # outputs that depend directly on inputs and have directional derivatives
     booleans: list      # Boolean outputs' vrs
 
     @classmethod
@@ -158,7 +158,7 @@ class Refs:
         real = [v for v in variables if v.kind == "Real"]
         return cls([(refs[v.name], float(v.start)) for v in real if v.causality == "input"],
                    [refs[v.name] for v in real if v.causality == "output"],
-                   [refs[v.name] for v in real if v.causality == "output" and v.dependencies],
+                   [refs[v.name] for v in real if v.causality == "output" and v.dependencies and v.derivative],
                    [refs[v.name] for v in variables if v.kind == "Boolean" and v.causality == "output"])
 
 

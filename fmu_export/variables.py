@@ -14,9 +14,7 @@ benchmarks and importers read the model description.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
-
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 from reference_models.component import Component
 from reference_models.ports import Ports
@@ -34,6 +32,7 @@ class Variable:
     start: float | None = None
     kind: str = "Real"        # Real | Boolean
     dependencies: tuple = ()  # an output's direct dependencies on inputs within a step (input names)
+    derivative: bool = True   # an output the FMU gives directional derivatives of (where it has dependencies)
 
 
 class VariableTable(list):
@@ -47,8 +46,9 @@ class VariableTable(list):
 
 @dataclass(frozen=True)
 class Extra:
-    """A variable one kind of FMU adds: name, causality, description, unit, Real or Boolean, and
-    whether it depends directly on every input (an output computed from the current inputs)."""
+    """A variable one kind of FMU adds: name, causality, description, unit, Real or Boolean,
+    whether it depends directly on every input (an output computed from the current inputs) and
+    whether the FMU gives its directional derivatives."""
 
     name: str
     causality: str
@@ -56,10 +56,12 @@ class Extra:
     unit: str = ""
     kind: str = "Real"
     feedthrough: bool = False
+    derivative: bool = True
 
 
 SURROGATE_EXTRAS = (
-    Extra("residual", "output", "RMS of the operator's physics residual, per state scaled", feedthrough=True),
+    Extra("residual", "output", "RMS of the operator's physics residual, per state scaled", feedthrough=True,
+          derivative=False),
     Extra("rollover_horizon", "parameter", "operator window length (at most the trained horizon)", "s"),
     Extra("in_envelope", "output", "false once an input or window start state left the trained envelope",
           kind="Boolean"),
@@ -92,6 +94,8 @@ BUS_OUTPUTS = (
     ("P_bus", "active power into the bus, Re(V conj(I)), generator convention"),
     ("Q_bus", "reactive power into the bus, Im(V conj(I)), generator convention"),
 )
+NORTON_OUTPUTS = tuple(name for name, _ in BUS_OUTPUTS[:6])
+POWER_OUTPUTS = tuple(name for name, _ in BUS_OUTPUTS[6:])
 SYSTEM_BASE_MVA = 100.0  # the system base an FMU declares unless its builder is told another
 
 # defaults of rtol, atol in both reference FMUs. The tolerance bounds each solver step's error, and
@@ -134,8 +138,7 @@ def fmu_ports(component: Component, base_mva: float | None = SYSTEM_BASE_MVA) ->
     ports = component.ports
     if ports.bus is None:
         return ports
-    names = [name for name, _ in BUS_OUTPUTS]
-    return replace(ports, bus=replace(ports.bus, norton=tuple(names[:6]), power=tuple(names[6:]),
+    return replace(ports, bus=replace(ports.bus, norton=NORTON_OUTPUTS, power=POWER_OUTPUTS,
                                       base_mva=None if base_mva is None else float(base_mva)))
 
 
@@ -164,7 +167,8 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         if extra.causality == "parameter" and start is None:
             raise ValueError(f"parameter {extra.name} needs a start value")
         deps = component.input_names if extra.feedthrough else ()
-        out.append(Variable(extra.name, -1, extra.causality, extra.description, extra.unit, start, extra.kind, deps))
+        out.append(Variable(extra.name, -1, extra.causality, extra.description, extra.unit, start, extra.kind, deps,
+                            extra.derivative))
     bus = component.ports.bus if bus_outputs else None
     if bus is not None:
         taken = {v.name for v in out}
@@ -176,7 +180,9 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         reads = set(bus.voltage).union(*(by_output.get(name, ()) for name in bus.current))
         deps = tuple(name for name in component.input_names if name in reads)
         base = f", pu on the system base Sb = {float(base_mva):g} MVA"
-        out += [Variable(name, -1, "output", text + base, "pu", dependencies=deps) for name, text in BUS_OUTPUTS]
+        # the Norton outputs, themselves derivatives, have none; P_bus and Q_bus have exact ones
+        out += [Variable(name, -1, "output", text + base, "pu", dependencies=deps, derivative=name in POWER_OUTPUTS)
+                for name, text in BUS_OUTPUTS]
     # Real value references in table order, then the Booleans' after the last Real
     n_real = sum(v.kind == "Real" for v in out)
     counters = {"Real": 0, "Boolean": n_real}

@@ -17,15 +17,13 @@ from fmpy.fmi1 import FMICallException
 from cosim.fmu import FMU as Slave
 from fmu_export.build_cache import cached_native_reference_fmu
 from fmu_export.model_description import validation_problems
-from fmu_export.variables import BUS_OUTPUTS, SYSTEM_BASE_MVA
+from fmu_export.variables import NORTON_OUTPUTS, POWER_OUTPUTS, SYSTEM_BASE_MVA
 from reference_models.models import STANDARD_MODELS
 from reference_models.ports import BusPort, Ports, ports_of_fmu
 from reference_models.sm4 import SM4
 
 COMPONENTS = {"SM4": SM4, "GENROU": STANDARD_MODELS["GENROU"], "REGCA1": STANDARD_MODELS["REGCA1"]}
 MACHINES = ("SM4", "GENROU")  # stator equations linear in the bus voltage: the Norton equivalent is exact
-NORTON = [name for name, _ in BUS_OUTPUTS[:6]]
-POWER = [name for name, _ in BUS_OUTPUTS[6:]]
 EPS = np.finfo(float).eps
 
 
@@ -59,7 +57,7 @@ def cartesian(vm, va):
 def norton_at(slave, vm, va):
     """(I_N [2], Y_N [2, 2]) read with the bus voltage at vm, va."""
     slave.set(Vs=vm, theta_vs=va)
-    values = slave.get(*NORTON)
+    values = slave.get(*NORTON_OUTPUTS)
     return values[:2], values[2:].reshape(2, 2)
 
 
@@ -120,21 +118,21 @@ def test_p_and_q_at_the_bus_are_v_conj_i_in_generator_convention_with_exact_deri
     for vm, va in ((0.7, 0.2), (1.1, -0.3), (0.0, 0.4)):
         i = complex(*current_at(slave, vm, va))
         s = complex(*cartesian(vm, va)) * i.conjugate()
-        p, q = slave.get(*POWER)
+        p, q = slave.get(*POWER_OUTPUTS)
         scale = max(abs(s), EPS)
         assert abs(p - s.real) <= 16 * EPS * scale and abs(q - s.imag) <= 16 * EPS * scale
         np.testing.assert_allclose(slave.get("P", "Q"), [p, q], rtol=0, atol=64 * EPS * max(abs(i), 1.0))
     # the derivatives with respect to the bus voltage, as a network master's Newton asks them
     slave.set(Vs=0.7, theta_vs=0.2)
     vrs = {v.name: v.valueReference for v in slave.md.modelVariables}
-    unknowns, knowns = [vrs[n] for n in POWER], [vrs["Vs"], vrs["theta_vs"]]
+    unknowns, knowns = [vrs[n] for n in POWER_OUTPUTS], [vrs["Vs"], vrs["theta_vs"]]
     h = 1e-6
     for k, known in enumerate(("Vs", "theta_vs")):
         got = np.array(slave.fmu.getDirectionalDerivative(unknowns, knowns, [1.0 if j == k else 0.0 for j in range(2)]))
         slave.set(**{"Vs": 0.7, "theta_vs": 0.2, known: (0.7, 0.2)[k] + h})
-        up = slave.get(*POWER)
+        up = slave.get(*POWER_OUTPUTS)
         slave.set(**{"Vs": 0.7, "theta_vs": 0.2, known: (0.7, 0.2)[k] - h})
-        down = slave.get(*POWER)
+        down = slave.get(*POWER_OUTPUTS)
         slave.set(Vs=0.7, theta_vs=0.2)
         np.testing.assert_allclose(got, (up - down) / (2 * h), rtol=0, atol=1e-7 * max(1.0, np.abs(got).max()))
 
@@ -153,11 +151,11 @@ def test_the_norton_outputs_derivatives_are_refused_with_a_reason(bus_fmus, vers
 def test_the_ports_declare_the_norton_equivalent_and_the_power_on_the_system_base(bus_fmus, name, version):
     ports = ports_of_fmu(bus_fmus[name, version])
     bus = ports.bus
-    assert bus.norton == tuple(NORTON) and bus.power == tuple(POWER) and bus.base_mva == SYSTEM_BASE_MVA
+    assert bus.norton == NORTON_OUTPUTS and bus.power == POWER_OUTPUTS and bus.base_mva == SYSTEM_BASE_MVA
     assert (bus.voltage, bus.current) == (COMPONENTS[name].ports.bus.voltage, COMPONENTS[name].ports.bus.current)
     md = read_model_description(str(bus_fmus[name, version]))
     described = {v.name: v for v in md.modelVariables}
-    for output in NORTON + POWER:
+    for output in NORTON_OUTPUTS + POWER_OUTPUTS:
         assert described[output].causality == "output" and described[output].unit == "pu"
         assert "system base Sb = 100 MVA" in described[output].description
 
@@ -207,7 +205,7 @@ def test_a_magnitude_a_round_off_below_zero_is_taken_as_zero_and_a_negative_one_
     slave.set(Vs=-1e-12)
     assert slave.get("Vs")[0] == 0.0
     slave.step(0.01, Vs=-1e-12, theta_vs=0.2)
-    assert np.all(np.isfinite(slave.get("I_re", "I_im", *NORTON, *POWER)))
+    assert np.all(np.isfinite(slave.get("I_re", "I_im", *NORTON_OUTPUTS, *POWER_OUTPUTS)))
     for bad, reason in ((-0.1, "Vs = -0.1 pu is below its lower bound 0 pu"), (float("nan"), "not a finite number"),
                         (-1e-5, "is below its lower bound")):
         with pytest.raises(FMICallException):
@@ -231,3 +229,13 @@ def test_a_ramp_ending_a_round_off_below_zero_ends_at_zero_and_one_ending_below_
     with pytest.raises(FMICallException):
         slave.fmu.doStep(currentCommunicationPoint=slave.t, communicationStepSize=0.01)
     assert "below its lower bound" in slave.messages[-1][1]
+
+
+def test_the_build_cross_check_asks_the_derivatives_of_p_and_q_at_the_bus_not_of_the_norton_outputs():
+    from fmu_export.cross_check import Refs
+    from fmu_export.native_reference_fmu import native_reference_variables
+
+    variables = native_reference_variables(SM4)
+    vr = {v.name: v.vr for v in variables}
+    derived = Refs.of(variables, 2).derived
+    assert {vr[n] for n in POWER_OUTPUTS} <= set(derived) and not {vr[n] for n in NORTON_OUTPUTS} & set(derived)
