@@ -169,17 +169,32 @@ def test_ports_without_the_fmu_additions_read_as_before_and_the_additions_round_
     assert Ports.from_element(full.element()) == full
 
 
+def undeclared_units(path) -> list:
+    """The Real (Float64) variables of an FMU (it has some) whose unit is missing or not among its
+    UnitDefinitions, (name, unit) each."""
+    with zipfile.ZipFile(path) as archive:
+        root = ET.fromstring(archive.read("modelDescription.xml"))
+    defined = {u.get("name") for u in root.iter("Unit")}
+    if root.get("fmiVersion") == "2.0":
+        reals = [(sv.get("name"), sv.find("Real").get("unit")) for sv in root.iter("ScalarVariable")
+                 if sv.find("Real") is not None]
+    else:
+        reals = [(v.get("name"), v.get("unit")) for v in root.find("ModelVariables").iter("Float64")]
+    assert reals
+    return [(name, unit) for name, unit in reals if unit not in defined]
+
+
 @pytest.mark.parametrize("version", (2, 3))
 @pytest.mark.parametrize("name", COMPONENTS)
 def test_every_real_variable_declares_a_defined_unit_and_the_fmu_validates(bus_fmus, name, version):
     path = bus_fmus[name, version]
     assert validation_problems(path) == []
-    with zipfile.ZipFile(path) as archive:
-        root = ET.fromstring(archive.read("modelDescription.xml"))
-    defined = {u.get("name") for u in root.iter("Unit")}
-    reals = ([sv.find("Real") for sv in root.iter("ScalarVariable") if sv.find("Real") is not None] if version == 2
-             else list(root.find("ModelVariables").iter("Float64")))
-    assert reals and all(r.get("unit") in defined for r in reals), [r.get("unit") for r in reals]
+    assert undeclared_units(path) == []
+
+
+def test_the_surrogate_and_pythonfmu_fmus_declare_a_unit_on_every_real_too(fmu_path, reference_path):
+    for path in (fmu_path, reference_path):
+        assert undeclared_units(path) == [] and validation_problems(path) == []
 
 
 def test_every_fmu_the_project_builds_gives_each_variable_its_own_value_reference(bus_fmus, fmu_path, reference_path):
