@@ -4,7 +4,8 @@
    against this interface, for FMI 2.0 and 3.0 alike; a model never touches an FMI call. Per FMU,
    generated at build time: config.h (sizes, defaults, component tables, OPFMU_STATE_HEADER: the
    header that defines the model's ModelState), variables.h (the value references of the model
-   description, groups VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT, VR_FIRST_START), equations.c
+   description, groups VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT, VR_FIRST_START, and
+   VR_FIRST_BUS where the FMU has the bus port's outputs, which variables.c computes), equations.c
    (the component's right-hand side and derived outputs) and derivatives.c (their exact partial
    derivatives).
 
