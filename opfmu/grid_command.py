@@ -3,6 +3,8 @@
     opfmu grid run    one contingency: DIR/result.csv, DIR/result.png, DIR/report.md, DIR/summary.json
     opfmu grid cct    the critical clearing time of a fault and its clearing action (--json: one object)
     opfmu grid screen many contingencies on dask: CCTs, stable/unstable verdicts, first-swing peaks
+    opfmu grid export the case's FMUs and DIR/case.json, which names every device's FMU, bus,
+                      parameters, load-flow point, start values and links (cosim.export), for another master
 
 The FMUs of every unit are built from its dynamic data (--dynamic-data, default the case's shipped
 file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed. A
@@ -161,6 +163,22 @@ def add_grid_parser(sub) -> None:
     scr.add_argument("--quiet", action="store_true", help="no progress report")
     _common(scr, trip=False)
     scr.set_defaults(func=cmd_screen)
+
+    exp = gsub.add_parser("export", help="the case's FMUs and case.json for another tool",
+                          description="Writes one FMU file per distinct FMU the case runs and DIR/case.json: every "
+                                      "device's FMU, bus, parameters, load-flow point, start values and where each of "
+                                      "its inputs comes from (docs/grid.md, cosim/export.py).")
+    exp.add_argument("--case", default="wscc9", help="a shipped case (wscc9, kundur, ieee14, ieee39, npcc) or a case "
+                     "file ANDES reads (xlsx, json, or a PSS/E raw with --dyr)")
+    exp.add_argument("--dyr", default=None, metavar="FILE", help="the PSS/E dyr file of a raw --case")
+    exp.add_argument("--dynamic-data", default=None, metavar="FILE", help="the units' dynamic data of a shipped case")
+    exp.add_argument("--fmus", choices=("reference", "surrogate"), default="reference",
+                     help="native reference FMUs for every device (default), or the surrogate FMUs of the machines "
+                          "whose dynamic data name an operator (native for the rest)")
+    exp.add_argument("--fmi-version", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
+    exp.add_argument("--fmu-cache", default=None, metavar="DIR", help="where built FMUs are kept")
+    exp.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    exp.set_defaults(func=cmd_export)
 
 
 def _one_line(exc: BaseException) -> str:
@@ -383,6 +401,26 @@ def _open(kind, case, settings, args, progress, **options):
         return open_runner(kind, case, settings, args.fmu_cache, progress, fmi_version=args.fmi_version, **options)
     except CouplingError as exc:
         raise UserError(_one_line(exc)) from None
+
+
+def cmd_export(args) -> None:
+    from cosim.export import export_case
+    from cosim.fmu import CouplingError
+
+    _check_out(args.out, ["case.json"])
+    case = _case(args)
+    _check_fmus(case, args.fmus, args.fmu_cache)
+    stated = _case_notes(case)
+    surrogates = _surrogates(case, args.fmus)
+    if surrogates:
+        print(f"note: {surrogates}", file=sys.stderr)
+    cache = Path(args.fmu_cache) if args.fmu_cache else None
+    try:
+        path = export_case(case, args.out, args.fmus, args.fmi_version, cache, _progress)
+    except CouplingError as exc:
+        raise UserError(_one_line(exc)) from None
+    count = len({d["fmu"] for d in json.loads(path.read_text(encoding="utf-8"))["devices"]})
+    print(f"{case.name}: {count} FMU files and {path}" + (f" ({len(stated)} notes on the case above)" if stated else ""))
 
 
 def cmd_run(args) -> None:
