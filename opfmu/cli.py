@@ -50,10 +50,17 @@ def cmd_data(args) -> None:
     from surrogate.data.presets import load_preset
     from surrogate.data.runner import SchedulerError, SolveRunner
 
-    if args.workers < 0:
-        raise UserError("--workers must be >= 0")
+    if not 0 <= args.workers <= usable_cores():
+        raise UserError(f"--workers must lie in [0, {usable_cores()}] (the cores this process may use)")
     if not 0 <= args.seed <= MAX_COUNT:
         raise UserError(f"--seed must lie in [0, {MAX_COUNT}]")
+    if args.scheduler is not None:
+        from cosim.screening import SchedulerError as AddressError, check_scheduler
+
+        try:
+            args.scheduler = check_scheduler(args.scheduler)
+        except AddressError as exc:
+            raise UserError(str(exc)) from None
     try:
         recipe = load_preset(args.preset)
         params = _machine(args.machine, recipe.component)

@@ -228,7 +228,16 @@ def test_operator_into_a_folder_holding_another_dataset_or_run_is_refused_before
 def test_a_scheduler_that_is_not_an_address_is_one_line(tmp_path, capsys):
     spec = preset_file(tmp_path / "p.json", tiny("paper"))
     line = refusal(capsys, "data", "--preset", spec, "--out", tmp_path / "d", "--scheduler", "no address")
-    assert line.startswith("error: cannot use the dask scheduler 'no address':")
+    assert line.startswith("error: --scheduler 'no address'")
+    line = refusal(capsys, "data", "--preset", spec, "--out", tmp_path / "d", "--scheduler", "http://localhost:1")
+    assert "a dask scheduler address is tcp://HOST:PORT" in line
+    assert not (tmp_path / "d").exists()
+
+
+def test_more_data_workers_than_cores_is_one_line(tmp_path, capsys):
+    spec = preset_file(tmp_path / "p.json", tiny("paper"))
+    line = refusal(capsys, "data", "--preset", spec, "--out", tmp_path / "d", "--workers", "100000")
+    assert line.startswith("error: --workers must lie in [0, ")
 
 
 def damaged_copy(source, target, damage):
