@@ -76,6 +76,10 @@ RUNS = {
     # errors of 450 and 300 pu drive both PIs onto thmax within the run, the pitch along its rate limit
     "WTPTA1": ((0.1, {}), (1.2, {"wt": 451.0, "Pord": 300.5}), (1.8, {"wt": -449.0})),
     "WTTQA1": ((0.1, {}), (0.6, {"Pe": 0.1}), (1.2, {"wg": 0.5})),  # the characteristic's bend at p1
+    # auxiliary powers beyond the limits: Psig, Qsig onto Pmax, Qmin (short: on a fixed bus voltage nothing rests)
+    "REGF1": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
+    "REGF2": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
+    "REGF3": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
 }
 
 
