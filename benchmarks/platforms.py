@@ -23,17 +23,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from fmu_export import cross_check, platforms  # noqa: E402
-from fmu_export.surrogate_fmu import build_surrogate_fmu, default_state, load_operator, surrogate_starts  # noqa: E402
+from fmu_export.surrogate_fmu import build_surrogate_fmu, load_operator, surrogate_variables as variables_of  # noqa: E402
 from fmu_export.native_reference_fmu import build_native_reference_fmu, native_reference_variables  # noqa: E402
-from fmu_export.variables import SURROGATE_EXTRAS, fmu_variables  # noqa: E402
 from reference_models.files import write_json  # noqa: E402
 from surrogate.operator import DEFAULT_OPERATOR  # noqa: E402
 
 
 def surrogate_variables():
     _, meta = load_operator(DEFAULT_OPERATOR)
-    return fmu_variables(meta["component"], meta["params"], default_state(meta, DEFAULT_OPERATOR), SURROGATE_EXTRAS,
-                         surrogate_starts(meta), meta.get("operating_point"))
+    return variables_of(meta, DEFAULT_OPERATOR)
 
 
 def binary(fmu: Path, p, version: int, model: str, folder: Path) -> Path:

@@ -17,7 +17,8 @@ import re
 
 from reference_models.component import Component
 
-from .c_equations import c_size, live_statements
+from .c_equations import c_size, live_statements, p_argument, p_unused, symbolic
+from .c_parameters import ParamCondition, ParamExpr, c_literal
 
 _NAME = re.compile(r"\bd\d+\b")
 
@@ -34,11 +35,6 @@ class _Recorder:
         return name
 
 
-def _literal(value: float) -> str:
-    text = repr(float(value))
-    return f"({text})" if text.startswith("-") else text
-
-
 class Dual:
     """A double-valued C expression `code` with its partial derivatives `grads` {column: C expression}."""
 
@@ -49,7 +45,7 @@ class Dual:
         return Dual(self.recorder.emit(code), {j: self.recorder.emit(g) for j, g in grads.items()}, self.recorder)
 
     def _lift(self, other) -> "Dual":
-        return other if isinstance(other, Dual) else Dual(_literal(other), {}, self.recorder)
+        return other if isinstance(other, Dual) else Dual(c_literal(other), {}, self.recorder)
 
     def __add__(self, other):
         o = self._lift(other)
@@ -118,44 +114,61 @@ class DualMath:
 
     @staticmethod
     def sin(a: Dual) -> Dual:
+        if isinstance(a, ParamExpr):
+            return a.space.call("sin", a)
         c = a.recorder.emit(f"cos({a.code})")
         return a._new(f"sin({a.code})", {j: f"{c} * {g}" for j, g in a.grads.items()})
 
     @staticmethod
     def cos(a: Dual) -> Dual:
+        if isinstance(a, ParamExpr):
+            return a.space.call("cos", a)
         s = a.recorder.emit(f"sin({a.code})")
         return a._new(f"cos({a.code})", {j: f"-{s} * {g}" for j, g in a.grads.items()})
 
     @staticmethod
     def exp(a: Dual) -> Dual:
+        if isinstance(a, ParamExpr):
+            return a.space.call("exp", a)
         value = a._new(f"exp({a.code})", {})
         return Dual(value.code, {j: a.recorder.emit(f"{value.code} * {g}") for j, g in a.grads.items()}, a.recorder)
 
     @staticmethod
     def sqrt(a: Dual) -> Dual:
+        if isinstance(a, ParamExpr):
+            return a.space.call("sqrt", a)
         value = a._new(f"sqrt({a.code})", {})
         return Dual(value.code, {j: a.recorder.emit(f"{g} / (2.0 * {value.code})") for j, g in a.grads.items()},
                     a.recorder)
 
     @staticmethod
     def where(condition, a, b):
-        """a where condition holds, else b, with the partial derivatives of the branch taken."""
-        if not isinstance(condition, DualCondition):
+        """a where condition holds, else b, with the partial derivatives of the branch taken (a
+        condition on parameters alone: a conditional on them)."""
+        if isinstance(condition, ParamCondition):
+            duals = [v for v in (a, b) if isinstance(v, Dual)]
+            if not duals:
+                return condition.space.select(condition, a, b)
+            recorder = duals[0].recorder
+        elif not isinstance(condition, DualCondition):
             return a if condition else b
-        a, b = (v if isinstance(v, Dual) else Dual(_literal(v), {}, condition.recorder) for v in (a, b))
+        else:
+            recorder = condition.recorder
+        a, b = (v if isinstance(v, Dual) else Dual(c_literal(v), {}, recorder) for v in (a, b))
         keys = sorted(a.grads.keys() | b.grads.keys())
         return a._new(f"({condition.code}) ? {a.code} : {b.code}",
                       {j: f"({condition.code}) ? {a.grads.get(j, '0.0')} : {b.grads.get(j, '0.0')}" for j in keys})
 
 
 def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int, doc: str) -> str:
-    """`static void name(const double x[], const double u[], double J[])`: the row-major Jacobian
-    [n_rows, n_x + n_u] of fn(x, u, params, m) with respect to (x, u)."""
+    """`static void name(const double x[], const double u[], [const double p[],] double J[])`: the
+    row-major Jacobian [n_rows, n_x + n_u] of fn(x, u, params, m) with respect to (x, u) (p: where
+    params is a ParameterSpace, c_equations)."""
     recorder = _Recorder()
     n_x, n_u = component.n_states, component.n_inputs
     x = [Dual(f"x[{i}]", {i: "1.0"}, recorder) for i in range(n_x)]
     u = [Dual(f"u[{i}]", {n_x + i: "1.0"}, recorder) for i in range(n_u)]
-    results = fn(x, u, params, DualMath)
+    results = fn(x, u, symbolic(params), DualMath)
     if len(results) != n_rows:
         raise ValueError(f"{name}: expected {n_rows} results, got {len(results)}")
     cols = n_x + n_u
@@ -166,9 +179,9 @@ def c_jacobian_function(name: str, fn, component: Component, params, n_rows: int
     # a value whose only use was its own derivative is dropped
     body = live_statements(recorder.lines, stores, _NAME) + stores
     return (f"/* {doc}: J[i * {cols} + j] = d out_i / d (x, u)_j */\n"
-            f"static void {name}(const double x[{c_size(n_x)}], const double u[{n_u}], "
+            f"static void {name}(const double x[{c_size(n_x)}], const double u[{n_u}], {p_argument(params)}"
             f"double J[{c_size(n_rows) * cols}])\n{{\n"
-            f"    (void)x;\n    (void)u;\n" + "\n".join(body) + "\n}\n")
+            + "\n".join(["    (void)x;", "    (void)u;"] + p_unused(params) + body) + "\n}\n")
 
 
 def jacobians_c_source(component: Component, params) -> str:

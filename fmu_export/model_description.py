@@ -78,6 +78,7 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
                                                  "causality": v.causality, "description": v.description,
                                                  **_variability(v)})
         type_attrs = {"unit": unit_of(v)} if v.kind == "Real" else {}
+        type_attrs.update(_bounds(v))
         if v.start is not None:
             type_attrs["start"] = repr(float(v.start))
         ET.SubElement(sv, v.kind, type_attrs)
@@ -111,6 +112,7 @@ def _fmi3_document(model_name: str, guid: str, variables: list[Variable], descri
                  "description": v.description, **_variability(v)}
         if v.kind == "Real":
             attrs["unit"] = unit_of(v)
+            attrs.update(_bounds(v))
         if v.start is not None:
             attrs["start"] = repr(float(v.start)) if v.kind == "Real" else ("true" if v.start else "false")
         ET.SubElement(mv, "Float64" if v.kind == "Real" else v.kind, attrs)
@@ -121,6 +123,11 @@ def _fmi3_document(model_name: str, guid: str, variables: list[Variable], descri
             variables.ports.element())
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _bounds(v: Variable) -> dict:
+    """min and max of a variable with a declared range (the same attributes in FMI 2.0 and 3.0)."""
+    return {name: repr(float(value)) for name, value in (("min", v.minimum), ("max", v.maximum)) if value is not None}
 
 
 def _variability(v: Variable) -> dict:

@@ -12,8 +12,19 @@ or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; variables.c: the component's varia
 the state; dopri5.c: the integrator, which locates the instants the right-hand side's conditions change:
 docs/fmu.md, "limit crossings") they compile into one binary per platform (binaries.py: gcc for
 linux64, MinGW-w64 for win64, ...), which needs the C runtime only.
-The C sources go into sources/ and the machine's parameters into resources/machine.json (a record;
-the binary has them compiled in).
+The C sources go into sources/ and the machine's parameters into resources/machine.json (a record of
+the defaults built in).
+
+Parameters (fmu_export.c_parameters): the component's parameters are fixed FMU parameters, start the
+values built for, which the equations read from the instance, so one FMU serves every device of its
+model: an importer sets them before initialisation (fmi2SetReal / fmi3SetFloat64 in instantiated or
+initialisation mode), and the parameters derived from them follow. A value outside the range the
+component checks, or one that would change the form of the equations (a structural parameter: a time
+constant of 0 making a lag algebraic, saturation data that Python turns into coefficients), is
+refused with fmi2Error and a logged reason; relations between parameters (VMIN < VMAX) are checked
+when initialisation ends. The GUID (and the grid's cache key) depends on the component and its
+structure only (`structure_of`), not on the values of the other parameters nor on the defaults of
+the inputs and the initial state.
 
 What the FMU does (docs/design.md, "The FMUs (FMI 2.0 and 3.0 co-simulation)"): inputs set before
 fmi2DoStep(t, h) hold over [t, t + h], or are linear over it where the master set their first
@@ -49,7 +60,8 @@ from reference_models.sm4 import SM4
 
 from .binaries import PLUMBING, check_fmi_version, compile_binaries, targets
 from .surrogate_fmu import BuildError, _c_double, check_model_name, component_config, derivatives_source
-from .c_equations import equations_c_source, reset_c_source, switching_c_source
+from .c_equations import equations_c_source, parameter_space, reset_c_source, switching_c_source
+from .c_parameters import parameters_c_source
 from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
@@ -74,7 +86,20 @@ def native_reference_variables(component: Component = SM4, params=None):
     """The native reference FMU's variables for that machine (the pythonfmu reference FMU's table)."""
     params = machine_params(component, params)
     return fmu_variables(component, params, _start_state(component, params), REFERENCE_EXTRAS, SOLVER_STARTS,
-                         bus_outputs=True)
+                         bus_outputs=True, space=parameter_space(component, params))
+
+
+def structure_of(component: Component, params=None) -> dict:
+    """The structure a native reference FMU of `component` with parameters `params` (as
+    build_native_reference_fmu takes them) is built for: {"component", "predicates"} (the
+    structural predicates with their outcomes, fmu_export.c_parameters), JSON-able. FMUs of equal
+    structure differ only in their defaults: one serves the parameters of the other.
+    NativeReferenceError for refused parameters."""
+    try:
+        params = machine_params(component, params)
+    except ParameterError as exc:
+        raise NativeReferenceError(str(exc)) from None
+    return {"component": component.name, "predicates": parameter_space(component, params).structure()}
 
 
 def build_native_reference_fmu(out, model_name: str = "SM4Reference", component: Component = SM4,
@@ -111,20 +136,26 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         x_start = np.asarray(start_state, dtype=float)
         if x_start.shape != (component.n_states,) or not np.all(np.isfinite(x_start)):
             raise NativeReferenceError(f"the start state must be {component.n_states} finite values")
-    variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point,
-                              bus_outputs=True, base_mva=system_base_mva)
-    n_switching, switching = switching_c_source(component, params, linkage="OPFMU_INTERNAL")
-    reset = reset_c_source(component, params, linkage="OPFMU_INTERNAL")
-    generated = {
+    space = parameter_space(component, params)
+    n_switching, switching = switching_c_source(component, space, linkage="OPFMU_INTERNAL")
+    reset = reset_c_source(component, space, linkage="OPFMU_INTERNAL")
+    equations = equations_c_source(component, space, linkage="OPFMU_INTERNAL")
+    derivatives = derivatives_source(component, space)
+    try:
+        variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point,
+                                  bus_outputs=True, base_mva=system_base_mva, space=space)
+    except ValueError as exc:
+        raise NativeReferenceError(str(exc)) from None
+    generated = {  # the derived parameters are all known once every function was traced
         "variables.h": vr_header(variables, component),
-        "equations.c": '#include "model.h"\n' + equations_c_source(component, params, linkage="OPFMU_INTERNAL")
-                       + ("\n" + switching if switching else "") + ("\n" + reset if reset else ""),
-        "derivatives.c": derivatives_source(component, params),
+        "equations.c": '#include <stdio.h>\n#include "model.h"\n' + equations
+                       + ("\n" + switching if switching else "") + ("\n" + reset if reset else "")
+                       + "\n" + parameters_c_source(space, linkage="OPFMU_INTERNAL"),
+        "derivatives.c": derivatives,
     }
-    guid = _guid(model_name, component, params, generated, operating_point, version,
-                 None if start_state is None else x_start.tolist(), system_base_mva)
+    guid = _guid(model_name, component, generated, version, system_base_mva)
     generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching,
-                                          bool(reset))
+                                          bool(reset), space)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
                             interpolates_inputs=True, fmi_version=version)
@@ -147,14 +178,14 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
 
 
 def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None,
-                  n_switching: int = 0, reset: bool = False) -> str:
+                  n_switching: int = 0, reset: bool = False, space=None) -> str:
     """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
     escaped names; n_switching: the number of switching functions of the right-hand side
     (c_equations.switching_c_source); reset: whether equations.c has the component's model_reset
     (c_equations.reset_c_source; only then is OPFMU_HAS_RESET defined, so the header of a component
-    without one is as before)."""
+    without one is as before); space: the build's ParameterSpace."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
-                                       x_start, operating_point)
+                                       x_start, operating_point, space)
     lines = opening + [
         f"#define OPFMU_RTOL {_c_double(SOLVER_STARTS['rtol'])} /* default of the parameter rtol */",
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
@@ -176,15 +207,14 @@ def _start_state(component: Component, params, operating_point=None) -> np.ndarr
         raise NativeReferenceError(str(exc)) from None
 
 
-def _guid(model_name: str, component: Component, params, generated: dict, operating_point=None,
-          version: int = 2, start_state=None, system_base_mva: float = SYSTEM_BASE_MVA) -> str:
-    """A GUID (FMI 3.0: instantiation token) that changes with everything compiled into the binary
-    or declared beside it: name, machine, operating point, FMI version, C sources and system base."""
+def _guid(model_name: str, component: Component, generated: dict, version: int = 2,
+          system_base_mva: float = SYSTEM_BASE_MVA) -> str:
+    """A GUID (FMI 3.0: instantiation token) that changes with what the binary computes: name,
+    component, FMI version, the generated C sources (the structure: structural predicates, derived
+    parameters) and system base; not with the defaults of the parameters, inputs and initial state
+    (config.h), which any instance may set."""
     digest = hashlib.sha256(b"native reference\0" + model_name.encode() + b"\0" + component.name.encode() + b"\0"
-                            + json.dumps(params.to_dict(), sort_keys=True).encode() + b"\0"
-                            + json.dumps(operating_point or {}, sort_keys=True).encode()
                             + (b"" if version == 2 else b"\0fmi3")
-                            + (b"" if start_state is None else json.dumps(start_state).encode())
                             + (b"" if system_base_mva == SYSTEM_BASE_MVA else repr(float(system_base_mva)).encode()))
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())

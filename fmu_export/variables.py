@@ -4,17 +4,19 @@ Real value references, in this order: the component's inputs, its states (output
 communication point), its derived outputs, the initial-state parameters `<state>0`, then the
 variables a kind of FMU adds (`SURROGATE_EXTRAS`, `REFERENCE_EXTRAS`) in the order listed, then,
 where the FMU offers them (the native reference FMU of a component with a bus port), the bus port's
-outputs (`BUS_OUTPUTS`: the Norton equivalent and P, Q at the bus). Booleans come after every Real,
+outputs (`BUS_OUTPUTS`: the Norton equivalent and P, Q at the bus), then, in a native FMU, the
+component's parameters in its parameter class's order (fixed parameters, start the built values, min
+and max their range where the component checks one: fmu_export.c_parameters). Booleans come after every Real,
 so that a value reference names one variable whatever its type (FMI 2.0 allows types to share
 them; importers that read by value reference alone do not). For SM4's native reference FMU this is
 Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, rtol 18, atol 19,
-I_N_re..Q_bus 20-27. The C sources get the same table as generated `#define`s (`vr_header`); tests,
+I_N_re..Q_bus 20-27, D..Wb 28-39. The C sources get the same table as generated `#define`s (`vr_header`); tests,
 benchmarks and importers read the model description.
 """
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 from reference_models.component import Component
 from reference_models.ports import Ports
@@ -33,6 +35,8 @@ class Variable:
     kind: str = "Real"        # Real | Boolean
     dependencies: tuple = ()  # an output's direct dependencies on inputs within a step (input names)
     derivative: bool = True   # an output the FMU gives directional derivatives of (where it has dependencies)
+    minimum: float | None = None  # a parameter's declared range (None: unbounded)
+    maximum: float | None = None
 
 
 class VariableTable(list):
@@ -144,11 +148,13 @@ def fmu_ports(component: Component, base_mva: float | None = SYSTEM_BASE_MVA) ->
 
 def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
                   operating_point: dict | None = None, bus_outputs: bool = False,
-                  base_mva: float = SYSTEM_BASE_MVA) -> VariableTable:
+                  base_mva: float = SYSTEM_BASE_MVA, space=None) -> VariableTable:
     """The variable table of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
     their start values by name (parameters need one); the inputs start at start_inputs. bus_outputs:
     a component with a bus port gets its outputs (BUS_OUTPUTS), on the system base `base_mva` [MVA].
+    space: the build's fmu_export.c_parameters.ParameterSpace, whose parameters the table then
+    declares (parameter_variables).
     The table carries the ports for the model description (fmu_ports where it has the bus outputs).
     ValueError where a bus output's name is one of the component's."""
     starts = starts or {}
@@ -183,6 +189,12 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         # the Norton outputs, themselves derivatives, have none; P_bus and Q_bus have exact ones
         out += [Variable(name, -1, "output", text + base, "pu", dependencies=deps, derivative=name in POWER_OUTPUTS)
                 for name, text in BUS_OUTPUTS]
+    if space is not None:
+        taken = {v.name for v in out}
+        clash = [name for name in space.names if name in taken]
+        if clash:
+            raise ValueError(f"{component.name}: the parameter {clash[0]!r} has the name of one of its variables")
+        out += parameter_variables(space)
     # Real value references in table order, then the Booleans' after the last Real
     n_real = sum(v.kind == "Real" for v in out)
     counters = {"Real": 0, "Boolean": n_real}
@@ -191,6 +203,27 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         numbered.append(replace(v, vr=counters[v.kind]))
         counters[v.kind] += 1
     return VariableTable(numbered, fmu_ports(component, base_mva) if bus is not None else component.ports)
+
+
+def parameter_variables(space) -> list:
+    """The component's parameters as fixed FMU parameters (value references still -1): start the
+    built value, min/max the range the component checks (fmu_export.c_parameters.ParameterSpace)."""
+    model = space.component.name.upper()
+    structural = set(space.structural_names())
+    out = []
+    for i, (name, value) in enumerate(zip(space.names, space.values)):
+        low, high, unit = space.ranges.get(i, (None, None, ""))
+        if space.fixed == "trained":
+            note = f"; fixed: the operator was trained for {value!r}"
+        elif space.fixed:
+            note = "; structural: the FMU refuses another value"
+        elif name in structural:
+            note = "; structural: a value that changes the form of the equations is refused"
+        else:
+            note = ""
+        out.append(Variable(name, -1, "parameter", f"{model} parameter {name}{note}", unit, value,
+                            minimum=low, maximum=high))
+    return out
 
 
 TIME = "time"  # the independent variable FMI 3.0 requires
@@ -216,7 +249,7 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     each Real's VarKind by value reference, model.h's tokens) and, given the component, the first
     value reference of each of its groups (VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT,
     VR_FIRST_START: inputs, states, derived outputs, initial-state parameters, each contiguous in the
-    component's order; an empty group, as a component without states has two, starts at 0, where
+    component's order; VR_FIRST_PARAM where the table declares the component's parameters; an empty group, as a component without states has two, starts at 0, where
     IN_GROUP over its no values finds none). Where the table has the bus port's outputs (BUS_OUTPUTS,
     contiguous in that order): VR_FIRST_BUS, BUS_N_OUTPUTS, the bus voltage's inputs by index
     (BUS_VOLTAGE_MAGNITUDE, BUS_VOLTAGE_ANGLE) and the bus current's value references
@@ -247,6 +280,9 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
         by_name = {v.name: v.vr for v in reals}
         groups = (("INPUT", component.input_names), ("STATE", component.state_names),
                   ("OUTPUT", component.output_names), ("START", [f"{n}0" for n in component.state_names]))
+        params = [f.name for f in fields(component.params_type)]
+        if params and params[0] in by_name:
+            groups += (("PARAM", params),)
         for group, names in groups:
             refs = [by_name[n] for n in names] or [0]
             if refs != list(range(refs[0], refs[0] + len(refs))):

@@ -210,15 +210,13 @@ def test_the_pythonfmu_reference_is_fmi2_only(tmp_path):
 @pytest.mark.platform_tools(PLATFORMS["win64"].compiler, PLATFORMS["win64"].emulator[0])
 def test_the_fmi3_surrogate_dll_under_wine_gives_the_linux64_outputs(surrogate_fmi3, tmp_path):
     from fmu_export import cross_check, platforms
-    from fmu_export.surrogate_fmu import default_state, load_operator, surrogate_starts
-    from fmu_export.variables import SURROGATE_EXTRAS, fmu_variables
+    from fmu_export.surrogate_fmu import load_operator, surrogate_variables
     from tests.test_platforms import extract_binary
 
     win64 = platforms.PLATFORMS["win64"]
     path, info = surrogate_fmi3
     _, meta = load_operator(GEN2)
-    variables = fmu_variables(meta["component"], meta["params"], default_state(meta, GEN2),
-                              SURROGATE_EXTRAS, surrogate_starts(meta), meta.get("operating_point"))
+    variables = surrogate_variables(meta, GEN2)
     script = cross_check.scenario_script(variables, info["guid"], 3, seed=404, steps=100)
     host = platforms.host()
     base = cross_check.run_script(host, extract_binary(path, host, 3, "Gen2Surrogate", tmp_path), script, tmp_path, 3)

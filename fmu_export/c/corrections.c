@@ -44,8 +44,8 @@ static void jacobian(const double x[N_X], const double u[N_U], Matrix J)
         memcpy(lo, x, sizeof lo);
         hi[j] += d;
         lo[j] -= d;
-        model_derivatives(hi, u, fh);
-        model_derivatives(lo, u, fl);
+        model_derivatives(hi, u, TRAINED_P, fh);
+        model_derivatives(lo, u, TRAINED_P, fl);
         for (int i = 0; i < N_X; ++i) J[i][j] = (fh[i] - fl[i]) / (2.0 * d);
     }
 }
@@ -60,7 +60,7 @@ static int equilibrium(const double x[N_X], const double u[N_U], double rest[N_X
         double f[N_X], step[N_X], norm = 0.0;
         Matrix J;
         int perm[N_X];
-        model_derivatives(rest, u, f);
+        model_derivatives(rest, u, TRAINED_P, f);
         for (int i = 0; i < N_X; ++i) norm += fabs(f[i]);
         if (!isfinite(norm)) return 0;
         if (norm < 1e-12) return 1;
@@ -166,7 +166,7 @@ void start_corrections(ModelState *m, int always)
 double slow_rate(const ModelState *m, const double x[N_X])
 {
     double f[N_X];
-    model_derivatives(x, m->u, f);
+    model_derivatives(x, m->u, TRAINED_P, f);
     return dot(m->slow_left, f);
 }
 
@@ -187,8 +187,8 @@ void affine_drive(const double x[N_X], const double u[N_U], double g[N_AFFINE_CA
         memcpy(moving, x, sizeof moving);
         at_rest[i] = 0.0;
         moving[i] = 1.0;
-        model_derivatives(at_rest, u, f_rest);
-        model_derivatives(moving, u, f_moving);
+        model_derivatives(at_rest, u, TRAINED_P, f_rest);
+        model_derivatives(moving, u, TRAINED_P, f_moving);
         k[a] = f_rest[i] - f_moving[i];
         g[a] = f_rest[i];
     }

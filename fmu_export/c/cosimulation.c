@@ -140,6 +140,12 @@ Status cs_exit_initialization(Instance *inst, const char *function)
 {
     char message[512] = "";
     if (not_allowed(inst, function, ST_INIT)) return STATUS_ERROR;
+    if (model_check_parameters(inst->model.p, -1, message, sizeof message) != MODEL_OK) {
+        char refused[700];
+        snprintf(refused, sizeof refused, "%s: %s", function, message);
+        inst->state = ST_ERROR;
+        return fail(inst, STATUS_ERROR, "%s", refused);
+    }
     Status status = model_status(inst, model_initialize(&inst->model, inst->start_time, message, sizeof message),
                                  message);
     inst->state = status == STATUS_ERROR ? ST_ERROR : ST_STEP;

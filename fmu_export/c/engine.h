@@ -11,6 +11,10 @@
 #define N_X OPFMU_N_STATES
 #define N_U OPFMU_N_INPUTS
 
+/* the parameter array the component's equations take: a surrogate's hold its trained values as literals,
+   the only values its parameters accept (model.h) */
+#define TRAINED_P OPFMU_PARAM_START
+
 static const double SENSOR_DT = OPFMU_HORIZON / (OPFMU_N_SENSORS - 1);
 static const double TIME_EPS = 1e-9;
 

@@ -17,8 +17,15 @@
        double du[OPFMU_N_INPUTS];    their first time derivatives over the next steps [unit/s] (0: held)
        double x[OPFMU_X_SIZE];       state at `time`
        double x_start[OPFMU_X_SIZE]; initial-state parameters
+       double p[OPFMU_P_SIZE];       the component's parameters (OPFMU_N_PARAMS, value references from
+                                     VR_FIRST_PARAM), then the parameters derived from them (model_derive)
    which variables.c reads and writes for the component's own variables (the first OPFMU_N_STATES
-   of x and x_start: a component without states has none, and one unused element, as C needs). */
+   of x and x_start: a component without states has none, and one unused element, as C needs).
+
+   The generated equations read the parameters from p (fmu_export/c_parameters.py): a parameter set
+   by the importer is checked (model_check_parameters: its range, the structural parameters the
+   equations were generated for, and for a surrogate the trained values) and the derived ones follow
+   it. A surrogate's equations hold its trained values as literals; its p only holds them. */
 #ifndef OPFMU_MODEL_H
 #define OPFMU_MODEL_H
 
@@ -50,17 +57,24 @@ typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT } VarKind;
 
 #include OPFMU_STATE_HEADER /* the model's ModelState */
 
-/* --- the component's equations (equations.c, derivatives.c: generated from its definition) --- */
-OPFMU_INTERNAL void model_derivatives(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
+/* --- the component's equations (equations.c, derivatives.c: generated from its definition), at the
+   parameters p (OPFMU_P_SIZE: the parameters, then the derived ones) --- */
+OPFMU_INTERNAL void model_derivatives(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS], const double p[],
                                       double dx[OPFMU_X_SIZE]);
-OPFMU_INTERNAL void model_outputs(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
+OPFMU_INTERNAL void model_outputs(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS], const double p[],
                                   double y[OPFMU_N_OUTPUTS]);
 /* J[i * OPFMU_N_COLUMNS + j] = d (dx_i/dt) / d (x, u)_j, exact */
 OPFMU_INTERNAL void component_rhs_jacobian(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
-                                           double J[OPFMU_X_SIZE * OPFMU_N_COLUMNS]);
+                                           const double p[], double J[OPFMU_X_SIZE * OPFMU_N_COLUMNS]);
 /* J[i * OPFMU_N_COLUMNS + j] = d y_i / d (x, u)_j, exact */
 OPFMU_INTERNAL void component_output_jacobian(const double x[OPFMU_X_SIZE], const double u[OPFMU_N_INPUTS],
-                                              double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+                                              const double p[], double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS]);
+/* the derived parameters p[OPFMU_N_PARAMS..] from the parameters p[0..OPFMU_N_PARAMS) */
+OPFMU_INTERNAL void model_derive(double p[OPFMU_P_SIZE]);
+/* MODEL_ERROR (why written) where the parameters p (derived ones computed) break a rule: with only >= 0
+   the rules that read parameter `only` alone (a value being set), with only < 0 every rule (ranges,
+   structural parameters, relations between parameters: at initialisation) */
+OPFMU_INTERNAL ModelStatus model_check_parameters(const double p[OPFMU_P_SIZE], int only, char *why, size_t size);
 
 /* --- variables.c (both FMUs): the component's variables by value reference --- */
 /* kind of a real variable, or -1 if vr names none */
@@ -83,8 +97,9 @@ OPFMU_INTERNAL void component_defaults(ModelState *m);
 /* sets the first time derivative of input c (0-based) for the next steps [unit/s] */
 OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
                                                       size_t size);
-/* MODEL_ERROR (why written) unless the component's fields of m (time, u, du, x, x_start) are finite
-   and the inputs at or above their lower bounds, as the setters and steps keep them */
+/* MODEL_ERROR (why written) unless the component's fields of m (time, u, du, x, x_start, p) are finite,
+   the inputs at or above their lower bounds, as the setters and steps keep them, and the parameters
+   pass every rule with their derived ones as model_derive gives them */
 OPFMU_INTERNAL ModelStatus check_component_state(const ModelState *m, char *why, size_t size);
 /* MODEL_ERROR (message written) where an input with a nonzero derivative ends a step at u_end
    non-finite or below its lower bound beyond the tolerance (an input held over the step is u_end

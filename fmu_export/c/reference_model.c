@@ -37,10 +37,11 @@
 
 #if N_G > 0
 /* g[k] = a - b and mode[k] = (a op b) of the right-hand side's condition k (equations.c) */
-OPFMU_INTERNAL void model_switching(const double x[N_X], const double u[N_U], double g[N_G], int mode[N_G]);
+OPFMU_INTERNAL void model_switching(const double x[N_X], const double u[N_U], const double p[], double g[N_G],
+                                    int mode[N_G]);
 /* dx/dt with condition k's branch locked to mode[k] (equations.c) */
-OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u[N_U], const int mode[N_G],
-                                             double dx[N_X]);
+OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u[N_U], const double p[],
+                                             const int mode[N_G], double dx[N_X]);
 #endif
 
 #ifdef OPFMU_HAS_RESET
@@ -48,7 +49,7 @@ OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u
 #error "a component with a reset has switching functions (its non-windup limits)"
 #endif
 /* the states after the component's limit resets at inputs u (equations.c) */
-OPFMU_INTERNAL void model_reset(const double x[N_X], const double u[N_U], double out[N_X]);
+OPFMU_INTERNAL void model_reset(const double x[N_X], const double u[N_U], const double p[], double out[N_X]);
 #endif
 
 void model_defaults(ModelState *m)
@@ -69,9 +70,10 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 }
 
 #if N_X > 0
-/* the inputs over a step: u(t) = u0 + du (t - t0); the branches the right-hand side is locked to */
+/* the inputs over a step: u(t) = u0 + du (t - t0); the parameters; the branches the right-hand side
+   is locked to */
 typedef struct {
-    const double *u0, *du;
+    const double *u0, *du, *p;
     double t0;
 #if N_G > 0
     int mode[N_G];
@@ -89,9 +91,9 @@ static void rhs(void *ctx, double t, const double *x, double *dx)
     double u[N_U];
     inputs_at(in, t, u);
 #if N_G > 0
-    model_derivatives_locked(x, u, in->mode, dx);
+    model_derivatives_locked(x, u, in->p, in->mode, dx);
 #else
-    model_derivatives(x, u, dx);
+    model_derivatives(x, u, in->p, dx);
 #endif
 }
 
@@ -103,10 +105,10 @@ static int crossed(void *ctx, double t, const double *x)
     double u[N_U], g[N_G], locked[N_X], now[N_X];
     int mode[N_G];
     inputs_at(in, t, u);
-    model_switching(x, u, g, mode);
+    model_switching(x, u, in->p, g, mode);
     if (memcmp(mode, in->mode, sizeof mode) == 0) return 0;
-    model_derivatives_locked(x, u, in->mode, locked);
-    model_derivatives_locked(x, u, mode, now);
+    model_derivatives_locked(x, u, in->p, in->mode, locked);
+    model_derivatives_locked(x, u, in->p, mode, now);
     return memcmp(locked, now, sizeof now) != 0;
 }
 
@@ -119,10 +121,10 @@ static void lock(void *ctx, double t, const double *x)
     /* x is dopri5_events' own working state (the step's start, the located switching), from which it
        integrates on after this call: the reset places it on its limits before the branches are chosen */
     double placed[N_X];
-    model_reset(x, u, placed);
+    model_reset(x, u, in->p, placed);
     memcpy((double *)x, placed, sizeof placed);
 #endif
-    model_switching(x, u, g, in->mode);
+    model_switching(x, u, in->p, g, in->mode);
 }
 #endif
 
@@ -131,7 +133,7 @@ static void lock(void *ctx, double t, const double *x)
 static ModelStatus integrate(ModelState *m, double stop, char *message, size_t size)
 {
     double x[N_X], h_guess = m->h_guess;
-    StepInputs inputs = {m->u, m->du, m->time};
+    StepInputs inputs = {m->u, m->du, m->p, m->time};
     DopriStats stats;
     memcpy(x, m->x, sizeof x);
 #if N_G > 0

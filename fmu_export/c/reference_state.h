@@ -8,6 +8,7 @@ typedef struct {
     double u[OPFMU_N_INPUTS];       /* inputs at `time` */
     double du[OPFMU_N_INPUTS];      /* their first time derivatives over the next step (0: held) */
     double x_start[OPFMU_X_SIZE];   /* parameters: initial state (model.h: its first OPFMU_N_STATES) */
+    double p[OPFMU_P_SIZE];         /* parameters: the component's, then derived ones (model.h) */
     double rtol, atol;              /* parameters: the solver's tolerances */
     double x[OPFMU_X_SIZE];         /* state at `time` */
     double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */

@@ -20,6 +20,7 @@ typedef struct {
     double du[OPFMU_N_INPUTS];    /* their first time derivatives over the next steps (0: held;
                                      fmi2SetRealInputDerivatives) */
     double x_start[OPFMU_N_STATES]; /* parameters: initial state */
+    double p[OPFMU_P_SIZE];       /* parameters: the component's, fixed at the trained values (model.h) */
     double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */
     double residual_limit;        /* parameter: residual above which a warning is logged; 0: no check */
     int residual_alarm;           /* the residual is above the limit (warned; re-armed below half of it) */

@@ -1,7 +1,8 @@
 /* The component's variables of either native FMU, by value reference: its inputs, states, derived
-   outputs and initial-state parameters (contiguous groups, from the generated variables.h, the model
-   description's table), the kind of every Real, the checks of what may be written, the inputs'
-   derivatives, and the check of the component's fields of a state. The model's own variables (those
+   outputs, initial-state parameters and parameters (contiguous groups, from the generated
+   variables.h, the model description's table), the kind of every Real, the checks of what may be
+   written (a parameter: the rules that read it alone, model_check_parameters; the derived parameters
+   follow it), the inputs' derivatives, and the check of the component's fields of a state. The model's own variables (those
    after the groups) are the model's: model_get_extra, model_set_extra.
 
    Where the FMU has the bus port's outputs (VR_FIRST_BUS: fmu_export.variables.BUS_OUTPUTS) they are
@@ -69,7 +70,7 @@ static void bus_outputs(const ModelState *m, double out[BUS_N_OUTPUTS])
     const double c = cos(m->u[BUS_VOLTAGE_ANGLE]), s = sin(m->u[BUS_VOLTAGE_ANGLE]);
     memcpy(u, m->u, sizeof u);
     if (fabs(u[BUS_VOLTAGE_MAGNITUDE]) < MAGNITUDE_FLOOR) u[BUS_VOLTAGE_MAGNITUDE] = MAGNITUDE_FLOOR;
-    component_output_jacobian(m->x, u, J);
+    component_output_jacobian(m->x, u, m->p, J);
     bus_voltage(m, v);
     bus_current(m, i);
     const unsigned int parts[2] = {VR_BUS_CURRENT_REAL, VR_BUS_CURRENT_IMAGINARY};
@@ -139,6 +140,8 @@ void component_defaults(ModelState *m)
     memcpy(m->u, OPFMU_START_U, sizeof m->u);
     memcpy(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start);
     memcpy(m->x, m->x_start, sizeof m->x);
+    memcpy(m->p, OPFMU_PARAM_START, OPFMU_N_PARAMS * sizeof *m->p);
+    model_derive(m->p);
 }
 
 ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
@@ -153,12 +156,16 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
     }
     if (IN_GROUP(vr, VR_FIRST_OUTPUT, OPFMU_N_OUTPUTS)) { /* from the inputs as they are now */
         double y[OPFMU_N_OUTPUTS];
-        model_outputs(m->x, m->u, y);
+        model_outputs(m->x, m->u, m->p, y);
         *value = y[vr - VR_FIRST_OUTPUT];
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_START, OPFMU_N_STATES)) {
         *value = m->x_start[vr - VR_FIRST_START];
+        return MODEL_OK;
+    }
+    if (IN_GROUP(vr, VR_FIRST_PARAM, OPFMU_N_PARAMS)) {
+        *value = m->p[vr - VR_FIRST_PARAM];
         return MODEL_OK;
     }
 #ifdef VR_FIRST_BUS
@@ -193,12 +200,22 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
         m->x_start[vr - VR_FIRST_START] = value;
         return MODEL_OK;
     }
+    if (IN_GROUP(vr, VR_FIRST_PARAM, OPFMU_N_PARAMS)) { /* checked on a copy: a refused value changes nothing */
+        double p[OPFMU_P_SIZE];
+        const int i = (int)(vr - VR_FIRST_PARAM);
+        memcpy(p, m->p, sizeof p);
+        p[i] = value;
+        model_derive(p);
+        if (model_check_parameters(p, i, message, size) != MODEL_OK) return MODEL_ERROR;
+        memcpy(m->p, p, sizeof p);
+        return MODEL_OK;
+    }
     return model_set_extra(m, vr, value, message, size);
 }
 
 void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS])
 {
-    component_output_jacobian(m->x, m->u, J);
+    component_output_jacobian(m->x, m->u, m->p, J);
 }
 
 ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
@@ -244,7 +261,18 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
         snprintf(why, size, "initial state %d: %g is not a finite number", i, m->x_start[i]);
         return MODEL_ERROR;
     }
-    return MODEL_OK;
+    if ((i = first_non_finite(m->p, OPFMU_N_PARAMS)) >= 0) {
+        snprintf(why, size, "parameter %s: %g is not a finite number", OPFMU_PARAM_NAMES[i], m->p[i]);
+        return MODEL_ERROR;
+    }
+    double p[OPFMU_P_SIZE];
+    memcpy(p, m->p, sizeof p);
+    model_derive(p);
+    if (memcmp(p, m->p, sizeof p)) {
+        snprintf(why, size, "the derived parameters are not those of the parameters");
+        return MODEL_ERROR;
+    }
+    return model_check_parameters(m->p, -1, why, size);
 }
 
 ModelStatus check_inputs_at_step_end(const ModelState *m, double u_end[OPFMU_N_INPUTS], char *message, size_t size)

@@ -157,7 +157,7 @@ double window_residual(const ModelState *m)
 {
     double rate[N_X], f[N_X], sum = 0.0;
     operator_rate(m, m->time - m->window_start, rate);
-    model_derivatives(m->x_operator, m->u, f);
+    model_derivatives(m->x_operator, m->u, TRAINED_P, f);
     if (m->slow_on) { /* the slow coordinate moves at l . f (slow_weight of it) */
         double shift = m->slow_weight * (dot(m->slow_left, f) - dot(m->slow_left, rate));
         for (int i = 0; i < N_X; ++i) rate[i] += shift * m->slow_right[i];
