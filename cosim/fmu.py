@@ -232,6 +232,14 @@ class FMU:
         if keep and self.rolls_back:
             self._initial = self.save()
 
+    def parameter_values(self, params) -> dict:
+        """{name: value} of a component's parameter object `params` (reference_models Parameters)
+        for each that this FMU declares as a parameter of that name (as start values are matched by
+        name): what a master sets at initialisation so that one FMU of a model serves each device
+        with its own parameters."""
+        return {name: float(value) for name, value in params.to_dict().items()
+                if getattr(self.variables.get(name), "causality", None) == "parameter"}
+
     # what the FMU logs
 
     def _log(self, status, category, message) -> None:

@@ -8,10 +8,20 @@ control components; `reference` builds native reference FMUs of every device; `p
 reference FMUs of every device; `file` takes an FMU file per device as given (`<device>_fmu`, e.g.
 machine_fmu, exciter_fmu; paths relative to the dynamic-data file). `fmi_version` 2 or 3 chooses
 the FMI version of the native FMUs built.
+
+A native reference FMU reads its component's parameters from the instance (fmu_export.c_parameters),
+so one is built per model: per (component, structure, FMI version), the structure being what the
+equations decide on parameter values (native_reference_fmu.structure_of). Its model name is the
+component's (GENROUReference; with a suffix from the structure where it is not the default
+parameters' one), its defaults those of the first device it was built for; the master sets every
+device's parameters and start values at initialisation (cosim.fmu.FMU.parameter_values).
 """
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 
 from .fmu import CouplingError
@@ -152,19 +162,49 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
         except (BuildError, ValueError, RuntimeError) as exc:
             raise CouplingError(f"cannot build {model_name}: {str(exc)[:300]}") from None
 
-    parts = (kind, device.component.name, device.params.to_dict(), payload)
-    if kind == "reference" and operating_point:
-        parts += (operating_point,)
-    if kind == "reference" and start_state is not None:
-        parts += (list(start_state),)
+    if kind == "reference":  # one FMU per model: the parameters and start values are set per device
+        parts = (kind, _structure(device), payload)
+    else:
+        parts = (kind, device.component.name, device.params.to_dict(), payload)
     if fmi_version != 2:
         parts += (f"fmi{fmi_version}",)
     return cached_fmu(model_name, parts, build, cache, progress and (lambda name: progress(f"{name} ({kind})")))
 
 
+def _structure(device) -> dict:
+    """The structure a native reference FMU of the device is built for (structure_of)."""
+    from fmu_export.native_reference_fmu import NativeReferenceError, structure_of
+
+    try:
+        return structure_of(device.component, device.params)
+    except NativeReferenceError as exc:
+        raise CouplingError(f"{device.name}: {exc}") from None
+
+
+@lru_cache(maxsize=None)
+def _default_structure(component) -> str:
+    """The structure of the component's default parameters, as JSON."""
+    from fmu_export.native_reference_fmu import structure_of
+
+    return json.dumps(structure_of(component), sort_keys=True)
+
+
+def reference_model_name(device) -> str:
+    """The model name of the native reference FMU of a device's model: <COMPONENT>Reference, with
+    _<8 hex digits of its structure> where the structure is not that of the component's defaults."""
+    structure = json.dumps(_structure(device), sort_keys=True)
+    stem = f"{device.component.name.upper()}Reference"
+    if structure == _default_structure(device.component):
+        return stem
+    return f"{stem}_{hashlib.sha256(structure.encode()).hexdigest()[:8]}"
+
+
 def _model_name(device, index: int, bus: int, kind: str) -> str:
-    """The FMU's model name: Gen<bus> for a unit's machine, <MODEL><bus> for another bus device (a
-    converter, a load), <Role><bus> for a control device (its dynamic-data key), then the kind."""
+    """The FMU's model name: a native reference FMU's, its model's (reference_model_name); else
+    Gen<bus> for a unit's machine, <MODEL><bus> for another bus device (a converter, a load),
+    <Role><bus> for a control device (its dynamic-data key), then the kind."""
+    if kind == "reference":
+        return reference_model_name(device)
     if index == 0:
         stem = "Gen" if device.component.ports.output("rotor_angle") else device.component.name.upper()
     else:

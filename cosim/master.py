@@ -288,6 +288,7 @@ class _Unit:
         for device, begin, fmu in zip(unit.devices, start, self.fmus):
             values = {f"{n}0": v for n, v in zip(device.component.state_names, begin.states)}
             values.update(begin.inputs)
+            values.update(fmu.parameter_values(device.params))
             fmu.initialise(values, keep=True)
         self.order = step_order(self.wiring)
         needed = {j: list(given.get(j, ())) for j in range(len(self.fmus))}

@@ -41,6 +41,7 @@ _NEGATED = {"<": ">=", "<=": ">", ">": "<=", ">=": "<", "==": "!=", "!=": "=="}
 _COMPARE = {"<": lambda a, b: a < b, "<=": lambda a, b: a <= b, ">": lambda a, b: a > b,
             ">=": lambda a, b: a >= b, "==": lambda a, b: a == b, "!=": lambda a, b: a != b}
 _LIBM = {"sin": math.sin, "cos": math.cos, "exp": math.exp, "sqrt": math.sqrt, "fabs": abs}
+TRAINED_TOLERANCE = 1e-9  # relative: a surrogate takes a parameter this close to its trained value
 _RANGE_RULE = re.compile(r"lie in \[[^\]]*\]\s*(\S*)")
 
 
@@ -314,7 +315,11 @@ class ParameterSpace:
                    "the FMU was built for {name} = {value!r} (the equations of " + model + " take every parameter "
                    "as given); rebuild it for another value")
             for i, (name, value) in enumerate(zip(self.names, self.values)):
-                out.append(Rule(self.fixed, f"p[{i}] == {c_literal(value)}", f"parameter {name} = %.16g refused: "
+                # a trained value to the tolerance a grid case's operator is checked to (its equations
+                # hold the value itself); a baked one exactly
+                same = (f"fabs(p[{i}] - {c_literal(value)}) <= {c_literal(TRAINED_TOLERANCE * max(1.0, abs(value)))}"
+                        if self.fixed == "trained" else f"p[{i}] == {c_literal(value)}")
+                out.append(Rule(self.fixed, same, f"parameter {name} = %.16g refused: "
                                 + why.format(name=name, value=value), (i,), frozenset({i})))
             return out
         for code, (what, outcome) in sorted(self.predicates.items()):
