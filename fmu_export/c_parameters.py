@@ -332,10 +332,11 @@ class ParameterSpace:
             held = what.text if outcome else what.negated_text()
             shown = tuple(sorted(what.reads))
             now = ", ".join(f"{self.names[i]} = %.16g" for i in shown)
+            refused = (f"structural parameter {now} refused" if len(shown) == 1 else
+                       f"structural parameters refused ({now})")
             out.append(Rule("structural", f"({code})" if outcome else f"!({code})",
-                            f"structural parameter{'s' if len(shown) > 1 else ''} refused ({now}): the FMU was built "
-                            f"for {held}, which its equations take as given; rebuild it for these values", shown,
-                            what.reads))
+                            f"{refused}: the FMU was built for {held}, which its equations take as given; rebuild it "
+                            "for these values", shown, what.reads))
         for name, condition in self.relations:
             shown = tuple(sorted(condition.reads))
             now = ", ".join(f"{self.names[i]} = %.16g" for i in shown)
