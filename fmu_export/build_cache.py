@@ -128,7 +128,10 @@ def cached_native_reference_fmu(model_name: str = "SM4Reference", component=None
     """The native reference FMU (fmu_export.native_reference_fmu.build_native_reference_fmu, same
     arguments; component None: SM4; system_base_mva None: the builder's default), from the cache or
     built into it. Keyed by the component, its parameters in full (defaults filled in), the operating
-    point, the platforms, the FMI version and a system base other than the default."""
+    point, the platforms, the FMI version and a system base other than the default: its callers take
+    the FMU's defaults (parameters, start values) as the machine, although one FMU of a structure
+    serves any parameters set at instantiation (the grid keys its FMUs by the structure alone:
+    cosim.fmus)."""
     from reference_models.component import ParameterError
     from reference_models.sm4 import SM4
 
