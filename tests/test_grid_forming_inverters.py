@@ -190,3 +190,30 @@ def test_converted_case_follows_andes_through_the_fault(name, tmp_path):
         e = errors(results[kind], results["andes"], contingency.fault_intervals(math.inf), case)
         assert e["angle_deg"] < angle and e["V"] < LIMITS["V"], (kind, e)
         assert max(e["P"], e["Q"]) / own_base < POWER[kind], (kind, e["P"], e["Q"])
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("pll, gains", [(None, (0.1, 0.1)), ("PLL2", (0.3, 0.2)), ("PLL1", None)])
+def test_regf2_takes_the_gains_of_the_pll2_it_reads_and_refuses_another_kind(pll, gains, tmp_path):
+    import pandas as pd
+
+    from reference_models.grid.andes_case import case_from_file, case_notes
+    from reference_models.grid.case import CaseError
+
+    path = write_case("REGF2", tmp_path / "regf2.xlsx", False)
+    if pll is not None:
+        sheets = pd.read_excel(path, sheet_name=None)
+        extra = {"Kp": 0.3, "Ki": 0.2} if pll == "PLL2" else {}
+        sheets[pll] = pd.DataFrame([{"uid": 0, "idx": "P1", "u": 1, "name": "P1", "bus": BUS, **extra}])
+        sheets["REGF2"]["pll"] = "P1"
+        with pd.ExcelWriter(path) as writer:
+            for model, frame in sheets.items():
+                frame.to_excel(writer, sheet_name=model, index=False)
+    if gains is None:
+        with pytest.raises(CaseError, match="which is not a PLL2"):
+            case_from_file(path)
+        return
+    case = case_from_file(path)
+    converter = next(u.machine for u in case.units if u.machine.component.name == "regf2")
+    assert (converter.params.Kp, converter.params.Ki) == gains
+    assert not any("PLL2" in note for note in case_notes(case))  # the PLL2 it reads is part of it, not left out

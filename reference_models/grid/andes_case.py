@@ -122,7 +122,7 @@ WIND_CONTROLS = ("WTDTA1", "WTARA1", "WTPTA1", "WTTQA1")  # type-3 wind: drive t
 DRIVE_TRAINS = ("WTDTA1", "WTDS")  # a wind turbine's drive train, linked by `ree` to its electrical control
 SHAFTS = ("SHAFT5",)  # a machine's multi-mass torsional shaft, linked by `syn` to its machine
 PLLS = ("PLL1", "PLL2")  # phase-locked loops: a control device of the converter that names them (pll)
-CACHE_FORMAT = 5  # version of what convert writes: a new one keys new cache entries (4: shared and static generators, islands)
+CACHE_FORMAT = 6  # version of what convert writes: a new one keys new cache entries (4: shared and static generators, islands)
 PFLOW_TOLERANCE = 1e-12  # ANDES' power-flow Newton tolerance at least (its default 1e-6 leaves 4e-7 pu mismatches)
 MISMATCH_LIMIT = 1e-8  # pu: the stored network at the stored load flow, at least (mismatch_limit)
 ROUNDING_MARGIN = 10  # pflow_tolerance: times the rounding error of the largest bus power balance
@@ -1063,13 +1063,35 @@ def _entry(model, name: str, i: int, ss) -> dict:
     return {"component": STANDARD_MODELS[name].name, "andes": str(model.idx.v[i]), "params": params}
 
 
+def _own_pll(ss, entry: dict) -> tuple:
+    """The PLL2 a REGF2 reads (the one its `pll` names, or the one ANDES adds at its bus where it names
+    none), whose gains Kp, Ki go into the REGF2's parameters (opfmu's REGF2 carries its PLL2);
+    CaseError for a PLL of another kind or at another bus. Returns its (model, idx)."""
+    model = ss.REGF2
+    i = list(map(str, model.idx.v)).index(entry["andes"])
+    named = model.pllidx.v[i]
+    if named not in list(ss.PLL2.idx.v):
+        raise CaseError(f"REGF2 {model.idx.v[i]} takes the PLL {named}, which is not a PLL2: opfmu's REGF2 carries "
+                        "a PLL2")
+    j = list(ss.PLL2.idx.v).index(named)
+    if ss.PLL2.bus.v[j] != model.bus.v[i]:
+        raise CaseError(f"REGF2 {model.idx.v[i]} takes the angle of PLL2 {named} at bus {ss.PLL2.bus.v[j]}, not at "
+                        f"its own bus {model.bus.v[i]}: opfmu's REGF2 measures its own bus")
+    entry["params"].update({"Kp": float(ss.PLL2.Kp.vin[j]), "Ki": float(ss.PLL2.Ki.vin[j])})
+    return ("PLL2", named)
+
+
 def _add_plls(ss, units: dict) -> set:
     """Puts the PLL each converter names (ANDES' REGCP1 `pll`) into that converter's unit as its
     "pll" device (CaseError where it measures another bus); a REGCP1 without one is ANDES' REGCA1
-    (the exact bus angle) and is converted as one. Returns the (model, idx) of the PLLs placed."""
+    (the exact bus angle) and is converted as one; a REGF2's PLL2 becomes part of it (_own_pll).
+    Returns the (model, idx) of the PLLs placed."""
     placed = set()
     for unit in units.values():
         entry = unit.get("converter")
+        if entry is not None and entry["component"] == STANDARD_MODELS["REGF2"].name:
+            placed.add(_own_pll(ss, entry))
+            continue
         if entry is None or "REGCP1" not in CONVERTERS or entry["component"] != STANDARD_MODELS["REGCP1"].name:
             continue
         model = ss.REGCP1
