@@ -57,9 +57,11 @@ class MasterRunner:
 
 
 def open_runner(kind: str | None, case, settings: MasterSettings = MasterSettings(), cache=None,
-                progress=None, monolithic_rtol: float = 1e-10, fmi_version: int = 2, scratch=None):
+                progress=None, monolithic_rtol: float = 1e-10, fmi_version: int = 2, scratch=None,
+                host: str = "master"):
     """A runner: `kind` monolithic, one FMU kind for every unit, or None (each unit's kind from its
-    dynamic data). FMUs are built into `cache` as needed (progress(text) before each build)."""
+    dynamic data). FMUs are built into `cache` as needed (progress(text) before each build). `host`
+    "veragrid": the FMUs run in VeraGrid's RMS simulation at the settings' step (cosim.veragrid)."""
     if kind == "monolithic":
         return MonolithicRunner(case, settings.step, monolithic_rtol)
     if kind == "andes":
@@ -67,4 +69,8 @@ def open_runner(kind: str | None, case, settings: MasterSettings = MasterSetting
 
         return AndesRunner(case, settings.step)
     files = generator_files(case, kind, cache, progress, fmi_version)
+    if host == "veragrid":
+        from .veragrid import VeraGridRunner
+
+        return VeraGridRunner(case, files, settings.step)
     return MasterRunner(files, case, settings, scratch)

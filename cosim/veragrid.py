@@ -89,9 +89,11 @@ def _vg():
 
 def norton_carriers():
     """The VeraGrid references the six Norton outputs ride on (I_N real, imaginary, then Y_N row by
-    row): currents of branch ends, which the injection balance of a bus does not read."""
+    row): flows and currents of branch ends, which the injection balance of a bus does not read and
+    VeraGrid does not seed from its power flow (it seeds an injection's Ir, Ii with the load-flow
+    current, which would overwrite I_N before the first step)."""
     R = _vg()[2]
-    return (R.Ir, R.Ii, R.Irf, R.Iif, R.Irt, R.Iit)
+    return (R.Pf, R.Qf, R.Irf, R.Iif, R.Irt, R.Iit)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -184,7 +186,9 @@ def build_network(case, fault_buses=()) -> VeraGridNetwork:
     vf = grid.var_factory
     buses = {}
     for b in net.buses:
-        bus = dev.Bus(name=f"bus {b}", Vnom=float(net.kv.get(b, 1.0)))
+        # one nominal voltage for all: VeraGrid makes a Line between buses of different nominal voltages a
+        # Transformer2W of its own (without the branch block below); the case is in pu throughout
+        bus = dev.Bus(name=f"bus {b}", Vnom=1.0)
         grid.add_bus(bus)
         initialize_bus_rms(bus, vf)
         buses[b] = bus
@@ -473,9 +477,9 @@ class VeraGridRunner:
                 fmu.close()
         if not well_initialised:
             raise RuntimeError(f"VeraGrid's RMS simulation of {self.case.name} does not start at rest")
-        if not converged or t[-1] < stop - 1e-9:
-            raise RuntimeError(f"VeraGrid's RMS simulation of {self.case.name} did not converge at t = "
-                               f"{t[-1] if converged else t[np.argmax(t[1:] == 0) if np.any(t[1:] == 0) else -1]:.4f} s")
+        if not converged:
+            raise RuntimeError(f"VeraGrid's Newton iteration in its RMS simulation of {self.case.name} did not "
+                               f"converge after t = {units[0].rows[-1][0] - self.step:.4f} s")
         result = self._result(network, problem, units, t, y, offset, topologies, stop_at_loss)
         return result, {"total_s": time.perf_counter() - started, "steps": len(t) - 1}
 
@@ -613,3 +617,33 @@ def run_in_veragrid(case, contingency, stop: float, step: float = 0.01, cache=No
     files = generator_files(case, "reference", cache, progress)
     result, _ = VeraGridRunner(case, files, step, interface).run(contingency, stop)
     return result
+
+
+def smib_case(folder, machine: str = "sm4", params: dict | None = None, P: float = 0.7, x: float = 0.2):
+    """A single machine against an infinite bus as an opfmu Case (written as its two files into
+    `folder`): bus 1 the machine (`machine`, a component of reference_models.components, with
+    `params`), a PV bus at V = 1 pu and P [pu, 100 MVA]; bus 2 the infinite bus, the slack at
+    V = 1 pu, angle 0: a GENCLS of 1e5 MVA (M = 2000 s, xd1 = 0.3 pu on its base: 3e-4 pu on the
+    system's); a lossless line of reactance `x` [pu] between them. The load flow is the line's own
+    (theta = asin(P x))."""
+    import json
+    from pathlib import Path
+
+    from reference_models.grid.case import load_case
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    theta = math.asin(P * x)
+    Q = (1.0 - math.cos(theta)) / x
+    network = {"name": "smib", "base_mva": 100.0, "f_hz": 60.0,
+               "buses": [{"number": 1, "kv": 20.0}, {"number": 2, "kv": 20.0}],
+               "branches": [{"from": 1, "to": 2, "r": 0.0, "x": x, "b": 0.0, "kind": "line"}],
+               "loads": [], "shunts": [],
+               "generators": [{"bus": 1, "kind": "pv", "V": 1.0, "P": P}, {"bus": 2, "kind": "slack", "V": 1.0}],
+               "load_flow": {"V": [1.0, 1.0], "theta": [theta, 0.0], "P": [P, -P], "Q": [Q, Q]}}
+    dynamic = {"case": "smib", "generators": [
+        {"bus": 1, "machine": {"component": machine, "params": dict(params or {})}},
+        {"bus": 2, "machine": {"component": "gencls", "params": {"Sn": 1e5, "M": 2000.0, "xd1": 0.3}}}]}
+    (folder / "smib_network.json").write_text(json.dumps(network))
+    (folder / "smib.json").write_text(json.dumps(dynamic))
+    return load_case(folder / "smib_network.json", folder / "smib.json", "smib")

@@ -125,6 +125,10 @@ def add_grid_parser(sub) -> None:
                           "surrogate, reference, python, monolithic, andes, or none (default monolithic); every run "
                           "is compared with the monolithic and the ANDES run among them")
     run.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    run.add_argument("--host", choices=("master", "veragrid"), default="master",
+                     help="what runs the FMUs of --fmus: opfmu's own master (default) or VeraGrid's RMS simulation "
+                          "(VeraGridEngine, MPL-2.0, where installed: native FMUs through their Norton port; "
+                          "docs/veragrid.md); the --compare runs stay on the master")
     _common(run)
     run.set_defaults(func=cmd_run)
 
@@ -441,6 +445,14 @@ def cmd_run(args) -> None:
     if unknown:
         raise UserError(f"--compare: unknown run kind {unknown[0]!r} (known: {', '.join(kinds_known)}, none)")
     main_kind = _main_kind(case, args.fmus)
+    if args.host == "veragrid":
+        from cosim.veragrid import VERAGRID_MISSING, veragrid_available
+
+        if not veragrid_available():
+            raise UserError(VERAGRID_MISSING)
+        if args.fmus not in (None, "reference"):
+            raise UserError(f"--host veragrid runs native FMUs (--fmus reference), not --fmus {args.fmus}")
+        main_kind = args.fmus = "reference"
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
     for kind in kinds:
         _check_fmus(case, kind, args.fmu_cache, contingency)
@@ -452,11 +464,12 @@ def cmd_run(args) -> None:
     runs, timings = {}, {}
     with _scratch() as scratch:
         for kind in kinds:
-            runner = _open(kind, case, settings, args, _progress, scratch=scratch)
+            host = {"host": "veragrid"} if args.host == "veragrid" and kind == kinds[0] else {}
+            runner = _open(kind, case, settings, args, _progress, scratch=scratch, **host)
             try:
                 result, timing = runner.run(contingency, args.stop)
             except RuntimeError as exc:
-                if kind != "andes":
+                if kind != "andes" and not host:
                     raise
                 raise UserError(_one_line(exc)) from None
             finally:

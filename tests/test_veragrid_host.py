@@ -1,0 +1,78 @@
+"""VeraGrid (VeraGridEngine, MPL-2.0, optional) as a host of opfmu's native FMUs (cosim.veragrid):
+the SMIB through bolted faults against opfmu's own master, the command line's --host veragrid."""
+import importlib.util
+
+import numpy as np
+import pytest
+
+from cosim.veragrid import VeraGridRunner, smib_case
+from reference_models.grid.contingency import Contingency
+
+pytestmark = [pytest.mark.veragrid,
+              pytest.mark.skipif(importlib.util.find_spec("VeraGridEngine") is None,
+                                 reason="VeraGridEngine is not installed (pip install VeraGridEngine==6.7.1)")]
+
+
+@pytest.fixture(scope="module")
+def smib(tmp_path_factory):
+    from cosim.fmus import generator_files
+
+    folder = tmp_path_factory.mktemp("smib")
+    case = smib_case(folder, "sm4", {"D": 2.0})
+    return case, generator_files(case, "reference", folder / "cache")
+
+
+@pytest.mark.parametrize("B", [-10.0, -50.0])
+def test_sm4_on_a_smib_through_a_deep_fault_follows_the_own_master(smib, B):
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+
+    case, files = smib
+    fault = Contingency(fault_bus=1, fault_start=0.1, clear_s=0.2, fault_impedance=1.0 / (1j * B),
+                        network=case.network)
+    host, _ = VeraGridRunner(case, files, 0.01).run(fault, 1.0)
+    master = MasterRunner(files, case, MasterSettings(step=0.01))
+    try:
+        own, _ = master.run(fault, 1.0)
+    finally:
+        master.close()
+    assert np.allclose(host.time, own.time)
+    outside = ~np.isin(np.round(host.time, 9), (0.1, 0.2))  # the fault's own steps
+    assert np.degrees(np.abs(host.rotor_angle - own.rotor_angle))[outside].max() < 0.5
+    assert np.abs(host.V_bus - own.V_bus)[outside].max() < 0.01
+    assert host.V_bus[host.time == 0.15, 0] < 0.5  # the fault was deep
+
+
+@pytest.fixture(scope="module")
+def kundur_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("kundur_fmus")
+
+
+def test_kundur_with_its_controls_runs_whole_through_a_fault_at_bus_8(kundur_cache):
+    from cosim.fmus import generator_files
+    from reference_models.grid.case import shipped_case
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE
+
+    case = shipped_case("kundur")  # GENROU + EXDC2 + TGOV1 at each of its four generators
+    fault = Contingency(fault_bus=8, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                        network=case.network)
+    result, _ = VeraGridRunner(case, generator_files(case, "reference", kundur_cache), 0.01).run(fault, 3.0)
+    assert result.time[-1] == pytest.approx(3.0) and len(result.time) == 301
+    assert result.stable
+    assert np.all(np.isfinite(result.rotor_angle)) and np.all(np.isfinite(result.V_bus))
+    assert result.V_bus[result.time == 1.05, case.network.bus_index(8)] < 0.05  # the fault holds bus 8 down
+    assert np.all(result.V_bus[-1] > 0.9)  # and it recovers
+    assert np.ptp(result.machine_inputs["Efd"][:, 0]) > 0.05  # the exciters act
+
+
+def test_grid_run_on_veragrid_writes_the_masters_result_files(kundur_cache, tmp_path):
+    from opfmu.cli import main
+
+    out = tmp_path / "out"
+    code = main(["grid", "run", "--case", "kundur", "--fault", "8", "--fault-start", "0.05", "--clear", "0.1",
+                 "--stop", "0.2", "--no-case-events", "--fmus", "reference", "--host", "veragrid", "--compare", "none",
+                 "--fmu-cache", str(kundur_cache), "--out", str(out)])
+    assert code == 0
+    assert sorted(p.name for p in out.iterdir()) == ["report.md", "result.csv", "result.png", "summary.json"]
+    header = (out / "result.csv").read_text().splitlines()[0].split(",")
+    assert header[:2] == ["time", "delta_1"] and "V_8" in header
