@@ -306,6 +306,12 @@ def attach_opfmu_device(grid, device, fmu_path, start: dict | None = None, name:
     return block
 
 
+def _device_parameters(fmu_path, params) -> dict:
+    """{name: value} of the device's parameters `params` that the FMU declares (FMU.parameter_values)."""
+    with FMU(fmu_path, "parameters", init=False) as fmu:
+        return fmu.parameter_values(params)
+
+
 def _outputs_at_start(fmu_path, start: dict, names) -> list:
     """The FMU's outputs `names` after its initialisation with the start values `start` (by name)."""
     with FMU(fmu_path, "start values", init=False) as fmu:
@@ -412,7 +418,8 @@ def _control_fmu(path, device, start, name: str) -> FMU:
     bound to all its inputs and its states and outputs."""
     fmu = FMU(path, name, init=False)
     try:
-        values = {f"{n}0": v for n, v in zip(device.component.state_names, start.states)}
+        values = fmu.parameter_values(device.params)  # one FMU per model: the device's own parameters
+        values.update({f"{n}0": v for n, v in zip(device.component.state_names, start.states)})
         values.update({n: v for n, v in start.inputs.items() if n in fmu.vr})
         fmu.initialise(values)
         outputs = list(dict.fromkeys([*device.component.state_names, *device.component.output_names]))
@@ -456,7 +463,8 @@ class VeraGridRunner:
         adapters, controls = [], []
         try:
             for k, (unit, start, files, gen) in enumerate(zip(self.case.units, starts, self.files, network.generators)):
-                machine_start = {f"{n}0": v for n, v in zip(unit.machine.component.state_names, start[0].states)}
+                machine_start = _device_parameters(files.paths[0], unit.machine.params)  # one FMU per model
+                machine_start.update({f"{n}0": v for n, v in zip(unit.machine.component.state_names, start[0].states)})
                 attach_opfmu_device(network.grid, gen, files.paths[0], machine_start, f"unit_{k}", self.interface,
                                     start[0].inputs, current_form=True)
                 unit_controls = [_control_fmu(path, device, s, f"{device.name} at bus {unit.bus}")
