@@ -77,9 +77,11 @@ RUNS = {
     "WTPTA1": ((0.1, {}), (1.2, {"wt": 451.0, "Pord": 300.5}), (1.8, {"wt": -449.0})),
     "WTTQA1": ((0.1, {}), (0.6, {"Pe": 0.1}), (1.2, {"wg": 0.5})),  # the characteristic's bend at p1
     # auxiliary powers beyond the limits: Psig, Qsig onto Pmax, Qmin (short: on a fixed bus voltage nothing rests)
-    "REGF1": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
-    "REGF2": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
-    "REGF3": ((0.1, {}), (0.3, {"Paux": 1.5, "Qaux": -1.5})),
+    # a grid-forming inverter has no rest on a held bus voltage off its set point: short, so that the
+    # runaway stays where two solvers agree to 1e-8 (0.3 s: 1e-7 and scores of limit crossings)
+    "REGF1": ((0.1, {}), (0.15, {"Paux": 1.5, "Qaux": -1.5})),
+    "REGF2": ((0.1, {}), (0.15, {"Paux": 1.5, "Qaux": -1.5})),
+    "REGF3": ((0.1, {}), (0.15, {"Paux": 1.5, "Qaux": -1.5})),
 }
 
 
