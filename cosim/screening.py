@@ -28,6 +28,7 @@ import ipaddress
 import logging
 import math
 import re
+import os
 import shutil
 import signal
 import socket
@@ -306,6 +307,25 @@ def screen_one(task: ScreeningTask) -> dict:
 WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an error (a start that failed)
 
 
+# the longest path of a Unix socket (sun_path: 108 bytes on Linux, 104 on the BSDs and macOS), less
+# multiprocessing's own "/pymp-XXXXXXXX/listener-XXXXXXXX" under its folder
+_SOCKET_FOLDER_LIMIT = 104 - 34
+
+
+def _short_socket_folder() -> None:
+    """Where this process's temporary folder (TMPDIR) is too long a path for the fork server's Unix
+    socket, multiprocessing's own folder of this process (its sockets) goes under /tmp instead; it
+    is removed at exit as it always is (multiprocessing.util.get_temp_dir)."""
+    from multiprocessing import process, util
+
+    if "tempdir" in process.current_process()._config:  # already made (and used) by this process
+        return
+    if len(os.fsencode(tempfile.gettempdir())) > _SOCKET_FOLDER_LIMIT and os.path.isdir("/tmp"):
+        folder = tempfile.mkdtemp(prefix="pymp-", dir="/tmp")
+        util.Finalize(None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True}, exitpriority=-100)
+        process.current_process()._config["tempdir"] = folder
+
+
 def _local_cluster(workers: int, scratch: str):
     """(cluster, client): a LocalCluster of `workers` single-threaded processes with `scratch` as their
     folder, and its client. The workers are forked from multiprocessing's fork server, started with
@@ -323,6 +343,7 @@ def _local_cluster(workers: int, scratch: str):
         get_mp_context()  # the fork server's preloaded modules (distributed's)
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the fork server (milliseconds)
         try:
+            _short_socket_folder()
             multiprocessing.forkserver.ensure_running()
             held = []
             signal.signal(signal.SIGINT, lambda *_: held.append(True))
