@@ -159,7 +159,9 @@ def test_the_fmus_validate_with_no_state_variables_and_carry_the_bus_port(zip_fm
     md = read_model_description(str(path))
     outputs = [v.name for v in md.modelVariables if v.causality == "output"]
     assert outputs == ["I_re", "I_im", "P", "Q", *(name for name, _ in BUS_OUTPUTS)]
-    assert [v.name for v in md.modelVariables if v.causality == "parameter"] == ["rtol", "atol"]
+    # the solver's tolerances, then the model's own parameters (one FMU serves every ZIP)
+    assert [v.name for v in md.modelVariables if v.causality == "parameter"] == ["rtol", "atol",
+                                                                               *ZIP.params_type().to_dict()]
     assert [v.name for v in md.modelVariables if v.causality == "input"] == list(ZIP.input_names)
     depends = {u.variable.name: {v.name for v in u.dependencies} for u in md.outputs}
     assert depends == {"I_re": set(ZIP.input_names), "I_im": set(ZIP.input_names), "P": {"Vs", "P0", "V0"},
