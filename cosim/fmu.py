@@ -96,6 +96,27 @@ def component_described(description):
     return max(found, key=lambda c: len(c.description)) if found else None
 
 
+def extracted(path, directory=None, name: str = "a") -> tuple:
+    """(folder, fmpy model description) of the FMU file `path` extracted into `directory` (the
+    files an instance needs), or of `path` itself where it is an extracted FMU's folder; an FMU
+    opfmu did not generate is checked against the FMI schema. CouplingError for an unreadable one.
+    Several FMU instances may share one extraction (FMU's source as the tuple)."""
+    from fmpy import extract, read_model_description
+
+    path = Path(path)
+    try:
+        if path.is_dir():
+            directory = path
+        else:
+            extract(str(path), unzipdir=str(directory), include=_needed)
+        md = read_model_description(str(directory), validate=False)
+        if not str(md.generationTool or "").startswith("opfmu"):
+            md = read_model_description(str(directory))  # checked against the FMI schema
+    except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
+        raise CouplingError(f"{name}: {path.name} is not a readable FMU ({_one_line(exc)})") from None
+    return Path(directory), md
+
+
 class FMU:
     """An FMU instance (see the module docstring). name: the instance name (also in messages);
     logging_on: the FMU's debug logging; component: a reference_models Component whose input and
@@ -106,8 +127,6 @@ class FMU:
 
     def __init__(self, source, name: str = "a", init: bool = True, logging_on: bool = False, component=None,
                  start: dict | None = None, scratch=None, on_message=None, **values):
-        from fmpy import extract, read_model_description
-
         self.name = name
         self.messages = []
         self._on_message = on_message
@@ -122,20 +141,15 @@ class FMU:
             directory = Path(directory)
         else:
             path = Path(source)
+            if not path.is_dir():
+                directory = Path(tempfile.mkdtemp(prefix="opfmu_fmu_", dir=scratch))
+                self._directory = directory
+                self._cleanup = weakref.finalize(self, shutil.rmtree, str(directory), True)
             try:
-                if path.is_dir():
-                    directory = path
-                else:
-                    directory = Path(tempfile.mkdtemp(prefix="opfmu_fmu_", dir=scratch))
-                    self._directory = directory
-                    self._cleanup = weakref.finalize(self, shutil.rmtree, str(directory), True)
-                    extract(str(path), unzipdir=str(directory), include=_needed)
-                md = read_model_description(str(directory), validate=False)
-                if not str(md.generationTool or "").startswith("opfmu"):
-                    md = read_model_description(str(directory))  # checked against the FMI schema
-            except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
+                directory, md = extracted(path, directory if not path.is_dir() else None, name)
+            except CouplingError:
                 self.close()
-                raise CouplingError(f"{name}: {path.name} is not a readable FMU ({_one_line(exc)})") from None
+                raise
         self.directory, self.md = directory, md
         try:
             self._open(md, component, init, logging_on, {**(start or {}), **values})

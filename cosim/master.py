@@ -51,8 +51,11 @@ from __future__ import annotations
 
 import cmath
 import math
+import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -60,7 +63,7 @@ from reference_models.grid.case import Case, external_impedance, measured_values
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.result import GridResult, device_labels, rotor_angle_state
 
-from .fmu import FMU, CouplingError
+from .fmu import FMU, CouplingError, extracted
 
 
 COUPLINGS = ("iterated", "extrapolated", "held")
@@ -259,20 +262,21 @@ class _Unit:
     their inputs from their ports, the bound inputs and outputs of each and where in them the
     master finds the bus current, the rotor angle, the states and the link outputs."""
 
-    def __init__(self, unit, start, files, scratch=None, remote=None, given=None):
+    def __init__(self, unit, start, files, source, remote=None, given=None):
         self.bus = unit.bus
         self.fmus = []
         try:
-            self._open(unit, start, files, scratch, remote or {}, given or {})
+            self._open(unit, start, files, source, remote or {}, given or {})
         except BaseException:
             self.close()
             raise
 
-    def _open(self, unit, start, files, scratch, remote: dict, given: dict) -> None:
-        """remote: the unit's signals from other units (case.remote_wiring); given: {device: [outputs
-        other units take]}."""
+    def _open(self, unit, start, files, source, remote: dict, given: dict) -> None:
+        """source(path, name): an FMU file's extraction, shared by its instances; remote: the unit's
+        signals from other units (case.remote_wiring); given: {device: [outputs other units take]}."""
         for device, path in zip(unit.devices, files.paths):
-            self.fmus.append(FMU(path, f"{device.name} at bus {unit.bus}", init=False, scratch=scratch))
+            name = f"{device.name} at bus {unit.bus}"
+            self.fmus.append(FMU(source(path, name), name, init=False))
         for fmu in self.fmus:
             if fmu.ports is None:
                 raise CouplingError(f"{fmu.name}: the FMU {fmu.model_name} declares no ports (no <Ports> element in "
@@ -369,9 +373,12 @@ class GridMaster:
         for wires in remote:
             for source in wires.values():
                 given[source.unit].setdefault(source.device, []).append(source.variable)
+        self._scratch = scratch
+        self._extracted = {}  # FMU file -> (its extracted folder, model description), shared by its instances
+        self._folders = []  # the folders extracted here, removed at close
         try:
             for k, f in enumerate(self.files):
-                self.units.append(_Unit(case.units[k], case.starts[k], f, scratch, remote[k], given[k]))
+                self.units.append(_Unit(case.units[k], case.starts[k], f, self._source, remote[k], given[k]))
         except BaseException:
             self.close()
             raise
@@ -394,10 +401,26 @@ class GridMaster:
     def __exit__(self, *exc):
         self.close()
 
+    def _source(self, path, name: str) -> tuple:
+        """The FMU file `path` extracted once under the scratch folder (cosim.fmu.extracted), its
+        instances sharing the folder and the model description (one binary loaded)."""
+        key = Path(path).resolve()
+        if key not in self._extracted:
+            if key.is_dir():  # an FMU given as its folder: used where it is
+                self._extracted[key] = extracted(key, None, name)
+                return self._extracted[key]
+            folder = tempfile.mkdtemp(prefix="opfmu_fmu_", dir=self._scratch)
+            self._folders.append(folder)
+            self._extracted[key] = extracted(key, folder, name)
+        return self._extracted[key]
+
     def close(self) -> None:
         for u in self.units:
             u.close()
         self.units, self.fmus = [], []
+        for folder in self._folders:
+            shutil.rmtree(folder, ignore_errors=True)
+        self._extracted, self._folders = {}, []
 
     def network(self, topology):
         """Case.reduced of a topology (its fault shunt with its own impedance), kept per topology."""

@@ -160,8 +160,11 @@ def _gone(pids) -> bool:
 def test_ctrl_c_while_the_local_workers_start_ends_in_one_line_and_leaves_nothing(tmp_path):
     scratch = tmp_path / "tmp"
     scratch.mkdir()
-    screening = opfmu_process(SCREEN[:-1] + [tmp_path / "out", "--workers", str(min(2, usable_cores()))],
-                              env=dict(os.environ, TMPDIR=str(scratch)))
+    # every bus faulted with every trip, each to 30 s at a fine resolution: far more work than the
+    # moments between the fork server's start and the interrupt, so that the run cannot end first
+    long = ["grid", "screen", "--fmus", "monolithic", "--stop", "30", "--resolution", "0.0005",
+            "--out", tmp_path / "out", "--workers", str(min(2, usable_cores()))]
+    screening = opfmu_process(long, env=dict(os.environ, TMPDIR=str(scratch)))
     _wait_until(lambda: _children(screening.pid), screening, "the fork server of the local workers")
     started = _children(screening.pid)
     code, err = interrupt_and_wait(screening, WAIT_S)
