@@ -136,11 +136,13 @@ def _check_operator(path: Path, device, bus: int) -> None:
 
 
 def _build(kind: str, device, cache: Path, model_name: str, operator: Path | None = None, progress=None,
-           fmi_version: int = 2, operating_point: dict | None = None, start_state=None) -> Path:
+           fmi_version: int = 2, operating_point: dict | None = None, start_state=None,
+           base_mva: float = 100.0) -> Path:
     """The FMU of `device` (component, parameters) of that kind, from the cache or built into it; a
     native reference FMU's inputs start at `operating_point` ({input: value}: the unit's start inputs)
     and its state at `start_state` (the unit's start states), so that its default start is the
-    case's operating point, not the component's generic one."""
+    case's operating point, not the component's generic one; it declares its bus port on the case's
+    system base `base_mva` [MVA]."""
     from fmu_export.build_cache import cached_fmu
 
     payload = operator.read_bytes() if operator is not None else b""
@@ -156,7 +158,8 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
             elif kind == "reference":
                 build_native_reference_fmu(out, model_name=model_name, component=device.component,
                                            params=device.params, operating_point=operating_point,
-                                           fmi_version=fmi_version, start_state=start_state)
+                                           fmi_version=fmi_version, start_state=start_state,
+                                           system_base_mva=base_mva)
             else:
                 build_reference_fmu(out, model_name=model_name, component=device.component, params=device.params)
         except (BuildError, ValueError, RuntimeError) as exc:
@@ -168,6 +171,8 @@ def _build(kind: str, device, cache: Path, model_name: str, operator: Path | Non
         parts = (kind, device.component.name, device.params.to_dict(), payload)
     if fmi_version != 2:
         parts += (f"fmi{fmi_version}",)
+    if kind == "reference" and base_mva != 100.0:
+        parts += (f"base {base_mva!r} MVA",)
     return cached_fmu(model_name, parts, build, cache, progress and (lambda name: progress(f"{name} ({kind})")))
 
 
@@ -256,6 +261,7 @@ def generator_files(case, kind: str | None = None, cache=None, progress=None, fm
                 paths.append(_build(device_kind, device, cache, _model_name(device, j, unit.bus, device_kind),
                                     progress=progress, fmi_version=fmi_version,
                                     operating_point={n: float(v) for n, v in start.inputs.items()},
-                                    start_state=[float(v) for v in start.states]))
+                                    start_state=[float(v) for v in start.states],
+                                    base_mva=float(case.network.base_mva)))
         files.append(UnitFiles(unit.bus, fmu.kind, tuple(paths)))
     return files

@@ -82,3 +82,16 @@ def test_export_into_a_file_is_refused_in_one_line_and_writes_nothing(tmp_path):
     assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1
     assert "is a file" in done.stderr and target.read_text() == "x"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+
+
+def test_a_case_on_another_system_base_gets_fmus_that_declare_it(tmp_path):
+    from dataclasses import replace
+
+    from cosim.fmus import generator_files
+    from reference_models.ports import ports_of_fmu
+
+    case = shipped_case("kundur")
+    other = replace(case, network=replace(case.network, base_mva=250.0))
+    machine = generator_files(other, "reference", tmp_path / "cache")[0].paths[0]
+    assert ports_of_fmu(machine).bus.base_mva == 250.0
+    assert ports_of_fmu(generator_files(case, "reference", tmp_path / "cache")[0].paths[0]).bus.base_mva == 100.0
