@@ -35,7 +35,8 @@ import json
 import shutil
 from pathlib import Path
 
-from reference_models.grid.case import MEASURED, TERMINAL, external_impedance, remote_wiring, unit_wiring
+from reference_models.grid.case import (MEASURED, TERMINAL, external_impedance, operating_point, remote_wiring,
+                                        unit_wiring)
 
 FORMAT, VERSION = "opfmu-case", 1
 
@@ -66,15 +67,6 @@ def _event(event) -> dict:
         if key in out:
             out[key] = [out[key].real, out[key].imag]
     return out
-
-
-def _load_flow_point(case, k: int) -> dict:
-    unit = case.units[k]
-    if unit.load is None:
-        return {key: float(v) for key, v in case.flow.generator_at(k).items() if key in ("V", "theta", "P", "Q")}
-    i = case.network.bus_index(unit.bus)
-    return {"V": float(case.flow.V[i]), "theta": float(case.flow.theta[i]), "P": -unit.load.real,
-            "Q": -unit.load.imag}
 
 
 def _source(source, case, k: int, j: int, ids, start: dict, name: str) -> dict:
@@ -111,7 +103,7 @@ def case_description(case, files, kind: str, fmi_version: int, names: dict) -> d
             comp = device.component
             entry = {"id": ids[k][j], "unit": _unit_name(unit), "bus": unit.bus, "role": device.name,
                      "component": comp.name, "fmu": names[Path(path)], "parameters": device.params.to_dict(),
-                     "load_flow": _load_flow_point(case, k),
+                     "load_flow": operating_point(unit, k, case.flow),
                      "start": {"states": dict(zip(comp.state_names, start.states)), "inputs": dict(start.inputs)},
                      "ports": _ports(comp.ports),
                      "inputs": {name: _source(source, case, k, j, ids, start.inputs, name)

@@ -308,7 +308,7 @@ WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an 
 
 
 # the longest path of a Unix socket (sun_path: 108 bytes on Linux, 104 on the BSDs and macOS), less
-# multiprocessing's own "/pymp-XXXXXXXX/listener-XXXXXXXX" under its folder
+# multiprocessing's own "/pymp-<8 characters>/listener-<8 characters>" under its folder
 _SOCKET_FOLDER_LIMIT = 104 - 34
 
 

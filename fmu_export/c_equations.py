@@ -22,7 +22,7 @@ import re
 
 from reference_models.component import Component
 
-from .c_parameters import ParamCondition, ParamExpr, ParameterSpace, c_literal
+from .c_parameters import Arithmetic, ParamCondition, ParamExpr, ParameterSpace, c_literal
 
 _NAME = re.compile(r"\bt\d+\b")
 
@@ -49,7 +49,7 @@ class _Recorder:
         return Traced(name, self, inputs)
 
 
-class Traced:
+class Traced(Arithmetic):
     """A double-valued C expression; arithmetic on it records C statements. `inputs`: the indices
     of the component inputs the value depends on."""
 
@@ -61,15 +61,6 @@ class Traced:
         rhs = other.code if traced else c_literal(other)
         a, b = (rhs, self.code) if swap else (self.code, rhs)
         return self.recorder.emit(f"{a} {op} {b}", self.inputs | (other.inputs if traced else frozenset()))
-
-    __add__ = lambda self, o: self._binary(o, "+")  # noqa: E731
-    __radd__ = lambda self, o: self._binary(o, "+", True)  # noqa: E731
-    __sub__ = lambda self, o: self._binary(o, "-")  # noqa: E731
-    __rsub__ = lambda self, o: self._binary(o, "-", True)  # noqa: E731
-    __mul__ = lambda self, o: self._binary(o, "*")  # noqa: E731
-    __rmul__ = lambda self, o: self._binary(o, "*", True)  # noqa: E731
-    __truediv__ = lambda self, o: self._binary(o, "/")  # noqa: E731
-    __rtruediv__ = lambda self, o: self._binary(o, "/", True)  # noqa: E731
 
     def __neg__(self):
         return self.recorder.emit(f"-{self.code}", self.inputs)

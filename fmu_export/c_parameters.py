@@ -73,12 +73,25 @@ def _operand(value) -> bool:
     return isinstance(value, ParamExpr) or (isinstance(value, numbers.Real) and not isinstance(value, bool))
 
 
-class ParamExpr:
+class Arithmetic:
+    """The arithmetic operators of a traced value, each its class's `_binary(other, op, swap)`."""
+
+    __add__ = lambda self, o: self._binary(o, "+")  # noqa: E731
+    __radd__ = lambda self, o: self._binary(o, "+", True)  # noqa: E731
+    __sub__ = lambda self, o: self._binary(o, "-")  # noqa: E731
+    __rsub__ = lambda self, o: self._binary(o, "-", True)  # noqa: E731
+    __mul__ = lambda self, o: self._binary(o, "*")  # noqa: E731
+    __rmul__ = lambda self, o: self._binary(o, "*", True)  # noqa: E731
+    __truediv__ = lambda self, o: self._binary(o, "/")  # noqa: E731
+    __rtruediv__ = lambda self, o: self._binary(o, "/", True)  # noqa: E731
+
+
+class ParamExpr(Arithmetic):
     """A parameter or a value derived from parameters: `code` its C expression (a slot p[k]),
     `text` a readable form, `value` its value for the built parameters, `reads` the indices of the
     component's parameters it depends on."""
 
-    __array_ufunc__ = None  # numpy defers to the reflected operators below
+    __array_ufunc__ = None  # numpy defers to the reflected operators (Arithmetic's)
 
     def __init__(self, space: "ParameterSpace", code: str, text: str, value: float, reads: frozenset):
         self.space, self.code, self.text, self.value, self.reads = space, code, text, value, reads
@@ -101,14 +114,6 @@ class ParamExpr:
         return self.space.derive(f"{c_literal(a)} {op} {c_literal(b)}", f"({_text(a)} {op} {_text(b)})", value,
                                  _reads(a, b))
 
-    __add__ = lambda self, o: self._binary(o, "+")  # noqa: E731
-    __radd__ = lambda self, o: self._binary(o, "+", True)  # noqa: E731
-    __sub__ = lambda self, o: self._binary(o, "-")  # noqa: E731
-    __rsub__ = lambda self, o: self._binary(o, "-", True)  # noqa: E731
-    __mul__ = lambda self, o: self._binary(o, "*")  # noqa: E731
-    __rmul__ = lambda self, o: self._binary(o, "*", True)  # noqa: E731
-    __truediv__ = lambda self, o: self._binary(o, "/")  # noqa: E731
-    __rtruediv__ = lambda self, o: self._binary(o, "/", True)  # noqa: E731
     __pow__ = lambda self, o: self._binary(o, "pow")  # noqa: E731
     __rpow__ = lambda self, o: self._binary(o, "pow", True)  # noqa: E731
 

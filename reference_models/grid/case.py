@@ -655,7 +655,7 @@ def _measured_at_rest(network: Network, flow: LoadFlow, unit: Unit) -> dict:
     return out
 
 
-def _operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
+def operating_point(unit: Unit, k: int, flow: LoadFlow) -> dict:
     """V, theta, P, Q of unit k at the load flow: its generator's, or for a load unit minus the
     power it draws (generator convention)."""
     if unit.load is None:
@@ -831,7 +831,7 @@ def _start_units(network: Network, flow: LoadFlow, units) -> tuple:
         pending.remove(k)
         unit = units[k]
         remote = RemoteStart(remotes[k], values, {j: d for (unit_k, j), d in demands.items() if unit_k == k})
-        starts[k] = unit_start(unit, _operating_point(unit, k, flow), _measured_at_rest(network, flow, unit), remote)
+        starts[k] = unit_start(unit, operating_point(unit, k, flow), _measured_at_rest(network, flow, unit), remote)
         for taker, j, name, source, solved in links:
             if taker == k and solved:
                 demands.setdefault((source.unit, source.device), {})[source.variable] = starts[k][j].inputs[name]
