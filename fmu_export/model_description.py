@@ -134,6 +134,8 @@ def _variability(v: Variable) -> dict:
     """variability and initial of a variable (the same in FMI 2.0 and 3.0)."""
     if v.causality == "parameter":
         return {"variability": "fixed", "initial": "exact"}
+    if v.causality == "calculatedParameter":
+        return {"variability": "fixed", "initial": "calculated"}
     variability = "continuous" if v.kind == "Real" else "discrete"
     if v.causality == "input":
         return {"variability": variability}
@@ -156,15 +158,16 @@ def _units_categories_experiment(root, variables: list[Variable], stop_time: flo
 
 def _structure(structure, variables: list[Variable], key: dict, outputs_tag: str, initial_tag: str, item_tag,
                attribute: str) -> None:
-    """ModelStructure: each output with its direct dependencies on inputs, then each output as an
-    initial unknown (depending on those inputs and every parameter). FMI 2.0 groups the items
+    """ModelStructure: each output with its direct dependencies on inputs, then each output and
+    calculated parameter as an initial unknown (depending on those inputs and every parameter). FMI 2.0 groups the items
     (<Outputs><Unknown index=...>), FMI 3.0 lists them (<Output valueReference=...>); `key` gives
     the number an item and a dependency are named by."""
     outputs = [v for v in variables if v.causality == "output"]
+    calculated = [v for v in variables if v.causality == "calculatedParameter"]
     parameters = [str(key[v.name]) for v in variables if v.causality == "parameter"]
-    for tag, extra in ((outputs_tag, []), (initial_tag, parameters)):
+    for tag, extra, unknowns in ((outputs_tag, [], outputs), (initial_tag, parameters, outputs + calculated)):
         parent = ET.SubElement(structure, tag) if item_tag else structure
-        for v in outputs:
+        for v in unknowns:
             deps = [str(key[n]) for n in v.dependencies] + extra
             ET.SubElement(parent, item_tag or tag, {attribute: str(key[v.name]), "dependencies": " ".join(deps)})
 

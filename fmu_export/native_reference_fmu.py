@@ -66,13 +66,17 @@ from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
 from .python_reference_fmu import machine_params
-from .variables import REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, fmu_variables, start_state, vr_header
+from .self_start import config_lines as self_start_config, describe as describe_self_start
+from .self_start import variables as self_start_variables
+from .variables import (REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, fmu_variables, start_inputs, start_state,
+                        vr_header)
 
 C_DIR = Path(__file__).parent / "c"
-MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "cosimulation.h", "model.h",
-                 "reference_state.h", "dopri5.h")
+MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "self_start.c", "linalg.c",
+                 "cosimulation.h", "model.h", "reference_state.h", "dopri5.h", "linalg.h")
 # beside the version's plumbing (binaries.PLUMBING)
 C_FILES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
+START_C_FILES = ("self_start.c", "linalg.c")  # where the FMU starts itself from the load flow
 RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
 
@@ -85,8 +89,21 @@ class NativeReferenceError(BuildError):
 def native_reference_variables(component: Component = SM4, params=None):
     """The native reference FMU's variables for that machine (the pythonfmu reference FMU's table)."""
     params = machine_params(component, params)
-    return fmu_variables(component, params, _start_state(component, params), REFERENCE_EXTRAS, SOLVER_STARTS,
-                         bus_outputs=True, space=parameter_space(component, params))
+    x_start = _start_state(component, params)
+    spec = self_start_of(component, params, x_start)
+    return fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, bus_outputs=True,
+                         space=parameter_space(component, params),
+                         self_start=spec and self_start_variables(spec, component))
+
+
+def self_start_of(component: Component, params, x_start, operating_point: dict | None = None):
+    """The start from the load flow the native reference FMU of `component` solves itself
+    (fmu_export.self_start.SelfStart), at its default rest x_start [n_x] under the start inputs;
+    None where it has none (its system is not square, or it fixes nothing to start from)."""
+    spec, _ = describe_self_start(component, params, x_start, start_inputs(component, operating_point))
+    if spec is None or not (spec.load_flow or spec.delivers or spec.solves):
+        return None
+    return spec
 
 
 def structure_of(component: Component, params=None) -> dict:
@@ -142,12 +159,14 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     equations = equations_c_source(component, space, linkage="OPFMU_INTERNAL")
     derivatives = derivatives_source(component, space)
     try:
+        spec = self_start_of(component, params, x_start, operating_point)
         variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point,
-                                  bus_outputs=True, base_mva=system_base_mva, space=space)
+                                  bus_outputs=True, base_mva=system_base_mva, space=space,
+                                  self_start=spec and self_start_variables(spec, component))
     except ValueError as exc:
         raise NativeReferenceError(str(exc)) from None
     generated = {  # the derived parameters are all known once every function was traced
-        "variables.h": vr_header(variables, component),
+        "variables.h": vr_header(variables, component, self_start=spec),
         "equations.c": '#include <stdio.h>\n#include "model.h"\n' + equations
                        + ("\n" + switching if switching else "") + ("\n" + reset if reset else "")
                        + "\n" + parameters_c_source(space, linkage="OPFMU_INTERNAL"),
@@ -155,7 +174,7 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     }
     guid = _guid(model_name, component, generated, version, system_base_mva)
     generated["config.h"] = config_header(model_name, guid, component, x_start, operating_point, n_switching,
-                                          bool(reset), space)
+                                          bool(reset), space, spec)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
                             interpolates_inputs=True, fmi_version=version)
@@ -167,7 +186,8 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         for name, text in generated.items():
             (src / name).write_text(text)
         try:
-            binaries = compile_binaries(Path(tmp), model_name, [src / f for f in C_FILES], src, chosen, version)
+            sources = C_FILES + (START_C_FILES if spec else ())
+            binaries = compile_binaries(Path(tmp), model_name, [src / f for f in sources], src, chosen, version)
             checks = cross_check(binaries, variables, guid, version, Path(tmp) / "check", interpolates=version == 2)
             written = write_fmu(out, Path(tmp), xml, model_name, version, {p: binaries[p] for p in chosen},
                                 {"machine.json": (json.dumps(params.to_dict(), indent=2) + "\n").encode()}, src)
@@ -178,12 +198,13 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
 
 
 def config_header(model_name: str, guid: str, component: Component, x_start, operating_point=None,
-                  n_switching: int = 0, reset: bool = False, space=None) -> str:
+                  n_switching: int = 0, reset: bool = False, space=None, self_start=None) -> str:
     """config.h of the native reference FMU: sizes, defaults and component tables, all numbers or
     escaped names; n_switching: the number of switching functions of the right-hand side
     (c_equations.switching_c_source); reset: whether equations.c has the component's model_reset
     (c_equations.reset_c_source; only then is OPFMU_HAS_RESET defined, so the header of a component
-    without one is as before); space: the build's ParameterSpace."""
+    without one is as before); space: the build's ParameterSpace; self_start: the start from the
+    load flow it solves (self_start_of), or None."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
                                        x_start, operating_point, space)
     lines = opening + [
@@ -194,6 +215,7 @@ def config_header(model_name: str, guid: str, component: Component, x_start, ope
         *(["#define OPFMU_HAS_RESET 1 /* model_reset: states placed on the non-windup limits they are pushed beyond */"]
           if reset else []),
         *tables,
+        *(self_start_config(component, self_start) if self_start else []),
         "#endif", "",
     ]
     return "\n".join(lines)

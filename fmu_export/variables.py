@@ -4,7 +4,9 @@ Real value references, in this order: the component's inputs, its states (output
 communication point), its derived outputs, the initial-state parameters `<state>0`, then the
 variables a kind of FMU adds (`SURROGATE_EXTRAS`, `REFERENCE_EXTRAS`) in the order listed, then,
 where the FMU offers them (the native reference FMU of a component with a bus port), the bus port's
-outputs (`BUS_OUTPUTS`: the Norton equivalent and P, Q at the bus), then, in a native FMU, the
+outputs (`BUS_OUTPUTS`: the Norton equivalent and P, Q at the bus), then, where the native reference
+FMU starts itself from the load flow (fmu_export.self_start), its start parameters and calculated
+parameters, then, in a native FMU, the
 component's parameters in its parameter class's order (fixed parameters, start the built values, min
 and max their range where the component checks one: fmu_export.c_parameters). Booleans come after every Real,
 so that a value reference names one variable whatever its type (FMI 2.0 allows types to share
@@ -148,13 +150,14 @@ def fmu_ports(component: Component, base_mva: float | None = SYSTEM_BASE_MVA) ->
 
 def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
                   operating_point: dict | None = None, bus_outputs: bool = False,
-                  base_mva: float = SYSTEM_BASE_MVA, space=None) -> VariableTable:
+                  base_mva: float = SYSTEM_BASE_MVA, space=None, self_start=None) -> VariableTable:
     """The variable table of an FMU of `component` with parameters `params`: x_start [n_x] are the
     defaults of the initial-state parameters, `extras` the FMU kind's own variables and `starts`
     their start values by name (parameters need one); the inputs start at start_inputs. bus_outputs:
     a component with a bus port gets its outputs (BUS_OUTPUTS), on the system base `base_mva` [MVA].
     space: the build's fmu_export.c_parameters.ParameterSpace, whose parameters the table then
-    declares (parameter_variables).
+    declares (parameter_variables). self_start: the variables of the start from the load flow
+    (fmu_export.self_start.variables), after the bus outputs.
     The table carries the ports for the model description (fmu_ports where it has the bus outputs).
     ValueError where a bus output's name is one of the component's."""
     starts = starts or {}
@@ -189,6 +192,12 @@ def fmu_variables(component: Component, params, x_start, extras=(), starts=None,
         # the Norton outputs, themselves derivatives, have none; P_bus and Q_bus have exact ones
         out += [Variable(name, -1, "output", text + base, "pu", dependencies=deps, derivative=name in POWER_OUTPUTS)
                 for name, text in BUS_OUTPUTS]
+    if self_start:
+        taken = {v.name for v in out}
+        clash = [v.name for v in self_start if v.name in taken]
+        if clash:
+            raise ValueError(f"{component.name}: the start variable {clash[0]!r} has the name of one of its variables")
+        out += list(self_start)
     if space is not None:
         taken = {v.name for v in out}
         clash = [name for name in space.names if name in taken]
@@ -240,13 +249,16 @@ def fmi3_value_references(variables: list[Variable]) -> dict[str, int]:
 
 
 C_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
-KIND_TOKENS = {"input": "VAR_INPUT", "parameter": "VAR_PARAMETER", "output": "VAR_OUTPUT"}
+# a calculated parameter is read like an output: nothing may set it
+KIND_TOKENS = {"input": "VAR_INPUT", "parameter": "VAR_PARAMETER", "output": "VAR_OUTPUT",
+               "calculatedParameter": "VAR_OUTPUT"}
 
 
-def vr_header(variables: list[Variable], component: Component | None = None, guard: str = "OPFMU_VARIABLES_H") -> str:
+def vr_header(variables: list[Variable], component: Component | None = None, guard: str = "OPFMU_VARIABLES_H",
+              self_start=None) -> str:
     """C header of the value-reference table: `#define VR_<NAME> <vr>` per variable (Booleans as
     VR_BOOL_<NAME>; not the component's parameters, whose names may differ in case alone, AC8B's kD
-    and KD: the C reads them by VR_FIRST_PARAM), the counts VR_REAL_COUNT and VR_BOOLEAN_COUNT, VR_REAL_KINDS (the initializer of
+    and KD: the C reads them by VR_FIRST_PARAM, nor the start's variables, read by their groups'), the counts VR_REAL_COUNT and VR_BOOLEAN_COUNT, VR_REAL_KINDS (the initializer of
     each Real's VarKind by value reference, model.h's tokens) and, given the component, the first
     value reference of each of its groups (VR_FIRST_INPUT, VR_FIRST_STATE, VR_FIRST_OUTPUT,
     VR_FIRST_START: inputs, states, derived outputs, initial-state parameters, each contiguous in the
@@ -254,17 +266,23 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     IN_GROUP over its no values finds none). Where the table has the bus port's outputs (BUS_OUTPUTS,
     contiguous in that order): VR_FIRST_BUS, BUS_N_OUTPUTS, the bus voltage's inputs by index
     (BUS_VOLTAGE_MAGNITUDE, BUS_VOLTAGE_ANGLE) and the bus current's value references
-    (VR_BUS_CURRENT_REAL, VR_BUS_CURRENT_IMAGINARY). ValueError for a name that is not a C
-    identifier or that collides in upper case."""
+    (VR_BUS_CURRENT_REAL, VR_BUS_CURRENT_IMAGINARY). Given the table's self_start
+    (fmu_export.self_start.SelfStart): the first value reference of its load flow (VR_FIRST_FLOW),
+    delivered values (VR_FIRST_DELIVERED) and solved inputs (VR_FIRST_SOLVED). ValueError for a name
+    that is not a C identifier or that collides in upper case."""
     lines = ["/* Generated by opfmu: value references of the model description. */",
              f"#ifndef {guard}", f"#define {guard}"]
     seen = {}
     params = [f.name for f in fields(component.params_type)] if component is not None else []
+    start_names = set()
+    if self_start is not None:
+        start_names = {"V_lf", "theta_lf", "P_lf", "Q_lf"} if self_start.load_flow else set()
+        start_names |= {f"{n}_init" for n in self_start.delivers + self_start.solves}
     for v in variables:
         if not C_NAME.fullmatch(v.name):
             raise ValueError(f"variable name {v.name!r} is not a C identifier")
-        if v.causality == "parameter" and v.name in params:
-            continue
+        if (v.causality == "parameter" and v.name in params) or v.name in start_names:
+            continue  # read by the first value reference of their group
         macro = ("VR_" if v.kind == "Real" else "VR_BOOL_") + v.name.upper()
         if macro in seen:
             raise ValueError(f"variables {seen[macro]!r} and {v.name!r} both give {macro}")
@@ -301,5 +319,14 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
                       f"#define BUS_VOLTAGE_ANGLE {component.input_names.index(bus.voltage[1])}",
                       f"#define VR_BUS_CURRENT_REAL {by_name[bus.current[0]]}u",
                       f"#define VR_BUS_CURRENT_IMAGINARY {by_name[bus.current[1]]}u"]
+    if self_start is not None:
+        groups = (("FLOW", ["V_lf", "theta_lf", "P_lf", "Q_lf"] if self_start.load_flow else []),
+                  ("DELIVERED", [f"{n}_init" for n in self_start.delivers]),
+                  ("SOLVED", [f"{n}_init" for n in self_start.solves]))
+        for group, names in groups:
+            refs = [by_name[n] for n in names] or [0]
+            if refs != list(range(refs[0], refs[0] + len(refs))):
+                raise ValueError(f"the start's {group.lower()} value references of {component.name} are not contiguous")
+            lines.append(f"#define VR_FIRST_{group} {refs[0]}u")
     lines += ["#endif", ""]
     return "\n".join(lines)

@@ -170,7 +170,11 @@ Status cs_reset(Instance *inst, const char *function)
 
 Status cs_get_real(Instance *inst, const char *function, unsigned int vr, double *value)
 {
-    char message[512];
+    char message[512], why[400];
+    if (inst->state == ST_INIT && component_settle_start(&inst->model, why, sizeof why) != MODEL_OK) {
+        snprintf(message, sizeof message, "%s: %s", function, why);
+        return fail(inst, STATUS_ERROR, "%s", message);
+    }
     if (model_get_real(&inst->model, vr, value) == MODEL_OK) return STATUS_OK;
     snprintf(message, sizeof message, "%s: no Real variable with value reference %u", function, vr);
     return fail(inst, STATUS_ERROR, "%s", message);

@@ -94,6 +94,15 @@ OPFMU_INTERNAL const char *component_no_derivative(unsigned int vr);
 /* every field of m zero but the component's: inputs at their start values, the initial state and
    the state at the default initial state */
 OPFMU_INTERNAL void component_defaults(ModelState *m);
+/* where the importer asked the FMU to start from the load flow (a start parameter set: V_lf, theta_lf,
+   P_lf, Q_lf, <y>_init; fmu_export/self_start.py) and something changed since it last solved: solves the
+   start into the state, the initial state, the solved inputs and their calculated parameters
+   (self_start_solve); MODEL_ERROR (why written) where there is no such start. MODEL_OK otherwise. */
+OPFMU_INTERNAL ModelStatus component_settle_start(ModelState *m, char *why, size_t size);
+#ifdef OPFMU_SELF_START
+/* self_start.c: the start from the load flow, unconditionally */
+OPFMU_INTERNAL ModelStatus self_start_solve(ModelState *m, char *why, size_t size);
+#endif
 /* sets the first time derivative of input c (0-based) for the next steps [unit/s] */
 OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
                                                       size_t size);

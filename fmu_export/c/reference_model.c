@@ -61,8 +61,7 @@ void model_defaults(ModelState *m)
 
 ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
 {
-    (void)message;
-    (void)size;
+    if (component_settle_start(m, message, size) != MODEL_OK) return MODEL_ERROR;
     m->time = start_time;
     memcpy(m->x, m->x_start, sizeof m->x);
     m->h_guess = 0.0;

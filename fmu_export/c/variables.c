@@ -11,6 +11,13 @@
    and inputs (the chain rule from the port's polar inputs: V_re = Vm cos(Va), V_im = Vm sin(Va)) and
    I_N = I - Y_N V, and the power into the bus P + jQ = V conj(I).
 
+   Where the FMU starts from the load flow (OPFMU_SELF_START: fmu_export/self_start.py) its start
+   parameters (V_lf, theta_lf, P_lf, Q_lf, <y>_init) and calculated parameters (<u>_init) are here too: setting
+   a start parameter asks for that start, setting anything marks it to be solved again (a bus voltage
+   input set by the importer keeps its value; one left unset takes V_lf, theta_lf), and
+   component_settle_start solves it (self_start.c) when it is read in initialisation mode and when
+   initialisation ends.
+
    An input's lower bound is kept with a tolerance: a value at most BOUND_TOLERANCE max(1, |bound|)
    below it (a magnitude of -1e-12 pu from a host's round-off) is taken as the bound itself. */
 #include <math.h>
@@ -142,6 +149,26 @@ void component_defaults(ModelState *m)
     memcpy(m->x, m->x_start, sizeof m->x);
     memcpy(m->p, OPFMU_PARAM_START, OPFMU_N_PARAMS * sizeof *m->p);
     model_derive(m->p);
+#ifdef OPFMU_SELF_START
+    memcpy(m->start_flow, SELF_START_FLOW_DEFAULT, sizeof m->start_flow);
+    memcpy(m->start_delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start_delivered);
+    for (int k = 0; k < SELF_START_N_SOLVES; ++k) m->start_solved[k] = OPFMU_START_U[SELF_START_SOLVES[k]];
+#endif
+}
+
+ModelStatus component_settle_start(ModelState *m, char *why, size_t size)
+{
+#ifdef OPFMU_SELF_START
+    if (m->start_asked && m->start_stale) {
+        if (self_start_solve(m, why, size) != MODEL_OK) return MODEL_ERROR;
+        m->start_stale = 0;
+    }
+#else
+    (void)m;
+    (void)why;
+    (void)size;
+#endif
+    return MODEL_OK;
 }
 
 ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
@@ -176,10 +203,24 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
         return MODEL_OK;
     }
 #endif
+#ifdef OPFMU_SELF_START
+    if (IN_GROUP(vr, VR_FIRST_FLOW, 4 * SELF_START_LOAD_FLOW)) {
+        *value = m->start_flow[vr - VR_FIRST_FLOW];
+        return MODEL_OK;
+    }
+    if (IN_GROUP(vr, VR_FIRST_DELIVERED, SELF_START_N_DELIVERS)) {
+        *value = m->start_delivered[vr - VR_FIRST_DELIVERED];
+        return MODEL_OK;
+    }
+    if (IN_GROUP(vr, VR_FIRST_SOLVED, SELF_START_N_SOLVES)) {
+        *value = m->start_solved[vr - VR_FIRST_SOLVED];
+        return MODEL_OK;
+    }
+#endif
     return model_get_extra(m, vr, value);
 }
 
-ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size)
+static ModelStatus set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size)
 {
     if (!isfinite(value)) {
         snprintf(message, size, "value reference %u: %g is not a finite number", vr, value);
@@ -210,8 +251,34 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
         memcpy(m->p, p, sizeof p);
         return MODEL_OK;
     }
+#ifdef OPFMU_SELF_START
+    if (IN_GROUP(vr, VR_FIRST_FLOW, 4 * SELF_START_LOAD_FLOW)) {
+        m->start_flow[vr - VR_FIRST_FLOW] = value;
+        m->start_asked = 1;
+        return MODEL_OK;
+    }
+    if (IN_GROUP(vr, VR_FIRST_DELIVERED, SELF_START_N_DELIVERS)) {
+        m->start_delivered[vr - VR_FIRST_DELIVERED] = value;
+        m->start_asked = 1;
+        return MODEL_OK;
+    }
+#endif
     return model_set_extra(m, vr, value, message, size);
 }
+
+ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *message, size_t size)
+{
+    if (set_real(m, vr, value, message, size) != MODEL_OK) return MODEL_ERROR;
+#ifdef OPFMU_SELF_START
+    m->start_stale = 1;
+#if SELF_START_LOAD_FLOW
+    if (vr == VR_FIRST_INPUT + BUS_VOLTAGE_MAGNITUDE || vr == VR_FIRST_INPUT + BUS_VOLTAGE_ANGLE) m->bus_voltage_set = 1;
+#endif
+#endif
+    return MODEL_OK;
+}
+
+
 
 void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU_N_COLUMNS])
 {
@@ -265,6 +332,19 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
         snprintf(why, size, "parameter %s: %g is not a finite number", OPFMU_PARAM_NAMES[i], m->p[i]);
         return MODEL_ERROR;
     }
+#ifdef OPFMU_SELF_START
+    if (first_non_finite(m->start_flow, 4) >= 0 || first_non_finite(m->start_delivered, SELF_START_N_DELIVERS) >= 0
+        || first_non_finite(m->start_solved, SELF_START_N_SOLVES) >= 0) {
+        snprintf(why, size, "a start parameter is not a finite number");
+        return MODEL_ERROR;
+    }
+    if ((m->start_asked != 0 && m->start_asked != 1) || (m->start_stale != 0 && m->start_stale != 1)
+        || (m->bus_voltage_set != 0 && m->bus_voltage_set != 1)) {
+        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->start_asked, m->start_stale,
+                 m->bus_voltage_set);
+        return MODEL_ERROR;
+    }
+#endif
     double p[OPFMU_P_SIZE];
     memcpy(p, m->p, sizeof p);
     model_derive(p);
