@@ -22,7 +22,13 @@ case.json (format "opfmu-case", version 1):
         impedance Re + j Xep: `external_impedance`),
         {"device": ID, "output": NAME} (another device's output),
         {"measured": {"bus", "branch", "end"}, "quantity": NAME} (a network measurement),
-        {"held": VALUE} (a set point: nothing drives it)
+        {"held": VALUE} (a set point: nothing drives it);
+        and where its FMU starts itself (fmu_export.self_start, docs/fmu.md "Start from the load flow"),
+        self_start {parameters {name: value}, from {name: {"device": ID, "parameter": NAME}}}: the
+        start parameters to set (a bus device's V_lf, theta_lf, P_lf, Q_lf; a controller's
+        `<output>_init`, the value the device it drives solved), and where a host that lets each FMU
+        solve its start reads a controller's `<output>_init` instead: that device's calculated
+        parameter `<input>_init` after it was given its own
     Every bus device's current (its bus port's outputs, network frame, system base) goes into its
     bus; a host solves the network with them (or with their Norton equivalents, docs/design.md).
 
@@ -35,10 +41,12 @@ import json
 import shutil
 from pathlib import Path
 
+from fmu_export.self_start import INIT_SUFFIX, LOAD_FLOW_VARIABLES
 from reference_models.grid.case import (MEASURED, TERMINAL, external_impedance, operating_point, remote_wiring,
                                         unit_wiring)
 
 FORMAT, VERSION = "opfmu-case", 1
+LOAD_FLOW_NAMES = tuple(name for name, _, _ in LOAD_FLOW_VARIABLES)
 
 
 def _unit_name(unit) -> str:
@@ -91,19 +99,54 @@ def _ports(ports) -> dict:
     return out
 
 
+def _start_variables(path) -> dict:
+    """{name: causality} of an FMU's start variables (fmu_export.self_start): its load flow, the
+    `<y>_init` parameters and the `<u>_init` calculated parameters."""
+    from fmpy import read_model_description
+
+    return {v.name: v.causality for v in read_model_description(str(path)).modelVariables
+            if v.name in LOAD_FLOW_NAMES or v.name.endswith(INIT_SUFFIX)}
+
+
+def _self_start(k: int, j: int, op: dict, starts, wiring, ids, start_vars) -> dict | None:
+    """case.json's self_start of unit k's device j (None where its FMU has none): start_vars[j] are
+    the unit's FMUs' start variables (_start_variables)."""
+    own = start_vars[j]
+    if not own:
+        return None
+    parameters, sources = {}, {}
+    if LOAD_FLOW_NAMES[0] in own:
+        parameters.update(zip(LOAD_FLOW_NAMES, (op["V"], op["theta"], op["P"], op["Q"])))
+    for taker, wires in enumerate(wiring):
+        for name, source in wires.items():
+            delivered = f"{source.variable}{INIT_SUFFIX}"
+            if (source.kind == "device" and source.unit is None and source.device == j
+                    and own.get(delivered) == "parameter"
+                    and start_vars[taker].get(f"{name}{INIT_SUFFIX}") == "calculatedParameter"):
+                parameters[delivered] = float(starts[taker].inputs[name])
+                sources[delivered] = {"device": ids[k][taker], "parameter": f"{name}{INIT_SUFFIX}"}
+    return {"parameters": parameters, "from": sources}
+
+
 def case_description(case, files, kind: str, fmi_version: int, names: dict) -> dict:
     """case.json's content for `case` whose unit k's device j runs the FMU files[k].paths[j], named
     names[path] in the export folder."""
     ids = [[f"{_unit_name(u)}/{d.name}" for d in u.devices] for u in case.units]
     remotes = remote_wiring(case.units)
+    start_variables = {}
     devices = []
     for k, (unit, starts, unit_files) in enumerate(zip(case.units, case.starts, files)):
         wiring = unit_wiring([d.component.ports for d in unit.devices], f"generator at bus {unit.bus}", remotes[k])
+        op = operating_point(unit, k, case.flow)
+        for path in unit_files.paths:
+            if Path(path) not in start_variables:
+                start_variables[Path(path)] = _start_variables(path)
+        start_vars = [start_variables[Path(p)] for p in unit_files.paths]
         for j, (device, start, path) in enumerate(zip(unit.devices, starts, unit_files.paths)):
             comp = device.component
             entry = {"id": ids[k][j], "unit": _unit_name(unit), "bus": unit.bus, "role": device.name,
                      "component": comp.name, "fmu": names[Path(path)], "parameters": device.params.to_dict(),
-                     "load_flow": operating_point(unit, k, case.flow),
+                     "load_flow": op,
                      "start": {"states": dict(zip(comp.state_names, start.states)), "inputs": dict(start.inputs)},
                      "ports": _ports(comp.ports),
                      "inputs": {name: _source(source, case, k, j, ids, start.inputs, name)
@@ -113,6 +156,9 @@ def case_description(case, files, kind: str, fmi_version: int, names: dict) -> d
             if j == 0:
                 z = external_impedance(device)
                 entry["external_impedance"] = [z.real, z.imag]
+            self_start = _self_start(k, j, op, starts, wiring, ids, start_vars)
+            if self_start is not None:
+                entry["self_start"] = self_start
             devices.append(entry)
     return {"format": FORMAT, "version": VERSION, "case": case.name, "base_mva": case.network.base_mva,
             "f_hz": case.network.f_hz, "fmi_version": fmi_version, "kind": kind, "terminal": list(TERMINAL),

@@ -9,11 +9,11 @@
    where it set nothing.
 
    Newton's method with the exact Jacobians (component_rhs_jacobian, component_output_jacobian), each
-   row scaled to a largest entry of 1, a step halved until the scaled residual falls. It is continued
+   row scaled to a largest entry of 1, by full steps that each halve the scaled residual at least. It is continued
    in lambda from the anchor (lambda = 0: a start solved at build time at the built parameters, with
    its inputs, load flow and delivered values: SELF_START_ANCHOR_*) to what the importer set
-   (lambda = 1), everything blended linearly between the two; a lambda step on which Newton fails is
-   cut by 4, one on which it succeeds doubles the next. A state the equations hold and read nowhere
+   (lambda = 1), everything blended linearly between the two, in steps of at most LARGEST_LAMBDA_STEP: a
+   lambda step on which Newton fails is cut by 4, one on which it succeeds doubles the next. A state the equations hold and read nowhere
    (SELF_START_INERT: a lag with T = 0) has the equation x = its anchor value. Parameters of one structure
    (the same structural predicates: fmu_export.c_parameters) stay in it when blended, as their
    predicates are linear in them. */
@@ -33,10 +33,11 @@
 #define N_Y (OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS : 1)
 #define D_SIZE (N_D > 0 ? N_D : 1)
 
-#define MAX_ITERATIONS 40
+#define MAX_ITERATIONS 12 /* a lambda step taking more, or a damped Newton step, is cut (no jump to another branch) */
 #define STEP_TOLERANCE 1e-13   /* converged: the last full Newton step below this times 1 + |z| */
 #define PATH_TOLERANCE 1e-8    /* the same on the way to lambda = 1 */
 #define RESIDUAL_TOLERANCE 1e-10 /* accepted: each scaled residual below this times 1 + |z| */
+#define LARGEST_LAMBDA_STEP 0.125 /* at least 8 steps from the anchor: each a short way along one branch */
 #define SMALLEST_LAMBDA_STEP 1e-4
 
 /* the system at one lambda: parameters (derived ones included), inputs (the solved ones overwritten
@@ -133,8 +134,9 @@ static double scaled_residual(const double r[N_Z], const double scale[N_Z])
     return most;
 }
 
-/* Newton from z to a solution of the system q, within `tolerance` (relative step); 1 on success (z the
-   solution), 0 otherwise (z unchanged) */
+/* Newton from z to a solution of the system q, within `tolerance` (relative step), by full steps that
+   each reduce the scaled residual; 1 on success (z the solution), 0 otherwise (z unchanged): a step
+   that does not reduce it means z lies too far from the solution to tell its branch */
 static int newton(const System *q, double z[N_Z], double tolerance)
 {
     double w[N_Z], r[N_Z], J[N_Z * N_Z], scale[N_Z], b[N_Z], dz[N_Z], trial[N_Z];
@@ -153,17 +155,12 @@ static int newton(const System *q, double z[N_Z], double tolerance)
         if (now <= 1e-15 * (1.0 + largest(w, N_Z))) break;
         if (!lu_factor_n(J, N_Z, perm)) return 0;
         lu_solve_n(J, N_Z, perm, b, dz);
-        double t = 1.0;
-        for (;;) {
-            for (int j = 0; j < N_Z; ++j) trial[j] = w[j] + t * dz[j];
-            residual(q, trial, r, NULL);
-            const double then = scaled_residual(r, scale);
-            if (then <= (1.0 - 1e-4 * t) * now || then <= 1e-15 * (1.0 + largest(trial, N_Z))) break;
-            t *= 0.5;
-            if (t < 1e-6) return 0;
-        }
+        for (int j = 0; j < N_Z; ++j) trial[j] = w[j] + dz[j];
+        residual(q, trial, r, NULL);
+        const double then = scaled_residual(r, scale);
+        if (!(then <= 0.5 * now || then <= 1e-14 * (1.0 + largest(trial, N_Z)))) return 0;
         memcpy(w, trial, sizeof w);
-        if (t == 1.0 && largest(dz, N_Z) <= tolerance * (1.0 + largest(w, N_Z))) break;
+        if (largest(dz, N_Z) <= tolerance * (1.0 + largest(w, N_Z))) break;
         if (iteration == MAX_ITERATIONS - 1) return 0;
     }
     residual(q, w, r, J); /* accepted only where every scaled residual is small */
@@ -193,7 +190,7 @@ ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
     double z[N_Z];
     memcpy(z, SELF_START_ANCHOR_X, N_X * sizeof *z);
     for (int k = 0; k < N_S; ++k) z[N_X + k] = SELF_START_ANCHOR_U[SELF_START_SOLVES[k]];
-    double lambda = 0.0, step = 1.0;
+    double lambda = 0.0, step = LARGEST_LAMBDA_STEP;
     System q;
     system_at(m, 0.0, &q);
     int solved = newton(&q, z, PATH_TOLERANCE); /* the anchor, to this build's rounding */
@@ -205,7 +202,7 @@ ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
         if (newton(&q, trial, next == 1.0 ? STEP_TOLERANCE : PATH_TOLERANCE)) {
             memcpy(z, trial, sizeof z);
             lambda = next;
-            step = fmin(1.0, 2.0 * step);
+            step = fmin(LARGEST_LAMBDA_STEP, 2.0 * step);
         } else if ((step *= 0.25) < SMALLEST_LAMBDA_STEP) {
             solved = 0;
         }
