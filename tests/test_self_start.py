@@ -196,17 +196,36 @@ def test_components_whose_references_follow_relations_of_their_own_get_no_self_s
                          COMPONENTS["genrou"].steady_state(None, COMPONENTS["genrou"].params())).solves == ("Pm", "Efd")
 
 
-def test_the_opfmu_master_start_is_unchanged_where_no_start_parameter_is_set(tmp_path):
-    """Setting the initial-state parameters alone (what the grid master does) starts there, as before."""
+def test_an_initial_state_the_importer_sets_wins_over_the_start_parameters(tmp_path):
+    """As opfmu's master and the VeraGrid host do; a host that sets every declared start value as
+    well (the start parameters at their defaults) starts there too."""
+    genrou = COMPONENTS["genrou"]
+    path = tmp_path / "g.fmu"
+    build_native_reference_fmu(path, "GENROUReference", genrou)
+    declared = {v.name: float(v.start) for v in read_model_description(str(path)).modelVariables
+                if v.causality == "parameter" and v.start is not None}
+    x = np.array(genrou.steady_state(None, genrou.params())) * 1.01
+    fmu = Instance(path)
+    fmu.set(declared | {f"{n}0": v for n, v in zip(genrou.state_names, x)})
+    fmu.enter()
+    fmu.fmu.exitInitializationMode()
+    assert fmu.get(list(genrou.state_names)) == list(x)
+
+
+def test_a_host_that_sets_only_parameters_starts_at_their_rest_at_the_default_load_flow(tmp_path):
+    """No start parameter set: the start parameters' defaults (the built rest's load flow) with the
+    parameters set, not the built rest, which is no rest for them."""
     genrou = COMPONENTS["genrou"]
     path = tmp_path / "g.fmu"
     build_native_reference_fmu(path, "GENROUReference", genrou)
     fmu = Instance(path)
-    x = np.array(genrou.steady_state(None, genrou.params())) * 1.01
-    fmu.set({f"{n}0": v for n, v in zip(genrou.state_names, x)})
+    fmu.set({"xd": 2.1, "M": 9.0})
     fmu.enter()
     fmu.fmu.exitInitializationMode()
-    assert fmu.get(list(genrou.state_names)) == list(x)
+    V, theta, P, Q = fmu.get(["V_lf", "theta_lf", "P_lf", "Q_lf"])
+    x0, _ = genrou.start({"V0": V, "theta0": theta, "P0": P, "Q0": Q, "Vs": V, "theta_vs": theta},
+                         genrou.params({"xd": 2.1, "M": 9.0}))
+    assert all(close(a, b) for a, b in zip(fmu.get(list(genrou.state_names)), x0))
 
 
 @pytest.mark.parametrize("device", ["1/machine", "3/machine"])

@@ -63,7 +63,11 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 {
     if (component_settle_start(m, message, size) != MODEL_OK) return MODEL_ERROR;
     m->time = start_time;
+#ifdef OPFMU_SELF_START
+    if (!m->self_started) memcpy(m->x, m->x_start, sizeof m->x); /* else x holds the solved start */
+#else
     memcpy(m->x, m->x_start, sizeof m->x);
+#endif
     m->h_guess = 0.0;
     return MODEL_OK;
 }

@@ -17,8 +17,8 @@ typedef struct {
     double start_flow[4];           /* parameters V_lf [pu], theta_lf [rad], P_lf, Q_lf [pu, system base] */
     double start_delivered[SELF_START_N_DELIVERS > 0 ? SELF_START_N_DELIVERS : 1]; /* parameters <y>_init */
     double start_solved[SELF_START_N_SOLVES > 0 ? SELF_START_N_SOLVES : 1];        /* calculated <u>_init */
-    int start_asked;                /* 1 once the importer set a start parameter: the FMU solves its start */
     int start_stale;                /* 1 while the solved start may not match what is set */
+    int self_started;               /* 1 where x holds the solved start (not x_start) */
     int bus_voltage_set;            /* 1 once the importer set a bus voltage input: it keeps its value */
 #endif
 } ModelState;

@@ -232,6 +232,5 @@ ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
     }
 #endif
     memcpy(m->x, x, sizeof m->x);
-    memcpy(m->x_start, x, sizeof m->x_start);
     return MODEL_OK;
 }

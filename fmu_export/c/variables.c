@@ -12,11 +12,12 @@
    I_N = I - Y_N V, and the power into the bus P + jQ = V conj(I).
 
    Where the FMU starts from the load flow (OPFMU_SELF_START: fmu_export/self_start.py) its start
-   parameters (V_lf, theta_lf, P_lf, Q_lf, <y>_init) and calculated parameters (<u>_init) are here too: setting
-   a start parameter asks for that start, setting anything marks it to be solved again (a bus voltage
-   input set by the importer keeps its value; one left unset takes V_lf, theta_lf), and
-   component_settle_start solves it (self_start.c) when it is read in initialisation mode and when
-   initialisation ends.
+   parameters (V_lf, theta_lf, P_lf, Q_lf, <y>_init) and calculated parameters (<u>_init) are here too.
+   Unless the importer set an initial-state parameter <state>0 to another value than its default (then
+   the FMU starts there), component_settle_start solves the start from them (self_start.c) when a
+   variable is read in initialisation mode and when initialisation ends, again wherever anything was
+   set since (a bus voltage input set by the importer keeps its value; one left unset takes V_lf,
+   theta_lf).
 
    An input's lower bound is kept with a tolerance: a value at most BOUND_TOLERANCE max(1, |bound|)
    below it (a magnitude of -1e-12 pu from a host's round-off) is taken as the bound itself. */
@@ -159,9 +160,14 @@ void component_defaults(ModelState *m)
 ModelStatus component_settle_start(ModelState *m, char *why, size_t size)
 {
 #ifdef OPFMU_SELF_START
-    if (m->start_asked && m->start_stale) {
+    if (memcmp(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start)) { /* an initial state set: start there */
+        m->self_started = 0;
+        return MODEL_OK;
+    }
+    if (m->start_stale || !m->self_started) {
         if (self_start_solve(m, why, size) != MODEL_OK) return MODEL_ERROR;
         m->start_stale = 0;
+        m->self_started = 1;
     }
 #else
     (void)m;
@@ -254,12 +260,10 @@ static ModelStatus set_real(ModelState *m, unsigned int vr, double value, char *
 #ifdef OPFMU_SELF_START
     if (IN_GROUP(vr, VR_FIRST_FLOW, 4 * SELF_START_LOAD_FLOW)) {
         m->start_flow[vr - VR_FIRST_FLOW] = value;
-        m->start_asked = 1;
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_DELIVERED, SELF_START_N_DELIVERS)) {
         m->start_delivered[vr - VR_FIRST_DELIVERED] = value;
-        m->start_asked = 1;
         return MODEL_OK;
     }
 #endif
@@ -338,9 +342,9 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
         snprintf(why, size, "a start parameter is not a finite number");
         return MODEL_ERROR;
     }
-    if ((m->start_asked != 0 && m->start_asked != 1) || (m->start_stale != 0 && m->start_stale != 1)
+    if ((m->self_started != 0 && m->self_started != 1) || (m->start_stale != 0 && m->start_stale != 1)
         || (m->bus_voltage_set != 0 && m->bus_voltage_set != 1)) {
-        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->start_asked, m->start_stale,
+        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->self_started, m->start_stale,
                  m->bus_voltage_set);
         return MODEL_ERROR;
     }
