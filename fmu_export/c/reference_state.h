@@ -1,7 +1,11 @@
 /* The native reference model's state (model.h includes it as OPFMU_STATE_HEADER): the component's
-   ODE integrated by Dormand-Prince 5(4) over each communication step (reference_model.c). */
+   ODE integrated by Dormand-Prince 5(4) over each communication step (reference_model.c), or by the
+   importer's integrator under Model Exchange (model_exchange.c). */
 #ifndef OPFMU_REFERENCE_STATE_H
 #define OPFMU_REFERENCE_STATE_H
+
+/* the declared size of an array of the switching functions: at least 1, as C requires */
+#define OPFMU_G_SIZE (OPFMU_N_SWITCHING > 0 ? OPFMU_N_SWITCHING : 1)
 
 typedef struct {
     double time;                    /* current communication point [s] */
@@ -12,6 +16,7 @@ typedef struct {
     double rtol, atol;              /* parameters: the solver's tolerances */
     double x[OPFMU_X_SIZE];         /* state at `time` */
     double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */
+    int mode[OPFMU_G_SIZE];         /* the branches the right-hand side is locked to (switching.h) */
 } ModelState;
 
 #endif

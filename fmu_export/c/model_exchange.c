@@ -1,0 +1,165 @@
+/* Model Exchange of the native reference FMU (model_exchange.h says what each function does): the
+   state machine of its calls and the checks of their arguments, over the model's locked right-hand
+   side (switching.c). The states' nominal values are all 1, the scale of per-unit quantities and
+   radians. */
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "model_exchange.h"
+#include "switching.h"
+#include "variables.h"
+
+ModelStatus exchange_get_real(const ModelState *m, unsigned int vr, double *value)
+{
+    if (IN_GROUP(vr, VR_FIRST_DERIVATIVE, OPFMU_N_STATES)) {
+        double dx[OPFMU_X_SIZE];
+        locked_derivatives(m, dx);
+        *value = dx[vr - VR_FIRST_DERIVATIVE];
+        return MODEL_OK;
+    }
+    if (IN_GROUP(vr, VR_FIRST_INDICATOR, OPFMU_N_SWITCHING)) {
+        double g[OPFMU_G_SIZE];
+        switching_functions(m, g);
+        *value = g[vr - VR_FIRST_INDICATOR];
+        return MODEL_OK;
+    }
+    return MODEL_ERROR;
+}
+
+/* nonzero (logged) unless the instance is one for Model Exchange in one of the states `allowed` */
+static int refused(Instance *inst, const char *function, int allowed)
+{
+    if (!inst) return 1;
+    if (!inst->model_exchange) {
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: the instance was instantiated for co-simulation, not "
+                    "Model Exchange", function);
+        return 1;
+    }
+    return not_allowed(inst, function, allowed);
+}
+
+/* nonzero (logged) unless the array of n values is there (or n = 0) and n is `expected`, what it holds */
+static int bad_array(Instance *inst, const char *function, const void *values, size_t n, size_t expected,
+                     const char *what)
+{
+    if (n != expected) {
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: %lu values for the FMU's %lu %s", function,
+                    (unsigned long)n, (unsigned long)expected, what);
+        return 1;
+    }
+    if (n > 0 && !values) {
+        log_message(inst, STATUS_ERROR, "logStatusError", "%s: NULL array", function);
+        return 1;
+    }
+    return 0;
+}
+
+/* the states in which the model's values at its time, state and inputs can be read: after
+   initialisation */
+#define ST_EVALUATED (ST_EVENT | ST_CONTINUOUS | ST_TERMINATED | ST_ERROR)
+
+Status me_set_time(Instance *inst, const char *function, double time)
+{
+    char message[512];
+    if (refused(inst, function, ST_EVENT | ST_CONTINUOUS)) return STATUS_ERROR;
+    if (!isfinite(time)) {
+        snprintf(message, sizeof message, "%s: time %g is not a finite number", function, time);
+        return fail(inst, STATUS_ERROR, "%s", message);
+    }
+    inst->model.time = time;
+    return STATUS_OK;
+}
+
+Status me_set_states(Instance *inst, const char *function, const double x[], size_t n)
+{
+    char message[512];
+    if (refused(inst, function, ST_CONTINUOUS)) return STATUS_ERROR;
+    if (bad_array(inst, function, x, n, OPFMU_N_STATES, "continuous states")) return STATUS_ERROR;
+    const int i = first_non_finite(x, (int)n);
+    if (i >= 0) {
+        snprintf(message, sizeof message, "%s: state %d: %g is not a finite number (the states are left as they were)",
+                 function, i, x[i]);
+        return fail(inst, STATUS_ERROR, "%s", message);
+    }
+    if (n > 0) memcpy(inst->model.x, x, n * sizeof *x);
+    return STATUS_OK;
+}
+
+Status me_get_states(Instance *inst, const char *function, double out[], size_t n)
+{
+    if (refused(inst, function, ST_EVALUATED)) return STATUS_ERROR;
+    if (bad_array(inst, function, out, n, OPFMU_N_STATES, "continuous states")) return STATUS_ERROR;
+    if (n > 0) memcpy(out, inst->model.x, n * sizeof *out);
+    return STATUS_OK;
+}
+
+Status me_get_derivatives(Instance *inst, const char *function, double out[], size_t n)
+{
+    double dx[OPFMU_X_SIZE];
+    if (refused(inst, function, ST_EVALUATED)) return STATUS_ERROR;
+    if (bad_array(inst, function, out, n, OPFMU_N_STATES, "continuous states")) return STATUS_ERROR;
+    locked_derivatives(&inst->model, dx);
+    if (n > 0) memcpy(out, dx, n * sizeof *out);
+    return STATUS_OK;
+}
+
+Status me_get_indicators(Instance *inst, const char *function, double out[], size_t n)
+{
+    double g[OPFMU_G_SIZE];
+    if (refused(inst, function, ST_EVALUATED)) return STATUS_ERROR;
+    if (bad_array(inst, function, out, n, OPFMU_N_SWITCHING, "event indicators")) return STATUS_ERROR;
+    switching_functions(&inst->model, g);
+    if (n > 0) memcpy(out, g, n * sizeof *out);
+    return STATUS_OK;
+}
+
+Status me_get_nominals(Instance *inst, const char *function, double out[], size_t n)
+{
+    if (refused(inst, function, ST_ANY)) return STATUS_ERROR;
+    if (bad_array(inst, function, out, n, OPFMU_N_STATES, "continuous states")) return STATUS_ERROR;
+    for (size_t i = 0; i < n; ++i) out[i] = 1.0;
+    return STATUS_OK;
+}
+
+Status me_enter_event_mode(Instance *inst, const char *function)
+{
+    if (refused(inst, function, ST_EVENT | ST_CONTINUOUS)) return STATUS_ERROR;
+    inst->state = ST_EVENT;
+    return STATUS_OK;
+}
+
+Status me_update_discrete_states(Instance *inst, const char *function, int *values_changed)
+{
+    if (refused(inst, function, ST_EVENT)) return STATUS_ERROR;
+    if (!values_changed) return fail(inst, STATUS_ERROR, "%s: NULL argument", function);
+    *values_changed = 0;
+#if OPFMU_N_SWITCHING > 0
+    ModelState *m = &inst->model;
+    double before[OPFMU_N_STATES];
+    memcpy(before, m->x, sizeof before);
+    relock(m->x, m->u, m->p, m->mode);
+    *values_changed = memcmp(before, m->x, sizeof before) != 0;
+#endif
+    return STATUS_OK;
+}
+
+Status me_enter_continuous_time_mode(Instance *inst, const char *function)
+{
+    if (refused(inst, function, ST_EVENT)) return STATUS_ERROR;
+    inst->state = ST_CONTINUOUS;
+    return STATUS_OK;
+}
+
+Status me_completed_integrator_step(Instance *inst, const char *function, int *enter_event_mode)
+{
+    if (refused(inst, function, ST_CONTINUOUS)) return STATUS_ERROR;
+    if (!enter_event_mode) return fail(inst, STATUS_ERROR, "%s: NULL argument", function);
+#if OPFMU_N_SWITCHING > 0
+    const ModelState *m = &inst->model;
+    *enter_event_mode = branches_changed(m->x, m->u, m->p, m->mode);
+#else
+    *enter_event_mode = 0;
+#endif
+    return STATUS_OK;
+}

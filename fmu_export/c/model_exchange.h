@@ -1,0 +1,43 @@
+/* Model Exchange of the native reference FMU (model_exchange.c), version independent as
+   cosimulation.c is for co-simulation: fmi2_me.c and fmi3_me.c map their version's calls onto these
+   functions. Each takes the calling FMI function's name for its messages, refuses a call its instance
+   was not instantiated for (co-simulation) or that its state does not allow (ST_EVENT: event mode,
+   initialisation's end included; ST_CONTINUOUS: continuous-time mode), and an array of the wrong size
+   or NULL, with STATUS_ERROR and a logged reason; nothing aborts.
+
+   The importer integrates dx/dt = f(t, x, u) with the branches of the right-hand side locked to the
+   modes of the last event (switching.h), and locates the sign changes of the event indicators, the
+   switching functions g. At each event (me_update_discrete_states) the modes are locked afresh from
+   the state and the inputs set then, after the limit resets, as the co-simulation step does at a
+   located switching and at the start of each communication step. */
+#ifndef OPFMU_MODEL_EXCHANGE_H
+#define OPFMU_MODEL_EXCHANGE_H
+
+#include "cosimulation.h"
+
+/* der(x) (VR_FIRST_DERIVATIVE: dx/dt on the locked branches) and the event indicators
+   (VR_FIRST_INDICATOR: the switching functions) at m's time, state and inputs; MODEL_ERROR if vr
+   names neither */
+OPFMU_INTERNAL ModelStatus exchange_get_real(const ModelState *m, unsigned int vr, double *value);
+
+/* the time [s] the states and inputs are at (finite) */
+OPFMU_INTERNAL Status me_set_time(Instance *inst, const char *function, double time);
+/* the continuous states x [n]: n must be OPFMU_N_STATES, every value finite (continuous-time mode) */
+OPFMU_INTERNAL Status me_set_states(Instance *inst, const char *function, const double x[], size_t n);
+/* the continuous states, their derivatives on the locked branches, the event indicators (the
+   switching functions, n = OPFMU_N_SWITCHING) and the states' nominal values (1) into out [n] */
+OPFMU_INTERNAL Status me_get_states(Instance *inst, const char *function, double out[], size_t n);
+OPFMU_INTERNAL Status me_get_derivatives(Instance *inst, const char *function, double out[], size_t n);
+OPFMU_INTERNAL Status me_get_indicators(Instance *inst, const char *function, double out[], size_t n);
+OPFMU_INTERNAL Status me_get_nominals(Instance *inst, const char *function, double out[], size_t n);
+OPFMU_INTERNAL Status me_enter_event_mode(Instance *inst, const char *function);
+/* the event: the limit resets at the current inputs, then the modes locked there; *values_changed
+   nonzero where a reset moved a state. No further iteration and no time event is ever needed. */
+OPFMU_INTERNAL Status me_update_discrete_states(Instance *inst, const char *function, int *values_changed);
+OPFMU_INTERNAL Status me_enter_continuous_time_mode(Instance *inst, const char *function);
+/* *enter_event_mode nonzero where the branches that hold at the accepted step's end change dx/dt
+   from the locked ones (a change the importer's indicators did not see, such as an indicator that
+   touched zero) */
+OPFMU_INTERNAL Status me_completed_integrator_step(Instance *inst, const char *function, int *enter_event_mode);
+
+#endif
