@@ -175,7 +175,7 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
         try:
             binaries = compile_binaries(Path(tmp), model_name,
                                         [src / f for f in (EXCHANGE_PLUMBING[version], *C_FILES)], src, chosen,
-                                        version)
+                                        version, model_exchange=True)
             checks = cross_check(binaries, variables, guid, version, Path(tmp) / "check", interpolates=version == 2)
             written = write_fmu(out, Path(tmp), xml, model_name, version, {p: binaries[p] for p in chosen},
                                 {"machine.json": (json.dumps(params.to_dict(), indent=2) + "\n").encode()}, src)

@@ -94,8 +94,11 @@ def test_variables_and_value_references_are_the_reference_fmus(unzipped):
     md = unzipped[1]
     got = [(v.name, v.valueReference, v.causality) for v in md.modelVariables]
     python = [(v.name, v.vr, v.causality) for v in reference_variables(SM4, DEFAULT)]
-    assert got[:len(python)] == python  # the pythonfmu reference's table, the bus port's outputs, the parameters
-    assert [name for name, _, _ in got[len(python):]] == [name for name, _ in BUS_OUTPUTS] + list(DEFAULT.to_dict())
+    # the pythonfmu reference's table, the bus port's outputs, the parameters, Model Exchange's state
+    # derivatives (SM4 has no switching functions, so no event indicators)
+    assert got[:len(python)] == python
+    assert [name for name, _, _ in got[len(python):]] == [name for name, _ in BUS_OUTPUTS] + list(DEFAULT.to_dict()) \
+        + [f"der({name})" for name in SM4.state_names]
     assert got == [(v.name, v.vr, v.causality) for v in native_reference_variables(SM4, DEFAULT)]
     starts = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}
     assert starts["rtol"] == SOLVER_STARTS["rtol"] <= 1e-8 and starts["atol"] == SOLVER_STARTS["atol"] <= 1e-10
