@@ -10,20 +10,27 @@
 #include "switching.h"
 #include "variables.h"
 
+/* (the model description has the groups it reads only where they are not empty) */
 ModelStatus exchange_get_real(const ModelState *m, unsigned int vr, double *value)
 {
+#if OPFMU_N_STATES > 0
     if (IN_GROUP(vr, VR_FIRST_DERIVATIVE, OPFMU_N_STATES)) {
         double dx[OPFMU_X_SIZE];
         locked_derivatives(m, dx);
         *value = dx[vr - VR_FIRST_DERIVATIVE];
         return MODEL_OK;
     }
+#endif
+#if OPFMU_N_SWITCHING > 0
     if (IN_GROUP(vr, VR_FIRST_INDICATOR, OPFMU_N_SWITCHING)) {
         double g[OPFMU_G_SIZE];
         switching_functions(m, g);
         *value = g[vr - VR_FIRST_INDICATOR];
         return MODEL_OK;
     }
+#endif
+    (void)m;
+    (void)value;
     return MODEL_ERROR;
 }
 
