@@ -152,7 +152,7 @@ Status cs_exit_initialization(Instance *inst, const char *function)
     Status status = model_status(inst, model_initialize(&inst->model, inst->start_time, message, sizeof message),
                                  message);
 #ifdef OPFMU_MODEL_EXCHANGE
-    if (status != STATUS_ERROR) lock_modes(&inst->model); /* the branches at the initial state and inputs */
+    if (status != STATUS_ERROR) initial_lock(&inst->model); /* the branches at the initial state and inputs */
 #endif
     inst->state = status == STATUS_ERROR ? ST_ERROR : inst->model_exchange ? ST_EVENT : ST_STEP;
     return status;

@@ -136,18 +136,48 @@ Status me_enter_event_mode(Instance *inst, const char *function)
     return STATUS_OK;
 }
 
+#if OPFMU_N_SWITCHING > 0
+#define PROBE_TIME 1e-9 /* [s] how far along the locked rate a condition at its switching point is probed */
+
+/* A condition locked at its switching point (g_k = 0 exactly: a state just placed on its limit,
+   a clip at rest on its bound) takes the branch that holds a moment later, PROBE_TIME along the
+   locked rate dx/dt, where that branch differs: the importer sees no sign change of an indicator that
+   starts at 0, and the co-simulation step locates this change within its first solver step. */
+static void lock_touching(ModelState *m)
+{
+    double g[N_G], after[N_G], dx[OPFMU_N_STATES], probe[OPFMU_N_STATES];
+    int mode[N_G], touching = 0;
+    model_switching(m->x, m->u, m->p, g, mode);
+    for (int k = 0; k < N_G; ++k) touching |= g[k] == 0.0;
+    if (!touching) return;
+    model_derivatives_locked(m->x, m->u, m->p, m->mode, dx);
+    for (int i = 0; i < OPFMU_N_STATES; ++i) probe[i] = m->x[i] + PROBE_TIME * dx[i];
+    model_switching(probe, m->u, m->p, after, mode);
+    for (int k = 0; k < N_G; ++k)
+        if (g[k] == 0.0) m->mode[k] = mode[k];
+}
+#endif
+
 Status me_update_discrete_states(Instance *inst, const char *function, int *values_changed)
 {
     if (refused(inst, function, ST_EVENT)) return STATUS_ERROR;
     if (!values_changed) return fail(inst, STATUS_ERROR, "%s: NULL argument", function);
+    ModelState *m = &inst->model;
     *values_changed = 0;
 #if OPFMU_N_SWITCHING > 0
-    ModelState *m = &inst->model;
-    double before[OPFMU_N_STATES];
-    memcpy(before, m->x, sizeof before);
-    relock(m->x, m->u, m->p, m->mode);
-    *values_changed = memcmp(before, m->x, sizeof before) != 0;
+    /* a full lock where co-simulation starts a communication step: the first event, inputs that
+       changed, a reset the last integrator step asked for; else one where the branches change dx/dt,
+       as at a located switching */
+    if (m->lock_due || memcmp(m->u, m->u_locked, sizeof m->u) != 0 || branches_changed(m->x, m->u, m->p, m->mode)) {
+        double before[OPFMU_N_STATES];
+        memcpy(before, m->x, sizeof before);
+        relock(m->x, m->u, m->p, m->mode);
+        lock_touching(m);
+        *values_changed = memcmp(before, m->x, sizeof before) != 0;
+    }
 #endif
+    memcpy(m->u_locked, m->u, sizeof m->u_locked);
+    m->lock_due = 0;
     return STATUS_OK;
 }
 
@@ -163,8 +193,9 @@ Status me_completed_integrator_step(Instance *inst, const char *function, int *e
     if (refused(inst, function, ST_CONTINUOUS)) return STATUS_ERROR;
     if (!enter_event_mode) return fail(inst, STATUS_ERROR, "%s: NULL argument", function);
 #if OPFMU_N_SWITCHING > 0
-    const ModelState *m = &inst->model;
-    *enter_event_mode = branches_changed(m->x, m->u, m->p, m->mode);
+    ModelState *m = &inst->model;
+    if (reset_moves(m->x, m->u, m->p)) m->lock_due = 1;
+    *enter_event_mode = m->lock_due || branches_changed(m->x, m->u, m->p, m->mode);
 #else
     *enter_event_mode = 0;
 #endif

@@ -5,11 +5,16 @@
    initialisation's end included; ST_CONTINUOUS: continuous-time mode), and an array of the wrong size
    or NULL, with STATUS_ERROR and a logged reason; nothing aborts.
 
-   The importer integrates dx/dt = f(t, x, u) with the branches of the right-hand side locked to the
-   modes of the last event (switching.h), and locates the sign changes of the event indicators, the
-   switching functions g. At each event (me_update_discrete_states) the modes are locked afresh from
-   the state and the inputs set then, after the limit resets, as the co-simulation step does at a
-   located switching and at the start of each communication step. */
+   The importer integrates dx/dt = f(t, x, u) with the branches of the right-hand side locked
+   (switching.h), and locates the sign changes of the event indicators, the switching functions g.
+   An event update (me_update_discrete_states) does what the co-simulation step does:
+   * where a communication step starts (the first event after initialisation, inputs that changed
+     since the last lock, a reset an integrator step's end asked for), a full lock: the limit resets
+     at the current inputs, then the modes locked from the state and inputs;
+   * at a located switching (an indicator's sign change), the same, but only where the branches that
+     now hold change dx/dt (a condition in a branch not taken changes nothing, and locks nothing).
+   The FMU state holds the locked modes, the inputs they were locked at and whether a full lock is
+   due, so a restored state integrates on exactly as it would have. */
 #ifndef OPFMU_MODEL_EXCHANGE_H
 #define OPFMU_MODEL_EXCHANGE_H
 
@@ -31,11 +36,13 @@ OPFMU_INTERNAL Status me_get_derivatives(Instance *inst, const char *function, d
 OPFMU_INTERNAL Status me_get_indicators(Instance *inst, const char *function, double out[], size_t n);
 OPFMU_INTERNAL Status me_get_nominals(Instance *inst, const char *function, double out[], size_t n);
 OPFMU_INTERNAL Status me_enter_event_mode(Instance *inst, const char *function);
-/* the event: the limit resets at the current inputs, then the modes locked there; *values_changed
-   nonzero where a reset moved a state. No further iteration and no time event is ever needed. */
+/* the event update (above); *values_changed nonzero where a reset moved a state. No further
+   iteration and no time event is ever needed. */
 OPFMU_INTERNAL Status me_update_discrete_states(Instance *inst, const char *function, int *values_changed);
 OPFMU_INTERNAL Status me_enter_continuous_time_mode(Instance *inst, const char *function);
-/* *enter_event_mode nonzero where the branches that hold at the accepted step's end change dx/dt
+/* *enter_event_mode nonzero where the accepted step's end needs an event: the reset would move a
+   state (one held on a limit that moved inward since, which the co-simulation step places on it at
+   each communication point: a full lock is then due), or the branches that hold there change dx/dt
    from the locked ones (a change the importer's indicators did not see, such as an indicator that
    touched zero) */
 OPFMU_INTERNAL Status me_completed_integrator_step(Instance *inst, const char *function, int *enter_event_mode);

@@ -201,5 +201,5 @@ ModelStatus model_check_state(const ModelState *m, char *why, size_t size)
         snprintf(why, size, "the solver's next step size %g s is not finite and >= 0 (0: none yet)", m->h_guess);
         return MODEL_ERROR;
     }
-    return check_modes(m, why, size);
+    return check_locks(m, why, size);
 }

@@ -17,6 +17,8 @@ typedef struct {
     double x[OPFMU_X_SIZE];         /* state at `time` */
     double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */
     int mode[OPFMU_G_SIZE];         /* the branches the right-hand side is locked to (switching.h) */
+    double u_locked[OPFMU_N_INPUTS]; /* Model Exchange: the inputs at the last lock (model_exchange.c) */
+    int lock_due;                   /* Model Exchange: the next event update is a full lock */
 } ModelState;
 
 #endif

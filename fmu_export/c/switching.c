@@ -19,6 +19,20 @@ int branches_changed(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPU
     return memcmp(before, now, sizeof now) != 0;
 }
 
+int reset_moves(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS], const double p[])
+{
+#ifdef OPFMU_HAS_RESET
+    double placed[OPFMU_N_STATES];
+    model_reset(x, u, p, placed);
+    return memcmp(placed, x, sizeof placed) != 0;
+#else
+    (void)x;
+    (void)u;
+    (void)p;
+    return 0;
+#endif
+}
+
 void relock(double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS], const double p[], int mode[N_G])
 {
     double g[N_G];
@@ -54,23 +68,31 @@ void switching_functions(const ModelState *m, double g[OPFMU_G_SIZE])
 #endif
 }
 
-void lock_modes(ModelState *m)
+void initial_lock(ModelState *m)
 {
 #if N_G > 0
     double g[N_G];
     model_switching(m->x, m->u, m->p, g, m->mode);
-#else
-    (void)m;
 #endif
+    memcpy(m->u_locked, m->u, sizeof m->u_locked);
+    m->lock_due = 1;
 }
 
-ModelStatus check_modes(const ModelState *m, char *why, size_t size)
+ModelStatus check_locks(const ModelState *m, char *why, size_t size)
 {
     for (int k = 0; k < N_G; ++k) {
         if (m->mode[k] != 0 && m->mode[k] != 1) {
             snprintf(why, size, "the locked branch of switching condition %d is %d, not 0 or 1", k, m->mode[k]);
             return MODEL_ERROR;
         }
+    }
+    if (m->lock_due != 0 && m->lock_due != 1) {
+        snprintf(why, size, "lock_due is %d, not 0 or 1", m->lock_due);
+        return MODEL_ERROR;
+    }
+    if (first_non_finite(m->u_locked, OPFMU_N_INPUTS) >= 0) {
+        snprintf(why, size, "the inputs of the last lock are not finite");
+        return MODEL_ERROR;
     }
     return MODEL_OK;
 }

@@ -28,6 +28,9 @@ OPFMU_INTERNAL int branches_changed(const double x[OPFMU_N_STATES], const double
 /* locks mode to the branches that hold at (x, u), after placing x on the limits it is pushed beyond
    (model_reset, where the component has one) */
 OPFMU_INTERNAL void relock(double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS], const double p[], int mode[N_G]);
+/* the reset at (x, u) would move a state (one held on a limit that has moved inward since it was
+   placed there, with a state or an input); 0 for a component without a reset */
+OPFMU_INTERNAL int reset_moves(const double x[OPFMU_N_STATES], const double u[OPFMU_N_INPUTS], const double p[]);
 #endif
 
 #ifdef OPFMU_HAS_RESET
@@ -43,9 +46,12 @@ OPFMU_INTERNAL void model_reset(const double x[OPFMU_N_STATES], const double u[O
 OPFMU_INTERNAL void locked_derivatives(const ModelState *m, double dx[OPFMU_X_SIZE]);
 /* the switching functions g at m's state and inputs [OPFMU_N_SWITCHING]: the event indicators */
 OPFMU_INTERNAL void switching_functions(const ModelState *m, double g[OPFMU_G_SIZE]);
-/* locks m->mode to the branches that hold at m's state and inputs, the state left as it is */
-OPFMU_INTERNAL void lock_modes(ModelState *m);
-/* MODEL_ERROR (why written) unless every mode of m is 0 or 1 */
-OPFMU_INTERNAL ModelStatus check_modes(const ModelState *m, char *why, size_t size);
+/* at initialisation's end: locks m->mode to the branches that hold at m's state and inputs, the
+   state left as it is, and makes the first event update a full lock (m->lock_due), as the first
+   communication step starts with one */
+OPFMU_INTERNAL void initial_lock(ModelState *m);
+/* MODEL_ERROR (why written) unless every mode of m and its lock_due are 0 or 1 and the inputs of its
+   last lock finite */
+OPFMU_INTERNAL ModelStatus check_locks(const ModelState *m, char *why, size_t size);
 
 #endif
