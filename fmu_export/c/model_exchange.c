@@ -165,16 +165,20 @@ Status me_update_discrete_states(Instance *inst, const char *function, int *valu
     ModelState *m = &inst->model;
     *values_changed = 0;
 #if OPFMU_N_SWITCHING > 0
-    /* a full lock where co-simulation starts a communication step: the first event, inputs that
-       changed, a reset the last integrator step asked for; else one where the branches change dx/dt,
-       as at a located switching */
+    /* the resets where co-simulation starts a communication step (the first event, inputs that
+       changed, a reset the last integrator step asked for) or locks at a located switching (the
+       branches that hold change dx/dt); the branches locked at every event, so that they follow the
+       indicators' signs */
     if (m->lock_due || memcmp(m->u, m->u_locked, sizeof m->u) != 0 || branches_changed(m->x, m->u, m->p, m->mode)) {
         double before[OPFMU_N_STATES];
         memcpy(before, m->x, sizeof before);
         relock(m->x, m->u, m->p, m->mode);
-        lock_touching(m);
         *values_changed = memcmp(before, m->x, sizeof before) != 0;
+    } else {
+        double g[N_G];
+        model_switching(m->x, m->u, m->p, g, m->mode);
     }
+    lock_touching(m);
 #endif
     memcpy(m->u_locked, m->u, sizeof m->u_locked);
     m->lock_due = 0;

@@ -7,12 +7,13 @@
 
    The importer integrates dx/dt = f(t, x, u) with the branches of the right-hand side locked
    (switching.h), and locates the sign changes of the event indicators, the switching functions g.
-   An event update (me_update_discrete_states) does what the co-simulation step does:
-   * where a communication step starts (the first event after initialisation, inputs that changed
-     since the last lock, a reset an integrator step's end asked for), a full lock: the limit resets
-     at the current inputs, then the modes locked from the state and inputs;
-   * at a located switching (an indicator's sign change), the same, but only where the branches that
-     now hold change dx/dt (a condition in a branch not taken changes nothing, and locks nothing).
+   An event update (me_update_discrete_states) locks the modes from the state and inputs, and applies
+   the limit resets before, where the co-simulation step does:
+   * where a communication step starts: the first event after initialisation, inputs that changed
+     since the last lock, a reset an integrator step's end asked for;
+   * at a located switching (an indicator's sign change) where the branches that now hold change
+     dx/dt (a condition in a branch not taken changes nothing: its mode follows, no reset).
+   A condition locked at its switching point (g = 0 exactly) takes the branch that holds just after.
    The FMU state holds the locked modes, the inputs they were locked at and whether a full lock is
    due, so a restored state integrates on exactly as it would have. */
 #ifndef OPFMU_MODEL_EXCHANGE_H
