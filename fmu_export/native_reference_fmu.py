@@ -42,7 +42,13 @@ c/variables.c from the exact derivatives of its bus current): its Norton equival
 come and P, Q at the bus, on the system base it is built for (`system_base_mva`, declared in the
 model description's ports).
 
-The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
+Model Exchange (docs/fmu.md, "Model Exchange"): the same FMU also offers it (c/fmi2_me.c or
+c/fmi3_me.c over c/model_exchange.c), with the states' derivatives and the switching functions as event
+indicators (variables.exchange_variables), integrated by the importer with the branches locked and
+relocked, the resets applied, at events as the co-simulation step does (c/switching.c, which both share).
+
+The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references, less
+Model Exchange's.
 """
 from __future__ import annotations
 
