@@ -86,10 +86,11 @@ def compile_c(output: Path, sources, include: Path, kind: str = "shared", target
 
 
 def compile_binaries(workdir: Path, model_name: str, sources, include: Path, chosen: list[Platform], version: int,
-                     objects=None) -> dict[Platform, Path]:
+                     objects=None, model_exchange: bool = False) -> dict[Platform, Path]:
     """The FMU's binary for the host and each chosen platform, {platform: path} with the host first:
     the version's plumbing (PLUMBING) and `sources` from `include`, plus `objects(platform)` (object
-    files compiled for that platform, e.g. the operator kernel). Each binary's linkage is checked."""
+    files compiled for that platform, e.g. the operator kernel). Each binary's linkage is checked
+    (model_exchange: the FMU also offers Model Exchange, whose functions it must export too)."""
     binaries = {}
     for target in dict.fromkeys([host(), *chosen]):
         folder = workdir / f"{target.name}-fmi{version}"
@@ -97,7 +98,7 @@ def compile_binaries(workdir: Path, model_name: str, sources, include: Path, cho
         inputs = [include / PLUMBING[version], *sources, *(objects(target) if objects else [])]
         binary = compile_c(folder / f"{model_name}{target.extension}", inputs, include, target=target)
         try:
-            check_linkage(binary, target, fmi_headers(), version)
+            check_linkage(binary, target, fmi_headers(), version, model_exchange)
         except PlatformError as exc:
             raise BuildError(str(exc)) from None
         binaries[target] = binary

@@ -45,21 +45,28 @@ LOG_CATEGORIES = (("logStatusWarning", "warnings: inputs or states outside the t
 
 def model_description(model_name: str, guid: str, variables: list[Variable], description: str,
                       stop_time: float = 10.0, step: float = 0.01, directional_derivatives: bool = False,
-                      interpolates_inputs: bool = False, fmi_version: int = 2) -> bytes:
+                      interpolates_inputs: bool = False, fmi_version: int = 2, model_exchange: bool = False) -> bytes:
     """The XML document (UTF-8 bytes) of an FMI `fmi_version` (2 or 3) co-simulation FMU with
     `variables` (a VariableTable declares its component's ports; a plain list declares none).
     directional_derivatives: the FMU provides the outputs' derivatives with respect to the inputs
     (FMI 2.0 fmi2GetDirectionalDerivative; FMI 3.0 also fmi3GetAdjointDerivative); interpolates_inputs:
     it takes first input derivatives with fmi2SetRealInputDerivatives, the inputs linear over a step
-    (canInterpolateInputs; FMI 3.0 has no such call, its inputs are held over a step)."""
+    (canInterpolateInputs; FMI 3.0 has no such call, its inputs are held over a step).
+    model_exchange: the FMU also offers Model Exchange (same model identifier), with the state
+    derivatives and event indicators of `variables` (variables.exchange_variables)."""
     if fmi_version == 3:
-        return _fmi3_document(model_name, guid, variables, description, stop_time, step, directional_derivatives)
+        return _fmi3_document(model_name, guid, variables, description, stop_time, step, directional_derivatives,
+                              model_exchange)
     if fmi_version != 2:
         raise ValueError(f"FMI version {fmi_version!r}: 2 or 3")
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "2.0", "modelName": model_name, "guid": guid, "description": description,
         "generationTool": f"opfmu {__version__}", "variableNamingConvention": "flat",
-        "numberOfEventIndicators": "0"})
+        "numberOfEventIndicators": str(len(_indicators(variables)) if model_exchange else 0)})
+    if model_exchange:  # before CoSimulation, as the schema orders them; fmi2CompletedIntegratorStep is called
+        ET.SubElement(root, "ModelExchange", {  # (completedIntegratorStepNotNeeded: false, the default)
+            "modelIdentifier": model_name, "canGetAndSetFMUstate": "true",
+            "canSerializeFMUstate": "true", "canNotUseMemoryManagementFunctions": "true"})
     capabilities = {"modelIdentifier": model_name, "canHandleVariableCommunicationStepSize": "true"}
     if interpolates_inputs:
         capabilities["canInterpolateInputs"] = "true"
@@ -73,6 +80,7 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", {"name": TOOL_NAME}).append(
             variables.ports.element())
     mv = ET.SubElement(root, "ModelVariables")
+    index = {v.name: i + 1 for i, v in enumerate(variables)}
     for v in variables:
         sv = ET.SubElement(mv, "ScalarVariable", {"name": v.name, "valueReference": str(v.vr),
                                                  "causality": v.causality, "description": v.description,
@@ -81,23 +89,29 @@ def model_description(model_name: str, guid: str, variables: list[Variable], des
         type_attrs.update(_bounds(v))
         if v.start is not None:
             type_attrs["start"] = repr(float(v.start))
+        if v.derivative_of is not None:
+            type_attrs["derivative"] = str(index[v.derivative_of])
         ET.SubElement(sv, v.kind, type_attrs)
     structure = ET.SubElement(root, "ModelStructure")
-    index = {v.name: i + 1 for i, v in enumerate(variables)}
-    _structure(structure, variables, index, "Outputs", "InitialUnknowns", "Unknown", "index")
+    _structure(structure, variables, index, "Outputs", "InitialUnknowns", "Unknown", "index", model_exchange)
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
 def _fmi3_document(model_name: str, guid: str, variables: list[Variable], description: str, stop_time: float,
-                   step: float, directional_derivatives: bool) -> bytes:
+                   step: float, directional_derivatives: bool, model_exchange: bool) -> bytes:
     """modelDescription.xml of FMI 3.0 co-simulation: Float64 and Boolean variables, `time` as the
     independent variable, no event mode, variable communication steps, FMU state, and (if
-    directional_derivatives) directional and adjoint derivatives."""
+    directional_derivatives) directional and adjoint derivatives; with model_exchange also Model
+    Exchange."""
     refs = fmi3_value_references(variables)
     root = ET.Element("fmiModelDescription", {
         "fmiVersion": "3.0", "modelName": model_name, "instantiationToken": guid, "description": description,
         "generationTool": f"opfmu {__version__}", "variableNamingConvention": "flat"})
+    if model_exchange:  # the schema orders ModelExchange before CoSimulation
+        ET.SubElement(root, "ModelExchange", {
+            "modelIdentifier": model_name, "needsCompletedIntegratorStep": "true", "canGetAndSetFMUState": "true",
+            "canSerializeFMUState": "true"})
     flags = "true" if directional_derivatives else "false"
     ET.SubElement(root, "CoSimulation", {
         "modelIdentifier": model_name, "canGetAndSetFMUState": "true", "canSerializeFMUState": "true",
@@ -115,9 +129,14 @@ def _fmi3_document(model_name: str, guid: str, variables: list[Variable], descri
             attrs.update(_bounds(v))
         if v.start is not None:
             attrs["start"] = repr(float(v.start)) if v.kind == "Real" else ("true" if v.start else "false")
+        if v.derivative_of is not None:
+            attrs["derivative"] = str(refs[v.derivative_of])
         ET.SubElement(mv, "Float64" if v.kind == "Real" else v.kind, attrs)
     structure = ET.SubElement(root, "ModelStructure")
-    _structure(structure, variables, refs, "Output", "InitialUnknown", None, "valueReference")
+    _structure(structure, variables, refs, "Output", "InitialUnknown", None, "valueReference", model_exchange)
+    if model_exchange:
+        for v in _indicators(variables):
+            ET.SubElement(structure, "EventIndicator", {"valueReference": str(refs[v.name])})
     if isinstance(variables, VariableTable):
         ET.SubElement(ET.SubElement(root, "Annotations"), "Annotation", {"type": FMI3_ANNOTATION_TYPE}).append(
             variables.ports.element())
@@ -156,20 +175,34 @@ def _units_categories_experiment(root, variables: list[Variable], stop_time: flo
     ET.SubElement(root, "DefaultExperiment", {"startTime": "0", "stopTime": repr(stop_time), "stepSize": repr(step)})
 
 
+def _indicators(variables: list[Variable]) -> list[Variable]:
+    """The event indicators of a table with Model Exchange's variables (variables.exchange_variables)."""
+    return [v for v in variables if v.causality == "local" and v.derivative_of is None]
+
+
 def _structure(structure, variables: list[Variable], key: dict, outputs_tag: str, initial_tag: str, item_tag,
-               attribute: str) -> None:
-    """ModelStructure: each output with its direct dependencies on inputs, then each output and
-    calculated parameter as an initial unknown (depending on those inputs and every parameter). FMI 2.0 groups the items
-    (<Outputs><Unknown index=...>), FMI 3.0 lists them (<Output valueReference=...>); `key` gives
-    the number an item and a dependency are named by."""
+               attribute: str, model_exchange: bool = False) -> None:
+    """ModelStructure: each output with its direct dependencies on inputs, with model_exchange each
+    state derivative (depending on the states and inputs: no dependencies attribute), then each
+    output, state derivative and calculated parameter as an initial unknown (an output or calculated
+    parameter depending on those inputs and every parameter). FMI 2.0 groups the items (<Outputs><Unknown index=...>), FMI 3.0 lists them
+    (<Output valueReference=...>); `key` gives the number an item and a dependency are named by."""
     outputs = [v for v in variables if v.causality == "output"]
+    derivatives = [v for v in variables if v.derivative_of is not None] if model_exchange else []
     calculated = [v for v in variables if v.causality == "calculatedParameter"]
     parameters = [str(key[v.name]) for v in variables if v.causality == "parameter"]
-    for tag, extra, unknowns in ((outputs_tag, [], outputs), (initial_tag, parameters, outputs + calculated)):
-        parent = ET.SubElement(structure, tag) if item_tag else structure
-        for v in unknowns:
-            deps = [str(key[n]) for n in v.dependencies] + extra
-            ET.SubElement(parent, item_tag or tag, {attribute: str(key[v.name]), "dependencies": " ".join(deps)})
+    fmi3 = item_tag is None
+    groups = [(outputs_tag, outputs, [])]
+    if derivatives:
+        groups.append(("ContinuousStateDerivative" if fmi3 else "Derivatives", derivatives, None))
+    groups.append((initial_tag, sorted(outputs + derivatives + calculated, key=lambda v: key[v.name]), parameters))
+    for tag, items, extra in groups:
+        parent = structure if fmi3 else ET.SubElement(structure, tag)
+        for v in items:
+            attrs = {attribute: str(key[v.name])}
+            if v.derivative_of is None and extra is not None:
+                attrs["dependencies"] = " ".join([str(key[n]) for n in v.dependencies] + extra)
+            ET.SubElement(parent, item_tag or tag, attrs)
 
 
 def validation_problems(fmu) -> list[str]:

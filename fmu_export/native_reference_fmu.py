@@ -42,7 +42,13 @@ c/variables.c from the exact derivatives of its bus current): its Norton equival
 come and P, Q at the bus, on the system base it is built for (`system_base_mva`, declared in the
 model description's ports).
 
-The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references.
+Model Exchange (docs/fmu.md, "Model Exchange"): the same FMU also offers it (c/fmi2_me.c or
+c/fmi3_me.c over c/model_exchange.c), with the states' derivatives and the switching functions as event
+indicators (variables.exchange_variables), integrated by the importer with the branches locked and
+relocked, the resets applied, at events as the co-simulation step does (c/switching.c, which both share).
+
+The pythonfmu reference FMU (python_reference_fmu.py) has the same variables and value references, less
+Model Exchange's.
 """
 from __future__ import annotations
 
@@ -68,14 +74,17 @@ from .model_description import model_description
 from .python_reference_fmu import machine_params
 from .self_start import config_lines as self_start_config, describe as describe_self_start
 from .self_start import variables as self_start_variables
-from .variables import (REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, fmu_variables, start_inputs, start_state,
-                        vr_header)
+from .variables import (REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, exchange_variables, fmu_variables,
+                        start_inputs, start_state, vr_header)
 
 C_DIR = Path(__file__).parent / "c"
-MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "self_start.c", "linalg.c",
-                 "cosimulation.h", "model.h", "reference_state.h", "dopri5.h", "linalg.h")
-# beside the version's plumbing (binaries.PLUMBING)
-C_FILES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "equations.c", "derivatives.c")
+MODEL_SOURCES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "switching.c", "model_exchange.c",
+                 "self_start.c", "linalg.c", "cosimulation.h", "model.h", "reference_state.h", "dopri5.h",
+                 "switching.h", "model_exchange.h", "linalg.h")
+EXCHANGE_PLUMBING = {2: "fmi2_me.c", 3: "fmi3_me.c"}  # the Model Exchange API of each version (c/)
+# beside the version's plumbing (binaries.PLUMBING) and its Model Exchange API (EXCHANGE_PLUMBING)
+C_FILES = ("cosimulation.c", "variables.c", "reference_model.c", "dopri5.c", "switching.c", "model_exchange.c",
+           "equations.c", "derivatives.c")
 START_C_FILES = ("self_start.c", "linalg.c")  # where the FMU starts itself from the load flow
 RTOL_MIN = 1e-14  # the smallest rtol the FMU accepts (the integrator needs at least 10 machine epsilons)
 SOLVER_STARTS = REFERENCE_STARTS  # defaults of the parameters rtol, atol (variables.py says why)
@@ -91,9 +100,11 @@ def native_reference_variables(component: Component = SM4, params=None):
     params = machine_params(component, params)
     x_start = _start_state(component, params)
     spec = self_start_of(component, params, x_start)
-    return fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, bus_outputs=True,
-                         space=parameter_space(component, params),
-                         self_start=spec and self_start_variables(spec, component))
+    space = parameter_space(component, params)
+    return exchange_variables(fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS,
+                                            bus_outputs=True, space=space,
+                                            self_start=spec and self_start_variables(spec, component)),
+                              component, switching_c_source(component, space)[0])
 
 
 def self_start_of(component: Component, params, x_start, operating_point: dict | None = None):
@@ -160,9 +171,10 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     derivatives = derivatives_source(component, space)
     try:
         spec = self_start_of(component, params, x_start, operating_point)
-        variables = fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS, operating_point,
-                                  bus_outputs=True, base_mva=system_base_mva, space=space,
-                                  self_start=spec and self_start_variables(spec, component))
+        variables = exchange_variables(fmu_variables(component, params, x_start, REFERENCE_EXTRAS, SOLVER_STARTS,
+                                                     operating_point, bus_outputs=True, base_mva=system_base_mva,
+                                                     space=space, self_start=spec and self_start_variables(spec, component)),
+                                       component, n_switching)
     except ValueError as exc:
         raise NativeReferenceError(str(exc)) from None
     generated = {  # the derived parameters are all known once every function was traced
@@ -177,17 +189,18 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
                                           bool(reset), space, spec)
     description = f"{component.description}: native reference, Dormand-Prince 5(4) over each communication step"
     xml = model_description(model_name, guid, variables, description, directional_derivatives=True,
-                            interpolates_inputs=True, fmi_version=version)
+                            interpolates_inputs=True, fmi_version=version, model_exchange=True)
     with tempfile.TemporaryDirectory(prefix="opfmu_native_reference_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
-        for name in (PLUMBING[version], *MODEL_SOURCES):
+        for name in (PLUMBING[version], EXCHANGE_PLUMBING[version], *MODEL_SOURCES):
             shutil.copy(C_DIR / name, src / name)
         for name, text in generated.items():
             (src / name).write_text(text)
         try:
-            sources = C_FILES + (START_C_FILES if spec else ())
-            binaries = compile_binaries(Path(tmp), model_name, [src / f for f in sources], src, chosen, version)
+            sources = (EXCHANGE_PLUMBING[version], *C_FILES, *(START_C_FILES if spec else ()))
+            binaries = compile_binaries(Path(tmp), model_name, [src / f for f in sources], src, chosen, version,
+                                        model_exchange=True)
             checks = cross_check(binaries, variables, guid, version, Path(tmp) / "check", interpolates=version == 2)
             written = write_fmu(out, Path(tmp), xml, model_name, version, {p: binaries[p] for p in chosen},
                                 {"machine.json": (json.dumps(params.to_dict(), indent=2) + "\n").encode()}, src)
@@ -212,6 +225,7 @@ def config_header(model_name: str, guid: str, component: Component, x_start, ope
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",
         f"#define OPFMU_RTOL_MIN {_c_double(RTOL_MIN)} /* the smallest rtol accepted */",
         f"#define OPFMU_N_SWITCHING {int(n_switching)} /* switching functions of the right-hand side */",
+        "#define OPFMU_MODEL_EXCHANGE 1 /* Model Exchange beside co-simulation (model_exchange.h) */",
         *(["#define OPFMU_HAS_RESET 1 /* model_reset: states placed on the non-windup limits they are pushed beyond */"]
           if reset else []),
         *tables,
@@ -240,7 +254,7 @@ def _guid(model_name: str, component: Component, generated: dict, version: int =
                             + (b"" if system_base_mva == SYSTEM_BASE_MVA else repr(float(system_base_mva)).encode()))
     for name in sorted(generated):
         digest.update(name.encode() + b"\0" + generated[name].encode())
-    for name in (PLUMBING[version], *MODEL_SOURCES):
+    for name in (PLUMBING[version], EXCHANGE_PLUMBING[version], *MODEL_SOURCES):
         digest.update(name.encode() + b"\0" + (C_DIR / name).read_bytes())
     h = digest.hexdigest()
     return f"{{{h[:8]}-{h[8:12]}-{h[12:16]}-{h[16:20]}-{h[20:32]}}}"

@@ -162,16 +162,18 @@ FUNCTION = re.compile(r"FMI([23])_Export\s+(fmi[23]\w+)TYPE\s+(fmi[23]\w+)\s*;")
 SECTION = re.compile(r"^(Common Functions|Functions for (?:FMI2 for )?(Model Exchange|Co-Simulation|Scheduled Execution))")
 
 
-def fmi_functions(headers: Path, fmi_version: int) -> list[str]:
+def fmi_functions(headers: Path, fmi_version: int, model_exchange: bool = False) -> list[str]:
     """The functions a co-simulation FMU of that version must export: those fmi2Functions.h or
-    fmi3Functions.h declare outside their Model Exchange (and Scheduled Execution) sections."""
+    fmi3Functions.h declare outside their Model Exchange (and Scheduled Execution) sections; with
+    model_exchange (an FMU that also offers Model Exchange) those of the Model Exchange section too."""
+    kept = ("Common Functions", "Co-Simulation") + (("Model Exchange",) if model_exchange else ())
     names, section = [], "Common Functions"
     for line in (headers / f"fmi{fmi_version}Functions.h").read_text().splitlines():
         heading = SECTION.match(line.strip())
         if heading:
             section = heading.group(2) or heading.group(1)
         declared = FUNCTION.search(line)
-        if declared and declared.group(1) == str(fmi_version) and section in ("Common Functions", "Co-Simulation"):
+        if declared and declared.group(1) == str(fmi_version) and section in kept:
             names.append(declared.group(3))
     if not names:
         raise PlatformError(f"no FMI {fmi_version} function declarations found in {headers}")
@@ -201,11 +203,12 @@ def linkage(binary: Path, p: Platform) -> tuple[set[str], set[str]]:
     return exports, imports
 
 
-def check_linkage(binary: Path, p: Platform, headers: Path, fmi_version: int) -> None:
-    """PlatformError unless the binary exports every FMI function of its version and imports only
-    the platform's C runtime (and on Windows kernel32)."""
+def check_linkage(binary: Path, p: Platform, headers: Path, fmi_version: int, model_exchange: bool = False) -> None:
+    """PlatformError unless the binary exports every FMI function of its version (with
+    model_exchange: its Model Exchange functions too) and imports only the platform's C runtime (and
+    on Windows kernel32)."""
     exports, imports = linkage(binary, p)
-    missing = [f for f in fmi_functions(headers, fmi_version) if f not in exports]
+    missing = [f for f in fmi_functions(headers, fmi_version, model_exchange) if f not in exports]
     if missing:
         raise PlatformError(f"the {p.name} binary does not export {len(missing)} FMI {fmi_version} functions "
                             f"({', '.join(missing[:4])}...)")

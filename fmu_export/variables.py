@@ -39,6 +39,7 @@ class Variable:
     derivative: bool = True   # an output the FMU gives directional derivatives of (where it has dependencies)
     minimum: float | None = None  # a parameter's declared range (None: unbounded)
     maximum: float | None = None
+    derivative_of: str | None = None  # a state derivative's state (exchange_variables), None for another variable
 
 
 class VariableTable(list):
@@ -251,7 +252,7 @@ def fmi3_value_references(variables: list[Variable]) -> dict[str, int]:
 C_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,63}")
 # a calculated parameter is read like an output: nothing may set it
 KIND_TOKENS = {"input": "VAR_INPUT", "parameter": "VAR_PARAMETER", "output": "VAR_OUTPUT",
-               "calculatedParameter": "VAR_OUTPUT"}
+               "calculatedParameter": "VAR_OUTPUT", "local": "VAR_LOCAL"}
 
 
 def vr_header(variables: list[Variable], component: Component | None = None, guard: str = "OPFMU_VARIABLES_H",
@@ -279,6 +280,8 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
         start_names = {"V_lf", "theta_lf", "P_lf", "Q_lf"} if self_start.load_flow else set()
         start_names |= {f"{n}_init" for n in self_start.delivers + self_start.solves}
     for v in variables:
+        if v.causality == "local":  # Model Exchange's (exchange_variables): read by their groups below
+            continue
         if not C_NAME.fullmatch(v.name):
             raise ValueError(f"variable name {v.name!r} is not a C identifier")
         if (v.causality == "parameter" and v.name in params) or v.name in start_names:
@@ -328,5 +331,34 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
             if refs != list(range(refs[0], refs[0] + len(refs))):
                 raise ValueError(f"the start's {group.lower()} value references of {component.name} are not contiguous")
             lines.append(f"#define VR_FIRST_{group} {refs[0]}u")
+    derivatives = [v.vr for v in reals if v.derivative_of is not None]
+    indicators = [v.vr for v in reals if v.causality == "local" and v.derivative_of is None]
+    if derivatives or indicators:
+        for group, refs in (("DERIVATIVE", derivatives), ("INDICATOR", indicators)):
+            refs = refs or [0]
+            if refs != list(range(refs[0], refs[0] + len(refs))):
+                raise ValueError(f"the {group.lower()} value references are not contiguous")
+            lines.append(f"#define VR_FIRST_{group} {refs[0]}u")
     lines += ["#endif", ""]
     return "\n".join(lines)
+
+
+def exchange_variables(variables: VariableTable, component: Component, n_switching: int) -> VariableTable:
+    """`variables` (a native reference FMU's table) with what Model Exchange adds after its last Real:
+    each state's derivative `der(<state>)` (local, continuous; the model description's `derivative`
+    attribute names the state), then the event indicators `event_indicator_<k>`, the right-hand
+    side's n_switching switching functions g_k = a - b of its conditions a op b (local; FMI 3.0
+    declares them in ModelStructure). The Booleans' value references move up behind them."""
+    units = {q.name: q.unit for q in component.states}
+    added = [Variable(f"der({name})", -1, "local", f"time derivative of {name} on the branches locked at the last "
+                      "event", f"{units[name]}/s" if units[name] not in ("", "-", "1") else "1/s",
+                      derivative_of=name)
+             for name in component.state_names]
+    added += [Variable(f"event_indicator_{k}", -1, "local", f"switching function {k} of the right-hand side: a - b "
+                       "of its condition a op b, whose sign change is an event") for k in range(n_switching)]
+    reals = [v for v in variables if v.kind == "Real"]
+    booleans = [v for v in variables if v.kind != "Real"]
+    added = [replace(v, vr=len(reals) + i) for i, v in enumerate(added)]
+    n_real = len(reals) + len(added)
+    booleans = [replace(v, vr=n_real + i) for i, v in enumerate(booleans)]
+    return VariableTable(reals + added + booleans, variables.ports)

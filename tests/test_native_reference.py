@@ -94,10 +94,12 @@ def test_variables_and_value_references_are_the_reference_fmus(unzipped):
     md = unzipped[1]
     got = [(v.name, v.valueReference, v.causality) for v in md.modelVariables]
     python = [(v.name, v.vr, v.causality) for v in reference_variables(SM4, DEFAULT)]
-    assert got[:len(python)] == python  # the pythonfmu reference's table, the bus port's outputs, the start from
-    # the load flow, the parameters
+    # the pythonfmu reference's table, the bus port's outputs, the start from the load flow, the
+    # parameters, Model Exchange's state derivatives (SM4 has no switching functions: no event indicators)
+    assert got[:len(python)] == python
     start = ["V_lf", "theta_lf", "P_lf", "Q_lf", "Pm_init", "Efd_init"]
-    assert [name for name, _, _ in got[len(python):]] == [name for name, _ in BUS_OUTPUTS] + start + list(DEFAULT.to_dict())
+    assert [name for name, _, _ in got[len(python):]] == [name for name, _ in BUS_OUTPUTS] + start \
+        + list(DEFAULT.to_dict()) + [f"der({name})" for name in SM4.state_names]
     assert got == [(v.name, v.vr, v.causality) for v in native_reference_variables(SM4, DEFAULT)]
     starts = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}
     assert starts["rtol"] == SOLVER_STARTS["rtol"] <= 1e-8 and starts["atol"] == SOLVER_STARTS["atol"] <= 1e-10

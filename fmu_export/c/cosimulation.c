@@ -10,6 +10,9 @@
 #include <string.h>
 
 #include "cosimulation.h"
+#ifdef OPFMU_MODEL_EXCHANGE
+#include "switching.h"
+#endif
 #include "variables.h"
 
 void format_message(char *message, size_t size, const char *format, va_list args)
@@ -148,13 +151,16 @@ Status cs_exit_initialization(Instance *inst, const char *function)
     }
     Status status = model_status(inst, model_initialize(&inst->model, inst->start_time, message, sizeof message),
                                  message);
-    inst->state = status == STATUS_ERROR ? ST_ERROR : ST_STEP;
+#ifdef OPFMU_MODEL_EXCHANGE
+    if (status != STATUS_ERROR) initial_lock(&inst->model); /* the branches at the initial state and inputs */
+#endif
+    inst->state = status == STATUS_ERROR ? ST_ERROR : inst->model_exchange ? ST_EVENT : ST_STEP;
     return status;
 }
 
 Status cs_terminate(Instance *inst, const char *function)
 {
-    if (not_allowed(inst, function, ST_STEP | ST_ERROR)) return STATUS_ERROR;
+    if (not_allowed(inst, function, ST_RUNNING | ST_ERROR)) return STATUS_ERROR;
     inst->state = ST_TERMINATED;
     return STATUS_OK;
 }
@@ -184,11 +190,11 @@ Status cs_set_real(Instance *inst, const char *function, unsigned int vr, double
 {
     char message[512], reason[400];
     int kind = model_real_kind(vr);
-    if (kind == VAR_OUTPUT || kind < 0) {
+    if (kind == VAR_OUTPUT || kind == VAR_LOCAL || kind < 0) {
         snprintf(message, sizeof message, "%s: value reference %u is not an input or parameter", function, vr);
         return fail(inst, STATUS_ERROR, "%s", message);
     }
-    if (kind == VAR_PARAMETER && inst->state == ST_STEP) {
+    if (kind == VAR_PARAMETER && (inst->state & ST_RUNNING)) {
         snprintf(message, sizeof message, "%s: parameter %u is fixed after initialization", function, vr);
         return fail(inst, STATUS_ERROR, "%s", message);
     }
@@ -202,6 +208,11 @@ Status cs_set_real(Instance *inst, const char *function, unsigned int vr, double
 Status cs_set_input_derivative(Instance *inst, const char *function, unsigned int vr, int order, double value)
 {
     char message[512], reason[400];
+    if (inst->model_exchange) {
+        snprintf(message, sizeof message, "%s: input derivatives are for co-simulation (under Model Exchange the "
+                 "importer sets the inputs at each time)", function);
+        return fail(inst, STATUS_ERROR, "%s", message);
+    }
     if (model_real_kind(vr) != VAR_INPUT || !IN_GROUP(vr, VR_FIRST_INPUT, OPFMU_N_INPUTS)) {
         snprintf(message, sizeof message, "%s: value reference %u is not an input", function, vr);
         return fail(inst, STATUS_ERROR, "%s", message);
@@ -311,8 +322,15 @@ static int bad_snapshot(const Instance *inst, const Snapshot *snap, char *why, s
         snprintf(why, size, "corrupt or foreign state (the state is of another FMU: its GUID is not %s)", OPFMU_GUID);
         return 1;
     }
-    if (s != ST_INSTANTIATED && s != ST_INIT && s != ST_STEP && s != ST_TERMINATED && s != ST_ERROR) {
+    if (s != ST_INSTANTIATED && s != ST_INIT && s != ST_STEP && s != ST_TERMINATED && s != ST_ERROR &&
+        s != ST_EVENT && s != ST_CONTINUOUS) {
         snprintf(why, size, "corrupt state: machine state %d is none of the FMU's", (int)s);
+        return 1;
+    }
+    if (s & (inst->model_exchange ? ST_STEP : ST_EVENT | ST_CONTINUOUS)) {
+        snprintf(why, size, "the state is of an instance for %s, this one is for %s",
+                 inst->model_exchange ? "co-simulation" : "Model Exchange",
+                 inst->model_exchange ? "Model Exchange" : "co-simulation");
         return 1;
     }
     char reason[400] = "";

@@ -15,9 +15,14 @@
 /* the status codes of FMI 2.0 and 3.0 (fmi2Status and fmi3Status have these values) */
 typedef enum { STATUS_OK = 0, STATUS_WARNING = 1, STATUS_DISCARD = 2, STATUS_ERROR = 3 } Status;
 
-typedef enum { ST_INSTANTIATED = 1, ST_INIT = 2, ST_STEP = 4, ST_TERMINATED = 8, ST_ERROR = 16 } MachineState;
-#define ST_ANY (ST_INSTANTIATED | ST_INIT | ST_STEP | ST_TERMINATED | ST_ERROR)
-#define ST_INITIALIZED (ST_STEP | ST_TERMINATED | ST_ERROR)
+/* ST_STEP: co-simulation's step mode; ST_EVENT, ST_CONTINUOUS: Model Exchange's event and
+   continuous-time modes (model_exchange.h), after initialisation */
+typedef enum {
+    ST_INSTANTIATED = 1, ST_INIT = 2, ST_STEP = 4, ST_TERMINATED = 8, ST_ERROR = 16, ST_EVENT = 32, ST_CONTINUOUS = 64
+} MachineState;
+#define ST_RUNNING (ST_STEP | ST_EVENT | ST_CONTINUOUS)
+#define ST_ANY (ST_INSTANTIATED | ST_INIT | ST_RUNNING | ST_TERMINATED | ST_ERROR)
+#define ST_INITIALIZED (ST_RUNNING | ST_TERMINATED | ST_ERROR)
 
 typedef struct Instance Instance;
 
@@ -42,6 +47,7 @@ struct Instance {
     unsigned int snapshot_magic;
     int log_warnings, log_errors, log_all;
     MachineState state;
+    int model_exchange;     /* instantiated for Model Exchange (model_exchange.h), not co-simulation */
     double start_time;      /* [s] */
     Snapshot **snapshots;   /* the FMU states this instance handed out and has not freed */
     size_t n_snapshots, snapshot_capacity;
@@ -64,6 +70,11 @@ OPFMU_INTERNAL Instance *instance_new(const char *name, unsigned int snapshot_ma
                                       void *environment, void (*logger)(void), int logging_on);
 /* frees the instance and every FMU state it handed out that was not freed */
 OPFMU_INTERNAL void instance_free(Instance *inst);
+/* FMI 3.0 (fmi3_cs.c): a new instance for either interface, after the checks both share (a name, the
+   instantiation token); NULL (logged through the importer's fmi3LogMessageCallback `logger`, named
+   `function`) when refused or out of memory */
+OPFMU_INTERNAL Instance *fmi3_new_instance(const char *function, const char *name, const char *token, int logging_on,
+                                           void *environment, void (*logger)(void));
 
 OPFMU_INTERNAL Status cs_set_debug_logging(Instance *inst, const char *function, int on, size_t n,
                                            const char *const categories[]);

@@ -1,6 +1,8 @@
 /* The FMI 2.0 API of both native FMUs over the shared plumbing (cosimulation.c): its types, how
-   its arguments map onto the shared functions, and what FMI 2.0 refuses on its own (model exchange,
-   asynchronous status, output derivatives, variable types the FMU does not have). Model behaviour
+   its arguments map onto the shared functions, and what FMI 2.0 refuses on its own (asynchronous
+   status, output derivatives, variable types the FMU does not have; model exchange, except in an FMU
+   built with OPFMU_MODEL_EXCHANGE, the native reference, whose Model Exchange calls are in
+   fmi2_me.c). Model behaviour
    lives behind model.h. Every misuse returns fmi2Error (or fmi2Discard) with a reason through the
    importer's logger; nothing aborts. */
 #include <stdarg.h>
@@ -48,14 +50,21 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     (void)visible;
     if (!functions || !functions->logger) return NULL;
     if (!instanceName || !*instanceName) return refuse(functions, instanceName, "fmi2Instantiate: missing instance name");
+#ifdef OPFMU_MODEL_EXCHANGE
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange)
+        return refuse(functions, instanceName, "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange nor "
+                      "fmi2CoSimulation", (int)fmuType);
+#else
     if (fmuType != fmi2CoSimulation)
         return refuse(functions, instanceName, "fmi2Instantiate: %s supports co-simulation only", OPFMU_MODEL_IDENTIFIER);
+#endif
     if (!fmuGUID || strcmp(fmuGUID, OPFMU_GUID))
         return refuse(functions, instanceName, "fmi2Instantiate: GUID %.60s does not match this binary (%s)",
                       fmuGUID ? fmuGUID : "(null)", OPFMU_GUID);
     Instance *inst = instance_new(instanceName, SNAPSHOT_MAGIC, emit, functions->componentEnvironment,
                                   (void (*)(void))functions->logger, loggingOn);
     if (!inst) return refuse(functions, instanceName, "fmi2Instantiate: out of memory");
+    inst->model_exchange = fmuType == fmi2ModelExchange; /* its calls: fmi2_me.c */
     return inst;
 }
 
@@ -91,7 +100,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[])
 {
     Instance *inst = (Instance *)c;
-    if (not_allowed(inst, "fmi2SetReal", ST_INSTANTIATED | ST_INIT | ST_STEP)) return fmi2Error;
+    if (not_allowed(inst, "fmi2SetReal", ST_INSTANTIATED | ST_INIT | ST_RUNNING)) return fmi2Error;
     if (nvr > 0 && (!vr || !value)) return (fmi2Status)fail(inst, STATUS_ERROR, "%s", "fmi2SetReal: NULL array");
     for (size_t i = 0; i < nvr; ++i)
         if (cs_set_real(inst, "fmi2SetReal", vr[i], value[i]) != STATUS_OK) return fmi2Error;

@@ -2,9 +2,11 @@
    fmi2_cs.c: its types, how its arguments map onto the shared functions (value references are
    unique across types, the model's in either version: the Booleans' follow the last Real's, and
    FMI3_VR_TIME is the independent variable `time`), and what FMI
-   3.0 refuses on its own: Model Exchange, Scheduled Execution, clocks, event mode (initialization
-   goes straight to step mode) and the variable types the FMU does not have. Every misuse returns
-   fmi3Error with a reason through the importer's logger; nothing aborts. */
+   3.0 refuses on its own: Scheduled Execution, clocks, event mode in co-simulation (initialization
+   goes straight to step mode), discrete states and the variable types the FMU does not have; Model
+   Exchange, except in an FMU built with OPFMU_MODEL_EXCHANGE, the native reference, whose Model
+   Exchange calls (and event mode) are in fmi3_me.c. Every misuse returns fmi3Error with a reason
+   through the importer's logger; nothing aborts. */
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
@@ -59,6 +61,7 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, siz
                                             categories);
 }
 
+#ifndef OPFMU_MODEL_EXCHANGE
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
@@ -68,6 +71,7 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
     return refuse(instanceEnvironment, logMessage, "fmi3InstantiateModelExchange: %s supports co-simulation only",
                   OPFMU_MODEL_IDENTIFIER);
 }
+#endif
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
                                                fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
@@ -96,20 +100,26 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     (void)earlyReturnAllowed; /* steps always run to their end */
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate; /* never called: there are no intermediate variables */
-    if (!instanceName || !*instanceName)
-        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: missing instance name");
-    if (!instantiationToken || strcmp(instantiationToken, OPFMU_GUID))
-        return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: instantiation token %s does not "
-                      "match this binary (%s)", instantiationToken ? instantiationToken : "(null)", OPFMU_GUID);
     if (eventModeUsed)
         return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %s has no event mode "
                       "(hasEventMode=\"false\"); instantiate it with eventModeUsed = false", OPFMU_MODEL_IDENTIFIER);
     if (nRequiredIntermediateVariables > 0)
         return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: %s has no intermediate variables "
                       "(no intermediate update); requiredIntermediateVariables must be empty", OPFMU_MODEL_IDENTIFIER);
-    Instance *inst = instance_new(instanceName, SNAPSHOT_MAGIC, emit, instanceEnvironment, (void (*)(void))logMessage,
-                                  loggingOn);
-    if (!inst) return refuse(instanceEnvironment, logMessage, "fmi3InstantiateCoSimulation: out of memory");
+    return fmi3_new_instance("fmi3InstantiateCoSimulation", instanceName, instantiationToken, loggingOn,
+                             instanceEnvironment, (void (*)(void))logMessage);
+}
+
+Instance *fmi3_new_instance(const char *function, const char *name, const char *token, int logging_on,
+                            void *environment, void (*logger)(void))
+{
+    fmi3LogMessageCallback log = (fmi3LogMessageCallback)logger;
+    if (!name || !*name) return refuse(environment, log, "%s: missing instance name", function);
+    if (!token || strcmp(token, OPFMU_GUID))
+        return refuse(environment, log, "%s: instantiation token %s does not match this binary (%s)", function,
+                      token ? token : "(null)", OPFMU_GUID);
+    Instance *inst = instance_new(name, SNAPSHOT_MAGIC, emit, environment, logger, logging_on);
+    if (!inst) return refuse(environment, log, "%s: out of memory", function);
     return inst;
 }
 
@@ -129,8 +139,10 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 { return (fmi3Status)cs_exit_initialization((Instance *)instance, "fmi3ExitInitializationMode"); }
 
+#ifndef OPFMU_MODEL_EXCHANGE
 fmi3Status fmi3EnterEventMode(fmi3Instance instance)
 { return unsupported(instance, "fmi3EnterEventMode: the FMU has no event mode"); }
+#endif
 
 fmi3Status fmi3Terminate(fmi3Instance instance) { return (fmi3Status)cs_terminate((Instance *)instance, "fmi3Terminate"); }
 
@@ -177,7 +189,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
                           const fmi3Float64 values[], size_t nValues)
 {
     Instance *inst = (Instance *)instance;
-    if (not_allowed(inst, "fmi3SetFloat64", ST_INSTANTIATED | ST_INIT | ST_STEP)) return fmi3Error;
+    if (not_allowed(inst, "fmi3SetFloat64", ST_INSTANTIATED | ST_INIT | ST_RUNNING)) return fmi3Error;
     if (bad_arrays(inst, "fmi3SetFloat64", vr, nvr, values, nValues)) return fmi3Error;
     for (size_t i = 0; i < nvr; ++i) {
         if (vr[i] == FMI3_VR_TIME)
@@ -468,7 +480,8 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance instance, const fmi3ValueReference 
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance)
-{ return unsupported(instance, "fmi3EvaluateDiscreteStates: the FMU has no event mode"); }
+{ return unsupported(instance, "fmi3EvaluateDiscreteStates: the FMU has no discrete states"); }
+#ifndef OPFMU_MODEL_EXCHANGE /* fmi3_me.c has these */
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
                                     fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
@@ -525,6 +538,7 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t *nConti
     (void)nContinuousStates;
     return unsupported(instance, "fmi3GetNumberOfContinuousStates: the FMU supports co-simulation only");
 }
+#endif
 
 fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime)

@@ -43,8 +43,9 @@
 
 typedef enum { MODEL_OK = 0, MODEL_WARNING = 1, MODEL_ERROR = 3 } ModelStatus;
 
-/* Variable kinds the plumbing checks writes against. */
-typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT } VarKind;
+/* Variable kinds the plumbing checks writes against (VAR_LOCAL: read only, neither an output nor
+   settable: the native reference FMU's state derivatives and event indicators) */
+typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT, VAR_LOCAL } VarKind;
 
 /* value reference vr lies in the group of n starting at first */
 #define IN_GROUP(vr, first, n) ((unsigned int)((vr) - (first)) < (unsigned int)(n))

@@ -11,8 +11,9 @@
    with each condition's branch locked (model_derivatives_locked), so the right-hand side is smooth
    within each solver step, and Dormand-Prince locates the instant a condition's truth changes in a way
    that changes the right-hand side, ends its step there and restarts with the branches that then
-   hold (dopri5_events). The branches are locked afresh from the state and inputs at the start of
-   each communication step, so they are no part of the FMU state.
+   hold (dopri5_events; switching.c). The branches are locked afresh from the state and inputs at the
+   start of each communication step; the FMU state keeps those the last step ended on (ModelState.mode),
+   which Model Exchange (model_exchange.c) integrates with between events.
 
    A component with a reset (OPFMU_HAS_RESET: the generated model_reset, from Component.reset: a
    state at or beyond a non-windup limit while its unlimited rate pushes outward is placed on the
@@ -29,28 +30,12 @@
 
 #include "dopri5.h"
 #include "model.h"
+#include "model_exchange.h"
+#include "switching.h"
 #include "variables.h"
 
 #define N_X OPFMU_N_STATES
 #define N_U OPFMU_N_INPUTS
-#define N_G OPFMU_N_SWITCHING
-
-#if N_G > 0
-/* g[k] = a - b and mode[k] = (a op b) of the right-hand side's condition k (equations.c) */
-OPFMU_INTERNAL void model_switching(const double x[N_X], const double u[N_U], const double p[], double g[N_G],
-                                    int mode[N_G]);
-/* dx/dt with condition k's branch locked to mode[k] (equations.c) */
-OPFMU_INTERNAL void model_derivatives_locked(const double x[N_X], const double u[N_U], const double p[],
-                                             const int mode[N_G], double dx[N_X]);
-#endif
-
-#ifdef OPFMU_HAS_RESET
-#if N_G == 0
-#error "a component with a reset has switching functions (its non-windup limits)"
-#endif
-/* the states after the component's limit resets at inputs u (equations.c) */
-OPFMU_INTERNAL void model_reset(const double x[N_X], const double u[N_U], const double p[], double out[N_X]);
-#endif
 
 void model_defaults(ModelState *m)
 {
@@ -105,29 +90,19 @@ static void rhs(void *ctx, double t, const double *x, double *dx)
 static int crossed(void *ctx, double t, const double *x)
 {
     const StepInputs *in = (const StepInputs *)ctx;
-    double u[N_U], g[N_G], locked[N_X], now[N_X];
-    int mode[N_G];
+    double u[N_U];
     inputs_at(in, t, u);
-    model_switching(x, u, in->p, g, mode);
-    if (memcmp(mode, in->mode, sizeof mode) == 0) return 0;
-    model_derivatives_locked(x, u, in->p, in->mode, locked);
-    model_derivatives_locked(x, u, in->p, mode, now);
-    return memcmp(locked, now, sizeof now) != 0;
+    return branches_changed(x, u, in->p, in->mode);
 }
 
+/* x is dopri5_events' own working state (the step's start, the located switching), from which it
+   integrates on after this call: the reset places it on its limits before the branches are chosen */
 static void lock(void *ctx, double t, const double *x)
 {
     StepInputs *in = (StepInputs *)ctx;
-    double u[N_U], g[N_G];
+    double u[N_U];
     inputs_at(in, t, u);
-#ifdef OPFMU_HAS_RESET
-    /* x is dopri5_events' own working state (the step's start, the located switching), from which it
-       integrates on after this call: the reset places it on its limits before the branches are chosen */
-    double placed[N_X];
-    model_reset(x, u, in->p, placed);
-    memcpy((double *)x, placed, sizeof placed);
-#endif
-    model_switching(x, u, in->p, g, in->mode);
+    relock((double *)x, u, in->p, in->mode);
 }
 #endif
 
@@ -154,6 +129,9 @@ static ModelStatus integrate(ModelState *m, double stop, char *message, size_t s
     }
     memcpy(m->x, x, sizeof x);
     m->h_guess = h_guess;
+#if N_G > 0
+    memcpy(m->mode, inputs.mode, sizeof inputs.mode); /* the branches the step ended on */
+#endif
     return MODEL_OK;
 }
 #endif
@@ -177,7 +155,7 @@ ModelStatus model_get_extra(const ModelState *m, unsigned int vr, double *value)
     switch (vr) {
     case VR_RTOL: *value = m->rtol; return MODEL_OK;
     case VR_ATOL: *value = m->atol; return MODEL_OK;
-    default: return MODEL_ERROR;
+    default: return exchange_get_real(m, vr, value);
     }
 }
 
@@ -226,5 +204,5 @@ ModelStatus model_check_state(const ModelState *m, char *why, size_t size)
         snprintf(why, size, "the solver's next step size %g s is not finite and >= 0 (0: none yet)", m->h_guess);
         return MODEL_ERROR;
     }
-    return MODEL_OK;
+    return check_locks(m, why, size);
 }

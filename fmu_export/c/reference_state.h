@@ -1,7 +1,11 @@
 /* The native reference model's state (model.h includes it as OPFMU_STATE_HEADER): the component's
-   ODE integrated by Dormand-Prince 5(4) over each communication step (reference_model.c). */
+   ODE integrated by Dormand-Prince 5(4) over each communication step (reference_model.c), or by the
+   importer's integrator under Model Exchange (model_exchange.c). */
 #ifndef OPFMU_REFERENCE_STATE_H
 #define OPFMU_REFERENCE_STATE_H
+
+/* the declared size of an array of the switching functions: at least 1, as C requires */
+#define OPFMU_G_SIZE (OPFMU_N_SWITCHING > 0 ? OPFMU_N_SWITCHING : 1)
 
 typedef struct {
     double time;                    /* current communication point [s] */
@@ -21,6 +25,9 @@ typedef struct {
     int self_started;               /* 1 where x holds the solved start (not x_start) */
     int bus_voltage_set;            /* 1 once the importer set a bus voltage input: it keeps its value */
 #endif
+    int mode[OPFMU_G_SIZE];         /* the branches the right-hand side is locked to (switching.h) */
+    double u_locked[OPFMU_N_INPUTS]; /* Model Exchange: the inputs at the last lock (model_exchange.c) */
+    int lock_due;                   /* Model Exchange: the next event update is a full lock */
 } ModelState;
 
 #endif

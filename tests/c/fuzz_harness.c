@@ -1,7 +1,8 @@
 /* An FMI 2.0 co-simulation importer that is not fmpy: loads a binary and makes CALLS calls of its
    FMI functions in a random order with random arguments (fixed SEED): NaN, inf and huge values, h <= 0,
    the wrong communication point, calls in the wrong FMI state, NULL arrays, unknown value references,
-   corrupt serialized states, up to four instances at a time, instances freed and made again. Every call
+   corrupt serialized states, up to four instances at a time, instances freed and made again; where the
+   binary offers Model Exchange, its calls too (on instances of either type, arrays of any length). Every call
    must return a valid fmi2Status and every logged message must be a short string under a declared
    category; the importer itself never passes a pointer that is not its own (as FMI requires).
    usage: fuzz_harness BINARY GUID CALLS SEED N_REALS
@@ -51,8 +52,14 @@ typedef struct {
     X(fmi2SerializedFMUstateSize) X(fmi2SerializeFMUstate) X(fmi2DeSerializeFMUstate) X(fmi2GetTypesPlatform)     \
     X(fmi2GetVersion)
 
+#define ME_FUNCTIONS(X)                                                                                          \
+    X(fmi2SetTime) X(fmi2SetContinuousStates) X(fmi2GetContinuousStates) X(fmi2GetDerivatives)                    \
+    X(fmi2GetEventIndicators) X(fmi2GetNominalsOfContinuousStates) X(fmi2EnterEventMode) X(fmi2NewDiscreteStates) \
+    X(fmi2EnterContinuousTimeMode) X(fmi2CompletedIntegratorStep)
+
 #define DECLARE(name) name##TYPE *name;
 static struct { FUNCTIONS(DECLARE) } F; /* the binary's functions */
+static struct { ME_FUNCTIONS(DECLARE) } M; /* its Model Exchange functions, where it has them (else NULL) */
 
 static double random_value(void)
 {
@@ -173,7 +180,7 @@ static void call_one(Slot *slots, const char *guid, int n_reals)
         return;
     }
     const fmi2ValueReference *v = null_arrays ? NULL : vr;
-    switch (below(30)) {
+    switch (below(32)) {
     case 0:
         if (c) free_slot(s);
         break;
@@ -268,6 +275,25 @@ static void call_one(Slot *slots, const char *guid, int n_reals)
         count(F.fmi2FreeFMUstate(c, below(8) ? state : NULL));
         break;
     }
+    case 27: case 28: { /* Model Exchange, where the binary offers it */
+        if (!M.fmi2GetDerivatives) break;
+        fmi2Real *a = null_arrays ? NULL : values;
+        fmi2EventInfo info;
+        fmi2Boolean enter, terminate;
+        switch (below(10)) {
+        case 0: count(M.fmi2SetTime(c, below(4) ? now + uniform() : random_value())); break;
+        case 1: count(M.fmi2SetContinuousStates(c, a, n)); break;
+        case 2: count(M.fmi2GetContinuousStates(c, a, n)); break;
+        case 3: count(M.fmi2GetDerivatives(c, a, n)); break;
+        case 4: count(M.fmi2GetEventIndicators(c, a, n)); break;
+        case 5: count(M.fmi2GetNominalsOfContinuousStates(c, a, n)); break;
+        case 6: count(M.fmi2EnterEventMode(c)); break;
+        case 7: count(M.fmi2NewDiscreteStates(c, null_arrays ? NULL : &info)); break;
+        case 8: count(M.fmi2EnterContinuousTimeMode(c)); break;
+        default: count(M.fmi2CompletedIntegratorStep(c, fmi2True, null_arrays ? NULL : &enter, &terminate)); break;
+        }
+        break;
+    }
     default: { /* serialize, maybe corrupt, deserialize */
         fmi2FMUstate state = s->states[below(N_STATES_KEPT)];
         size_t size = 0;
@@ -288,6 +314,7 @@ static void call_one(Slot *slots, const char *guid, int n_reals)
 }
 
 #define LOAD(name) F.name = (name##TYPE *)dlsym(lib, #name); if (!F.name) { fprintf(stderr, "no %s\n", #name); return 2; }
+#define LOAD_OPTIONAL(name) M.name = (name##TYPE *)dlsym(lib, #name);
 
 int main(int argc, char **argv)
 {
@@ -302,6 +329,7 @@ int main(int argc, char **argv)
         return 2;
     }
     FUNCTIONS(LOAD)
+    ME_FUNCTIONS(LOAD_OPTIONAL)
     Slot slots[N_SLOTS];
     memset(slots, 0, sizeof slots);
     for (long k = 0; k < calls; ++k) call_one(slots, guid, n_reals);
