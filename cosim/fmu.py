@@ -25,6 +25,9 @@ Two ways to drive it:
 
 Its capabilities come from the model description: `interpolates` (FMI 2.0 canInterpolateInputs:
 fmi2SetRealInputDerivatives; FMI 3.0 co-simulation has no input derivatives, so never),
+`input_order` (the highest order of input derivatives it takes: 2 where an opfmu FMU's own
+sources say so, OPFMU_INPUT_ORDER in its config.h, as FMI 2.0 declares no such capability; 1 for
+another that interpolates; 0 for none),
 `rolls_back` (can get and set its FMU state), `directional` (provides directional derivatives).
 Its `ports` (reference_models.ports.Ports) are the <Ports> element of the model description;
 for an FMU opfmu built without one, those of the component its model description names; None
@@ -56,8 +59,8 @@ def _array(kind, values):
 
 def _needed(member: str) -> bool:
     """What an instance needs of an FMU archive: all but its sources and documentation (the binaries,
-    the model description, the resources)."""
-    return not member.startswith(("sources/", "documentation/"))
+    the model description, the resources), its sources' config.h aside (`input_order`)."""
+    return member == "sources/config.h" or not member.startswith(("sources/", "documentation/"))
 
 
 def _one_line(exc: BaseException) -> str:
@@ -178,6 +181,7 @@ class FMU:
             self.interpolates = False
             self.rolls_back = _true(attrs.get("canGetAndSetFMUState"))
             self.directional = _true(attrs.get("providesDirectionalDerivatives"))
+        self.input_order = _input_order(self.directory) if self.interpolates else 0
         self.variables = {v.name: v for v in md.modelVariables}
         self.vr = {n: v.valueReference for n, v in self.variables.items()}
         self.starts = {v.name: float(v.start) for v in md.modelVariables
@@ -344,7 +348,9 @@ class FMU:
         self._in_vr = _array(VR, [self.vr[n] for n in inputs])
         self._in = (Real * len(inputs))()
         self._order = _array(Int, [1] * len(inputs))
+        self._order2 = _array(Int, [2] * len(inputs))
         self._du = (Real * len(inputs))()
+        self._d2u = (Real * len(inputs))()
         self._out_vr = _array(VR, [self.vr[n] for n in outputs])
         self._out = (Real * len(outputs))()
         self._seed = _array(Real, [1.0])
@@ -366,17 +372,31 @@ class FMU:
         else:
             self._check(self._dll.fmi3SetFloat64(self._c, self._in_vr, n, self._in, n), "fmi3SetFloat64")
 
-    def set_input_derivatives(self, rates) -> None:
-        """fmi2SetRealInputDerivatives (first order) of the bound inputs: their rates over the next step
-        (only where `interpolates`)."""
+    def set_input_derivatives(self, rates, curvatures=None) -> None:
+        """fmi2SetRealInputDerivatives of the bound inputs: their rates over the next step (first
+        order; only where `interpolates`) and, where given and input_order is 2, their second
+        derivatives (order 2)."""
         self._du[:] = rates
+        if curvatures is not None:
+            self._d2u[:] = curvatures
+        self._set_derivatives(curvatures is not None)
+
+    def _set_derivatives(self, second: bool) -> None:
+        """The rates' buffer set as first derivatives and, where `second` and input_order is 2, the
+        curvatures' buffer as second derivatives."""
+        second = second and self.input_order > 1
         fast = self._fast
         if fast is not None:
-            if fast.set_derivatives(*fast.derivative_args) > 1:
+            if fast.set_derivatives(*fast.derivative_args) > 1 or (
+                    second and fast.set_derivatives(*fast.curvature_args) > 1):
                 self._check(2, "fmi2SetRealInputDerivatives")
             return
-        self._check(self._dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, len(self._du), self._order, self._du),
+        n = len(self._du)
+        self._check(self._dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, n, self._order, self._du),
                     "fmi2SetRealInputDerivatives")
+        if second:
+            self._check(self._dll.fmi2SetRealInputDerivatives(self._c, self._in_vr, n, self._order2, self._d2u),
+                        "fmi2SetRealInputDerivatives")
 
     def outputs(self) -> list:
         """The bound outputs now (bind order)."""
@@ -417,12 +437,14 @@ class FMU:
         """The bound outputs' buffer (a ctypes array, bind order): what the last call read."""
         return self._out
 
-    def share(self, inputs, rates, outputs, derivatives) -> None:
-        """The buffers of the bound inputs, their rates, the bound outputs and the directional
-        derivatives moved into `inputs`, `rates`, `outputs`, `derivatives` (float64 numpy arrays of
-        the bound lengths, e.g. views into a master's arrays of all its FMUs, which then sets and
-        reads them in one numpy operation each), their present values kept."""
-        for name, memory in (("_in", inputs), ("_du", rates), ("_out", outputs), ("_dd", derivatives)):
+    def share(self, inputs, rates, outputs, derivatives, curvatures=None) -> None:
+        """The buffers of the bound inputs, their rates, the bound outputs, the directional
+        derivatives and (where given) the inputs' second derivatives moved into `inputs`, `rates`,
+        `outputs`, `derivatives`, `curvatures` (float64 numpy arrays of the bound lengths, e.g. views
+        into a master's arrays of all its FMUs, which then sets and reads them in one numpy
+        operation each), their present values kept."""
+        shared = (("_in", inputs), ("_du", rates), ("_out", outputs), ("_dd", derivatives), ("_d2u", curvatures))
+        for name, memory in ((n, m) for n, m in shared if m is not None):
             buffer = getattr(self, name)
             if memory.shape != (len(buffer),) or memory.dtype.itemsize != ctypes.sizeof(self._Real):
                 raise ValueError(f"{self.name}: {name[1:]} needs {len(buffer)} float64 values, got {memory.shape}")
@@ -430,24 +452,26 @@ class FMU:
             setattr(self, name, (self._Real * len(buffer)).from_buffer(memory))
         self._fast = _Calls(self) if self.version == 2 else None
 
-    def step_inputs(self, t: float, h: float, rates: bool | None = None) -> None:
+    def step_inputs(self, t: float, h: float, rates: bool | None = None, curvatures: bool = False) -> None:
         """A step from t [s] by h [s] with the bound inputs as `inputs_now` holds them and, where
         `rates` (default: where the FMU interpolates), their rates as the rates' buffer holds them
-        (fmi2SetRealInputDerivatives; see share); the bound outputs read into `outputs_now`."""
+        (fmi2SetRealInputDerivatives; see share), and where `curvatures` and input_order is 2 their
+        second derivatives as the curvatures' buffer holds them; the bound outputs read into
+        `outputs_now`."""
         if rates is None:
             rates = self.interpolates
         fast = self._fast
         if fast is None:
             self.set_inputs(self._in[:])
             if rates:
-                self.set_input_derivatives(self._du[:])
+                self._set_derivatives(curvatures)
             self.do_step(t, h)
             self.outputs()
             return
         if fast.set_real(*fast.set_args) > 1:
             self._check(2, "fmi2SetReal")
-        if rates and fast.set_derivatives(*fast.derivative_args) > 1:
-            self._check(2, "fmi2SetRealInputDerivatives")
+        if rates:
+            self._set_derivatives(curvatures)
         fast.t.value, fast.h.value = t, h
         if fast.do_step(*fast.step_args) > 1:
             self._check(2, f"the step at t = {t:.6g} s")
@@ -645,8 +669,19 @@ class _Calls:
         self.step_args = (c, self.t, self.h, ctypes.c_int(1))
         self.set_derivatives = plain("fmi2SetRealInputDerivatives")
         self.derivative_args = (c, fmu._in_vr, n_in, fmu._order, fmu._du)
+        self.curvature_args = (c, fmu._in_vr, n_in, fmu._order2, fmu._d2u)
         self.derivative = plain("fmi2GetDirectionalDerivative")
         one = ctypes.c_size_t(1)
         self.jacobian_args = [(c, fmu._out_vr, n_out, known, one, fmu._seed, fmu._dd) for known in fmu._known]
         self.get_state = plain("fmi2GetFMUstate") if fmu.rolls_back else None
         self.set_state = plain("fmi2SetFMUstate") if fmu.rolls_back else None
+
+
+def _input_order(directory) -> int:
+    """The highest order of input derivatives an FMU that interpolates its inputs takes: 2 where its
+    own sources' config.h defines OPFMU_INPUT_ORDER 2 (an opfmu native reference FMU), else 1."""
+    try:
+        text = (Path(directory) / "sources" / "config.h").read_text(errors="replace")
+    except OSError:
+        return 1
+    return 2 if "#define OPFMU_INPUT_ORDER 2" in text else 1

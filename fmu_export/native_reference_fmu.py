@@ -219,7 +219,7 @@ def config_header(model_name: str, guid: str, component: Component, x_start, ope
     without one is as before); space: the build's ParameterSpace; self_start: the start from the
     load flow it solves (self_start_of), or None."""
     opening, tables = component_config("native reference", model_name, guid, component, "reference_state.h", True,
-                                       x_start, operating_point, space)
+                                       x_start, operating_point, space, input_order=2)
     lines = opening + [
         f"#define OPFMU_RTOL {_c_double(SOLVER_STARTS['rtol'])} /* default of the parameter rtol */",
         f"#define OPFMU_ATOL {_c_double(SOLVER_STARTS['atol'])} /* default of the parameter atol */",

@@ -158,6 +158,23 @@ def test_inputs_are_linear_over_a_step_where_their_derivatives_are_set(unzipped)
     slave.close()
 
 
+def test_inputs_are_quadratic_over_a_step_where_their_second_derivatives_are_set(unzipped):
+    slave = Slave(unzipped)
+    refs = [slave.vr[n] for n in SM4.input_names]
+    u, du, d2u = (0.9, 0.1, 0.75, 1.1), (2.0, -3.0, 0.4, -1.0), (-30.0, 40.0, 8.0, -20.0)
+    slave.fmu.setRealInputDerivatives(refs, [1] * len(refs), list(du))
+    slave.fmu.setRealInputDerivatives(refs, [2] * len(refs), list(d2u))
+    x0 = slave.state()
+    got = slave.step(0.05, *u)
+    expected = solve_ivp(lambda t, y: SM4.derivatives(y.tolist(), [a + b * t + 0.5 * c * t * t
+                                                                  for a, b, c in zip(u, du, d2u)], DEFAULT, math),
+                         (0.0, 0.05), x0, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1]
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-9)
+    ends = [a + 0.05 * (b + 0.5 * c * 0.05) for a, b, c in zip(u, du, d2u)]  # the inputs at the step's end
+    np.testing.assert_allclose(slave.get(*SM4.input_names), ends, rtol=0, atol=1e-15)
+    slave.close()
+
+
 def test_after_a_step_with_input_derivatives_the_inputs_are_those_at_its_end(unzipped):
     slave = Slave(unzipped)
     slave.fmu.setRealInputDerivatives([slave.vr["Vs"]], [1], [-2.0])
@@ -173,7 +190,7 @@ def test_after_a_step_with_input_derivatives_the_inputs_are_those_at_its_end(unz
 
 
 @pytest.mark.parametrize("vr_name, order, value, reason", [
-    ("delta", 1, 1.0, "is not an input"), ("Vs", 2, 1.0, "only first derivatives"),
+    ("delta", 1, 1.0, "is not an input"), ("Vs", 3, 1.0, "derivatives of order 1 and 2 are supported"),
     ("Vs", 1, float("nan"), "not a finite number"), ("rtol", 1, 1.0, "is not an input")])
 def test_bad_input_derivatives_are_refused_with_a_reason(unzipped, vr_name, order, value, reason):
     slave = Slave(unzipped)

@@ -217,12 +217,14 @@ Status cs_set_input_derivative(Instance *inst, const char *function, unsigned in
         snprintf(message, sizeof message, "%s: value reference %u is not an input", function, vr);
         return fail(inst, STATUS_ERROR, "%s", message);
     }
-    if (order != 1) {
-        snprintf(message, sizeof message, "%s: order %d of value reference %u: only first derivatives are supported "
-                 "(inputs linear over a step)", function, order, vr);
+    if (order < 1 || order > OPFMU_INPUT_ORDER) {
+        snprintf(message, sizeof message, "%s: order %d of value reference %u: derivatives of order 1%s are supported "
+                 "(inputs %s over a step)", function, order, vr, OPFMU_INPUT_ORDER > 1 ? " and 2" : " only",
+                 OPFMU_INPUT_ORDER > 1 ? "quadratic at most" : "linear");
         return fail(inst, STATUS_ERROR, "%s", message);
     }
-    if (model_set_input_derivative(&inst->model, vr - VR_FIRST_INPUT, value, reason, sizeof reason) != MODEL_OK) {
+    if (model_set_input_derivative(&inst->model, vr - VR_FIRST_INPUT, order, value, reason, sizeof reason)
+        != MODEL_OK) {
         snprintf(message, sizeof message, "%s: %s", function, reason);
         return fail(inst, STATUS_ERROR, "%s", message);
     }

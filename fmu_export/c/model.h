@@ -105,9 +105,11 @@ OPFMU_INTERNAL ModelStatus component_settle_start(ModelState *m, char *why, size
 /* self_start.c: the start from the load flow, unconditionally */
 OPFMU_INTERNAL ModelStatus self_start_solve(ModelState *m, char *why, size_t size);
 #endif
-/* sets the first time derivative of input c (0-based) for the next steps [unit/s] */
-OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message,
-                                                      size_t size);
+/* sets the time derivative of order `order` (1 [unit/s]; 2 [unit/s^2] where OPFMU_INPUT_ORDER is 2, in
+   the model's d2u) of input c (0-based) for the next steps: over each, u + du tau + d2u tau^2 / 2 with
+   tau the time into the step */
+OPFMU_INTERNAL ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, int order, double value,
+                                                      char *message, size_t size);
 /* MODEL_ERROR (why written) unless the component's fields of m (time, u, du, x, x_start, p) are finite,
    the inputs at or above their lower bounds, as the setters and steps keep them, and the parameters
    pass every rule with their derived ones as model_derive gives them */

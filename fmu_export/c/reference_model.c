@@ -58,19 +58,37 @@ ModelStatus model_initialize(ModelState *m, double start_time, char *message, si
 }
 
 #if N_X > 0
-/* the inputs over a step: u(t) = u0 + du (t - t0); the parameters; the branches the right-hand side
-   is locked to */
+#if N_G > 0
+/* Sliding on a moving limit. A state held on a limit that moves away from it while its rate keeps
+   pushing on it (ESDC2A's VRMAX Vt rising after a fault is cleared) leaves the limit, is driven back
+   onto it, and so on, infinitely often (Zeno): thousands of located switchings in a microsecond,
+   until the step gives up. A condition that changes back within ZENO_GAP [s] of its last change
+   slides: it stays locked to the slower of its two branches (slower_branch: the limiter's hold), its
+   changes are not located, for ZENO_DWELL [s]; then the branches are locked afresh (the reset placing the state on the limit where it is
+   pushed beyond it). The state follows the moving limit sampled every ZENO_DWELL at most (held
+   below a rising ceiling by at most its rise over ZENO_DWELL, never across it), as a fixed step of
+   that size does (the monolithic DAE, reference_models/grid/monolithic.py, the same). */
+#define ZENO_GAP 1e-6
+#define ZENO_DWELL 1e-3
+#endif
+
+/* the inputs over a step: u(t) = u0 + du (t - t0) + d2u (t - t0)^2 / 2; the parameters; the branches
+   the right-hand side is locked to, and what sliding needs: the time of the last lock, the branches
+   before it, the conditions that slide, and until when */
 typedef struct {
-    const double *u0, *du, *p;
+    const double *u0, *du, *d2u, *p;
     double t0;
 #if N_G > 0
     int mode[N_G];
+    double last_lock, slide_until;
+    int locks, before[N_G], sliding[N_G]; /* locks: how many so far (`before` holds branches from the second on) */
 #endif
 } StepInputs;
 
 static void inputs_at(const StepInputs *in, double t, double u[N_U])
 {
-    for (int c = 0; c < N_U; ++c) u[c] = in->u0[c] + in->du[c] * (t - in->t0);
+    const double tau = t - in->t0;
+    for (int c = 0; c < N_U; ++c) u[c] = in->u0[c] + tau * (in->du[c] + 0.5 * in->d2u[c] * tau);
 }
 
 static void rhs(void *ctx, double t, const double *x, double *dx)
@@ -86,32 +104,80 @@ static void rhs(void *ctx, double t, const double *x, double *dx)
 }
 
 #if N_G > 0
-/* the branches that hold at (t, x) differ from the locked ones and give another dx/dt there */
+/* the branches that hold at (t, x) differ from the locked ones, the sliding ones aside, and give
+   another dx/dt there; or a slide has ended (t at or past slide_until) */
 static int crossed(void *ctx, double t, const double *x)
 {
     const StepInputs *in = (const StepInputs *)ctx;
-    double u[N_U];
+    double u[N_U], g[N_G];
+    int now[N_G], probe[N_G];
+    if (t >= in->slide_until) return 1;
     inputs_at(in, t, u);
-    return branches_changed(x, u, in->p, in->mode);
+    model_switching(x, u, in->p, g, now);
+    for (int k = 0; k < N_G; ++k) probe[k] = in->sliding[k] ? now[k] : in->mode[k];
+    return branches_changed(x, u, in->p, probe);
+}
+
+/* of condition k's two branches (the others as in `mode`), the one on which the states change least
+   at (x, u) (the largest rate relative to the state, the smaller): a limiter's hold rather than its
+   free rate, which would carry the state across the limit for the slide's length */
+static int slower_branch(const double *x, const double u[N_U], const double *p, const int mode[N_G], int k)
+{
+    int probe[N_G];
+    double dx[N_X], speed[2];
+    memcpy(probe, mode, sizeof probe);
+    for (int branch = 0; branch < 2; ++branch) {
+        probe[k] = branch;
+        model_derivatives_locked(x, u, p, probe, dx);
+        speed[branch] = 0.0;
+        for (int i = 0; i < N_X; ++i) speed[branch] = fmax(speed[branch], fabs(dx[i]) / fmax(1.0, fabs(x[i])));
+    }
+    return speed[1] < speed[0];
 }
 
 /* x is dopri5_events' own working state (the step's start, the located switching), from which it
-   integrates on after this call: the reset places it on its limits before the branches are chosen */
+   integrates on after this call: the reset places it on its limits before the branches are chosen;
+   a sliding condition keeps its branch until its slide ends, and one that changes back within
+   ZENO_GAP of its last change starts sliding */
 static void lock(void *ctx, double t, const double *x)
 {
     StepInputs *in = (StepInputs *)ctx;
     double u[N_U];
+    int locked[N_G];
+    memcpy(locked, in->mode, sizeof locked);
+    if (t >= in->slide_until) { /* the slide ends: every branch locked afresh */
+        memset(in->sliding, 0, sizeof in->sliding);
+        in->slide_until = INFINITY;
+    }
     inputs_at(in, t, u);
     relock((double *)x, u, in->p, in->mode);
+    for (int k = 0; k < N_G; ++k) {
+        if (in->sliding[k]) {
+            in->mode[k] = locked[k];
+        } else if (in->locks >= 2 && t - in->last_lock < ZENO_GAP && in->mode[k] != locked[k]
+                   && in->mode[k] == in->before[k]) {
+            in->sliding[k] = 1; /* back where it was a moment ago: it slides, on the slower of its branches */
+            in->mode[k] = slower_branch(x, u, in->p, in->mode, k);
+            if (!isfinite(in->slide_until)) in->slide_until = t + ZENO_DWELL;
+        }
+    }
+    memcpy(in->before, locked, sizeof locked);
+    in->last_lock = t;
+    in->locks++;
 }
 #endif
 
-/* integrates m->x from m->time to stop with the inputs over the step (m->u, m->du); MODEL_ERROR
+/* integrates m->x from m->time to stop with the inputs over the step (m->u, m->du, m->d2u); MODEL_ERROR
    (message written) where Dormand-Prince cannot, m unchanged */
 static ModelStatus integrate(ModelState *m, double stop, char *message, size_t size)
 {
     double x[N_X], h_guess = m->h_guess;
-    StepInputs inputs = {m->u, m->du, m->p, m->time};
+    StepInputs inputs = {m->u, m->du, m->d2u, m->p, m->time};
+#if N_G > 0
+    inputs.last_lock = -INFINITY;
+    inputs.slide_until = INFINITY;
+    memset(inputs.sliding, 0, sizeof inputs.sliding);
+#endif
     DopriStats stats;
     memcpy(x, m->x, sizeof x);
 #if N_G > 0
@@ -140,7 +206,7 @@ ModelStatus model_do_step(ModelState *m, double h, char *message, size_t size)
 {
     const double stop = m->time + h;
     double u_end[N_U];
-    for (int c = 0; c < N_U; ++c) u_end[c] = m->u[c] + m->du[c] * h;
+    for (int c = 0; c < N_U; ++c) u_end[c] = m->u[c] + h * (m->du[c] + 0.5 * m->d2u[c] * h);
     if (check_inputs_at_step_end(m, u_end, message, size) != MODEL_OK) return MODEL_ERROR;
 #if N_X > 0
     if (integrate(m, stop, message, size) != MODEL_OK) return MODEL_ERROR;

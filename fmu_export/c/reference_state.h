@@ -11,6 +11,7 @@ typedef struct {
     double time;                    /* current communication point [s] */
     double u[OPFMU_N_INPUTS];       /* inputs at `time` */
     double du[OPFMU_N_INPUTS];      /* their first time derivatives over the next step (0: held) */
+    double d2u[OPFMU_N_INPUTS];     /* their second time derivatives over it (0: linear) */
     double x_start[OPFMU_X_SIZE];   /* parameters: initial state (model.h: its first OPFMU_N_STATES) */
     double p[OPFMU_P_SIZE];         /* parameters: the component's, then derived ones (model.h) */
     double rtol, atol;              /* parameters: the solver's tolerances */

@@ -289,12 +289,21 @@ void model_output_jacobian(const ModelState *m, double J[OPFMU_N_OUTPUTS * OPFMU
     component_output_jacobian(m->x, m->u, m->p, J);
 }
 
-ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, double value, char *message, size_t size)
+ModelStatus model_set_input_derivative(ModelState *m, unsigned int c, int order, double value, char *message,
+                                       size_t size)
 {
     if (!isfinite(value)) {
         snprintf(message, size, "the derivative of %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], value);
         return MODEL_ERROR;
     }
+#if OPFMU_INPUT_ORDER > 1
+    if (order == 2) {
+        m->d2u[c] = value;
+        return MODEL_OK;
+    }
+#else
+    (void)order;
+#endif
     m->du[c] = value;
     return MODEL_OK;
 }
@@ -323,6 +332,13 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
             snprintf(why, size, "the derivative of input %s: %g is not a finite number", OPFMU_INPUT_NAMES[c], m->du[c]);
             return MODEL_ERROR;
         }
+#if OPFMU_INPUT_ORDER > 1
+        if (!isfinite(m->d2u[c])) {
+            snprintf(why, size, "the second derivative of input %s: %g is not a finite number", OPFMU_INPUT_NAMES[c],
+                     m->d2u[c]);
+            return MODEL_ERROR;
+        }
+#endif
     }
     if ((i = first_non_finite(m->x, OPFMU_N_STATES)) >= 0) {
         snprintf(why, size, "state %d: %g is not a finite number", i, m->x[i]);
@@ -362,7 +378,11 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
 ModelStatus check_inputs_at_step_end(const ModelState *m, double u_end[OPFMU_N_INPUTS], char *message, size_t size)
 {
     for (int c = 0; c < OPFMU_N_INPUTS; ++c) {
+#if OPFMU_INPUT_ORDER > 1
+        if (m->du[c] == 0.0 && m->d2u[c] == 0.0) continue;
+#else
         if (m->du[c] == 0.0) continue;
+#endif
         const double kept = within_bound(c, u_end[c]);
         if (isfinite(kept)) {
             u_end[c] = kept;
