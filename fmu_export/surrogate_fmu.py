@@ -43,7 +43,7 @@ from .fmu_archive import write_fmu
 from .model_description import model_description
 from .onnx_to_c import generate_kernel, hex_literals
 from .platforms import host
-from .variables import SURROGATE_EXTRAS, fmu_variables, start_inputs, start_state, vr_header
+from .variables import SURROGATE_EXTRAS, SYSTEM_BASE_MVA, fmu_variables, start_inputs, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
 # residual above which the FMU warns, for an operator whose metadata names none (the export writes
@@ -338,11 +338,15 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
 
 def surrogate_variables(meta: dict, onnx_path: Path, space=None):
     """The surrogate FMU's variable table (fmu_export.variables) for an operator's validated metadata;
-    space: its trained ParameterSpace (None: made here)."""
+    space: its trained ParameterSpace (None: made here). A component with a bus port gets the bus
+    port's outputs (the Norton equivalent at the surrogate's state, P and Q at the bus) on the system
+    base its trained parameters name (`Sb`; 100 MVA where they name none)."""
     component, params = meta["component"], meta["params"]
     space = space or parameter_space(component, params, trained=True)
+    base = float(getattr(params, "Sb", SYSTEM_BASE_MVA))
     return fmu_variables(component, params, default_state(meta, Path(onnx_path)), SURROGATE_EXTRAS,
-                         surrogate_starts(meta), meta.get("operating_point"), space=space)
+                         surrogate_starts(meta), meta.get("operating_point"), bus_outputs=True, base_mva=base,
+                         space=space)
 
 
 def derivatives_source(component, space) -> str:

@@ -8,9 +8,9 @@ import pytest
 from fmpy import extract, read_model_description
 
 from fmu_export.c_derivatives import jacobians_c_source
-from fmu_export.c_equations import parameter_space
+from fmu_export.c_equations import parameter_space, switching_c_source
 from fmu_export.native_reference_fmu import build_native_reference_fmu
-from fmu_export.variables import REFERENCE_EXTRAS, REFERENCE_STARTS, fmu_variables
+from fmu_export.variables import REFERENCE_EXTRAS, REFERENCE_STARTS, exchange_variables, fmu_variables
 from cosim.fmu import FMU as Slave
 from reference_models.component import Component, Parameters, ParameterError, Quantity
 
@@ -52,8 +52,9 @@ def lag_fmu(tmp_path_factory):
 
 def test_its_variables_follow_the_one_table_and_start_at_its_equilibrium(lag_fmu):
     params = LAG.params({"T": 0.25, "K": 3.0})
-    table = fmu_variables(LAG, params, [3.0], REFERENCE_EXTRAS, REFERENCE_STARTS,
-                          space=parameter_space(LAG, params))  # its parameters T, K are FMU parameters
+    table = exchange_variables(fmu_variables(LAG, params, [3.0], REFERENCE_EXTRAS, REFERENCE_STARTS,
+                                             space=parameter_space(LAG, params)),  # T, K are FMU parameters
+                               LAG, switching_c_source(LAG, parameter_space(LAG, params))[0])  # and Model Exchange's
     described = {v.name: (v.valueReference, v.start) for v in lag_fmu[1].modelVariables}
     assert {v.name: v.vr for v in table} == {n: vr for n, (vr, _) in described.items()}
     assert float(described["y0"][1]) == 3.0

@@ -144,8 +144,8 @@ def test_the_model_description_declares_can_interpolate_inputs_and_validates(nam
 
 @pytest.mark.parametrize("vr_name, order, value, reason", [
     ("delta", 1, 1.0, "is not an input"), ("P", 1, 1.0, "is not an input"), ("residual", 1, 1.0, "is not an input"),
-    ("restart_jump", 1, 1.0, "is not an input"), ("Vs", 2, 1.0, "only first derivatives"),
-    ("theta_vs", 0, 1.0, "only first derivatives"), ("Vs", 1, float("nan"), "not a finite number"),
+    ("restart_jump", 1, 1.0, "is not an input"), ("Vs", 2, 1.0, "derivatives of order 1 only are supported"),
+    ("theta_vs", 0, 1.0, "derivatives of order 1 only are supported"), ("Vs", 1, float("nan"), "not a finite number"),
     ("Pm", 1, float("inf"), "not a finite number")])
 def test_bad_input_derivatives_are_refused_with_a_reason(gen2, vr_name, order, value, reason):
     slave = Master(gen2.unzipped)
