@@ -134,6 +134,24 @@ static double scaled_residual(const double r[N_Z], const double scale[N_Z])
     return most;
 }
 
+/* row i of J where the exact one is zero: a rest on the kink of a clip (HYGOV4's gate rate at its
+   closing limit 0 at rest), where the branch taken gives no slope. The one-sided difference
+   quotients on the side that has one (the larger row), each unknown moved by 1e-7 (1 + |z_j|). */
+static void kink_row(const System *q, const double z[N_Z], const double r[N_Z], int i, double *row)
+{
+    double moved[N_Z], rm[N_Z], sides[2][N_Z];
+    for (int side = 0; side < 2; ++side) {
+        for (int j = 0; j < N_Z; ++j) {
+            const double step = (side ? -1e-7 : 1e-7) * (1.0 + fabs(z[j]));
+            memcpy(moved, z, sizeof moved);
+            moved[j] += step;
+            residual(q, moved, rm, NULL);
+            sides[side][j] = (rm[i] - r[i]) / step;
+        }
+    }
+    memcpy(row, sides[largest(sides[1], N_Z) > largest(sides[0], N_Z)], N_Z * sizeof *row);
+}
+
 /* Newton from z to a solution of the system q, within `tolerance` (relative step), by full steps that
    each reduce the scaled residual; 1 on success (z the solution), 0 otherwise (z unchanged): a step
    that does not reduce it means z lies too far from the solution to tell its branch */
@@ -145,6 +163,7 @@ static int newton(const System *q, double z[N_Z], double tolerance)
     for (int iteration = 0; iteration < MAX_ITERATIONS; ++iteration) {
         residual(q, w, r, J);
         for (int i = 0; i < N_Z; ++i) {
+            if (largest(&J[i * N_Z], N_Z) == 0.0) kink_row(q, w, r, i, &J[i * N_Z]);
             scale[i] = largest(&J[i * N_Z], N_Z);
             if (!(scale[i] > 0.0) || !isfinite(scale[i])) return 0;
             for (int j = 0; j < N_Z; ++j) J[i * N_Z + j] /= scale[i];
@@ -164,7 +183,10 @@ static int newton(const System *q, double z[N_Z], double tolerance)
         if (iteration == MAX_ITERATIONS - 1) return 0;
     }
     residual(q, w, r, J); /* accepted only where every scaled residual is small */
-    for (int i = 0; i < N_Z; ++i) scale[i] = largest(&J[i * N_Z], N_Z);
+    for (int i = 0; i < N_Z; ++i) {
+        if (largest(&J[i * N_Z], N_Z) == 0.0) kink_row(q, w, r, i, &J[i * N_Z]);
+        scale[i] = largest(&J[i * N_Z], N_Z);
+    }
     if (!(scaled_residual(r, scale) <= RESIDUAL_TOLERANCE * (1.0 + largest(w, N_Z)))) return 0;
     memcpy(z, w, sizeof w);
     return 1;
