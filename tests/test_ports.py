@@ -22,11 +22,14 @@ def test_a_native_reference_fmu_declares_its_components_ports_and_still_validate
     assert validation_problems(path) == []
 
 
-def test_the_surrogate_fmu_declares_the_machines_ports(fmu_path, tmp_path):
-    assert ports_of_fmu(fmu_path) == SM4.ports
+def test_the_surrogate_fmu_declares_the_machines_ports_with_the_norton_port(fmu_path, tmp_path):
+    from fmu_export.variables import fmu_ports
+
+    assert ports_of_fmu(fmu_path) == fmu_ports(SM4)  # SM4's, its bus port with the Norton and power outputs
+    assert ports_of_fmu(fmu_path).bus.norton and ports_of_fmu(fmu_path).bus.base_mva == 100.0
     with zipfile.ZipFile(fmu_path) as archive:
         archive.extractall(tmp_path)
-    assert ports_of_fmu(tmp_path) == SM4.ports  # an extracted FMU reads the same
+    assert ports_of_fmu(tmp_path) == fmu_ports(SM4)  # an extracted FMU reads the same
 
 
 def test_the_pythonfmu_reference_fmu_declares_the_machines_ports(reference_path):

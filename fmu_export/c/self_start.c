@@ -23,6 +23,7 @@
 
 #include "linalg.h"
 #include "model.h"
+#include "switching.h"
 #include "variables.h"
 
 #define N_X OPFMU_N_STATES
@@ -237,6 +238,25 @@ ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
     }
     double x[OPFMU_X_SIZE], u[N_U];
     unpack(&q, z, x, u);
+#ifdef OPFMU_HAS_RESET
+    /* a rest with a state beyond a non-windup limit, its unlimited rate 0 there, is none (Python's
+       initialisations refuse it; an integrator would place the state on the limit at once): moved a
+       little back inside, the state's rate pushes it out and the reset places it on the limit */
+    for (int i = 0; i < N_X; ++i) {
+        for (int side = -1; side <= 1; side += 2) {
+            double nudged[OPFMU_X_SIZE], placed[OPFMU_X_SIZE];
+            const double step = 1e-6 * (1.0 + fabs(x[i]));
+            memcpy(nudged, x, sizeof nudged);
+            nudged[i] += side * step;
+            model_reset(nudged, u, q.p, placed);
+            if (fabs(placed[i] - nudged[i]) > 10.0 * step) {
+                snprintf(message, size, "no rest at the start asked for (%s): it would hold state %d at %g, beyond "
+                         "its limit %g", asked, i, x[i], placed[i]);
+                return MODEL_ERROR;
+            }
+        }
+    }
+#endif
     for (int k = 0; k < N_S; ++k) {
         const int c = SELF_START_SOLVES[k];
         if (u[c] < OPFMU_INPUT_MIN[c]) {
