@@ -97,7 +97,7 @@ OPFMU_INTERNAL const char *component_no_derivative(unsigned int vr);
 OPFMU_INTERNAL void component_defaults(ModelState *m);
 /* where the FMU starts from the load flow (fmu_export/self_start.py) and the importer asked for it (a
    start parameter set to another value than its default and no initial-state parameter <state>0 to
-   another than its own; or the component's parameters set and no initial-state parameter at all):
+   another than its own):
    solves the start from the start parameters (V_lf, theta_lf, P_lf, Q_lf, <y>_init) into the state,
    the solved inputs and their calculated parameters (self_start_solve), unless nothing was set since
    it last did; MODEL_ERROR (why written) where there is no such start. MODEL_OK otherwise. */

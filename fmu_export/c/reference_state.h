@@ -25,7 +25,6 @@ typedef struct {
     int start_stale;                /* 1 while the solved start may not match what is set */
     int self_started;               /* 1 where x holds the solved start (not x_start) */
     int bus_voltage_set;            /* 1 once the importer set a bus voltage input: it keeps its value */
-    int states_set;                 /* 1 once the importer set an initial-state parameter <state>0 */
 #endif
     int mode[OPFMU_G_SIZE];         /* the branches the right-hand side is locked to (switching.h) */
     double u_locked[OPFMU_N_INPUTS]; /* Model Exchange: the inputs at the last lock (model_exchange.c) */

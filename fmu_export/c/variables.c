@@ -15,8 +15,8 @@
    parameters (V_lf, theta_lf, P_lf, Q_lf, <y>_init) and calculated parameters (<u>_init) are here too.
    component_settle_start solves the start from them (self_start.c) where the importer set a start
    parameter to another value than its default and no initial-state parameter <state>0 to another
-   value than its own, or set the component's parameters and no initial-state parameter at all; else
-   the FMU starts at the initial-state parameters (set, or built: the built rest). It solves when a
+   value than its own; else the FMU starts at the initial-state parameters (set, or built: the built
+   rest). It solves when a
    variable is read in initialisation mode and when initialisation ends, again wherever anything was
    set since (a bus voltage input set by the importer keeps its value; one left unset takes V_lf,
    theta_lf).
@@ -162,14 +162,11 @@ void component_defaults(ModelState *m)
 ModelStatus component_settle_start(ModelState *m, char *why, size_t size)
 {
 #ifdef OPFMU_SELF_START
-    /* start at x_start where the importer set an initial state other than the built one, or set the
-       built one and left the start parameters at theirs, or left everything the start depends on as
-       it was built (the built rest solves that) */
-    const int start_parameters_set = memcmp(m->start_flow, SELF_START_FLOW_DEFAULT, sizeof m->start_flow)
-                                     || memcmp(m->start_delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start_delivered);
-    const int parameters_set = memcmp(m->p, OPFMU_PARAM_START, OPFMU_N_PARAMS * sizeof *m->p) != 0;
-    if (memcmp(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start) || (m->states_set && !start_parameters_set)
-        || (!start_parameters_set && !parameters_set)) {
+    /* start at x_start unless the importer set a start parameter off its default and no initial state
+       other than the built one */
+    if (memcmp(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start)
+        || (!memcmp(m->start_flow, SELF_START_FLOW_DEFAULT, sizeof m->start_flow)
+            && !memcmp(m->start_delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start_delivered))) {
         m->self_started = 0;
         return MODEL_OK;
     }
@@ -287,7 +284,6 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
 #if SELF_START_LOAD_FLOW
     if (vr == VR_FIRST_INPUT + BUS_VOLTAGE_MAGNITUDE || vr == VR_FIRST_INPUT + BUS_VOLTAGE_ANGLE) m->bus_voltage_set = 1;
 #endif
-    if (IN_GROUP(vr, VR_FIRST_START, OPFMU_N_STATES)) m->states_set = 1;
 #endif
     return MODEL_OK;
 }
@@ -369,9 +365,9 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
         return MODEL_ERROR;
     }
     if ((m->self_started != 0 && m->self_started != 1) || (m->start_stale != 0 && m->start_stale != 1)
-        || (m->bus_voltage_set != 0 && m->bus_voltage_set != 1) || (m->states_set != 0 && m->states_set != 1)) {
-        snprintf(why, size, "the start's flags %d, %d, %d, %d are not 0 or 1", m->self_started, m->start_stale,
-                 m->bus_voltage_set, m->states_set);
+        || (m->bus_voltage_set != 0 && m->bus_voltage_set != 1)) {
+        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->self_started, m->start_stale,
+                 m->bus_voltage_set);
         return MODEL_ERROR;
     }
 #endif
