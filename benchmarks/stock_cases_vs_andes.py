@@ -64,7 +64,7 @@ def run_case(path: str, bus: int, duration: float, stop: float) -> dict:
         row[f"{kind}_s"] = time.perf_counter() - started
         row[f"{kind}_stable"] = bool(results[kind].stable)
     for kind in ("reference", "monolithic"):
-        e = errors(results[kind], results["andes"], fault, case)
+        e = errors(results[kind], results["andes"], fault, case, contingency.trip_times(math.inf))
         row[kind] = {k: e[k] for k in ("angle_deg", "V", "P", "Q")}
     return row
 

@@ -190,25 +190,35 @@ def common_rows(result, reference) -> tuple:
     return mine[match], theirs[nearest[match]]
 
 
-def errors(result, reference, fault=None, case=None) -> dict:
+def errors(result, reference, fault=None, case=None, trips=None) -> dict:
     """Largest differences from `reference`, compared at the rows both runs have outside their event
     times (`common_rows`; no value is interpolated, none is taken across a switching): rotor angles
-    relative to machine 1 [deg], speeds [rad/s deviation where `case` is given, else the speed
+    relative to the first machine that is not tripped [deg], speeds [rad/s deviation where `case` is given, else the speed
     states as stored], bus voltages at the machines outside the fault's own steps [pu] (the rows
     with a fault on, times in [start, clear), are left out: fault = (start, clear), a sequence of
     such pairs, or None), field voltages [pu] (with `case`: every unit's, GridResult's
     field_voltage), and the power P, Q [pu, system base] into the bus of every unit without a rotor
-    angle (an inverter, a load) outside the fault's steps. ValueError where the runs share no such
-    row."""
+    angle (an inverter, a load) outside the fault's steps. trips {unit index: time [s]}
+    (Contingency.trip_times): a unit tripped is left out from its trip on (what each run keeps of a
+    device that is off differs: opfmu's stands still, ANDES' voltage falls to 0). ValueError where
+    the runs share no such row."""
     from reference_models.grid.result import field_voltage, speed_deviation
 
     mine, theirs = common_rows(result, reference)
     if not len(mine):
         raise ValueError("the two runs have no row at a common time outside their events")
     t = result.time[mine]
+    off = np.zeros((len(t), len(result.gen_buses)), bool)  # [row, unit]: tripped by then
+    for k, trip in (trips or {}).items():
+        off[:, k] = t >= trip - EVENT_TOLERANCE
     out = {}
-    differences = [np.abs(result.angle_difference(b)[mine] - reference.angle_difference(b)[theirs])
-                   for b in result.gen_buses[1:]]
+    # rotor angles relative to the first machine that is not tripped
+    g = result.gen_buses
+    first = next((k for k in range(len(g)) if k not in (trips or {}) and np.any(np.isfinite(result.angles[:, k]))),
+                 0)
+    differences = [np.where(off[:, k] | off[:, first], np.nan,
+                            np.abs(result.angle_difference(b, g[first])[mine] - reference.angle_difference(b, g[first])[theirs]))
+                   for k, b in enumerate(g) if k != first]
     differences = [d for d in differences if np.any(np.isfinite(d))]
     angle = max((float(np.nanmax(d)) for d in differences), default=0.0)
     out["angle_deg"] = math.degrees(angle)
@@ -221,14 +231,15 @@ def errors(result, reference, fault=None, case=None) -> dict:
     intervals = [] if fault is None or not len(fault) else [fault] if np.isscalar(fault[0]) else list(fault)
     for start, clear in intervals:
         rows &= ~((t >= start - EVENT_TOLERANCE) & (t < clear - EVENT_TOLERANCE))
-    out["V"] = float(np.max(np.abs(result.Vs[mine] - reference.Vs[theirs])[rows])) if rows.any() else math.nan
+    out["V"] = _largest(np.where(off, np.nan, np.abs(result.Vs[mine] - reference.Vs[theirs]))[rows]) if rows.any() \
+        else math.nan
     for name, (a, b) in pairs.items():
-        out[name] = _largest(None if a is None or b is None else np.abs(a[mine] - b[theirs]))
+        out[name] = _largest(None if a is None or b is None else np.where(off, np.nan, np.abs(a[mine] - b[theirs])))
     # the power of the units without a rotor angle (inverters, loads) where both runs give it
     others = ~np.any(np.isfinite(reference.angles), axis=0) & ~np.any(np.isfinite(result.angles), axis=0)
     for name in ("P", "Q"):
         a, b = getattr(result, name)[mine][:, others], getattr(reference, name)[theirs][:, others]
-        out[name] = _largest(np.abs(a - b)[rows]) if rows.any() else math.nan
+        out[name] = _largest(np.where(off[:, others], np.nan, np.abs(a - b))[rows]) if rows.any() else math.nan
     return {key: out[key] for key in ("angle_deg", "omega", "V", "Efd", "P", "Q")}
 
 
@@ -344,7 +355,7 @@ def report(path, title: str, runs: dict, timings: dict, contingency, case=None, 
             lines.append(f"| {LABELS.get(kind, kind)} | {tm['total_s']:.3f} | {tm['fmu_step_s']:.3f} | "
                          f"{tm['network_s']:.3f} | {tm['rollback_s']:.3f} | {tm['overhead_s']:.3f} | "
                          f"{tm['passes'] / max(tm['steps'], 1):.2f} |")
-    fault = contingency.fault_intervals(math.inf)
+    fault, trips = contingency.fault_intervals(math.inf), contingency.trip_times(math.inf)
     for reference in REFERENCES:
         if reference not in runs or len(runs) < 2:
             continue
@@ -356,7 +367,7 @@ def report(path, title: str, runs: dict, timings: dict, contingency, case=None, 
         for kind, result in runs.items():
             if kind == reference:
                 continue
-            e = errors(result, runs[reference], fault, case)
+            e = errors(result, runs[reference], fault, case, trips)
             lines.append(f"| {LABELS.get(kind, kind)} | {e['angle_deg']:.3f} | {e['omega']:.3g} | {e['V']:.3g} | "
                          f"{e['Efd']:.3g} | {e['P']:.3g}, {e['Q']:.3g} |")
     if notes:

@@ -486,10 +486,10 @@ def cmd_run(args) -> None:
                "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
                "passes": settings.passes, "fmi_version": args.fmi_version, "notes": stated}
-    fault = contingency.fault_intervals(args.stop)
+    fault, trips = contingency.fault_intervals(args.stop), contingency.trip_times(args.stop)
     for reference in outputs.REFERENCES:
         if reference in runs and len(runs) > 1:
-            summary[f"difference_from_{reference}"] = {k: outputs.errors(r, runs[reference], fault, case)
+            summary[f"difference_from_{reference}"] = {k: outputs.errors(r, runs[reference], fault, case, trips)
                                                        for k, r in runs.items() if k != reference}
     out = Path(args.out)
     try:

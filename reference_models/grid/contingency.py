@@ -182,6 +182,15 @@ class Contingency:
                 out.append((tp.start, end))
         return tuple(out)
 
+    def trip_times(self, stop: float) -> dict:
+        """{unit index: the time [s] it is tripped} for every unit tripped before `stop` (the user's
+        events and the case's)."""
+        out = {}
+        for topology in self.topologies(stop):
+            for k in topology.tripped:
+                out.setdefault(k, topology.start)
+        return out
+
     def topologies(self, stop: float) -> list:
         """The Topology sequence up to `stop` [s]: the intact network from 0, then the network after
         each time at which something changes before `stop` (a change at 0 replaces the intact
