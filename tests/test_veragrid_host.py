@@ -22,20 +22,25 @@ def smib(tmp_path_factory):
     return case, generator_files(case, "reference", folder / "cache")
 
 
-@pytest.mark.parametrize("B", [-10.0, -50.0])
-def test_sm4_on_a_smib_through_a_deep_fault_follows_the_own_master(smib, B):
+def own_master_run(case, files, fault, stop: float):
+    """opfmu's own master (iterated coupling, 10 ms) on the same case and fault: the reference."""
     from cosim.master import MasterSettings
     from cosim.runners import MasterRunner
 
+    master = MasterRunner(files, case, MasterSettings(step=0.01))
+    try:
+        return master.run(fault, stop)[0]
+    finally:
+        master.close()
+
+
+@pytest.mark.parametrize("B", [-10.0, -50.0])
+def test_sm4_on_a_smib_through_a_deep_fault_follows_the_own_master(smib, B):
     case, files = smib
     fault = Contingency(fault_bus=1, fault_start=0.1, clear_s=0.2, fault_impedance=1.0 / (1j * B),
                         network=case.network)
     host, _ = VeraGridRunner(case, files, 0.01).run(fault, 1.0)
-    master = MasterRunner(files, case, MasterSettings(step=0.01))
-    try:
-        own, _ = master.run(fault, 1.0)
-    finally:
-        master.close()
+    own = own_master_run(case, files, fault, 1.0)
     assert np.allclose(host.time, own.time)
     outside = ~np.isin(np.round(host.time, 9), (0.1, 0.2))  # the fault's own steps
     assert np.degrees(np.abs(host.rotor_angle - own.rotor_angle))[outside].max() < 0.5
@@ -50,8 +55,6 @@ def kundur_cache(tmp_path_factory):
 
 def test_kundur_with_its_controls_runs_whole_through_a_fault_at_bus_8_close_to_the_own_master(kundur_cache):
     from cosim.fmus import generator_files
-    from cosim.master import MasterSettings
-    from cosim.runners import MasterRunner
     from reference_models.grid.case import shipped_case
     from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE
 
@@ -60,11 +63,7 @@ def test_kundur_with_its_controls_runs_whole_through_a_fault_at_bus_8_close_to_t
                         network=case.network)
     files = generator_files(case, "reference", kundur_cache)
     result, _ = VeraGridRunner(case, files, 0.01).run(fault, 3.0)
-    master = MasterRunner(files, case, MasterSettings(step=0.01))
-    try:
-        own, _ = master.run(fault, 3.0)
-    finally:
-        master.close()
+    own = own_master_run(case, files, fault, 3.0)
     assert result.time[-1] == pytest.approx(3.0) and len(result.time) == 301
     rows = np.isin(np.round(own.time, 9), np.round(result.time, 9)) & ~np.isin(np.round(own.time, 9), (1.0, 1.1))
     mine = ~np.isin(np.round(result.time, 9), (1.0, 1.1))
