@@ -16,6 +16,7 @@ from cosim.fmu import FMU, CouplingError
 from cosim.fmus import generator_files
 from cosim.master import GridMaster, MasterSettings, communication_points
 from cosim.outputs import errors
+from cosim.stability import loss_of_synchronism
 from reference_models.grid import wscc9
 from reference_models.grid.contingency import Contingency
 from reference_models.grid.monolithic import System, simulate
@@ -111,6 +112,9 @@ def test_an_unstable_run_is_found_unstable_and_stops_early_when_asked(reference_
     assert not run.stable and not mono.stable
     assert run.time[-1] < 2.0
     assert abs(run.loss_of_synchronism_s - mono.loss_of_synchronism_s) < 0.02
+    # the rows of both show the loss that the verdict reads, so run_verdict does not run them again to the stop
+    for result in (run, mono):
+        assert loss_of_synchronism(result, contingency, 3.0) == pytest.approx(result.loss_of_synchronism_s, abs=0.02)
 
 
 def test_fmus_without_directional_derivatives_are_differentiated_numerically(fmu_cache):

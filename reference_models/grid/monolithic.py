@@ -673,7 +673,7 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
     Rows at t_eval (default: every `step` s from 0 to stop); `event_rows`: the state just before
     each event too. `controls=False`: every control signal a machine takes held at its start value.
     `stop_at_loss`: the solve ends where two rotor angles of units in service get pi apart (the rows
-    stop there).
+    end at the first row past it, or at the end of the step that crossed).
 
     Each topology of the contingency (Contingency.topologies: fault, clearing, opened branches,
     tripped units, whose devices stand still and inject nothing) is integrated by scipy's `method`
@@ -781,16 +781,20 @@ def simulate(system: System, contingency: Contingency, stop: float = 5.0, t_eval
                         dense = dense if dense is not None else solver.dense_output()
                         lost = brentq(lambda s: f.spread(dense(s)), t0, t1, xtol=1e-12)
                     spread = s1
-                    end = lost if (stop_at_loss and lost is not None) else t1
-                    if at < len(times) and times[at] <= end:
+                    if at < len(times) and times[at] <= t1:
                         dense = dense if dense is not None else solver.dense_output()
                         k = at
-                        while k < len(times) and times[k] <= end:
+                        while k < len(times) and times[k] <= t1:
                             k += 1
                         rows_t.extend(times[at:k])
                         rows_y.extend(np.atleast_2d(dense(np.array(times[at:k])).T))
                         at = k
                     if stop_at_loss and lost is not None:
+                        # the rows end with the step that crossed: its end where no row lies past the
+                        # loss, so that the last row shows the spread beyond pi (cosim.stability's verdict)
+                        if not rows_t or rows_t[-1] < lost:
+                            rows_t.append(t1)
+                            rows_y.append(np.array(y1))
                         ended = True
                         break
                     t, y = t1, np.array(y1)
