@@ -164,6 +164,26 @@ def test_runs_are_compared_at_their_common_rows_outside_event_times():
     assert errors(a, b, (0.02, 0.1))["V"] == 0.0  # the fault's own steps left out
 
 
+@pytest.mark.parametrize("tripped", [0, 2])
+def test_a_tripped_unit_is_left_out_of_the_errors_from_its_trip_and_is_no_angle_reference(tripped):
+    # one run keeps the tripped machine standing still, the other (as ANDES) lets its voltage fall to 0
+    # and its angle run; the machines in service agree, each moving by its own angle
+    t = np.arange(0.0, 2.0, 0.1)
+    trip = 1.0
+    delta = np.outer(t, [0.1, 0.2, 0.3, 0.4])
+    kept, dropped = _result(t, np.zeros((len(t), 4))), _result(t, np.zeros((len(t), 4)))
+    kept.rotor_angle[:], dropped.rotor_angle[:] = delta, delta
+    after = t >= trip
+    kept.rotor_angle[after, tripped] = delta[np.argmax(after), tripped]
+    dropped.rotor_angle[after, tripped] += 5.0
+    dropped.Vs[after, tripped] = 0.0
+    c = kundur(Event("generator", trip, bus=KUNDUR.units[tripped].bus, generator=KUNDUR.units[tripped].generator, status=0))
+    trips = c.trip_times(2.0)
+    assert trips == {tripped: trip}
+    assert errors(kept, dropped, trips=trips)["angle_deg"] == 0.0 and errors(kept, dropped, trips=trips)["V"] == 0.0
+    assert errors(kept, dropped)["angle_deg"] > 100 and errors(kept, dropped)["V"] == 1.0
+
+
 def test_grid_run_applies_the_case_events_unless_told_not_to(tmp_path, capsys):
     from opfmu.cli import main
 
