@@ -35,8 +35,11 @@ the bus and terminal voltage and the machine's outputs run to the end value pred
 values at the last three step starts (EXTRAPOLATION_POINTS), fewer after an event. And VeraGrid is
 told each event one step early (`VeraGridRunner._event_time`): its backward Euler applies an event
 to the network at the end of the step it falls in, while the FMUs step explicitly from the voltage
-at the step's start. Kundur then keeps within 0.71 deg of the own master, 0.063 deg between the
-machines (benchmarks/veragrid_host.py).
+at the step's start. The first step after an event has nothing to predict from: the unit takes it
+with its inputs held, and again at the next step's start, from its saved FMU states, with each input
+on the line to the end value VeraGrid has by then accepted (`_UnitAdapter._redo`). Kundur then keeps
+within 0.16 deg of the own master, 0.062 deg between the machines (benchmarks/veragrid_host.py;
+held over that step, the four drifted 0.71 deg together).
 
 Initialisation: VeraGrid's power flow of the grid built from the case (branches as pi sections
 with their taps and phase shifts, loads as constant impedances at the case's load-flow voltages,
@@ -367,6 +370,7 @@ class _UnitAdapter:
         self.events, self.step = tuple(float(e) for e in events), float(step)
         self.history = []  # [(time, {(device, input): value at that step's start})] of the last steps, latest first
         self.interpolates, self.input_refs = False, []  # the machine FMU's, once VeraGrid opened it
+        self.redo = None  # the first step after an event, to be taken again once its end is known (_redo)
 
     # VeraGrid's adapter interface (FmuCsDeviceAdapter: what its RMS problem calls)
 
@@ -389,20 +393,13 @@ class _UnitAdapter:
         R = _vg()[2]
         V = (_get_rms_input_value(self.problem, self.device, R.Vm, x_snapshot),
              _get_rms_input_value(self.problem, self.device, R.Va, x_snapshot))
-        current = complex(*(self.values[0][n] for n in self.bus_port.current))
-        Vt = V[0] * cmath.exp(1j * V[1]) + self.z_ext * current
-        terminal = (abs(Vt), cmath.phase(Vt))
+        if self.redo is not None:
+            self._redo(V)
+        terminal = self._terminal(V)
         before = [dict(v) for v in self.values]  # every device's outputs at the step's start
-        now, stepped = {}, set()
-        for j in self.order[:-1]:  # the controls, then the machine
-            fmu = self.controls[j - 1]
-            inputs, rates = self._inputs(j, fmu.input_names, V, terminal, before, stepped, now, current_time,
-                                         step_size)
-            self.values[j] = dict(zip(fmu.output_names, fmu.advance(current_time, step_size, inputs,
-                                                                   rates if fmu.interpolates else None)))
-            stepped.add(j)
-        inputs, rates = self._inputs(0, tuple(self.bus_port.voltage) + tuple(self.machine_inputs), V, terminal,
-                                     before, stepped, now, current_time, step_size)
+        saved = self._save() if self._after_event(current_time, step_size) else None
+        now = {}
+        inputs, rates = self._step_controls(current_time, step_size, V, terminal, before, now)
         host = self.inner.runtime_host
         set_now = dict(zip(self.machine_inputs, inputs[2:]))
         host.set_real(set_now)
@@ -412,6 +409,8 @@ class _UnitAdapter:
         self._read_machine()
         self._record(current_time + step_size, set_now)
         self.history = [(current_time, now)] + self.history[:EXTRAPOLATION_POINTS - 2]
+        if saved is not None:
+            self.redo = (current_time, step_size, saved, V, now, before)
         return outputs
 
     def apply_outputs(self, target, outputs):
@@ -422,14 +421,71 @@ class _UnitAdapter:
 
     # the unit
 
-    def _inputs(self, j: int, names, V, terminal, before, stepped, now: dict, t: float, h: float) -> tuple:
+    def _terminal(self, V) -> tuple:
+        """(magnitude, angle) of the machine's terminal voltage: the bus voltage V (magnitude, angle)
+        plus the drop over its external impedance at its current now."""
+        current = complex(*(self.values[0][n] for n in self.bus_port.current))
+        Vt = V[0] * cmath.exp(1j * V[1]) + self.z_ext * current
+        return abs(Vt), cmath.phase(Vt)
+
+    def _step_controls(self, t: float, h: float, V, terminal, before, now: dict, ends: dict | None = None) -> tuple:
+        """Steps the control FMUs over [t, t + h] in step order; (values, rates) of the machine's
+        inputs (its bus voltage, then machine_inputs) for the same step (_inputs)."""
+        stepped = set()
+        for j in self.order[:-1]:  # the controls, then the machine
+            fmu = self.controls[j - 1]
+            inputs, rates = self._inputs(j, fmu.input_names, V, terminal, before, stepped, now, t, h, ends)
+            self.values[j] = dict(zip(fmu.output_names, fmu.advance(t, h, inputs, rates if fmu.interpolates else None)))
+            stepped.add(j)
+        return self._inputs(0, tuple(self.bus_port.voltage) + tuple(self.machine_inputs), V, terminal, before,
+                            stepped, now, t, h, ends)
+
+    def _after_event(self, t: float, h: float) -> bool:
+        """Whether the step from t is the first after an event (its inputs held: no history runs up to it)."""
+        return any(t - h - 1e-9 * max(1.0, t) <= e < t - 1e-9 * max(1.0, t) for e in self.events)
+
+    def _save(self) -> list:
+        """The FMU states of the unit's devices (machine first)."""
+        return [self.inner.runtime_host.runtime.getFMUstate()] + [fmu.save() for fmu in self.controls]
+
+    def _redo(self, V_end) -> None:
+        """Steps the unit again over the first step after an event, [t, t + h], from its saved states,
+        with each input on the line from its value at t to its value at t + h (known now: the bus
+        voltage `V_end` VeraGrid accepted at t + h, the terminal voltage and the outputs after the held
+        step) instead of held, which lost energy at the event (Kundur: 0.7 deg over 4 s). VeraGrid's
+        network at t + h keeps the Norton outputs of the held step; the states go on from the redone
+        one."""
+        t, h, saved, V, now_before, before = self.redo
+        self.redo = None
+        runtime = self.inner.runtime_host.runtime
+        terminal_end = self._terminal(V_end)
+        ends = {(j, name): self._source(j, name, V_end, terminal_end) for j, name in now_before}
+        runtime.setFMUstate(saved[0])
+        runtime.freeFMUstate(saved[0])
+        for fmu, state in zip(self.controls, saved[1:]):
+            fmu.restore(state)
+            fmu.free(state)
+        self.values = [dict(v) for v in before]
+        inputs, rates = self._step_controls(t, h, V, self._terminal(V), before, dict(now_before), ends)
+        host = self.inner.runtime_host
+        host.set_real(dict(zip([*self.bus_port.voltage, *self.machine_inputs], inputs)))
+        if self.interpolates:
+            runtime.setRealInputDerivatives(self.input_refs, [1] * len(rates), rates)
+        host.do_step(current_time=t, step_size=h)
+        self._read_machine()
+        self.rows.pop()
+        self._record(t + h, dict(zip(self.machine_inputs, inputs[2:])))
+
+    def _inputs(self, j: int, names, V, terminal, before, stepped, now: dict, t: float, h: float,
+                ends: dict | None = None) -> tuple:
         """(values at the step's start t, rates over [t, t + h]) of device j's inputs `names`. An input
         from a device stepped before it in this step runs linearly from that device's output at the
         step's start to its new one. Any other (the bus and terminal voltage, the machine's outputs)
         runs linearly to the end of the step predicted through its values at the last steps' starts
         (EXTRAPOLATION_POINTS - 1 of them, fewer after an event or at the start; held with none):
-        VeraGrid's coupling would hold it, first order in h. Records each value in `now` for the
-        next steps."""
+        VeraGrid's coupling would hold it, first order in h. `ends` {(device, input): value at t + h}:
+        the step taken again (_redo), each such input on the line to its known end. Records each
+        value in `now` for the next steps."""
         values, rates = [], []
         # the last steps over which the inputs ran smoothly: each at t - k h, no event from it to t.
         # VeraGrid applies an event it is told at e to the network at e + h (VeraGridRunner._event_time):
@@ -450,9 +506,14 @@ class _UnitAdapter:
             now[(j, name)] = value
             values.append(value)
             held = source is None or source.kind == "held"
+            angle = source is not None and source.kind in ("bus", "terminal") and source.index == 1
+            if ends is not None:  # the step again, its end known
+                change = 0.0 if held else ends[(j, name)] - value
+                rates.append((math.remainder(change, 2.0 * math.pi) if angle else change) / h)
+                continue
             points = [value] + ([] if held else [v[(j, name)] for v in history if (j, name) in v])
             steps = [a - b for a, b in zip(points, points[1:])]  # the changes over the last steps, latest first
-            if source is not None and source.kind in ("bus", "terminal") and source.index == 1:
+            if angle:
                 steps = [math.remainder(d, 2.0 * math.pi) for d in steps]  # an angle: the short way round
             rates.append(_predicted_change(steps) / h)
         return values, rates

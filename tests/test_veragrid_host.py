@@ -68,10 +68,11 @@ def test_kundur_with_its_controls_runs_whole_through_a_fault_at_bus_8_close_to_t
     rows = np.isin(np.round(own.time, 9), np.round(result.time, 9)) & ~np.isin(np.round(own.time, 9), (1.0, 1.1))
     mine = ~np.isin(np.round(result.time, 9), (1.0, 1.1))
     error = np.degrees(result.rotor_angle[mine] - own.rotor_angle[rows])
-    # the machines' angles to one another within the goal's 0.5 deg (measured 0.06); all of them
-    # together drift from the own master's by 0.7 deg over 3 s (ANDES at 1 ms: 0.8 deg)
+    # within the goal's 0.5 deg, the machines' angles to one another (measured 0.06) and each angle
+    # itself (0.16 over 5 s: the first step after each event taken again on its known end; held there,
+    # all four drifted 0.7 deg together)
     assert np.abs(error - error[:, :1]).max() < 0.5
-    assert np.abs(error).max() < 1.5
+    assert np.abs(error).max() < 0.5
     assert np.abs(result.V_bus[mine] - own.V_bus[rows]).max() < 0.01
     assert result.stable
     assert np.all(np.isfinite(result.rotor_angle)) and np.all(np.isfinite(result.V_bus))
