@@ -8,12 +8,15 @@ steps).
 Scenarios: an SM4 on a SMIB (cosim.veragrid.smib_case: a 0.2 pu line to a GENCLS of 1e5 MVA)
 through a fault shunt of B = -10 and -50 pu at its bus from 0.1 to 0.2 s; Kundur (shipped, GENROU +
 EXDC2 + TGOV1 per unit, the case's own events left out) through a fault of 1e-4j pu at bus 8 from
-1.0 to 1.1 s. Runs: VeraGrid with the Norton interface; VeraGrid with the FMUs' P, Q alone (what
+1.0 to 1.1 s; where ANDES is installed (it reads the file), ANDES' ieee14_pvd1 (five GENROU units
+with their controls, ten PVD1 inverters at bus 4, tapped transformers, its own line toggle) through
+a fault of 1e-4j pu at bus 4 from 1.0 to 1.1 s. Runs: VeraGrid with the Norton interface; VeraGrid with the FMUs' P, Q alone (what
 VeraGrid's importer does by itself; a failure is printed as such); the own master iterated (its
 default) and with held inputs (the explicit coupling VeraGrid does); ANDES for Kundur. Printed per
 run against the iterated master: the largest rotor-angle error [deg] (absolute, and of the angles
 relative to the first machine), the largest bus-voltage error [pu] outside the fault's own steps,
-the wall time [s] (VeraGrid's first run includes its numba compilation of the equations).
+the largest P, Q error of the units without a rotor angle (inverters) [pu, system base], the wall
+time [s] (VeraGrid's first run includes its numba compilation of the equations).
 Needs VeraGridEngine (pip install VeraGridEngine==6.7.1).
 """
 from __future__ import annotations
@@ -36,8 +39,8 @@ from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 
 
 def errors(run, reference, events) -> tuple:
-    """(abs angle [deg], relative angle [deg], voltage [pu]) errors of `run` against `reference` on
-    their common rows, the rows at `events` left out."""
+    """(abs angle [deg], relative angle [deg], voltage [pu], inverter P and Q [pu]) errors of `run`
+    against `reference` on their common rows, the rows at `events` left out (NaN: no inverter)."""
     t = np.round(run.time, 9)
     common = np.intersect1d(t, np.round(reference.time, 9))
     common = common[~np.isin(common, np.round(events, 9))]
@@ -45,8 +48,11 @@ def errors(run, reference, events) -> tuple:
     da = run.rotor_angle[a] - reference.rotor_angle[b]
     rel = da - da[:, :1]
     dv = run.V_bus[a] - reference.V_bus[b]
+    inverters = ~np.isfinite(reference.rotor_angle[0])
+    power = max((float(np.max(np.abs(getattr(run, x)[a][:, inverters] - getattr(reference, x)[b][:, inverters])))
+                 for x in ("P", "Q")), default=float("nan")) if inverters.any() else float("nan")
     return (float(np.degrees(np.nanmax(np.abs(da)))), float(np.degrees(np.nanmax(np.abs(rel)))),
-            float(np.nanmax(np.abs(dv))))
+            float(np.nanmax(np.abs(dv))), power)
 
 
 def timed(runner, contingency, stop):
@@ -70,14 +76,14 @@ def scenario(name, case, files, contingency, stop, step, andes: bool) -> None:
     if andes:
         runs["andes (1 ms)"] = AndesRunner(case, 0.001, rows=step)
     print(f"\n{name}: own master (iterated) {own_s:.2f} s")
-    print(f"{'run':18s} {'angle deg':>10s} {'rel. deg':>10s} {'V pu':>8s} {'wall s':>8s}")
+    print(f"{'run':18s} {'angle deg':>10s} {'rel. deg':>10s} {'V pu':>8s} {'inv. P,Q':>9s} {'wall s':>8s}")
     for label, runner in runs.items():
         result, wall, failed = timed(runner, contingency, stop)
         if failed:
             print(f"{label:18s} failed: {failed[:90]}")
             continue
-        da, dr, dv = errors(result, own, events)
-        print(f"{label:18s} {da:10.4f} {dr:10.4f} {dv:8.5f} {wall:8.2f}")
+        da, dr, dv, dp = errors(result, own, events)
+        print(f"{label:18s} {da:10.4f} {dr:10.4f} {dv:8.5f} {dp:9.5f} {wall:8.2f}")
 
 
 def main() -> None:
@@ -98,6 +104,16 @@ def main() -> None:
         fault = Contingency(fault_bus=8, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
                             network=case.network)
         scenario("Kundur, fault at bus 8", case, files, fault, args.kundur_stop, args.step, andes_available())
+        if andes_available():
+            import andes
+
+            from reference_models.grid.andes_case import case_from_file
+
+            case = case_from_file(andes.get_case("ieee14/ieee14_pvd1.xlsx"))
+            files = generator_files(case, "reference", Path(tmp) / "fmus")
+            fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                                network=case.network, events=case.events)
+            scenario("ieee14_pvd1, fault at bus 4", case, files, fault, args.kundur_stop, args.step, True)
 
 
 if __name__ == "__main__":

@@ -175,12 +175,14 @@ def _branch_block(vf, name: str, br, bus_from, bus_to):
 @dataclass
 class VeraGridNetwork:
     """The VeraGrid grid of a case: `grid` (MultiCircuit), `buses` {bus number: Bus}, `generators` [one
-    Generator per unit, unit order], and the event parameters: `status` {branch: its u}, `loads`
+    Generator per unit, unit order], `branches` {branch name: its Line, or its Transformer2W where it
+    has a tap or a phase shift}, and the event parameters: `status` {branch: its u}, `loads`
     {bus: (shunt, g, b, y)}, `faults` {bus: (shunt, g, b)}."""
 
     grid: object
     buses: dict
     generators: list
+    branches: dict
     status: dict
     loads: dict
     faults: dict
@@ -209,12 +211,18 @@ def build_network(case, fault_buses=()) -> VeraGridNetwork:
         grid.add_bus(bus)
         initialize_bus_rms(bus, vf)
         buses[b] = bus
-    status = {}
+    status, branches = {}, {}
     for br in net.branches:
-        line = dev.Line(bus_from=buses[br.from_bus], bus_to=buses[br.to_bus], name=br.name, r=br.r, x=br.x, b=br.b)
-        grid.add_line(line)
-        line.rms_model, status[br.name] = _branch_block(vf, f"branch_{br.name}", br, buses[br.from_bus],
-                                                         buses[br.to_bus])
+        ends = dict(bus_from=buses[br.from_bus], bus_to=buses[br.to_bus], name=br.name, r=br.r, x=br.x, b=br.b)
+        if br.tap != 1.0 or br.phi != 0.0:  # VeraGrid's Line has no tap: its power flow would miss it
+            device = dev.Transformer2W(**ends, tap_module=br.tap, tap_phase=br.phi)
+            grid.add_transformer2w(device)
+        else:
+            device = dev.Line(**ends)
+            grid.add_line(device)
+        device.rms_model, status[br.name] = _branch_block(vf, f"branch_{br.name}", br, buses[br.from_bus],
+                                                           buses[br.to_bus])
+        branches[br.name] = device
 
     def shunt(bus: int, name: str, y: complex):
         device = dev.Shunt(name=name, G=float(y.real) * base, B=float(y.imag) * base)
@@ -241,7 +249,7 @@ def build_network(case, fault_buses=()) -> VeraGridNetwork:
         if g.kind == "slack":
             buses[unit.bus].is_slack = True
         generators.append(gen)
-    return VeraGridNetwork(grid, buses, generators, status, loads, faults)
+    return VeraGridNetwork(grid, buses, generators, branches, status, loads, faults)
 
 
 def power_flow(network: VeraGridNetwork):
@@ -680,8 +688,7 @@ class VeraGridRunner:
                 fault = now_fault
             now_open = set(tp.open)
             for name in now_open ^ opened:
-                line = next(br for br in network.grid.lines if br.name == name)
-                changes.append((line, network.status[name], 0.0 if name in now_open else 1.0))
+                changes.append((network.branches[name], network.status[name], 0.0 if name in now_open else 1.0))
             opened = now_open
             now_off = {bus for bus, _ in tp.loads_off}
             for bus in now_off ^ off:

@@ -1,5 +1,6 @@
 """VeraGrid (VeraGridEngine, MPL-2.0, optional) as a host of opfmu's native FMUs (cosim.veragrid):
-the SMIB through bolted faults against opfmu's own master, the command line's --host veragrid."""
+the SMIB, Kundur and (where ANDES reads it) ieee14_pvd1 with its inverters through bolted faults
+against opfmu's own master, the command line's --host veragrid."""
 import importlib.util
 
 import numpy as np
@@ -79,6 +80,38 @@ def test_kundur_with_its_controls_runs_whole_through_a_fault_at_bus_8_close_to_t
     assert result.V_bus[result.time == 1.05, case.network.bus_index(8)] < 0.05  # the fault holds bus 8 down
     assert np.all(result.V_bus[-1] > 0.9)  # and it recovers
     assert np.ptp(result.machine_inputs["Efd"][:, 0]) > 0.05  # the exciters act
+
+
+@pytest.mark.andes
+def test_ieee14_with_ten_inverters_and_tapped_transformers_follows_the_own_master_through_a_bolted_fault(tmp_path):
+    """ieee14_pvd1: five GENROU units with their controls, ten PVD1 inverters at bus 4, transformers
+    with off-nominal taps (a Transformer2W in VeraGrid's power flow: a Line there has no tap, and the
+    run started off rest), the case's own line toggle; a bolted fault at bus 4."""
+    import andes
+
+    from cosim.fmus import generator_files
+    from reference_models.grid.andes_case import case_from_file
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE
+
+    case = case_from_file(andes.get_case("ieee14/ieee14_pvd1.xlsx"))
+    assert any(br.tap != 1.0 for br in case.network.branches)
+    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                        network=case.network, events=case.events)
+    files = generator_files(case, "reference", tmp_path / "cache")
+    result, _ = VeraGridRunner(case, files, 0.01).run(fault, 2.0)
+    own = own_master_run(case, files, fault, 2.0)
+    assert np.array_equal(np.round(result.time, 9), np.round(own.time, 9))
+    events = np.isin(np.round(own.time, 9), (1.0, 1.1))
+    machines = np.isfinite(own.rotor_angle[0])
+    assert machines.sum() == 5
+    angle = np.degrees(np.abs(result.rotor_angle - own.rotor_angle)[~events][:, machines])
+    assert angle[own.time[~events] < 1.0].max() < 1e-6  # at rest from VeraGrid's power flow
+    assert angle.max() < 0.5  # measured 0.41 deg
+    assert np.abs(result.V_bus - own.V_bus)[~events].max() < 0.01
+    inverters = ~machines  # 0.005 pu each on the system base: measured 0.0002 pu
+    assert np.abs(result.P - own.P)[~events][:, inverters].max() < 0.002
+    assert np.abs(result.Q - own.Q)[~events][:, inverters].max() < 0.002
+    assert result.V_bus[np.round(result.time, 9) == 1.05, case.network.bus_index(4)] < 0.05
 
 
 def test_grid_run_on_veragrid_writes_the_masters_result_files(kundur_cache, tmp_path):
