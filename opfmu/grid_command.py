@@ -76,6 +76,11 @@ def _common(p, trip: bool = True) -> None:
                         "converted from ANDES (kundur, ieee14, ieee39, npcc), or a case file ANDES reads (xlsx, "
                         "json, or a PSS/E raw with --dyr; converted once, needs ANDES: pip install -e '.[andes]')")
     p.add_argument("--dyr", default=None, metavar="FILE", help="the PSS/E dyr file of a raw --case")
+    p.add_argument("--attach", action="append", default=[], metavar="BUS=FILE",
+                   help="attach the sub-system case FILE (a case ANDES reads whose only Slack is its boundary "
+                        "bus, e.g. python -m reference_models.grid.subsystems feeder) at the case's bus BUS; "
+                        "the power flow is solved jointly and it runs as the rest of the case (--fmus); "
+                        "repeatable; needs ANDES")
     p.add_argument("--no-case-events", action="store_true",
                    help="leave the case's own events (line toggles, faults, generator trips) out (default: they "
                         "apply as in the case file, with the contingency)")
@@ -216,6 +221,8 @@ def _case(args):
     from reference_models.grid import wscc9
     from reference_models.grid.case import DATA_DIR, CaseError, load_case, shipped_case
 
+    if getattr(args, "attach", None):
+        return _attached_case(args)
     if args.case not in CASES:
         if not (Path(args.case).exists() or Path(args.case).suffix.lower() in CASE_FILE_SUFFIXES):
             raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)}, or a case file ANDES reads: "
@@ -239,6 +246,51 @@ def _case(args):
         return load_case(DATA_DIR / f"{args.case}_network.json", args.dynamic_data, args.case)
     except CaseError as exc:
         raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
+
+
+def _attachments(args) -> list:
+    """[(bus, sub-system file)] of --attach BUS=FILE; UserError for one that is malformed."""
+    out = []
+    for text in args.attach:
+        bus, sep, path = text.partition("=")
+        if not sep or not bus.strip().lstrip("-").isdigit() or not path:
+            raise UserError(f"--attach takes BUS=FILE (a bus number of the case and a sub-system case file), "
+                            f"got {text!r}")
+        if not Path(path).is_file():
+            raise UserError(f"--attach {text}: no file {path}")
+        out.append((int(bus), Path(path)))
+    return out
+
+
+def _attached_case(args):
+    """The case of --case with the sub-systems of --attach attached (reference_models.grid.attach)."""
+    import importlib.util
+
+    attachments = _attachments(args)
+    if args.dynamic_data is not None or args.dyr is not None:
+        raise UserError("--attach goes with a shipped case converted from ANDES or a case file ANDES reads, "
+                        "without --dynamic-data or --dyr")
+    if importlib.util.find_spec("andes") is None:
+        raise UserError("--attach needs ANDES to read and join the case files: pip install -e '.[andes]'")
+    import andes
+
+    from reference_models.grid.andes_case import ANDES_CASES, case_cache_dir, case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.case import CaseError
+
+    if args.case in ANDES_CASES:
+        host = Path(andes.get_case(ANDES_CASES[args.case]))
+    elif args.case in CASES:
+        raise UserError(f"--attach needs a case ANDES reads; {args.case} has no ANDES case file "
+                        f"(use one of {', '.join(ANDES_CASES)} or a case file)")
+    elif Path(args.case).is_file():
+        host = Path(args.case)
+    else:
+        raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)}, or a case file ANDES reads)")
+    try:
+        return case_from_file(attached_file(host, attachments, case_cache_dir() / "attached"))
+    except CaseError as exc:
+        raise UserError(_one_line(exc)) from None
 
 
 def _run_events(args, case) -> None:

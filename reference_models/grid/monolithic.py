@@ -600,7 +600,17 @@ class _Locked:
         return self.system.rhs(t, y, self.network, self.controls, _Branches(modes), self.tripped)
 
     def rhs(self, t, y):
-        return self.on(t, y, self.modes)
+        """dy/dt on the locked branches. Where a locked branch is evaluated outside its domain (the
+        square root of a current headroom gone negative past the switching that ends the branch), with
+        every condition as it holds at y instead: the branch's continuation there (the headroom is
+        0), and the switching is located after the step as any other."""
+        try:
+            return self.on(t, y, self.modes)
+        except (ArithmeticError, ValueError) as exc:
+            if isinstance(exc, ValueError) and str(exc) != "math domain error":
+                raise
+            self.count(t)
+            return self.system.rhs(t, y, self.network, self.controls, _Branches(), self.tripped)
 
     def differing(self, t, y, held=frozenset()) -> frozenset:
         """The conditions whose branch at y (not one `held`) differs from its lock, where the

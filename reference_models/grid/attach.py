@@ -1,0 +1,192 @@
+"""Sub-systems attached to a host case at a bus, as one case file ANDES reads: the host's and each
+sub-system's devices (ANDES loads both files; needs ANDES, like any case file), merged, so that the
+power flow is solved jointly and every runner (native FMUs, the monolithic DAE, ANDES itself) runs
+the whole.
+
+A sub-system file (reference_models.grid.subsystems) is a case of its own whose only Slack stands
+for the grid at its boundary bus. Attached at host bus B:
+* the Slack and the boundary bus are left out, and whatever the sub-system connects to its
+  boundary bus connects to B (a line's nominal voltage at that end becomes B's);
+* the sub-system's other buses are numbered from the first multiple of 1000 above every bus number
+  already taken (ANDES' bus idx are integers), and every other idx (lines, loads, static
+  generators, devices) gets the prefix "B:" (ANDES' references between devices follow: each
+  IdxParam names the model or group it points into);
+* its own events (Toggle, Fault, Alter) come along.
+Neither file's ANDES settings (_config) are carried: the merged case runs on ANDES' defaults, which
+are what opfmu's conversion asks of a case anyway (reference_models.grid.andes_case).
+
+`attached_file(host, [(bus, file), ...], folder)` writes the merged case as ANDES JSON into
+`folder`, named by a hash of the inputs' bytes (a second call finds it), atomically.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+
+from .case import CaseError
+from .subsystems import write_case
+
+BUS_BLOCK = 1000  # the sub-system's buses are numbered from a multiple of this
+
+
+def _records(ss) -> dict:
+    """{model: [record]} of every model of the loaded ANDES system `ss` with devices (its input data)."""
+    import pandas as pd
+
+    out = {}
+    for name, model in ss.models.items():
+        if model.n == 0:
+            continue
+        frame = model.as_df(vin=True)
+        out[name] = [{k: (None if (isinstance(v, float) and math.isnan(v)) or v is pd.NA else _plain(v))
+                      for k, v in row.items() if k != "uid"} for row in frame.to_dict(orient="records")]
+    return out
+
+
+def _plain(value):
+    """A JSON value of an ANDES input (numpy scalars made Python ones)."""
+    return value.item() if hasattr(value, "item") else value
+
+
+def _references(ss) -> dict:
+    """{model: {field: the model or group the IdxParam points into}} of every model of `ss`."""
+    out = {}
+    for name, model in ss.models.items():
+        fields = {}
+        for field, param in model.params.items():
+            target = getattr(param, "model", None)
+            if field != "idx" and target is not None and type(param).__name__ == "IdxParam":
+                fields[field] = target
+        out[name] = fields
+    return out
+
+
+def _boundary(records: dict, path) -> tuple:
+    """(boundary bus idx, the Slack record's idx) of a sub-system: its only Slack's bus."""
+    slacks = [r for r in records.get("Slack", []) if r.get("u", 1) not in (0, 0.0)]
+    if len(slacks) != 1:
+        raise CaseError(f"{path}: a sub-system has exactly one Slack in service, at its boundary bus (the grid "
+                        f"it is attached to), got {len(slacks)}")
+    return slacks[0]["bus"], slacks[0]["idx"]
+
+
+def merge(host: dict, host_refs: dict, subsystems: list) -> dict:
+    """The host's records with each (bus, records, refs, path) of `subsystems` attached (module
+    docstring)."""
+    merged = {model: [dict(r) for r in rows] for model, rows in host.items()}
+    buses = {r["idx"]: r for r in merged.get("Bus", [])}
+    taken = max(int(b) for b in buses)
+    for bus, records, refs, path in subsystems:
+        if bus not in buses:
+            raise CaseError(f"--attach {bus}={path}: the host has no bus {bus}")
+        boundary, slack = _boundary(records, path)
+        first = (taken // BUS_BLOCK + 1) * BUS_BLOCK
+        numbers = {boundary: bus}
+        for r in records.get("Bus", []):
+            if r["idx"] != boundary:
+                numbers[r["idx"]] = first + len(numbers) - 1
+        taken = max([taken, *numbers.values()])
+        prefix = f"{bus}:"
+        bus_group = {"Bus", "ACNode"}  # ANDES: a bus field points into the ACNode group
+        for model, rows in records.items():
+            if model in ("_config", "Summary"):
+                continue
+            fields = refs.get(model, {})
+            for r in rows:
+                if model == "Bus" and r["idx"] == boundary or model == "Slack" and r["idx"] == slack:
+                    continue
+                r = dict(r)
+                if model == "Bus":
+                    r["idx"] = numbers[r["idx"]]
+                else:
+                    r["idx"] = f"{prefix}{r['idx']}"
+                    if r.get("name") is not None:
+                        r["name"] = f"{prefix}{r['name']}"
+                for field, target in fields.items():
+                    value = r.get(field)
+                    if value is None:
+                        continue
+                    if target in bus_group:
+                        r[field] = numbers.get(value, value)
+                    else:
+                        r[field] = f"{prefix}{value}"
+                if model == "Line":  # an end at the boundary takes the host bus' nominal voltage
+                    for end, vn in (("bus1", "Vn1"), ("bus2", "Vn2")):
+                        if r.get(end) == bus:
+                            r[vn] = buses[bus].get("Vn", r.get(vn))
+                elif r.get("bus") == bus and "Vn" in r:
+                    r["Vn"] = buses[bus].get("Vn", r["Vn"])
+                merged.setdefault(model, []).append(r)
+    return merged
+
+
+def _load(andes, path):
+    """The ANDES system of the case file `path`, loaded without setup; CaseError where ANDES cannot."""
+    from .andes_case import configure_andes_logging
+
+    configure_andes_logging(andes)
+    try:
+        ss = andes.load(str(path), setup=False, no_output=True, default_config=True)
+    except Exception as exc:  # ANDES raises what its readers raise on a malformed file
+        raise CaseError(f"{path}: ANDES cannot read it: {type(exc).__name__}: {exc}") from None
+    if ss is None:
+        raise CaseError(f"{path}: ANDES cannot read it")
+    return ss
+
+
+def attached_file(host, attachments, folder) -> Path:
+    """The case file (ANDES JSON in `folder`) of the host case file `host` with each (bus, sub-system
+    file) of `attachments` attached; CaseError for a file ANDES cannot read, a sub-system without
+    exactly one Slack, or a bus the host lacks."""
+    import andes
+
+    host = Path(host)
+    digest = hashlib.sha256(host.read_bytes())
+    for bus, path in attachments:
+        digest.update(f"|{bus}|".encode())
+        digest.update(Path(path).read_bytes())
+    digest.update(Path(__file__).read_bytes())
+    out = Path(folder) / f"{host.stem}_attached_{digest.hexdigest()[:16]}.json"
+    if out.exists():
+        return out
+    ss = _load(andes, host)
+    host_records = _records(ss)
+    subsystems = []
+    for bus, path in attachments:
+        sub = _load(andes, path)
+        subsystems.append((int(bus), _records(sub), _references(sub), path))
+    merged = merge(host_records, _references(ss), subsystems)
+    _at_unity_power_factor(andes, merged, {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems
+                                           for r in records.get("PV", [])}, Path(folder))
+    return write_case(merged, out)
+
+
+def _at_unity_power_factor(andes, merged: dict, pvs: set, folder: Path) -> None:
+    """Sets the voltage of each sub-system static generator in `pvs` (a PV holds its bus voltage in
+    the power flow) to the one the joint power flow gives it when it holds its reactive power at 0
+    instead (ANDES' pv2pq with both of its limits 0, every other PV's limits out of reach): the
+    sub-system's units then start at unity power factor wherever it is attached, as they were built
+    (subsystems: the set points a sweep of the feeder alone gives). CaseError where that power flow
+    does not converge."""
+    if not pvs:
+        return
+    probe = {model: [dict(r) for r in rows] for model, rows in merged.items()}
+    for r in probe.get("PV", []):
+        if r["idx"] in pvs:
+            r["qmax"], r["qmin"] = 0.0, 0.0
+        else:
+            r["qmax"], r["qmin"] = 1e8, -1e8
+    path = write_case(probe, folder / ".unity_power_factor_probe.json")
+    try:
+        ss = andes.load(str(path), no_output=True, default_config=True, config_option=["PV.pv2pq=1"])
+        converged = ss is not None and ss.PFlow.run() and ss.PFlow.converged
+        if not converged:
+            raise CaseError("the joint power flow of the host and its sub-systems does not converge")
+        voltage = dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
+        bus_of = dict(zip(ss.PV.idx.v, ss.PV.bus.v))
+    finally:
+        path.unlink(missing_ok=True)
+    for r in merged.get("PV", []):
+        if r["idx"] in pvs:
+            r["v0"] = float(voltage[bus_of[r["idx"]]])

@@ -1,0 +1,118 @@
+"""Generated sub-systems (reference_models.grid.subsystems: radial feeders of PVD1 units) and their
+attachment to a host case at a bus (reference_models.grid.attach, `opfmu grid run --attach`)."""
+from __future__ import annotations
+
+import json
+from collections import defaultdict
+
+import numpy as np
+import pytest
+
+from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+
+
+def test_a_feeder_is_the_same_for_a_seed_and_spreads_its_units_settings():
+    a, b, c = feeder(FeederSpec(units=40, seed=3)), feeder(FeederSpec(units=40, seed=3)), feeder(FeederSpec(units=40, seed=4))
+    assert a == b and a != c
+    units = a["PVD1"]
+    assert len(units) == 40 and len(a["Slack"]) == 1 and a["Slack"][0]["bus"] == 1
+    for u in units:  # trip curves in order around the nominal voltage and frequency
+        assert u["vt0"] < u["vt1"] < 1.0 < u["vt2"] < u["vt3"]
+        assert u["ft0"] < u["ft1"] < 60.0 < u["ft2"] < u["ft3"]
+        assert u["v0"] < 0.93 and u["v1"] > 1.05  # the Q-V dead band holds the feeder's voltages
+    assert np.std([u["vt1"] for u in units]) > 0.01 and np.std([u["Sn"] for u in units]) > 0.05
+    shares = defaultdict(float)
+    for u in units:
+        shares[u["gen"]] += u["gammap"]
+    assert set(shares) == {g["idx"] for g in a["PV"]}
+    assert np.allclose(list(shares.values()), 1.0, rtol=1e-12)
+    power = {g["idx"]: g["p0"] for g in a["PV"]}
+    assert sum(power.values()) == pytest.approx(sum(u["Sn"] / 100.0 * 0.5 for u in units), rel=0.5)
+
+
+@pytest.mark.parametrize("units, sections", [(10, 3), (100, 10), (300, 30)])
+def test_the_feeder_grows_with_its_units_and_keeps_its_voltage_drop(units, sections):
+    records = feeder(FeederSpec(units=units))
+    assert len(records["PVD1"]) == units and len(records["Line"]) == sections + 1
+    voltages = [b["v0"] for b in records["Bus"][2:]]
+    assert 0.9 < min(voltages) < 1.0  # the sweep's voltages, a drop of a few per cent
+    assert records["Line"][0]["trans"] == 1 and records["Line"][0]["Vn1"] != records["Line"][0]["Vn2"]
+
+
+def test_a_bad_feeder_size_is_refused():
+    with pytest.raises(ValueError, match="at least one unit"):
+        FeederSpec(units=0)
+
+
+def test_the_case_file_is_written_whole(tmp_path):
+    path = write_case(feeder(FeederSpec(units=5)), tmp_path / "f.json")
+    assert json.loads(path.read_text())["PVD1"][0]["idx"] == "unit 1"
+    assert [p.name for p in tmp_path.iterdir()] == ["f.json"]  # no temporary file left
+
+
+@pytest.mark.parametrize("attach, message", [
+    ("9", "--attach takes BUS=FILE"),
+    ("x=f.json", "--attach takes BUS=FILE"),
+    ("9=missing.json", "no file missing.json"),
+])
+def test_a_malformed_attachment_is_one_line_and_exit_code_2(attach, message, tmp_path, capsys, monkeypatch):
+    from opfmu.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "f.json").write_text("{}")
+    assert main(["grid", "run", "--case", "ieee14", "--attach", attach, "--out", "out"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.andes
+def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_fault(tmp_path):
+    import andes
+
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from reference_models.grid.andes_case import case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+
+    sub = write_case(feeder(FeederSpec(units=12, seed=1)), tmp_path / "feeder.json")
+    path = attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached")
+    assert attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached") == path
+    merged = json.loads(path.read_text())
+    assert not any(r["idx"] == "9:grid" for r in merged["Slack"])  # the sub-system's grid is the host now
+    assert [r["bus1"] for r in merged["Line"] if r["idx"] == "9:transformer"] == [9]
+    ss = andes.run(str(path), no_output=True, default_config=True)
+    assert ss.PFlow.converged
+    pv = [i for i, idx in enumerate(ss.PV.idx.v) if str(idx).startswith("9:")]
+    assert np.max(np.abs(ss.PV.q.v[pv])) < 1e-6  # the units start at unity power factor
+    case = case_from_file(path)
+    assert sum(1 for u in case.units if u.bus >= 1000) == 12
+    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                        network=case.network, events=case.events)
+    files = generator_files(case, "reference", tmp_path / "cache")
+    runner = MasterRunner(files, case, MasterSettings(step=0.01))
+    try:
+        result, _ = runner.run(fault, 2.0)
+    finally:
+        runner.close()
+    assert result.stable and np.all(np.isfinite(result.V_bus))
+    # the feeder's head follows the host: its voltage dips with the fault at bus 4 and recovers
+    head = case.network.bus_index(min(b for b in case.buses if b >= 1000))
+    assert result.V_bus[np.round(result.time, 9) == 1.05, head] < result.V_bus[0, head] - 0.05
+    assert abs(result.V_bus[-1, head] - result.V_bus[0, head]) < 0.02
+
+
+@pytest.mark.andes
+def test_the_monolithic_dae_continues_a_current_headroom_past_its_switching(tmp_path):
+    """A PVD1's reactive-current limit sqrt(ialim^2 - Ip^2) on a branch locked where the headroom was
+    positive, evaluated past the switching that ends it: its continuation (0), not a math domain error."""
+    from cosim.runners import MonolithicRunner
+    from reference_models.grid.andes_case import case_from_file
+    from reference_models.grid.contingency import Contingency
+
+    case = case_from_file(write_case(feeder(FeederSpec(units=30, seed=0)), tmp_path / "feeder.json"))
+    fault = Contingency(fault_bus=5, fault_start=1.0, clear_s=1.1, fault_impedance=1e-4j, network=case.network)
+    result, _ = MonolithicRunner(case, 0.01, 1e-9).run(fault, 1.5)
+    assert result.time[-1] == pytest.approx(1.5) and np.all(np.isfinite(result.V_bus))
