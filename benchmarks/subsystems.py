@@ -1,0 +1,200 @@
+"""A generated feeder attached to a host case, run side by side in one process: its full detail as
+native FMUs in opfmu's master, in the monolithic DAE and in ANDES, and its hand-made aggregate
+(reference_models.grid.aggregate) as native FMUs; the aggregate's errors against the detail, and
+every run's wall and CPU time, for feeders of N units (issue 35).
+
+    python benchmarks/subsystems.py [--host ieee14] [--bus 9] [--fault 4] [--units 10 30 100 300]
+                                    [--clear 0.1] [--stop 3] [--seed 0] [--out benchmarks/subsystems]
+
+Per N: reference_models.grid.subsystems.feeder(FeederSpec(units=N, seed)) attached at --bus of
+--host (reference_models.grid.attach), a fault of 1e-4j pu at --fault from 1.0 s, cleared --clear s
+later, each run to --stop at h = 10 ms (ANDES: its trapezoid at 10 ms, and at 1 ms as the reference
+of the errors). Errors outside the fault's own steps: the power the feeder draws through its
+boundary bus (P, Q in % of the feeder's total unit rating; from the bus voltages and the branch
+admittances of the branches from the host bus into the feeder), the host's rotor angles relative to
+its first machine [deg], the boundary bus voltage [pu]; and the share of units still in service at
+the stop (PVD1's trip flags, where the runner gives them). The FMUs are built (and cached) before
+anything is timed. Writes OUT.json (every number), OUT.md (the tables) and OUT.png (cost against N).
+Needs ANDES.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from cosim.andes_runner import AndesRunner  # noqa: E402
+from cosim.fmus import generator_files  # noqa: E402
+from cosim.master import MasterSettings  # noqa: E402
+from cosim.runners import MasterRunner, MonolithicRunner  # noqa: E402
+from reference_models.grid.aggregate import aggregate_file  # noqa: E402
+from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
+from reference_models.grid.attach import attached_file  # noqa: E402
+from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
+from reference_models.grid.subsystems import FeederSpec, feeder, write_case  # noqa: E402
+
+
+def boundary_power(result, case, bus: int) -> np.ndarray:
+    """[n] complex: the power [pu, system base] flowing from host bus `bus` into the branches to the
+    sub-system's buses (numbered from 1000: reference_models.grid.attach)."""
+    net = case.network
+    i = net.bus_index(bus)
+    V = result.V_bus * np.exp(1j * result.theta_bus)
+    S = np.zeros(len(result.time), complex)
+    for br in net.branches:
+        if bus not in (br.from_bus, br.to_bus) or min(br.from_bus, br.to_bus) >= 1000 or \
+                max(br.from_bus, br.to_bus) < 1000:
+            continue
+        y = 1.0 / complex(br.r, br.x)
+        m = br.tap * np.exp(1j * br.phi)
+        j = net.bus_index(br.to_bus if br.from_bus == bus else br.from_bus)
+        if br.from_bus == bus:
+            current = (y + 0.5j * br.b) / br.tap ** 2 * V[:, i] - y / np.conj(m) * V[:, j]
+        else:
+            current = (y + 0.5j * br.b) * V[:, i] - y / m * V[:, j]
+        S += V[:, i] * np.conj(current)
+    return S
+
+
+def _common(a, b) -> tuple:
+    """Row indices of a and b at common times (rounded to 1e-9 s)."""
+    ta, tb = np.round(a.time, 9), np.round(b.time, 9)
+    common = np.intersect1d(ta, tb)
+    return np.searchsorted(ta, common), np.searchsorted(tb, common), common
+
+
+def errors(run, case_run, ref, case_ref, bus: int, rating: float, fault: tuple) -> dict:
+    """The errors of `run` (its case `case_run`) against `ref` (module docstring)."""
+    a, b, t = _common(run, ref)
+    keep = ~((t >= fault[0] - 1e-9) & (t < fault[1] + 1e-9))
+    a, b = a[keep], b[keep]
+    S_run, S_ref = boundary_power(run, case_run, bus)[a], boundary_power(ref, case_ref, bus)[b]
+    machines = np.isfinite(ref.rotor_angle[0]) & (np.arange(ref.rotor_angle.shape[1]) < len(case_ref.units))
+    host = [k for k, u in enumerate(case_ref.units) if u.bus < 1000 and machines[k]]
+    host_run = [k for k, u in enumerate(case_run.units) if u.bus < 1000 and np.isfinite(run.rotor_angle[0, k])]
+    da = (run.rotor_angle[a][:, host_run] - run.rotor_angle[a][:, host_run[:1]]) \
+        - (ref.rotor_angle[b][:, host] - ref.rotor_angle[b][:, host[:1]])
+    i_run, i_ref = case_run.network.bus_index(bus), case_ref.network.bus_index(bus)
+    return {"P_percent": float(100 * np.max(np.abs(S_run.real - S_ref.real)) / rating),
+            "Q_percent": float(100 * np.max(np.abs(S_run.imag - S_ref.imag)) / rating),
+            "angle_deg": float(np.degrees(np.max(np.abs(da)))),
+            "V_boundary": float(np.max(np.abs(run.V_bus[a, i_run] - ref.V_bus[b, i_ref])))}
+
+
+def timed(runner, contingency, stop):
+    wall, cpu = time.perf_counter(), time.process_time()
+    result, _ = runner.run(contingency, stop)
+    return result, time.perf_counter() - wall, time.process_time() - cpu
+
+
+def main(argv=None) -> int:
+    import andes
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--host", default="ieee14")
+    parser.add_argument("--bus", type=int, default=9)
+    parser.add_argument("--fault", type=int, default=4)
+    parser.add_argument("--units", type=int, nargs="+", default=[10, 30, 100, 300])
+    parser.add_argument("--clear", type=float, default=0.1)
+    parser.add_argument("--stop", type=float, default=3.0)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default=str(ROOT / "benchmarks" / "subsystems"))
+    args = parser.parse_args(argv)
+    host = Path(andes.get_case(ANDES_CASES[args.host])) if args.host in ANDES_CASES else Path(args.host)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for n in args.units:
+            spec = FeederSpec(units=n, seed=args.seed)
+            records = feeder(spec)
+            rating = sum(u["Sn"] for u in records["PVD1"]) / 100.0
+            sub = write_case(records, tmp / f"feeder_{n}.json")
+            detail = case_from_file(attached_file(host, [(args.bus, sub)], tmp / "attached"))
+            agg = case_from_file(attached_file(host, [(args.bus, aggregate_file(sub, tmp / "aggregates"))],
+                                               tmp / "attached"))
+            fault = (1.0, 1.0 + args.clear)
+            contingency = {name: Contingency(fault_bus=args.fault, fault_start=1.0, clear_s=fault[1],
+                                             fault_impedance=ANDES_FAULT_IMPEDANCE, network=c.network,
+                                             events=c.events)
+                           for name, c in (("detail", detail), ("aggregate", agg))}
+            runs = {}
+            for label, case, runner in (
+                    ("detail, native FMUs", detail,
+                     lambda: MasterRunner(generator_files(detail, "reference", tmp / "fmus"), detail,
+                                          MasterSettings(step=0.01))),
+                    ("detail, monolithic DAE", detail, lambda: MonolithicRunner(detail, 0.01, 1e-8)),
+                    ("detail, ANDES 10 ms", detail, lambda: AndesRunner(detail, 0.01)),
+                    ("detail, ANDES 1 ms", detail, lambda: AndesRunner(detail, 0.001, rows=0.01)),
+                    ("aggregate, native FMUs", agg,
+                     lambda: MasterRunner(generator_files(agg, "reference", tmp / "fmus"), agg,
+                                          MasterSettings(step=0.01)))):
+                kind = "aggregate" if case is agg else "detail"
+                try:
+                    made = runner()
+                    result, wall, cpu = timed(made, contingency[kind], args.stop)
+                    made.close()
+                    runs[label] = (result, case, wall, cpu, None)
+                except (RuntimeError, ValueError) as exc:
+                    runs[label] = (None, case, None, None, str(exc).splitlines()[0][:160])
+                print(f"N = {n}: {label}: " + (f"{runs[label][2]:.2f} s wall, {runs[label][3]:.2f} s CPU"
+                                               if runs[label][4] is None else f"failed: {runs[label][4]}"),
+                      flush=True)
+            ref_label = "detail, ANDES 1 ms" if runs["detail, ANDES 1 ms"][0] is not None else "detail, native FMUs"
+            ref = runs[ref_label]
+            for label, (result, case, wall, cpu, failed) in runs.items():
+                row = {"units": n, "run": label, "wall_s": wall, "cpu_s": cpu, "failed": failed,
+                       "reference": ref_label, "rating_pu": rating}
+                if result is not None and ref[0] is not None and label != ref_label:
+                    row.update(errors(result, case, ref[0], ref[1], args.bus, rating, fault))
+                rows.append(row)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
+    lines = [f"{args.host}, feeder at bus {args.bus}, fault at bus {args.fault} cleared after {args.clear:g} s, "
+             f"{args.stop:g} s at h = 10 ms; errors against {ref_label} outside the fault's steps", "",
+             "| N | run | wall [s] | CPU [s] | P [% rating] | Q [% rating] | host angles [deg] | V boundary [pu] |",
+             "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        def f(key, fmt):
+            return format(r[key], fmt) if r.get(key) is not None else ""
+        lines.append(f"| {r['units']} | {r['run']} | {f('wall_s', '.2f')} | {f('cpu_s', '.2f')} | "
+                     f"{f('P_percent', '.2f')} | {f('Q_percent', '.2f')} | {f('angle_deg', '.3f')} | "
+                     f"{f('V_boundary', '.4f')} |" + (f" failed: {r['failed']}" if r["failed"] else ""))
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    _plot(rows, out.with_suffix(".png"))
+    return 0
+
+
+def _plot(rows, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label in dict.fromkeys(r["run"] for r in rows):
+        points = [(r["units"], r["cpu_s"]) for r in rows if r["run"] == label and r["cpu_s"] is not None]
+        if points:
+            ax.plot(*zip(*points), marker="o", label=label)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("PV units in the feeder")
+    ax.set_ylabel("CPU of the run [s]")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
