@@ -317,3 +317,13 @@ def lag_non_windup_between(m, u, x, K: float, T: float, low, high):
         return non_windup_between(m, (K * u - x) / T, x, low, high), x
     y = K * u
     return 0.0 * x, clip_between(m, y, low + 0.0 * y, high + 0.0 * y)
+
+
+def sqrt_positive_part(m, x):
+    """sqrt(max(x, 0)) with no condition: max(x, 0) as (x + |x|) / 2, |x| = m.sqrt(x x) (for x > 0
+    bit for bit x: sqrt(x x) is |x| exactly in binary floating point). Under a `where(m, x > 0, ...)`
+    the branch that takes sqrt(x) needs it: a guard `m.sqrt(where(m, x > 0, x, 1))` is a condition
+    too, locked with the branch it guards by the integrators that lock branches between switchings
+    (fmu_export.c_equations, Model Exchange), so past x = 0 the locked branch would take the root of
+    a negative number (NaN) where this continues it as 0, the other branch's value there."""
+    return m.sqrt(0.5 * (x + m.sqrt(x * x)))

@@ -76,6 +76,40 @@ def test_model_exchange_under_cvode_equals_cosimulation_through_the_limits(excit
     assert len(me) > len(cs)  # the events between communication points
 
 
+def test_ieeet3_under_cvode_equals_cosimulation_through_its_voltage_steps(fmu_cache):
+    """IEEET3 through the run of tests/test_standard_model_fmus.py: Vt = 0.2 pu from 0.1 s puts
+    SQE = |KP V + j KI I|^2 - (0.78 XadIfd)^2 below 0, Vt back at 0.6 s (Vref 3.0) above. fmpy's
+    CVode sets the inputs of before the step again at 0.6 s (its root function takes the left
+    value there) after the event locked SQE > 0: the locked branch's root stays finite past SQE = 0
+    (blocks.sqrt_positive_part; it took sqrt of a negative number, NaN, and CVode stopped)."""
+    import sys
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1] / "benchmarks"))
+    from model_exchange import compare
+
+    row = compare("IEEET3", 2, fmu_cache)
+    assert row["status"] == "agrees" and row["difference"] <= 1e-6, row
+
+
+def test_a_non_finite_rate_is_discarded_with_a_logged_reason(exciter, unzipped):
+    """A state far enough out that its rate overflows: fmi2GetDerivatives (fmi3's too) returns
+    Discard (the FMI's answer for a right-hand side outside its domain: try a smaller step) with the
+    reason logged, and the instance goes on."""
+    path, version = exciter
+    me = Exchange(path, version, unzipped)
+    me.initialise()
+    me.update()
+    me.fmu.enterContinuousTimeMode()
+    me.set_states([0.3, -1.7e308])  # (K LL_y - LAW_y) / TE overflows
+    get = "fmi2GetDerivatives" if version == 2 else "fmi3GetContinuousStateDerivatives"
+    with pytest.raises(FMICallException) as raised:
+        me.derivatives()
+    assert raised.value.status == 2  # Discard
+    assert any(f"{get}: the derivative of state 1 is inf" in m for m in me.messages), me.messages
+    me.set_states([0.3, 3.0])
+    assert np.all(np.isfinite(me.derivatives()))
+    me.free()
+
+
 def test_a_machine_with_held_inputs_stays_at_rest_under_model_exchange(fmu_cache):
     genrou = component("genrou")
     path = cached_native_reference_fmu("GENROUReference", component=genrou, cache=fmu_cache)

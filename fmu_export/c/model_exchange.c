@@ -108,6 +108,16 @@ Status me_get_derivatives(Instance *inst, const char *function, double out[], si
     if (bad_array(inst, function, out, n, OPFMU_N_STATES, "continuous states")) return STATUS_ERROR;
     locked_derivatives(&inst->model, dx);
     if (n > 0) memcpy(out, dx, n * sizeof *out);
+    /* the right-hand side outside its domain at this state, time and inputs (with the branches locked
+       at the last event): the FMI's Discard, so that the integrator tries a smaller step */
+    const int i = first_non_finite(dx, OPFMU_N_STATES);
+    if (i >= 0) {
+        char message[512];
+        snprintf(message, sizeof message, "%s: the derivative of state %d is %g at time %g (the right-hand side is "
+                 "outside its domain at these states and inputs): try a smaller step", function, i, dx[i],
+                 inst->model.time);
+        return fail(inst, STATUS_DISCARD, "%s", message);
+    }
     return STATUS_OK;
 }
 

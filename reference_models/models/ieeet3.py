@@ -42,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import clip, lag, lag_non_windup, lag_non_windup_reset, washout
+from ..blocks import clip, lag, lag_non_windup, lag_non_windup_reset, sqrt_positive_part, washout
 from ..component import Component, Parameters, Quantity
 from ..piecewise import where
 from .common import check_ranges, controller_initialisation, finite_inputs
@@ -94,7 +94,7 @@ def _signals(x, u, p: IEEET3Params, m):
     d_LG, sensed = lag(m, Vt, LG_y, 1.0, p.TR)
     d_WF, WF_y = washout(m, LA1_y, WF_x, p.KF, p.TF)
     SQE = source_voltage_squared(Vt, theta_vs, I_re, I_im, XadIfd, p, m)
-    root = m.sqrt(where(m, SQE > 0.0, SQE, 1.0 + 0.0 * SQE))
+    root = sqrt_positive_part(m, SQE)  # finite past SQE = 0 with the branch below locked (blocks.py)
     error = Vref - sensed + Vss - WF_y
     d_LA3, VR = lag_non_windup(m, error, LA3_y, p.KA, p.TA, p.VRMIN, ceiling(p.VRMAX))
     VB = VR + where(m, SQE > 0.0, root, 0.0 * SQE)
