@@ -116,3 +116,105 @@ def test_the_monolithic_dae_continues_a_current_headroom_past_its_switching(tmp_
     fault = Contingency(fault_bus=5, fault_start=1.0, clear_s=1.1, fault_impedance=1e-4j, network=case.network)
     result, _ = MonolithicRunner(case, 0.01, 1e-9).run(fault, 1.5)
     assert result.time[-1] == pytest.approx(1.5) and np.all(np.isfinite(result.V_bus))
+
+
+def test_a_plant_is_the_same_for_a_seed_and_spreads_its_units_settings():
+    from reference_models.grid.subsystems import PlantSpec, plant
+
+    a, b, c = plant(PlantSpec(seed=3)), plant(PlantSpec(seed=3)), plant(PlantSpec(seed=4))
+    assert a == b and a != c
+    assert len(a["REGCA1"]) == len(a["REECA1"]) == len(a["REPCA1"]) == len(a["PV"]) == 20
+    assert len(a["Slack"]) == 1 and a["Slack"][0]["bus"] == 1
+    main = a["Line"][0]
+    assert main["bus1"] == 1 and main["trans"] == 1 and (main["Vn1"], main["Vn2"]) == (230.0, 34.5)
+    pads = [r for r in a["Line"] if r["idx"].startswith("pad-mount")]
+    assert len(pads) == 20 and all((r["Vn1"], r["Vn2"]) == (34.5, 0.69) for r in pads)
+    gens = {g["idx"]: g for g in a["PV"]}
+    for gen, ree in zip(a["REGCA1"], a["REECA1"]):
+        pv = gens[gen["gen"]]
+        assert pv["bus"] == gen["bus"] and pv["Sn"] == gen["Sn"] and pv["q0"] == 0.0
+        assert pv["p0"] * 100.0 / gen["Sn"] < 0.95 * ree["Imax"]  # inside the current limit
+        assert 0.8 < ree["Vdip"] < 0.95 < 1.05 < ree["Vup"] and ree["Iq4"] < ree["Imax"] and ree["Ip4"] < ree["Imax"]
+    # the flags are the plant's, the settings the unit's
+    for flag in ("PFFLAG", "VFLAG", "QFLAG", "PQFLAG"):
+        assert len({r[flag] for r in a["REECA1"]}) == 1
+    for key in ("Vdip", "Vup", "Imax", "Trv", "Tpord"):
+        assert np.std([r[key] for r in a["REECA1"]]) > 0.003
+    assert np.std([g["Sn"] for g in a["REGCA1"]]) > 0.3 and np.std([g["Tg"] for g in a["REGCA1"]]) > 0.003
+    # one plant controller: the same measurement and reference, gains split by rating
+    rep = a["REPCA1"]
+    assert {(r["busr"], r["line"], r["RefFlag"], r["Ddn"], r["Tfltr"]) for r in rep} == {
+        (1, None, 1, rep[0]["Ddn"], rep[0]["Tfltr"])}
+    ratings = np.array([g["Sn"] for g in a["REGCA1"]])
+    for key in ("Kp", "Ki", "Kpg", "Kig", "Qmax", "Pmax"):
+        values = np.array([r[key] for r in rep])
+        assert np.allclose(values / values.sum(), ratings / ratings.sum(), rtol=1e-12)
+    assert plant(PlantSpec(units=100, seed=1))["REPCA1"][99]["ree"] == "unit 100"
+
+
+def test_a_bad_plant_size_is_refused():
+    from reference_models.grid.subsystems import PlantSpec
+
+    with pytest.raises(ValueError, match="at least one unit"):
+        PlantSpec(units=0)
+    with pytest.raises(ValueError, match="feeders"):
+        PlantSpec(units=4, feeders=5)
+
+
+def test_the_plant_command_writes_its_case(tmp_path, capsys):
+    from reference_models.grid.subsystems import main
+
+    assert main(["plant", str(tmp_path / "p.json"), "--units", "24", "--seed", "5"]) == 0
+    records = json.loads((tmp_path / "p.json").read_text())
+    assert len(records["REPCA1"]) == 24 and "24 units" in capsys.readouterr().out
+
+
+@pytest.mark.andes
+def test_andes_starts_a_plant_at_rest(tmp_path, caplog):
+    import andes
+
+    from reference_models.grid.subsystems import PlantSpec, plant
+
+    path = write_case(plant(PlantSpec(units=20, seed=1)), tmp_path / "plant.json")
+    ss = andes.run(str(path), no_output=True, default_config=True)
+    assert ss.PFlow.converged
+    assert np.max(np.abs(ss.PV.q.v)) < 1e-6  # the units start at unity power factor
+    ss.TDS.config.tf = 1.0
+    ss.TDS.config.no_tqdm = 1
+    ss.TDS.run()
+    assert ss.exit_code == 0 and "Initialization FAILED" not in caplog.text
+    ts = ss.dae.ts
+    assert np.max(np.abs(ts.x[-1] - ts.x[0])) < 1e-6 and np.max(np.abs(ts.y[-1] - ts.y[0])) < 1e-6
+
+
+@pytest.mark.andes
+def test_a_plant_attached_to_ieee14_runs_through_a_host_fault(tmp_path):
+    import andes
+
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from reference_models.grid.andes_case import case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+    from reference_models.grid.subsystems import PlantSpec, plant
+
+    sub = write_case(plant(PlantSpec(units=20, seed=2)), tmp_path / "plant.json")
+    path = attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached")
+    merged = json.loads(path.read_text())
+    assert {r["busr"] for r in merged["REPCA1"] if r["idx"].startswith("9:")} == {9}  # the POI is the host's bus
+    case = case_from_file(path)
+    assert sum(1 for u in case.units if u.bus >= 1000) == 20
+    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                        network=case.network, events=case.events)
+    files = generator_files(case, "reference", tmp_path / "cache")
+    runner = MasterRunner(files, case, MasterSettings(step=0.01))
+    try:
+        result, _ = runner.run(fault, 2.0)
+    finally:
+        runner.close()
+    assert result.stable and np.all(np.isfinite(result.V_bus))
+    collector = case.network.bus_index(min(b for b in case.buses if b >= 1000))
+    assert np.max(np.abs(result.V_bus[result.time < 0.99, collector] - result.V_bus[0, collector])) < 1e-4  # at rest
+    assert result.V_bus[np.round(result.time, 9) == 1.05, collector] < result.V_bus[0, collector] - 0.05
+    assert abs(result.V_bus[-1, collector] - result.V_bus[0, collector]) < 0.02

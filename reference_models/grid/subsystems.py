@@ -3,6 +3,7 @@ full of PV inverters (PVD1: ANDES' WECC distributed PV, with its voltage and fre
 seeded, written as ANDES JSON ({model: [records]}).
 
     python -m reference_models.grid.subsystems feeder OUT.json [--units N] [--seed S]
+    python -m reference_models.grid.subsystems plant OUT.json [--units N] [--seed S] [--feeders F]
 
 A sub-system file is a whole case on its own: its boundary bus (the bus it connects through) holds
 its only Slack, which stands for the grid it is attached to; `reference_models.grid.attach` replaces
@@ -23,6 +24,36 @@ droop gain, the current limit, the current lag time constants, the voltage-trip 
 1 < vt2 < vt3) and the frequency-trip curve (ft0 < ft1 < fn < ft2 < ft3), latching (vrflag = frflag =
 0: a unit that trips stays off, so a deep fault trips part of the feeder). The loads' power factor
 is spread too. All powers on ANDES' system base, 100 MVA.
+
+The plant (`plant`, issue 35's utility-scale PV plant; default 20 units, 100 and more scale): the
+boundary bus is the point of interconnection (POI, 230 kV), a main step-up transformer (1.1 times
+the units' ratings, z = 0.3 + j10 % on it, tap 1) to the 34.5 kV collector bus, and `feeders`
+collector feeders (one per 8 units, at least 2): a home run of 1-4 km of heavier cable to the first
+unit's junction, then 0.2-0.6 km between junctions (500 kcmil cable, 0.125 + j0.12 ohm/km, 0.3
+uF/km, its charging as the lines' b). Each unit sits on its own 0.69 kV terminal bus behind its
+pad-mount transformer (1.1 times its rating, X = 5.5-6.5 %, X/R 8) and is an REGCA1 (converter)
+with an REECA1 (electrical control) and an REPCA1 (plant control) and its own static generator (PV)
+carrying its power. The PV set points are the voltages a backward-forward sweep of the plant gives
+with every unit at unity power factor and the POI at `v_poi`, so ANDES' power flow leaves them at
+zero reactive power and its time domain starts at rest.
+
+Spread per unit: the rating (2-4 MVA), the loading (irradiance, 0.55-0.9 of the rating: inside the
+current limit Imax, 1.1-1.3), the REGCA1 lag, low-voltage power logic and high-voltage management
+settings, the REECA1 voltage-dip thresholds Vdip (0.85-0.9) and Vup (1.1-1.15), its dip dead band
+and reactive-current gain Kqv, its inner gains and time constants. Plant-wide (one draw): the
+current priority PQFLAG; every REECA1 takes its reactive power from the plant controller (PFFLAG =
+VFLAG = QFLAG = 0: Iqcmd = Qref / V) and its voltage-dependent current limits (VDL1, VDL2) lie below
+its Imax (ANDES starts those limits as if they did: its VDL1c, VDL2c are 1 at initialisation).
+
+The plant controller: ANDES attaches one REPCA1 to each REECA1. All of a plant's REPCA1 measure the
+POI (busr) and its frequency, in voltage control (RefFlag = 1, VCFlag = 0, Kc = 0) with frequency
+droop (Fflag = 1, 3-5 % on the plant's rating); their gains Kp, Ki, Kpg, Kig and output limits are
+the plant's times the unit's share of its rating (REPCA1 works on the system base), their
+references, filters, dead bands and droop the plant's: the set acts as one plant controller whose
+output is split by rating. They measure no line (line = None, PLflag = 0): ANDES' REPCA1 takes the
+current of its `line` only where its converter's bus is one of that line's ends (CurrentSign:
+"bus 4 is not terminal of the line connecting 1 and 2"), which a unit behind a pad-mount
+transformer and a collector never is, so the power through the main transformer is not measured.
 """
 from __future__ import annotations
 
@@ -152,6 +183,188 @@ def _pvd1(rng, name: str, bus: int, gen: str, sn: float, share: float) -> dict:
             "recflag": 1}
 
 
+# ---------------------------------------------------------------------------------------------------
+# the plant
+
+
+@dataclass(frozen=True)
+class PlantSpec:
+    """A PV plant's size and spread: `units` inverters (REGCA1 + REECA1 + REPCA1) of ratings in
+    [unit_mva_min, unit_mva_max] MVA at a loading (irradiance) in [loading_min, loading_max] of their
+    rating, on `feeders` collector feeders (default: one per 8 units, at least 2), the POI at
+    `poi_kv` held at `v_poi` by the boundary's Slack."""
+
+    units: int = 20
+    seed: int = 0
+    feeders: int | None = None
+    unit_mva_min: float = 2.0
+    unit_mva_max: float = 4.0
+    loading_min: float = 0.55
+    loading_max: float = 0.9
+    poi_kv: float = 230.0
+    v_poi: float = 1.0
+
+    def __post_init__(self):
+        if not (isinstance(self.units, int) and self.units >= 1):
+            raise ValueError(f"a plant needs at least one unit, got {self.units!r}")
+        if self.feeders is not None and not (isinstance(self.feeders, int) and 1 <= self.feeders <= self.units):
+            raise ValueError(f"feeders must be an integer from 1 to the number of units, got {self.feeders!r}")
+        if not 0.0 < self.loading_min <= self.loading_max <= 0.95:
+            raise ValueError("the units' loading must lie in (0, 0.95] of their rating, for their current headroom")
+
+    @property
+    def n_feeders(self) -> int:
+        return self.feeders if self.feeders is not None else min(self.units, max(2, math.ceil(self.units / 8)))
+
+
+COLLECTOR_KV, UNIT_KV = 34.5, 0.69
+# a 34.5 kV collector cable per km (500 kcmil aluminium, XLPE): ohm, ohm, microfarad
+CABLE_R, CABLE_X, CABLE_C = 0.125, 0.12, 0.30
+
+
+def _tree_sweep(parent: np.ndarray, z: np.ndarray, shunt: np.ndarray, injection: np.ndarray,
+                source: complex = 1.0 + 0j, iterations: int = 200) -> np.ndarray:
+    """[n] complex: the bus voltages of a radial network of n buses, bus 0 held at `source`, bus k > 0
+    fed from parent[k] < k through the series impedance z[k] [pu], with a shunt admittance shunt[k]
+    to ground and a complex power injection[k] into the network [pu], by backward-forward sweeps."""
+    n = len(parent)
+    V = np.full(n, source, dtype=complex)
+    for _ in range(iterations):
+        current = shunt * V - np.conj(injection / V)  # drawn from each bus
+        for k in range(n - 1, 0, -1):  # each branch's current: everything beyond it
+            current[parent[k]] += current[k]
+        V_new = V.copy()
+        V_new[0] = source
+        for k in range(1, n):
+            V_new[k] = V_new[parent[k]] - z[k] * current[k]
+        if np.max(np.abs(V_new - V)) < 1e-13:
+            return V_new
+        V = V_new
+    raise ValueError("the plant's load flow does not converge")
+
+
+def plant(spec: PlantSpec) -> dict:
+    """The ANDES records {model: [record]} of the PV plant `spec` (module docstring)."""
+    rng = np.random.default_rng(spec.seed)
+    u = rng.uniform
+    n, m = spec.units, spec.n_feeders
+    sn = np.round(u(spec.unit_mva_min, spec.unit_mva_max, n), 2)  # [MVA]
+    p = sn * u(spec.loading_min, spec.loading_max, n) / BASE_MVA  # [pu]
+    total_mva = float(sn.sum())
+    feeder_of = np.repeat(np.arange(m), np.diff(np.linspace(0, n, m + 1).round().astype(int)))
+    # buses: 0 the POI, 1 the collector bus, 2 + 2k unit k's junction on its feeder, 3 + 2k its terminal
+    nb = 2 + 2 * n
+    parent = np.zeros(nb, dtype=int)
+    z = np.zeros(nb, dtype=complex)
+    shunt = np.zeros(nb, dtype=complex)
+    injection = np.zeros(nb, dtype=complex)
+    main_mva = 1.1 * total_mva  # the main transformer: 10 % above the units' ratings, z 0.3 + j10 % on it
+    z[1] = (0.003 + 0.10j) * BASE_MVA / main_mva
+    z_base = COLLECTOR_KV ** 2 / BASE_MVA
+    cable_z = (CABLE_R + 1j * CABLE_X) / z_base  # [pu/km]
+    cable_b = 2 * math.pi * F_HZ * CABLE_C * 1e-6 * z_base  # [pu/km]
+    lengths = np.zeros(n)
+    pad_x = u(0.055, 0.065, n)  # the pad-mount transformers: 1.1 times the unit's rating, X/R 8
+    previous = {}
+    for k in range(n):
+        f = feeder_of[k]
+        j, t = 2 + 2 * k, 3 + 2 * k
+        first = f not in previous
+        lengths[k] = u(1.0, 4.0) if first else u(0.2, 0.6)  # the home run to the first unit, then between units
+        parent[j] = 1 if first else previous[f]
+        # the home run is a heavier cable (about half the impedance, twice the charging)
+        z[j] = cable_z * lengths[k] * (0.5 if first else 1.0)
+        b = cable_b * lengths[k] * (2.0 if first else 1.0)
+        shunt[j] += 0.5j * b
+        shunt[parent[j]] += 0.5j * b
+        parent[t] = j
+        z[t] = pad_x[k] * (1 / 8 + 1j) * BASE_MVA / (1.1 * sn[k])
+        injection[t] = p[k]
+        previous[f] = j
+    V = _tree_sweep(parent, z, shunt, injection, spec.v_poi)
+
+    def line(idx, bus1, bus2, vn1, vn2, zz, b=0.0, trans=False, sn_mva=BASE_MVA):
+        r = {"idx": idx, "name": idx, "bus1": int(bus1) + 1, "bus2": int(bus2) + 1, "Sn": BASE_MVA, "fn": F_HZ,
+             "Vn1": vn1, "Vn2": vn2, "r": float(zz.real), "x": float(zz.imag), "b": float(b)}
+        if trans:
+            r.update(trans=1, tap=1.0, phi=0.0)
+        return r
+
+    kv = [spec.poi_kv, COLLECTOR_KV] + [COLLECTOR_KV, UNIT_KV] * n
+    names = ["poi", "collector"] + [x for k in range(n) for x in (f"feeder {feeder_of[k] + 1} junction {k + 1}",
+                                                                 f"unit {k + 1} terminal")]
+    buses = [{"idx": b + 1, "name": names[b], "Vn": kv[b], "v0": float(abs(V[b])), "a0": float(np.angle(V[b]))}
+             for b in range(nb)]
+    lines = [line("main transformer", 0, 1, spec.poi_kv, COLLECTOR_KV, z[1], trans=True)]
+    for k in range(n):
+        j, t = 2 + 2 * k, 3 + 2 * k
+        b = cable_b * lengths[k] * (2.0 if parent[j] == 1 else 1.0)
+        lines.append(line(f"cable {k + 1}", parent[j], j, COLLECTOR_KV, COLLECTOR_KV, z[j], b))
+        lines.append(line(f"pad-mount {k + 1}", j, t, COLLECTOR_KV, UNIT_KV, z[t], trans=True))
+    slack = [{"idx": "grid", "name": "grid", "bus": 1, "Sn": BASE_MVA, "Vn": spec.poi_kv, "v0": spec.v_poi,
+              "a0": 0.0, "p0": 0.0, "q0": 0.0, "pmax": 999.0, "pmin": -999.0, "qmax": 999.0, "qmin": -999.0}]
+    # plant-wide choices: the current priority (PQFLAG) of every unit, the plant controller's gains (on
+    # the plant's rating) and its filters
+    pqflag = int(rng.integers(0, 2))
+    ctl = {"Kp": u(5.0, 20.0), "Ki": u(2.0, 10.0), "Kpg": u(0.1, 0.5), "Kig": u(0.05, 0.2), "Tfltr": u(0.02, 0.05),
+           "Tfv": u(0.05, 0.15), "Tp": u(0.02, 0.05), "Tg": u(0.05, 0.15), "Vfrz": u(0.7, 0.85),
+           "dbv": u(0.0, 0.005), "droop": u(0.03, 0.05), "fdbd": u(0.0004, 0.0006), "qcap": u(0.33, 0.48)}
+    plant_pu = total_mva / BASE_MVA
+    headroom, output = float(sn.sum() / BASE_MVA - p.sum()), float(p.sum())
+    pvs, gens, elecs, plants = [], [], [], []
+    for k in range(n):
+        t = 4 + 2 * k  # the terminal's bus idx
+        name, share, rating = f"unit {k + 1}", sn[k] / total_mva, sn[k] / BASE_MVA
+        pvs.append({"idx": name, "name": name, "bus": t, "Sn": float(sn[k]), "Vn": UNIT_KV, "v0": float(abs(V[t - 1])),
+                    "p0": float(p[k]), "q0": 0.0, "pmax": float(rating), "pmin": 0.0, "qmax": float(rating),
+                    "qmin": -float(rating)})
+        imax = float(u(1.1, 1.3))
+        gens.append({"idx": name, "name": name, "bus": t, "gen": name, "Sn": float(sn[k]), "Tg": float(u(0.01, 0.03)),
+                     "Rrpwr": float(u(5.0, 20.0)), "Brkpt": float(u(0.85, 0.95)), "Zerox": float(u(0.35, 0.5)),
+                     "Lvplsw": 1, "Lvpl1": float(u(1.0, 1.2)), "Volim": float(u(1.15, 1.25)),
+                     "Lvpnt1": float(u(0.8, 0.9)), "Lvpnt0": float(u(0.3, 0.4)), "Iolim": -float(u(1.3, 1.5)),
+                     "Tfltr": float(u(0.02, 0.1)), "Khv": float(u(0.5, 0.9)), "Iqrmax": 999.0, "Iqrmin": -999.0,
+                     "Accel": 0.0, "gammap": 1.0, "gammaq": 1.0})
+        vdip = float(u(0.85, 0.9))
+        elecs.append({"idx": name, "name": name, "reg": name, "PFFLAG": 0, "VFLAG": 0, "QFLAG": 0,
+                      "PFLAG": 0, "PQFLAG": pqflag, "Vdip": vdip, "Vup": float(u(1.1, 1.15)),
+                      "Trv": float(u(0.01, 0.03)), "dbd1": -float(u(0.05, 0.1)), "dbd2": float(u(0.05, 0.1)),
+                      # ANDES takes REECA1's gains on the system base: Kqv [pu current / pu voltage] and Kvp,
+                      # Kvi scaled by the unit's rating, Kqp, Kqi [pu voltage / pu power] by its inverse
+                      "Kqv": float(u(2.0, 4.0) * rating), "Vref0": 0.0, "Iqfrz": 0.0, "Thld": 0.0, "Thld2": 0.0,
+                      "Tp": float(u(0.02, 0.05)), "QMax": float(ctl["qcap"] * 1.1), "QMin": -float(ctl["qcap"] * 1.1),
+                      "Kqp": float(u(0.5, 1.5) / rating), "Kqi": float(u(5.0, 15.0) / rating),
+                      "Kvp": float(u(0.5, 1.5) * rating), "Kvi": float(u(20.0, 60.0) * rating), "Vref1": 1.0,
+                      "Tiq": float(u(0.01, 0.03)), "PMAX": 1.0, "PMIN": 0.0, "Imax": imax,
+                      "Tpord": float(u(0.01, 0.05)),
+                      # the voltage-dependent current limits, below Imax (machine base) so that ANDES starts
+                      # them where they run: its VDL1c, VDL2c (Lt(VDL_y, Imax)) are 1 at initialisation
+                      **_vdl("q", imax, (0.2, 0.5, 0.8, 1.0), (0.9, 0.95, 0.98, 0.99)),
+                      **_vdl("p", imax, (0.2, 0.5, 0.8, 1.0), (0.2, 0.5, 0.9, 0.99))})
+        # one plant controller split over the units by rating: its gains (on the plant's rating, ANDES
+        # takes them on the system base) times the unit's share, the same reference, measurement and
+        # filters everywhere; the V error, the frequency droop and dead bands are the plant's
+        plants.append({"idx": name, "name": name, "ree": name, "line": None, "busr": 1, "VCFlag": 0, "RefFlag": 1,
+                       "Fflag": 1, "PLflag": 0, "Tfltr": ctl["Tfltr"], "Kp": ctl["Kp"] * plant_pu * share,
+                       "Ki": ctl["Ki"] * plant_pu * share, "Tft": 0.0, "Tfv": ctl["Tfv"], "Vfrz": ctl["Vfrz"],
+                       "Rc": 0.0, "Xc": 0.0, "Kc": 0.0, "emax": 0.1, "emin": -0.1, "dbd1": -ctl["dbv"], "dbd2": ctl["dbv"],
+                       "Qmax": ctl["qcap"] * plant_pu * share, "Qmin": -ctl["qcap"] * plant_pu * share,
+                       "Kpg": ctl["Kpg"] * share, "Kig": ctl["Kig"] * share, "Tp": ctl["Tp"],
+                       "fdbd1": -ctl["fdbd"], "fdbd2": ctl["fdbd"], "femax": plant_pu, "femin": -plant_pu,
+                       "Pmax": headroom * share, "Pmin": -output * share, "Tg": ctl["Tg"],
+                       "Ddn": plant_pu / ctl["droop"], "Dup": plant_pu / ctl["droop"]})
+    plants = [{k: (float(v) if isinstance(v, (float, np.floating)) else v) for k, v in r.items()} for r in plants]
+    return {"Bus": buses, "Line": lines, "Slack": slack, "PV": pvs, "REGCA1": gens, "REECA1": elecs,
+            "REPCA1": plants}
+
+
+def _vdl(kind: str, imax: float, voltages: tuple, fractions: tuple) -> dict:
+    """A REECA1 voltage-dependent current limit (VDL1 for "q", VDL2 for "p"): its four voltages and
+    the currents `fractions` of `imax` there."""
+    return {**{f"V{kind}{i + 1}": v for i, v in enumerate(voltages)},
+            **{f"I{kind}{i + 1}": float(f * imax) for i, f in enumerate(fractions)}}
+
+
 def write_case(records: dict, path) -> Path:
     """Writes ANDES JSON records to `path` atomically (a temporary file beside it, then renamed)."""
     path = Path(path)
@@ -176,13 +389,25 @@ def main(argv=None) -> int:
     f.add_argument("--units", type=int, default=30)
     f.add_argument("--seed", type=int, default=0)
     f.add_argument("--sections", type=int, default=None)
+    pl = sub.add_parser("plant", help="a PV plant of REGCA1/REECA1/REPCA1 units behind a main transformer")
+    pl.add_argument("out")
+    pl.add_argument("--units", type=int, default=20)
+    pl.add_argument("--seed", type=int, default=0)
+    pl.add_argument("--feeders", type=int, default=None)
     args = parser.parse_args(argv)
     try:
-        spec = FeederSpec(units=args.units, seed=args.seed, sections=args.sections)
+        if args.kind == "plant":
+            spec = PlantSpec(units=args.units, seed=args.seed, feeders=args.feeders)
+        else:
+            spec = FeederSpec(units=args.units, seed=args.seed, sections=args.sections)
     except ValueError as exc:
         parser.exit(2, f"error: {exc}\n")
-    path = write_case(feeder(spec), args.out)
-    print(f"feeder of {spec.units} PVD1 units on {spec.n_sections} sections (seed {spec.seed}): {path}")
+    if args.kind == "plant":
+        path = write_case(plant(spec), args.out)
+        print(f"PV plant of {spec.units} units on {spec.n_feeders} collector feeders (seed {spec.seed}): {path}")
+    else:
+        path = write_case(feeder(spec), args.out)
+        print(f"feeder of {spec.units} PVD1 units on {spec.n_sections} sections (seed {spec.seed}): {path}")
     return 0
 
 
