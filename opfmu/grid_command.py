@@ -76,11 +76,12 @@ def _common(p, trip: bool = True) -> None:
                         "converted from ANDES (kundur, ieee14, ieee39, npcc), or a case file ANDES reads (xlsx, "
                         "json, or a PSS/E raw with --dyr; converted once, needs ANDES: pip install -e '.[andes]')")
     p.add_argument("--dyr", default=None, metavar="FILE", help="the PSS/E dyr file of a raw --case")
-    p.add_argument("--attach", action="append", default=[], metavar="BUS=FILE",
+    p.add_argument("--attach", action="append", default=[], metavar="BUS=FILE[:KIND]",
                    help="attach the sub-system case FILE (a case ANDES reads whose only Slack is its boundary "
                         "bus, e.g. python -m reference_models.grid.subsystems feeder) at the case's bus BUS; "
-                        "the power flow is solved jointly and it runs as the rest of the case (--fmus); "
-                        "repeatable; needs ANDES")
+                        "the power flow is solved jointly; KIND detail (default: every device, run as the rest "
+                        "of the case, --fmus) or aggregate (one unit of each model with the summed ratings "
+                        "behind an equivalent impedance); repeatable; needs ANDES")
     p.add_argument("--no-case-events", action="store_true",
                    help="leave the case's own events (line toggles, faults, generator trips) out (default: they "
                         "apply as in the case file, with the contingency)")
@@ -248,17 +249,28 @@ def _case(args):
         raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
 
 
+ATTACH_KINDS = ("detail", "aggregate")  # how an attached sub-system runs (reference_models.grid.aggregate)
+
+
 def _attachments(args) -> list:
-    """[(bus, sub-system file)] of --attach BUS=FILE; UserError for one that is malformed."""
+    """[(bus, sub-system file, kind)] of --attach BUS=FILE[:KIND]; UserError for one that is malformed."""
     out = []
     for text in args.attach:
         bus, sep, path = text.partition("=")
+        head, colon, kind = path.rpartition(":")
+        if colon and kind in ATTACH_KINDS + ("surrogate",):
+            path = head
+        else:
+            kind = "detail"
         if not sep or not bus.strip().lstrip("-").isdigit() or not path:
-            raise UserError(f"--attach takes BUS=FILE (a bus number of the case and a sub-system case file), "
-                            f"got {text!r}")
+            raise UserError(f"--attach takes BUS=FILE[:KIND] (a bus number of the case, a sub-system case file, "
+                            f"KIND one of {', '.join(ATTACH_KINDS)}), got {text!r}")
+        if kind == "surrogate":
+            raise UserError(f"--attach {text}: a sub-system surrogate is not available yet; run it as detail or "
+                            f"aggregate")
         if not Path(path).is_file():
             raise UserError(f"--attach {text}: no file {path}")
-        out.append((int(bus), Path(path)))
+        out.append((int(bus), Path(path), kind))
     return out
 
 
@@ -287,8 +299,13 @@ def _attached_case(args):
         host = Path(args.case)
     else:
         raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)}, or a case file ANDES reads)")
+    from reference_models.grid.aggregate import aggregate_file
+
+    folder = case_cache_dir() / "attached"
     try:
-        return case_from_file(attached_file(host, attachments, case_cache_dir() / "attached"))
+        files = [(bus, aggregate_file(path, folder) if kind == "aggregate" else path)
+                 for bus, path, kind in attachments]
+        return case_from_file(attached_file(host, files, folder))
     except CaseError as exc:
         raise UserError(_one_line(exc)) from None
 

@@ -54,6 +54,8 @@ def test_the_case_file_is_written_whole(tmp_path):
     ("9", "--attach takes BUS=FILE"),
     ("x=f.json", "--attach takes BUS=FILE"),
     ("9=missing.json", "no file missing.json"),
+    ("9=missing.json:aggregate", "no file missing.json"),
+    ("9=f.json:surrogate", "a sub-system surrogate is not available yet"),
 ])
 def test_a_malformed_attachment_is_one_line_and_exit_code_2(attach, message, tmp_path, capsys, monkeypatch):
     from opfmu.cli import main
@@ -218,3 +220,46 @@ def test_a_plant_attached_to_ieee14_runs_through_a_host_fault(tmp_path):
     assert np.max(np.abs(result.V_bus[result.time < 0.99, collector] - result.V_bus[0, collector])) < 1e-4  # at rest
     assert result.V_bus[np.round(result.time, 9) == 1.05, collector] < result.V_bus[0, collector] - 0.05
     assert abs(result.V_bus[-1, collector] - result.V_bus[0, collector]) < 0.02
+
+
+@pytest.mark.andes
+def test_the_aggregate_is_one_unit_with_the_summed_rating_drawing_what_the_detail_draws(tmp_path):
+    import andes
+
+    from reference_models.grid.aggregate import aggregate_file
+
+    records = feeder(FeederSpec(units=20, seed=2))
+    sub = write_case(records, tmp_path / "feeder.json")
+    path = aggregate_file(sub, tmp_path / "aggregates")
+    assert aggregate_file(sub, tmp_path / "aggregates") == path  # cached by the file's bytes
+    agg = json.loads(path.read_text())
+    assert [len(agg[m]) for m in ("Bus", "Line", "PQ", "PV", "PVD1", "Slack")] == [2, 1, 1, 1, 1, 1]
+    unit = agg["PVD1"][0]
+    ratings = np.array([u["Sn"] for u in records["PVD1"]]) * np.array([u["gammap"] for u in records["PVD1"]])
+    assert unit["Sn"] == pytest.approx(sum(u["Sn"] for u in records["PVD1"]))
+    assert unit["vt1"] == pytest.approx(np.sum(ratings * [u["vt1"] for u in records["PVD1"]]) / ratings.sum())
+    assert agg["PV"][0]["p0"] == pytest.approx(sum(g["p0"] for g in records["PV"]))
+    line = agg["Line"][0]
+    assert line["r"] > 0 and line["x"] > 0
+    # the equivalent draws at its boundary what the detail draws there, and ANDES starts it at rest
+    detail, equivalent = (andes.run(str(p), no_output=True, default_config=True) for p in (sub, path))
+    assert complex(equivalent.Slack.p.v[0], equivalent.Slack.q.v[0]) == pytest.approx(
+        complex(detail.Slack.p.v[0], detail.Slack.q.v[0]), abs=1e-3 * unit["Sn"] / 100.0)
+    equivalent.TDS.config.tf = 0.5
+    equivalent.TDS.run()
+    assert equivalent.exit_code == 0
+
+
+@pytest.mark.andes
+def test_grid_run_attaches_the_aggregate_of_a_feeder(tmp_path, capsys, monkeypatch):
+    from opfmu.cli import main
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
+    sub = write_case(feeder(FeederSpec(units=10, seed=0)), tmp_path / "feeder.json")
+    code = main(["grid", "run", "--case", "ieee14", "--attach", f"9={sub}:aggregate", "--fmus", "reference",
+                 "--fault", "4", "--clear", "1.1", "--stop", "1.5", "--compare", "none",
+                 "--fmu-cache", str(tmp_path / "fmus"), "--out", str(tmp_path / "out")])
+    assert code == 0, capsys.readouterr().err
+    header = (tmp_path / "out" / "result.csv").read_text().splitlines()[0].split(",")
+    # one unit in the feeder's place: the aggregate's, at its bus behind the equivalent (from 1000)
+    assert [c for c in header if c.startswith("P_") and int(c[2:].split("_")[0]) >= 1000] == ["P_1000"]

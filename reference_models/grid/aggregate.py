@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .attach import case_records
 from .case import CaseError
 from .subsystems import write_case
 
@@ -157,7 +158,5 @@ def aggregate_file(path, folder) -> Path:
     out = Path(folder) / f"{path.stem}_aggregate_{digest.hexdigest()[:16]}.json"
     if out.exists():
         return out
-    from .attach import case_records
-
     ss, boundary, S_b, V_b = _boundary_flow(andes, path)
     return write_case(aggregate(case_records(ss), ss, boundary, S_b, V_b), out)

@@ -30,7 +30,7 @@ from .subsystems import write_case
 BUS_BLOCK = 1000  # the sub-system's buses are numbered from a multiple of this
 
 
-def _records(ss) -> dict:
+def case_records(ss) -> dict:
     """{model: [record]} of every model of the loaded ANDES system `ss` with devices (its input data)."""
     import pandas as pd
 
@@ -151,11 +151,11 @@ def attached_file(host, attachments, folder) -> Path:
     if out.exists():
         return out
     ss = _load(andes, host)
-    host_records = _records(ss)
+    host_records = case_records(ss)
     subsystems = []
     for bus, path in attachments:
         sub = _load(andes, path)
-        subsystems.append((int(bus), _records(sub), _references(sub), path))
+        subsystems.append((int(bus), case_records(sub), _references(sub), path))
     merged = merge(host_records, _references(ss), subsystems)
     _at_unity_power_factor(andes, merged, {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems
                                            for r in records.get("PV", [])}, Path(folder))
