@@ -107,6 +107,29 @@ def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_faul
 
 
 @pytest.mark.andes
+def test_on_a_low_voltage_host_bus_the_substation_tap_keeps_the_feeders_own_voltages(tmp_path):
+    """Kundur's bus 7 (a load bus at 0.96 pu): the feeder built for 1 pu at its boundary would sag into
+    its units' Q-V droop (no rest); its substation transformer's tap settles instead, as an on-load
+    tap changer does, and ANDES starts the whole at rest."""
+    import andes
+
+    from reference_models.grid.attach import attached_file
+
+    sub = write_case(feeder(FeederSpec(units=10, seed=0)), tmp_path / "feeder.json")
+    own = andes.run(str(sub), no_output=True, default_config=True)
+    path = attached_file(andes.get_case("kundur/kundur_full.xlsx"), [(7, sub)], tmp_path / "attached")
+    merged = json.loads(path.read_text())
+    tap = next(r["tap"] for r in merged["Line"] if r["idx"] == "7:transformer")
+    ss = andes.run(str(path), no_output=True, default_config=True)
+    assert ss.Bus.v.v[ss.Bus.idx2uid(7)] < 0.98 and tap < 0.99
+    heads = [b for b in ss.Bus.idx.v if b >= 1000]
+    assert np.allclose([ss.Bus.v.v[ss.Bus.idx2uid(b)] for b in heads], own.Bus.v.v[1:], atol=1e-4)
+    ss.TDS.config.tf = 0.2
+    ss.TDS.run()
+    assert ss.exit_code == 0
+
+
+@pytest.mark.andes
 def test_the_monolithic_dae_continues_a_current_headroom_past_its_switching(tmp_path):
     """A PVD1's reactive-current limit sqrt(ialim^2 - Ip^2) on a branch locked where the headroom was
     positive, evaluated past the switching that ends it: its continuation (0), not a math domain error."""

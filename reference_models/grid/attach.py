@@ -11,7 +11,11 @@ for the grid at its boundary bus. Attached at host bus B:
   already taken (ANDES' bus idx are integers), and every other idx (lines, loads, static
   generators, devices) gets the prefix "B:" (ANDES' references between devices follow: each
   IdxParam names the model or group it points into);
-* its own events (Toggle, Fault, Alter) come along.
+* its own events (Toggle, Fault, Alter) come along;
+* a transformer between its boundary and the rest (a feeder's substation transformer) settles its
+  tap so that its far bus keeps the voltage of the sub-system's own power flow, as an on-load tap
+  changer does before a dynamic study; its static generators keep its units at unity power factor
+  (`_settle`).
 Neither file's ANDES settings (_config) are carried: the merged case runs on ANDES' defaults, which
 are what opfmu's conversion asks of a case anyway (reference_models.grid.andes_case).
 
@@ -28,6 +32,8 @@ from .case import CaseError
 from .subsystems import write_case
 
 BUS_BLOCK = 1000  # the sub-system's buses are numbered from a multiple of this
+TAP_MIN, TAP_MAX = 0.85, 1.15  # the range of a boundary transformer's settled tap (_settle)
+TAP_ITERATIONS, TAP_TOLERANCE = 8, 1e-6  # power flows at most, and the far-bus voltage [pu] they settle to
 
 
 def case_records(ss) -> dict:
@@ -71,13 +77,16 @@ def _boundary(records: dict, path) -> tuple:
     return slacks[0]["bus"], slacks[0]["idx"]
 
 
-def merge(host: dict, host_refs: dict, subsystems: list) -> dict:
-    """The host's records with each (bus, records, refs, path) of `subsystems` attached (module
-    docstring)."""
+def merge(host: dict, host_refs: dict, subsystems: list) -> tuple:
+    """(the host's records with each (bus, records, refs, path) of `subsystems` attached (module
+    docstring), the sub-systems' transformers at their boundaries: [(subsystem index, merged Line
+    idx, whether its tap side (bus1) is the boundary, merged far bus, the far bus' idx in the
+    sub-system)])."""
+    regulated = []
     merged = {model: [dict(r) for r in rows] for model, rows in host.items()}
     buses = {r["idx"]: r for r in merged.get("Bus", [])}
     taken = max(int(b) for b in buses)
-    for bus, records, refs, path in subsystems:
+    for k, (bus, records, refs, path) in enumerate(subsystems):
         if bus not in buses:
             raise CaseError(f"--attach {bus}={path}: the host has no bus {bus}")
         boundary, slack = _boundary(records, path)
@@ -115,10 +124,15 @@ def merge(host: dict, host_refs: dict, subsystems: list) -> dict:
                     for end, vn in (("bus1", "Vn1"), ("bus2", "Vn2")):
                         if r.get(end) == bus:
                             r[vn] = buses[bus].get("Vn", r.get(vn))
+                    ends = (r.get("bus1"), r.get("bus2"))
+                    if r.get("trans") and bus in ends and ends[0] != ends[1]:
+                        far = ends[1] if ends[0] == bus else ends[0]
+                        original = next(b for b, n in numbers.items() if n == far)
+                        regulated.append((k, r["idx"], ends[0] == bus, far, original))
                 elif r.get("bus") == bus and "Vn" in r:
                     r["Vn"] = buses[bus].get("Vn", r["Vn"])
                 merged.setdefault(model, []).append(r)
-    return merged
+    return merged, regulated
 
 
 def _load(andes, path):
@@ -156,37 +170,81 @@ def attached_file(host, attachments, folder) -> Path:
     for bus, path in attachments:
         sub = _load(andes, path)
         subsystems.append((int(bus), case_records(sub), _references(sub), path))
-    merged = merge(host_records, _references(ss), subsystems)
-    _at_unity_power_factor(andes, merged, {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems
-                                           for r in records.get("PV", [])}, Path(folder))
+    merged, regulated = merge(host_records, _references(ss), subsystems)
+    own = [_own_voltages(andes, path) for _, path in attachments]
+    targets = [(idx, tap_at_boundary, far, own[k][original]) for k, idx, tap_at_boundary, far, original in regulated]
+    pvs = {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems for r in records.get("PV", [])}
+    _settle(andes, merged, pvs, targets, Path(folder))
     return write_case(merged, out)
 
 
-def _at_unity_power_factor(andes, merged: dict, pvs: set, folder: Path) -> None:
-    """Sets the voltage of each sub-system static generator in `pvs` (a PV holds its bus voltage in
-    the power flow) to the one the joint power flow gives it when it holds its reactive power at 0
-    instead (ANDES' pv2pq with both of its limits 0, every other PV's limits out of reach): the
-    sub-system's units then start at unity power factor wherever it is attached, as they were built
-    (subsystems: the set points a sweep of the feeder alone gives). CaseError where that power flow
-    does not converge."""
-    if not pvs:
+def _own_voltages(andes, path) -> dict:
+    """{bus idx: voltage magnitude [pu]} of the sub-system's own power flow (its Slack the grid)."""
+    ss = _load(andes, path)
+    ss.setup()
+    if not (ss.PFlow.run() and ss.PFlow.converged):
+        raise CaseError(f"{path}: the sub-system's own power flow does not converge")
+    return dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
+
+
+def _settle(andes, merged: dict, pvs: set, targets: list, folder: Path) -> None:
+    """The joint power flow's settled state, written into `merged`:
+    * each sub-system transformer at its boundary (`targets`: (Line idx, whether its tap side is the
+      boundary, far bus, the far bus' voltage in the sub-system's own power flow)) takes the tap that
+      gives its far bus that voltage, as an on-load tap changer settles before a dynamic study (a
+      feeder built for 1 pu at its boundary keeps its voltage profile on a host bus at 0.95 pu);
+      taps within [TAP_MIN, TAP_MAX], CaseError beyond;
+    * the voltage of each sub-system static generator in `pvs` (a PV holds its bus voltage in the
+      power flow) is the one the joint flow gives it when it holds its reactive power at 0 instead
+      (ANDES' pv2pq with both of its limits 0, every other PV's limits out of reach): the units start
+      at unity power factor, as they were built.
+    CaseError where that power flow does not converge."""
+    if not pvs and not targets:
         return
+    taps = {idx: 1.0 for idx, *_ in targets}
+    for r in merged.get("Line", []):
+        if r["idx"] in taps:
+            taps[r["idx"]] = float(r.get("tap", 1.0) or 1.0)
+    for _ in range(TAP_ITERATIONS):
+        voltage, bus_of = _probe_flow(andes, merged, pvs, taps, folder)
+        off = 0.0
+        for idx, tap_at_boundary, far, target in targets:
+            v = voltage[far]
+            # the far bus' voltage goes as 1/tap where the tap sits at the boundary, as tap where at the far bus
+            taps[idx] *= v / target if tap_at_boundary else target / v
+            off = max(off, abs(v - target))
+            if not TAP_MIN <= taps[idx] <= TAP_MAX:
+                raise CaseError(f"the sub-system's transformer {idx} would need a tap of {taps[idx]:.3f} to hold "
+                                f"its far bus at {target:.4f} pu (beyond [{TAP_MIN}, {TAP_MAX}]): attach it at a bus "
+                                f"nearer its boundary voltage")
+        if off < TAP_TOLERANCE:
+            break
+    for r in merged.get("Line", []):
+        if r["idx"] in taps:
+            r["tap"] = taps[r["idx"]]
+    for r in merged.get("PV", []):
+        if r["idx"] in pvs:
+            r["v0"] = float(voltage[bus_of[r["idx"]]])
+
+
+def _probe_flow(andes, merged: dict, pvs: set, taps: dict, folder: Path) -> tuple:
+    """({bus: voltage [pu]}, {PV idx: its bus}) of the joint power flow with the taps `taps` and the
+    static generators `pvs` at zero reactive power (_settle)."""
     probe = {model: [dict(r) for r in rows] for model, rows in merged.items()}
     for r in probe.get("PV", []):
         if r["idx"] in pvs:
             r["qmax"], r["qmin"] = 0.0, 0.0
         else:
             r["qmax"], r["qmin"] = 1e8, -1e8
-    path = write_case(probe, folder / ".unity_power_factor_probe.json")
+    for r in probe.get("Line", []):
+        if r["idx"] in taps:
+            r["tap"] = taps[r["idx"]]
+    path = write_case(probe, folder / ".joint_power_flow_probe.json")
     try:
         ss = andes.load(str(path), no_output=True, default_config=True, config_option=["PV.pv2pq=1"])
         converged = ss is not None and ss.PFlow.run() and ss.PFlow.converged
         if not converged:
             raise CaseError("the joint power flow of the host and its sub-systems does not converge")
-        voltage = dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
-        bus_of = dict(zip(ss.PV.idx.v, ss.PV.bus.v))
+        return dict(zip(ss.Bus.idx.v, ss.Bus.v.v)), dict(zip(ss.PV.idx.v, ss.PV.bus.v))
     finally:
         path.unlink(missing_ok=True)
-    for r in merged.get("PV", []):
-        if r["idx"] in pvs:
-            r["v0"] = float(voltage[bus_of[r["idx"]]])
