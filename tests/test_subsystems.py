@@ -286,3 +286,25 @@ def test_grid_run_attaches_the_aggregate_of_a_feeder(tmp_path, capsys, monkeypat
     header = (tmp_path / "out" / "result.csv").read_text().splitlines()[0].split(",")
     # one unit in the feeder's place: the aggregate's, at its bus behind the equivalent (from 1000)
     assert [c for c in header if c.startswith("P_") and int(c[2:].split("_")[0]) >= 1000] == ["P_1000"]
+
+
+@pytest.mark.andes
+def test_the_aggregate_of_a_plant_follows_its_control_chain_and_sums_the_gains_split_among_its_units(tmp_path):
+    from reference_models.grid.aggregate import aggregate_file
+    from reference_models.grid.subsystems import PlantSpec, plant
+
+    records = plant(PlantSpec(units=20, seed=3))
+    path = aggregate_file(write_case(records, tmp_path / "plant.json"), tmp_path / "aggregates")
+    agg = json.loads(path.read_text())
+    assert [len(agg[m]) for m in ("REGCA1", "REECA1", "REPCA1", "PV")] == [1, 1, 1, 1]
+    # the chain: static generator <- converter <- electrical control <- plant controller
+    assert agg["REGCA1"][0]["gen"] == agg["PV"][0]["idx"]
+    assert agg["REECA1"][0]["reg"] == agg["REGCA1"][0]["idx"]
+    assert agg["REPCA1"][0]["ree"] == agg["REECA1"][0]["idx"]
+    # the plant controller's gains and limits, split by rating among the units, add up; a time constant
+    # (each unit's own) is the rating-weighted mean
+    for field in ("Kp", "Ki", "Qmax", "Pmax"):
+        assert agg["REPCA1"][0][field] == pytest.approx(sum(r[field] for r in records["REPCA1"]), rel=1e-12)
+    ratings = np.array([r["Sn"] for r in records["REGCA1"]])
+    assert agg["REGCA1"][0]["Sn"] == pytest.approx(ratings.sum())
+    assert agg["REGCA1"][0]["Tg"] == pytest.approx(np.sum(ratings * [r["Tg"] for r in records["REGCA1"]]) / ratings.sum())

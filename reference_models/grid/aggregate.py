@@ -12,11 +12,13 @@ the boundary sends in and I_b its current:
 * one aggregate bus behind Z, at the voltage V_b - Z I_b, with every load summed (constant impedance
   at the load-flow voltage in the time domain, as each was: the sum is taken at the aggregate bus'
   voltage so that it draws the detail's total power there);
-* one static generator per kind (PV) with the summed power; one device per dynamic model (here the
-  converters, e.g. PVD1) with its rating the sum of the units' (Sn), every other numeric setting the
-  rating-weighted mean of the units' (trip thresholds included: the equivalent trips all at once,
-  which is what aggregates are known to miss), links (gen) to the aggregate static generator, and
-  its share of it 1.
+* one static generator with the summed power; one device per dynamic model linked to the static
+  generators, directly or through other devices (a PVD1's gen; a REGCA1's gen, its REECA1's reg,
+  the REPCA1's ree), linked to the aggregates, with its rating the sum of the units' (Sn), a
+  setting split by rating among the units (a plant controller's gains and limits: proportional to
+  the ratings) summed, every other numeric setting the rating-weighted mean of the units' (trip
+  thresholds included: the equivalent trips all at once, which is what aggregates are known to
+  miss), and its share of its static generator 1.
 Devices that are neither loads, static generators nor models with a `gen` link (a Toggle, a Fault,
 measurements) are left out.
 
@@ -31,11 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .attach import case_records
+from .attach import case_records, device_references
 from .case import CaseError
 from .subsystems import write_case
 
 MIN_CURRENT = 1e-4  # pu: below it the loss-based impedance is undefined
+PROPORTIONAL = 1e-9  # relative spread of value / rating below which a setting counts as split by rating
+BUS_GROUPS = ("Bus", "ACNode")  # what ANDES' bus fields point into
 TEXT_FIELDS = ("idx", "name", "bus", "gen", "busf", "igreg", "busr", "owner", "coi", "coi2", "zone", "area")
 
 
@@ -60,9 +64,13 @@ def _boundary_flow(andes, path):
 
 
 def _weighted(rows: list, weights: np.ndarray) -> dict:
-    """One record: each numeric field the weighted mean of the rows' values (integers and flags as the
-    most common value), the others from the first row."""
+    """One record of the devices `rows` with `weights` (their ratings): each numeric field that is
+    proportional to the weights (to PROPORTIONAL; a rating Sn, a plant controller's gains and limits
+    split by rating) the sum of the rows' values, any other the weighted mean (integers and flags:
+    the most common value); the rest from the first row. Where every weight is the same, only Sn is
+    summed (a split gain and a unit's own setting cannot be told apart)."""
     out = dict(rows[0])
+    spread = np.ptp(weights) > PROPORTIONAL * np.max(np.abs(weights))
     for field, value in rows[0].items():
         if field in TEXT_FIELDS or not isinstance(value, (int, float)) or isinstance(value, bool):
             continue
@@ -70,14 +78,19 @@ def _weighted(rows: list, weights: np.ndarray) -> dict:
         if isinstance(value, int) or field.endswith("flag"):
             kinds, counts = np.unique(values, return_counts=True)
             out[field] = type(value)(kinds[np.argmax(counts)])
-        else:
-            out[field] = float(np.sum(weights * values) / np.sum(weights))
+            continue
+        ratio = values / weights
+        proportional = spread and np.all(values != 0) and np.ptp(ratio) <= PROPORTIONAL * np.max(np.abs(ratio))
+        out[field] = float(np.sum(values)) if proportional or field == "Sn" else \
+            float(np.sum(weights * values) / np.sum(weights))
     return out
 
 
 def aggregate(records: dict, ss, boundary, S_b: complex, V_b: complex) -> dict:
     """The equivalent's records (module docstring) of the sub-system `records` whose load flow is `ss`
     (ANDES), with its boundary bus idx, S_b and V_b."""
+    refs = device_references(ss)
+    groups = {name: model.group for name, model in ss.models.items()}
     loads = [r for r in records.get("PQ", []) if r.get("u", 1)]
     gens = [r for r in records.get("PV", []) if r.get("u", 1)]
     S_load = sum(complex(ss.PQ.Ppf.v[ss.PQ.idx2uid(r["idx"])], ss.PQ.Qpf.v[ss.PQ.idx2uid(r["idx"])]) for r in loads)
@@ -114,16 +127,57 @@ def aggregate(records: dict, ss, boundary, S_b: complex, V_b: complex) -> dict:
                       "q0": S_gen.imag, "v0": abs(V_a), "Sn": sum(r.get("Sn", 100.0) for r in gens),
                       "pmax": sum(r.get("pmax", p) for r in gens), "pmin": sum(r.get("pmin", 0.0) for r in gens),
                       "qmax": sum(r.get("qmax", 0.0) for r in gens), "qmin": sum(r.get("qmin", 0.0) for r in gens)}]
-        names = {r["idx"] for r in gens}
+        out.update(_devices(records, refs, groups, gens, boundary, agg))
+    return out
+
+
+def _devices(records: dict, refs: dict, groups: dict, gens: list, boundary, agg) -> dict:
+    """{model: [one aggregate record]} of every dynamic model linked, directly or through other
+    devices (ANDES' IdxParam links: a converter's gen, its electrical control's reg, a plant
+    controller's ree, ...), to the static generators `gens`; each linked to the aggregates of what its
+    devices link to, its bus fields on the aggregate bus (the boundary where they name it). Each
+    device's weight is its rating (Sn, times its share gammap of its static generator), or that of
+    the device it links to."""
+    aggregate_of = {}  # (model or group, idx) -> the aggregate's idx
+    weight_of = {}
+    for r in gens:
+        for key in (("PV", r["idx"]), (groups.get("PV"), r["idx"])):
+            aggregate_of[key] = "generation"
+            weight_of[key] = float(r.get("Sn", 1.0))
+    out, changed = {}, True
+    skip = {"Bus", "PV", "PQ", "Slack", "Line", "Summary", "Toggle", "Fault", "Alter", "BusFreq", "BusROCOF"}
+    while changed:
+        changed = False
         for model, rows in records.items():
-            linked = [r for r in rows if r.get("gen") in names and r.get("u", 1)]
+            if model in skip or model in out:
+                continue
+            links = {f: t for f, t in refs.get(model, {}).items() if t not in BUS_GROUPS}
+            linked = [r for r in rows if r.get("u", 1) and any((t, r.get(f)) in aggregate_of for f, t in links.items())]
             if not linked:
                 continue
-            rating = np.array([float(r.get("Sn", 1.0)) * float(r.get("gammap", 1.0)) for r in linked])
-            unit = _weighted(linked, rating)
-            unit.update({"idx": f"aggregate {model}", "name": f"aggregate {model}", "bus": agg, "gen": "generation",
-                         "Sn": float(sum(r.get("Sn", 0.0) for r in linked)), "gammap": 1.0, "gammaq": 1.0})
+            weights = []
+            for r in linked:
+                via = next(weight_of[(t, r[f])] for f, t in links.items() if (t, r.get(f)) in weight_of)
+                weights.append(float(r["Sn"]) * float(r.get("gammap", 1.0)) if "Sn" in r and r["Sn"] else via)
+            weights = np.array(weights)
+            unit = _weighted(linked, weights)
+            name = f"aggregate {model}"
+            unit.update({"idx": name, "name": name})
+            for f, t in links.items():
+                value = linked[0].get(f)
+                unit[f] = aggregate_of.get((t, value)) if value is not None else None
+            for f, t in refs.get(model, {}).items():
+                if t in BUS_GROUPS and linked[0].get(f) is not None:
+                    unit[f] = boundary if linked[0][f] == boundary else agg
+            for f in ("gammap", "gammaq"):
+                if f in unit:
+                    unit[f] = 1.0
             out[model] = [unit]
+            for r, w in zip(linked, weights):
+                for key in ((model, r["idx"]), (groups.get(model), r["idx"])):
+                    aggregate_of[key] = name
+                    weight_of[key] = float(w)
+            changed = True
     return out
 
 

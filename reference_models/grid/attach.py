@@ -55,7 +55,7 @@ def _plain(value):
     return value.item() if hasattr(value, "item") else value
 
 
-def _references(ss) -> dict:
+def device_references(ss) -> dict:
     """{model: {field: the model or group the IdxParam points into}} of every model of `ss`."""
     out = {}
     for name, model in ss.models.items():
@@ -169,8 +169,8 @@ def attached_file(host, attachments, folder) -> Path:
     subsystems = []
     for bus, path in attachments:
         sub = _load(andes, path)
-        subsystems.append((int(bus), case_records(sub), _references(sub), path))
-    merged, regulated = merge(host_records, _references(ss), subsystems)
+        subsystems.append((int(bus), case_records(sub), device_references(sub), path))
+    merged, regulated = merge(host_records, device_references(ss), subsystems)
     own = [_own_voltages(andes, path) for _, path in attachments]
     targets = [(idx, tap_at_boundary, far, own[k][original]) for k, idx, tap_at_boundary, far, original in regulated]
     pvs = {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems for r in records.get("PV", [])}
