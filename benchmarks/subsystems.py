@@ -3,16 +3,18 @@ native FMUs in opfmu's master, in the monolithic DAE and in ANDES, and its hand-
 (reference_models.grid.aggregate) as native FMUs; the aggregate's errors against the detail, and
 every run's wall and CPU time, for feeders of N units (issue 35).
 
-    python benchmarks/subsystems.py [--host ieee14] [--bus 9] [--fault 4] [--units 10 30 100 300]
-                                    [--clear 0.1] [--stop 3] [--seed 0] [--out benchmarks/subsystems]
+    python benchmarks/subsystems.py [--host ieee14] [--bus 9 [BUS ...]] [--fault 4] [--kind feeder|plant]
+                                    [--units 10 30 100 300] [--clear 0.1] [--stop 3] [--seed 0]
+                                    [--out benchmarks/subsystems]
 
-Per N: reference_models.grid.subsystems.feeder(FeederSpec(units=N, seed)) attached at --bus of
---host (reference_models.grid.attach), a fault of 1e-4j pu at --fault from 1.0 s, cleared --clear s
+Per N: reference_models.grid.subsystems.feeder(FeederSpec(units=N, seed)) (or plant(PlantSpec(...)))
+attached at each --bus of --host (one sub-system per bus, seeds seed, seed + 1, ...;
+reference_models.grid.attach), a fault of 1e-4j pu at --fault from 1.0 s, cleared --clear s
 later, each run to --stop at h = 10 ms (ANDES: its trapezoid at 10 ms, and at 1 ms as the reference
 of the errors). Errors outside the fault's own steps: the power the feeder draws through its
-boundary bus (P, Q in % of the feeder's total unit rating; from the bus voltages and the branch
-admittances of the branches from the host bus into the feeder), the host's rotor angles relative to
-its first machine [deg], the boundary bus voltage [pu]. The FMUs are built (and cached) before a run
+boundary buses (P, Q in % of the sub-systems' total unit rating, the largest over the boundaries;
+from the bus voltages and the admittances of the branches from each host bus into its sub-system),
+the host's rotor angles relative to its first machine [deg], the boundary bus voltages [pu]. The FMUs are built (and cached) before a run
 is timed; the monolithic DAE runs up to --monolithic-units units. Writes OUT.json (every number), OUT.md (the tables) and OUT.png (cost against N).
 Needs ANDES.
 """
@@ -38,7 +40,7 @@ from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
-from reference_models.grid.subsystems import FeederSpec, feeder, write_case  # noqa: E402
+from reference_models.grid.subsystems import FeederSpec, PlantSpec, feeder, plant, write_case  # noqa: E402
 
 
 def boundary_power(result, case, bus: int) -> np.ndarray:
@@ -70,22 +72,23 @@ def _common(a, b) -> tuple:
     return np.searchsorted(ta, common), np.searchsorted(tb, common), common
 
 
-def errors(run, case_run, ref, case_ref, bus: int, rating: float, fault: tuple) -> dict:
+def errors(run, case_run, ref, case_ref, buses, rating: float, fault: tuple) -> dict:
     """The errors of `run` (its case `case_run`) against `ref` (module docstring)."""
     a, b, t = _common(run, ref)
     keep = ~((t >= fault[0] - 1e-9) & (t < fault[1] + 1e-9))
     a, b = a[keep], b[keep]
-    S_run, S_ref = boundary_power(run, case_run, bus)[a], boundary_power(ref, case_ref, bus)[b]
-    machines = np.isfinite(ref.rotor_angle[0]) & (np.arange(ref.rotor_angle.shape[1]) < len(case_ref.units))
+    S = [(boundary_power(run, case_run, bus)[a], boundary_power(ref, case_ref, bus)[b]) for bus in buses]
+    machines = np.isfinite(ref.rotor_angle[0])
     host = [k for k, u in enumerate(case_ref.units) if u.bus < 1000 and machines[k]]
     host_run = [k for k, u in enumerate(case_run.units) if u.bus < 1000 and np.isfinite(run.rotor_angle[0, k])]
     da = (run.rotor_angle[a][:, host_run] - run.rotor_angle[a][:, host_run[:1]]) \
         - (ref.rotor_angle[b][:, host] - ref.rotor_angle[b][:, host[:1]])
-    i_run, i_ref = case_run.network.bus_index(bus), case_ref.network.bus_index(bus)
-    return {"P_percent": float(100 * np.max(np.abs(S_run.real - S_ref.real)) / rating),
-            "Q_percent": float(100 * np.max(np.abs(S_run.imag - S_ref.imag)) / rating),
+    V = [np.abs(run.V_bus[a, case_run.network.bus_index(bus)] - ref.V_bus[b, case_ref.network.bus_index(bus)])
+         for bus in buses]
+    return {"P_percent": float(100 * max(np.max(np.abs(x.real - y.real)) for x, y in S) / rating),
+            "Q_percent": float(100 * max(np.max(np.abs(x.imag - y.imag)) for x, y in S) / rating),
             "angle_deg": float(np.degrees(np.max(np.abs(da)))),
-            "V_boundary": float(np.max(np.abs(run.V_bus[a, i_run] - ref.V_bus[b, i_ref])))}
+            "V_boundary": float(max(np.max(v) for v in V))}
 
 
 def timed(runner, contingency, stop):
@@ -99,7 +102,8 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--host", default="ieee14")
-    parser.add_argument("--bus", type=int, default=9)
+    parser.add_argument("--bus", type=int, nargs="+", default=[9])
+    parser.add_argument("--kind", choices=("feeder", "plant"), default="feeder")
     parser.add_argument("--fault", type=int, default=4)
     parser.add_argument("--units", type=int, nargs="+", default=[10, 30, 100, 300])
     parser.add_argument("--clear", type=float, default=0.1)
@@ -114,13 +118,18 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for n in args.units:
-            spec = FeederSpec(units=n, seed=args.seed)
-            records = feeder(spec)
-            rating = sum(u["Sn"] for u in records["PVD1"]) / 100.0
-            sub = write_case(records, tmp / f"feeder_{n}.json")
-            detail = case_from_file(attached_file(host, [(args.bus, sub)], tmp / "attached"))
-            agg = case_from_file(attached_file(host, [(args.bus, aggregate_file(sub, tmp / "aggregates"))],
-                                               tmp / "attached"))
+            subs, rating = [], 0.0
+            for k, bus in enumerate(args.bus):
+                if args.kind == "feeder":
+                    records = feeder(FeederSpec(units=n, seed=args.seed + k))
+                    rating += sum(u["Sn"] for u in records["PVD1"]) / 100.0
+                else:
+                    records = plant(PlantSpec(units=n, seed=args.seed + k))
+                    rating += sum(u["Sn"] for u in records["REGCA1"]) / 100.0
+                subs.append((bus, write_case(records, tmp / f"{args.kind}_{n}_{bus}.json")))
+            detail = case_from_file(attached_file(host, subs, tmp / "attached"))
+            agg = case_from_file(attached_file(host, [(bus, aggregate_file(path, tmp / "aggregates"))
+                                                      for bus, path in subs], tmp / "attached"))
             fault = (1.0, 1.0 + args.clear)
             contingency = {name: Contingency(fault_bus=args.fault, fault_start=1.0, clear_s=fault[1],
                                              fault_impedance=ANDES_FAULT_IMPEDANCE, network=c.network,
@@ -162,7 +171,8 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
-    lines = [f"{args.host}, feeder at bus {args.bus}, fault at bus {args.fault} cleared after {args.clear:g} s, "
+    lines = [f"{args.host}, a {args.kind} at bus {', '.join(map(str, args.bus))}, fault at bus {args.fault} cleared "
+             f"after {args.clear:g} s, "
              f"{args.stop:g} s at h = 10 ms; errors against {ref_label} outside the fault's steps", "",
              "| N | run | wall [s] | CPU [s] | P [% rating] | Q [% rating] | host angles [deg] | V boundary [pu] |",
              "| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
