@@ -110,8 +110,8 @@ def main(argv=None) -> int:
     parser.add_argument("--stop", type=float, default=3.0)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=str(ROOT / "benchmarks" / "subsystems"))
-    parser.add_argument("--monolithic-units", type=int, default=30,
-                        help="the largest N the monolithic DAE runs (default 30: beyond, minutes per run)")
+    parser.add_argument("--monolithic-units", type=int, default=10,
+                        help="the largest N the monolithic DAE runs (default 10: beyond, minutes per run)")
     args = parser.parse_args(argv)
     host = Path(andes.get_case(ANDES_CASES[args.host])) if args.host in ANDES_CASES else Path(args.host)
     rows = []
