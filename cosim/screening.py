@@ -365,11 +365,26 @@ def _local_cluster(workers: int, scratch: str):
                 raise RuntimeError(f"the {workers} local dask workers did not start within "
                                    f"{WORKER_START_TIMEOUT_S:g} s") from None
         except BaseException:
-            if client is not None:
-                client.close()
-            cluster.close()
+            _close_quietly(client, cluster)
             raise
     return cluster, client
+
+
+def _close_quietly(client, cluster) -> None:
+    """Closes `client` (None: none yet) and `cluster` with Ctrl-C held off, on the way out of an
+    interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
+    by the interrupt it follows: distributed's sync then raises UnboundLocalError) is tried once more."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for close in ([client.close] if client is not None else []) + [cluster.close]:
+            for _ in range(2):
+                try:
+                    close()
+                    break
+                except Exception:  # dask's own shutdown failed: once more, then the exit ends the rest
+                    continue
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
