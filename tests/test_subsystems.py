@@ -30,6 +30,23 @@ def test_a_feeder_is_the_same_for_a_seed_and_spreads_its_units_settings():
     assert sum(power.values()) == pytest.approx(sum(u["Sn"] / 100.0 * 0.5 for u in units), rel=0.5)
 
 
+def _through_a_fault_at_bus_4(case, folder):
+    """The case's run with native FMUs at 10 ms through a 1e-4j pu fault at bus 4 from 1.0 to 1.1 s
+    (its own events with it), to 2 s."""
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+
+    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
+                        network=case.network, events=case.events)
+    runner = MasterRunner(generator_files(case, "reference", folder / "cache"), case, MasterSettings(step=0.01))
+    try:
+        return runner.run(fault, 2.0)[0]
+    finally:
+        runner.close()
+
+
 @pytest.mark.parametrize("units, sections", [(10, 3), (100, 10), (300, 30)])
 def test_the_feeder_grows_with_its_units_and_keeps_its_voltage_drop(units, sections):
     records = feeder(FeederSpec(units=units))
@@ -72,12 +89,8 @@ def test_a_malformed_attachment_is_one_line_and_exit_code_2(attach, message, tmp
 def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_fault(tmp_path):
     import andes
 
-    from cosim.fmus import generator_files
-    from cosim.master import MasterSettings
-    from cosim.runners import MasterRunner
     from reference_models.grid.andes_case import case_from_file
     from reference_models.grid.attach import attached_file
-    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 
     sub = write_case(feeder(FeederSpec(units=12, seed=1)), tmp_path / "feeder.json")
     path = attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached")
@@ -91,14 +104,7 @@ def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_faul
     assert np.max(np.abs(ss.PV.q.v[pv])) < 1e-6  # the units start at unity power factor
     case = case_from_file(path)
     assert sum(1 for u in case.units if u.bus >= 1000) == 12
-    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
-                        network=case.network, events=case.events)
-    files = generator_files(case, "reference", tmp_path / "cache")
-    runner = MasterRunner(files, case, MasterSettings(step=0.01))
-    try:
-        result, _ = runner.run(fault, 2.0)
-    finally:
-        runner.close()
+    result = _through_a_fault_at_bus_4(case, tmp_path)
     assert result.stable and np.all(np.isfinite(result.V_bus))
     # the feeder's head follows the host: its voltage dips with the fault at bus 4 and recovers
     head = case.network.bus_index(min(b for b in case.buses if b >= 1000))
@@ -216,12 +222,8 @@ def test_andes_starts_a_plant_at_rest(tmp_path, caplog):
 def test_a_plant_attached_to_ieee14_runs_through_a_host_fault(tmp_path):
     import andes
 
-    from cosim.fmus import generator_files
-    from cosim.master import MasterSettings
-    from cosim.runners import MasterRunner
     from reference_models.grid.andes_case import case_from_file
     from reference_models.grid.attach import attached_file
-    from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
     from reference_models.grid.subsystems import PlantSpec, plant
 
     sub = write_case(plant(PlantSpec(units=20, seed=2)), tmp_path / "plant.json")
@@ -230,14 +232,7 @@ def test_a_plant_attached_to_ieee14_runs_through_a_host_fault(tmp_path):
     assert {r["busr"] for r in merged["REPCA1"] if r["idx"].startswith("9:")} == {9}  # the POI is the host's bus
     case = case_from_file(path)
     assert sum(1 for u in case.units if u.bus >= 1000) == 20
-    fault = Contingency(fault_bus=4, fault_start=1.0, clear_s=1.1, fault_impedance=ANDES_FAULT_IMPEDANCE,
-                        network=case.network, events=case.events)
-    files = generator_files(case, "reference", tmp_path / "cache")
-    runner = MasterRunner(files, case, MasterSettings(step=0.01))
-    try:
-        result, _ = runner.run(fault, 2.0)
-    finally:
-        runner.close()
+    result = _through_a_fault_at_bus_4(case, tmp_path)
     assert result.stable and np.all(np.isfinite(result.V_bus))
     collector = case.network.bus_index(min(b for b in case.buses if b >= 1000))
     assert np.max(np.abs(result.V_bus[result.time < 0.99, collector] - result.V_bus[0, collector])) < 1e-4  # at rest

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .attach import case_records, device_references
+from .attach import case_records, device_references, own_power_flow
 from .case import CaseError
 from .subsystems import write_case
 
@@ -46,17 +46,9 @@ TEXT_FIELDS = ("idx", "name", "bus", "gen", "busf", "igreg", "busr", "owner", "c
 def _boundary_flow(andes, path):
     """(ss, boundary bus idx, S_b [pu into the sub-system], V_b [complex pu]) of the sub-system's own
     load flow; CaseError where it does not solve."""
-    from .andes_case import configure_andes_logging
-
-    configure_andes_logging(andes)
-    try:
-        ss = andes.load(str(path), no_output=True, default_config=True)
-    except Exception as exc:  # ANDES raises what its readers raise on a malformed file
-        raise CaseError(f"{path}: ANDES cannot read it: {type(exc).__name__}: {exc}") from None
-    if ss is None or ss.Slack.n != 1:
+    ss = own_power_flow(andes, path)
+    if ss.Slack.n != 1:
         raise CaseError(f"{path}: a sub-system has exactly one Slack, at its boundary bus")
-    if not (ss.PFlow.run() and ss.PFlow.converged):
-        raise CaseError(f"{path}: the sub-system's own power flow does not converge")
     bus = ss.Slack.bus.v[0]
     i = ss.Bus.idx2uid(bus)
     V = ss.Bus.v.v[i] * np.exp(1j * ss.Bus.a.v[i])

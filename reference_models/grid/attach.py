@@ -178,12 +178,19 @@ def attached_file(host, attachments, folder) -> Path:
     return write_case(merged, out)
 
 
-def _own_voltages(andes, path) -> dict:
-    """{bus idx: voltage magnitude [pu]} of the sub-system's own power flow (its Slack the grid)."""
+def own_power_flow(andes, path):
+    """The ANDES system of the sub-system file `path` with its own power flow solved (its Slack the
+    grid); CaseError where ANDES cannot read it or the flow does not converge."""
     ss = _load(andes, path)
     ss.setup()
     if not (ss.PFlow.run() and ss.PFlow.converged):
         raise CaseError(f"{path}: the sub-system's own power flow does not converge")
+    return ss
+
+
+def _own_voltages(andes, path) -> dict:
+    """{bus idx: voltage magnitude [pu]} of the sub-system's own power flow."""
+    ss = own_power_flow(andes, path)
     return dict(zip(ss.Bus.idx.v, ss.Bus.v.v))
 
 
