@@ -152,11 +152,12 @@ def build_native_reference_fmu(out, model_name: str = "SM4Reference", component:
     out = Path(out)
     try:
         check_model_name(model_name)
+        component.require_known_rates("reference FMU")
         params = machine_params(component, params)
         version, chosen = check_fmi_version(fmi_version), targets(platforms)
         if not (isinstance(system_base_mva, (int, float)) and math.isfinite(system_base_mva) and system_base_mva > 0):
             raise BuildError(f"the system base {system_base_mva!r} MVA is not a positive number")
-    except (BuildError, ParameterError) as exc:
+    except (BuildError, ValueError) as exc:  # ParameterError is a ValueError
         raise NativeReferenceError(str(exc)) from None
     if start_state is None:
         x_start = _start_state(component, params, operating_point)

@@ -84,6 +84,7 @@ def build_reference_fmu(out, model_name: str = "SM4Reference", component: Compon
     """
     if not model_name.isidentifier():
         raise ValueError(f"model name must be a Python identifier (it names the slave class), got {model_name!r}")
+    component.require_known_rates("reference FMU")
     params = machine_params(component, params)
     variables = reference_variables(component, params)
     module, attribute = _definition(component)

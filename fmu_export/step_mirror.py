@@ -218,7 +218,7 @@ class StepMirror:
         self.angles, self.speed = np.zeros(n_x), np.zeros(n_x)
         if frame:
             self.angles[list(frame.angle_states)] = 1.0
-            self.speed[frame.speed_state] = 1.0
+            self.speed = frame.speed_mask(n_x)
 
     def f(self, x, u) -> np.ndarray:
         """The component's right-hand side dx/dt [n_x] at state x [n_x] under input u [n_u]."""

@@ -151,7 +151,9 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
     envelope = meta["envelope"]
     n_x, n_u = component.n_states, component.n_inputs
     affine = [int(i) for i in component.affine_states]
-    residual_scale = meta["residual_scale"] or [1.0] * n_x
+    residual_scale = [0.0 if i in component.learned_states else float(s)  # 0: a learned rate, left out
+                      for i, s in enumerate(meta["residual_scale"] or [1.0] * n_x)]
+    corrections = correction_defaults(component)
     opening, tables = component_config("surrogate", model_name, guid, component, "surrogate_state.h", True, x_default,
                                        meta.get("operating_point"), space)
     lines = opening + [
@@ -163,9 +165,9 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
         f"#define OPFMU_RESIDUAL_LIMIT {_c_double(residual_limit(meta))} /* default of the parameter residual_limit */",
         f"#define OPFMU_RESTART_JUMP {_c_double(DEFAULT_RESTART_JUMP)} /* default of the parameter restart_jump */",
-        f"#define OPFMU_REST_RADIUS {_c_double(DEFAULT_REST_RADIUS)} /* default of the parameter rest_radius */",
-        f"#define OPFMU_SLOW_WEIGHT {_c_double(DEFAULT_SLOW_WEIGHT)} /* default of the parameter slow_weight */",
-        f"#define OPFMU_SWING_WEIGHT {_c_double(DEFAULT_SWING_WEIGHT)} /* default of the parameter swing_weight */",
+        f"#define OPFMU_REST_RADIUS {_c_double(corrections['rest_radius'])} /* default of the parameter rest_radius */",
+        f"#define OPFMU_SLOW_WEIGHT {_c_double(corrections['slow_weight'])} /* default of the parameter slow_weight */",
+        f"#define OPFMU_SWING_WEIGHT {_c_double(corrections['swing_weight'])} /* default of the parameter swing_weight */",
         f"#define OPFMU_N_AFFINE {len(affine)} /* states whose rate is affine in themselves (exact step) */",
         f"static const int OPFMU_AFFINE_STATES[{max(len(affine), 1)}] = {{{', '.join(map(str, affine or [0]))}}};",
         *tables,
@@ -176,7 +178,7 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"static const double OPFMU_ENV_X0_MAX[{n_x}] = {_c_array(envelope['x0'][s][1] for s in component.state_names)};",
         f"static const double OPFMU_ENV_U_MIN[{n_u}] = {_c_array(envelope['u'][s][0] for s in component.input_names)};",
         f"static const double OPFMU_ENV_U_MAX[{n_u}] = {_c_array(envelope['u'][s][1] for s in component.input_names)};",
-        f"static const double OPFMU_RESIDUAL_SCALE[{n_x}] = {_c_array(residual_scale)};",
+        f"static const double OPFMU_RESIDUAL_SCALE[{n_x}] = {_c_array(residual_scale)}; /* 0: a learned rate */",
         *frame_config(meta.get("frame"), n_x, n_u),
         "#endif", "",
     ]
@@ -190,11 +192,12 @@ def frame_config(frame, n_x: int, n_u: int) -> list[str]:
     angles, speed = np.zeros(n_x), np.zeros(n_x)
     if frame:
         angles[list(frame.angle_states)] = 1.0
-        speed[frame.speed_state] = 1.0
+        speed = frame.speed_mask(n_x)
     return [
         f"#define OPFMU_FRAME {1 if frame else 0} /* the operator works in the frame of its window */",
         f"#define OPFMU_FRAME_ANGLE_INPUT {frame.angle_inputs[0] if frame else 0}",
-        f"#define OPFMU_FRAME_SPEED_STATE {frame.speed_state if frame else 0}",
+        f"#define OPFMU_FRAME_SPEED_STATE {-1 if not frame or frame.speed_state is None else frame.speed_state}"
+        " /* -1: no speed, the frame only turns */",
         f"#define OPFMU_FRAME_ANGLE_STATE {frame.angle_states[0] if frame and frame.angle_states else -1}",
         f"#define OPFMU_FRAME_PERIOD {_c_double(frame.period if frame else 1.0)}",
         f"#define OPFMU_FRAME_SPEED_STEP {_c_double(frame.speed_step if frame else 0.0)} /* 0: c = the start speed */",
@@ -220,11 +223,19 @@ def rollover_horizon(meta: dict) -> float:
     return float(meta["rollover_horizon_s"])
 
 
+def correction_defaults(component) -> dict:
+    """Defaults of the corrections' parameters (corrections.c). The rest and slow-mode corrections
+    read every state's rate from the right-hand side: off (0) for a component whose rates are
+    partly learned (Component.learned_states); the exact step of its affine states stays on."""
+    learned = bool(component.learned_states)
+    return {"rest_radius": 0.0 if learned else DEFAULT_REST_RADIUS,
+            "slow_weight": 0.0 if learned else DEFAULT_SLOW_WEIGHT, "swing_weight": DEFAULT_SWING_WEIGHT}
+
+
 def surrogate_starts(meta: dict) -> dict:
     """Start values of the surrogate FMU's own parameters (SURROGATE_EXTRAS)."""
     return {"rollover_horizon": rollover_horizon(meta), "residual_limit": residual_limit(meta),
-            "restart_jump": DEFAULT_RESTART_JUMP, "rest_radius": DEFAULT_REST_RADIUS,
-            "slow_weight": DEFAULT_SLOW_WEIGHT, "swing_weight": DEFAULT_SWING_WEIGHT}
+            "restart_jump": DEFAULT_RESTART_JUMP, **correction_defaults(meta["component"])}
 
 
 def check_model_name(model_name) -> str:

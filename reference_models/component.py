@@ -117,6 +117,10 @@ class Component:
         solves the network by Newton (an inverter's current limits, a constant-power load).
     initialisation: how it starts at rest from the load flow and from what the devices it drives
         need (`Initialisation`); None: at `equilibrium` with every input given.
+    learned_states: indices of states whose rate no equation gives (a sub-system's devices seen
+        through its boundary: reference_models.models.subsystem): `derivatives` gives 0 for them,
+        an operator learns them from data alone (the physics losses and the FMU's residual leave
+        them out), and nothing integrates the component (`require_known_rates`).
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
@@ -140,6 +144,7 @@ class Component:
     reset: Callable | None = None
     initialisation: Initialisation | None = None
     affine_current: bool = False
+    learned_states: tuple = ()
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -151,6 +156,9 @@ class Component:
             raise ValueError(f"component {self.name!r}: one positive state scale per state")
         if not all(0 <= i < len(self.states) for i in self.affine_states):
             raise ValueError(f"component {self.name!r}: affine_states must index its states")
+        if not all(0 <= i < len(self.states) for i in self.learned_states) or \
+                set(self.learned_states) & set(self.affine_states):
+            raise ValueError(f"component {self.name!r}: learned_states must index states that are not affine")
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
         self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")
@@ -184,6 +192,20 @@ class Component:
         if not self.states:
             raise ValueError(f"the {self.name} component has no states: a component without states has no "
                              "operator to learn")
+
+    def require_known_rates(self, purpose: str) -> None:
+        """ValueError where some of the component's rates are learned, not known: `purpose` (a
+        reference FMU, a monolithic solve) needs every rate from an equation."""
+        if self.learned_states:
+            names = ", ".join(self.state_names[i] for i in self.learned_states)
+            raise ValueError(f"the {self.name} component's rates of {names} are learned from data, not equations: "
+                             f"it has no {purpose}; its operator's surrogate FMU stands for it")
+
+    def physics_mask(self) -> np.ndarray:
+        """[n_x]: 1 for a state whose rate an equation gives, 0 for a learned one."""
+        mask = np.ones(self.n_states)
+        mask[list(self.learned_states)] = 0.0
+        return mask
 
     @property
     def start_inputs(self) -> np.ndarray:

@@ -30,6 +30,10 @@ taken from the speed's offset from rest (c = omega(0) - 1 where the speed carrie
 omega_f starts at 1), the angles ramp at speed_scale c, and the torque inputs drop by k c. With
 the defaults (scale 1, rest 0) this is the frame above, number for number.
 
+A component whose equations turn with the network but read their speed as physics (a sub-system's
+frequency relays and droops: reference_models.models.subsystem) has no speed symmetry
+(`speed_state` None): its frame only turns (c = 0), which removes any angle offset exactly.
+
 Arrays: x0 [N, n_x], u [N, S, n_u] at window times s [S] (s[0] = 0), x [N, M, n_x] at times t [M].
 """
 from __future__ import annotations
@@ -51,7 +55,7 @@ class Drift:
 
     angle_states: tuple
     angle_inputs: tuple
-    speed_state: int
+    speed_state: int | None  # None: the equations have no speed symmetry, the frame only turns (c = 0)
     torque_inputs: tuple = ()
     period: float = 2.0 * math.pi
     speed_step: float = 0.0  # speed units: the frame's speed in whole steps where it carries a torque (0: exact)
@@ -61,8 +65,9 @@ class Drift:
     def check(self, n_states: int, n_inputs: int) -> None:
         if not self.angle_inputs or not all(0 <= i < n_inputs for i in self.angle_inputs):
             raise ValueError("drift: angle_inputs must name at least one input, by index")
-        if not all(0 <= i < n_states for i in self.angle_states) or not 0 <= self.speed_state < n_states:
-            raise ValueError("drift: angle_states and speed_state must index states")
+        if not all(0 <= i < n_states for i in self.angle_states) or not (
+                self.speed_state is None or 0 <= self.speed_state < n_states):
+            raise ValueError("drift: angle_states and speed_state must index states (speed_state None: no speed)")
         if not all(0 <= i < n_inputs for i, _ in self.torque_inputs) or not self.period > 0:
             raise ValueError("drift: torque_inputs must index inputs, and the period be positive")
         if not self.speed_step >= 0:
@@ -79,7 +84,7 @@ class Frame:
 
     angle_states: tuple
     angle_inputs: tuple
-    speed_state: int
+    speed_state: int | None  # None: a frame that only turns (c = 0)
     torque: tuple  # (input index, coefficient k): input_f = input - k c
     period: float
     speed_step: float = 0.0  # speed units: c = the start offset rounded to whole steps (0: c = the offset)
@@ -98,9 +103,14 @@ class Frame:
     @classmethod
     def from_dict(cls, data: dict) -> "Frame":
         return cls(tuple(int(i) for i in data["angle_states"]), tuple(int(i) for i in data["angle_inputs"]),
-                   int(data["speed_state"]), tuple((int(i), float(k)) for i, k in data["torque"]),
+                   None if data["speed_state"] is None else int(data["speed_state"]),
+                   tuple((int(i), float(k)) for i, k in data["torque"]),
                    float(data["period"]), float(data.get("speed_step", 0.0)),
                    float(data.get("speed_scale", 1.0)), float(data.get("speed_rest", 0.0)))
+
+    def speed_mask(self, n_states: int) -> np.ndarray:
+        """[n_x]: 1 on the speed state (it drops by c in the frame), else 0; all 0 without one."""
+        return _mask(n_states, () if self.speed_state is None else (self.speed_state,))
 
     def input_ramps(self, n_inputs: int) -> np.ndarray:
         """[n_u]: speed_scale for an angle input (what c t turns it by per second), else 0."""
@@ -128,7 +138,8 @@ def frame_of(drift: Drift, params) -> Frame:
     scale = float(drift.speed_scale[0])
     for name in drift.speed_scale[1:]:
         scale *= float(getattr(params, name))
-    return Frame(tuple(drift.angle_states), tuple(drift.angle_inputs), int(drift.speed_state), torque,
+    speed_state = None if drift.speed_state is None else int(drift.speed_state)
+    return Frame(tuple(drift.angle_states), tuple(drift.angle_inputs), speed_state, torque,
                  float(drift.period), step, scale, float(drift.speed_rest))
 
 
@@ -136,9 +147,9 @@ def window_frame(frame: Frame, x0: np.ndarray, u0: np.ndarray):
     """(input shift a [N], state shift [N], speed c [N]) of windows starting at x0 [N, n_x] under
     inputs u0 [N, n_u] (the first sensor values): a = the first angle input; the angle states shift
     by a plus the whole periods that bring them nearest to it; c = the start speed's offset from
-    rest (in whole speed steps where the frame has one)."""
+    rest (in whole speed steps where the frame has one; 0 where it has no speed state)."""
     a = u0[:, frame.angle_inputs[0]]
-    c = frame_speed(frame, x0[:, frame.speed_state])
+    c = np.zeros_like(a) if frame.speed_state is None else frame_speed(frame, x0[:, frame.speed_state])
     lead = x0[:, frame.angle_states[0]] - a if frame.angle_states else np.zeros_like(a)
     return a, a + frame.period * np.floor(lead / frame.period + 0.5), c
 
@@ -156,7 +167,7 @@ def to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, s: np.ndarray):
     """(x0_f [N, n_x], u_f [N, S, n_u], state shift [N], speed [N]): windows in their own frame."""
     a, shift, c = window_frame(frame, x0, u[:, 0])
     n_x, n_u = x0.shape[-1], u.shape[-1]
-    x0_f = x0 - shift[:, None] * _mask(n_x, frame.angle_states) - c[:, None] * _mask(n_x, (frame.speed_state,))
+    x0_f = x0 - shift[:, None] * _mask(n_x, frame.angle_states) - c[:, None] * frame.speed_mask(n_x)
     u_f = (u - a[:, None, None] * frame.input_rates(n_u)
            - c[:, None, None] * (s[None, :, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)))
     return x0_f, u_f, shift, c
@@ -167,7 +178,7 @@ def from_frame(frame: Frame, x_f: np.ndarray, t: np.ndarray, shift: np.ndarray, 
     n_x = x_f.shape[-1]
     angles = _mask(n_x, frame.angle_states)
     return (x_f + shift[:, None, None] * angles
-            + c[:, None, None] * (t[None, :, None] * frame.speed_scale * angles + _mask(n_x, (frame.speed_state,))))
+            + c[:, None, None] * (t[None, :, None] * frame.speed_scale * angles + frame.speed_mask(n_x)))
 
 
 def trajectories_to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, x: np.ndarray, s: np.ndarray):
@@ -176,7 +187,7 @@ def trajectories_to_frame(frame: Frame, x0: np.ndarray, u: np.ndarray, x: np.nda
     n_x = x0.shape[-1]
     angles = _mask(n_x, frame.angle_states)
     x_f = (x - shift[:, None, None] * angles
-           - c[:, None, None] * (s[None, :, None] * frame.speed_scale * angles + _mask(n_x, (frame.speed_state,))))
+           - c[:, None, None] * (s[None, :, None] * frame.speed_scale * angles + frame.speed_mask(n_x)))
     return x0_f, u_f, x_f
 
 

@@ -42,9 +42,8 @@ def drifted(frame, x0_f: np.ndarray, u_f: np.ndarray, s: np.ndarray, a: np.ndarr
     """(x0 [n, n_x], u [n, S, n_u]) float32: windows given in their frame (x0_f, u_f at window times
     s [S]) turned by angles a [n] and speeds c [n], the inverse of reference_models.drift.to_frame."""
     n_x, n_u = x0_f.shape[-1], u_f.shape[-1]
-    angles, speed = np.zeros(n_x), np.zeros(n_x)
+    angles, speed = np.zeros(n_x), frame.speed_mask(n_x)
     angles[list(frame.angle_states)] = 1.0
-    speed[frame.speed_state] = 1.0
     x0 = x0_f + a[:, None] * angles + c[:, None] * speed
     u = (u_f + a[:, None, None] * frame.input_rates(n_u)
          + c[:, None, None] * (s[None, :, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)))

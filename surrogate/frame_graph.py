@@ -44,16 +44,18 @@ def wrap_in_frame(proto, frame: Frame, sensor_times: np.ndarray):
 
     angles = np.zeros(n_x, np.float32)
     angles[list(frame.angle_states)] = 1.0
-    speed = np.zeros(n_x, np.float32)
-    speed[frame.speed_state] = 1.0
+    speed = frame.speed_mask(n_x).astype(np.float32)
     s = np.asarray(sensor_times, dtype=np.float64)
     ramp = s[:, None] * frame.input_ramps(n_u) + frame.input_torques(n_u)  # [S, n_u]: what c multiplies
     u0 = op("Gather", ["u", const("first", 0, np.int64)], "u0", axis=1)  # [N, n_u]
     a = op("Gather", [u0, const("angle_input", frame.angle_inputs[0], np.int64)], "a", axis=1)  # [N]
-    c = op("Gather", ["x0", const("speed_state", frame.speed_state, np.int64)], "speed0", axis=1)  # [N]
-    if frame.speed_rest:  # a per-unit speed: its offset from rest (drift.frame_speed)
+    if frame.speed_state is None:  # a frame that only turns
+        c = op("Mul", [a, const("no_speed", 0.0)], "c")
+    else:
+        c = op("Gather", ["x0", const("speed_state", frame.speed_state, np.int64)], "speed0", axis=1)  # [N]
+    if frame.speed_state is not None and frame.speed_rest:  # a per-unit speed: its offset from rest (drift.frame_speed)
         c = op("Sub", [c, const("speed_rest", frame.speed_rest)], "speed_offset")
-    if frame.speed_step:  # whole speed steps (drift.frame_speed)
+    if frame.speed_state is not None and frame.speed_step:  # whole speed steps (drift.frame_speed)
         steps = op("Floor", [op("Add", [op("Mul", [c, const("per_step", 1.0 / frame.speed_step)], "speed_steps"),
                                         const("half_step", 0.5)], "rounded_steps")], "whole_steps")
         c = op("Mul", [steps, const("speed_step", frame.speed_step)], "c")

@@ -16,6 +16,8 @@ on every time; for a DeepONet through the trunk only, d x_hat/dt = B @ d tau/dt)
 """
 from __future__ import annotations
 
+import math
+
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -40,6 +42,14 @@ def residual_scale(x: np.ndarray, t: np.ndarray) -> np.ndarray:
     dxdt = np.gradient(np.asarray(x, dtype=float), np.asarray(t, dtype=float), axis=1)
     std = dxdt.reshape(-1, dxdt.shape[-1]).std(0)
     return np.where(std > 1e-9, std, 1.0)  # a state that does not move gets 1, not round-off
+
+
+def physics_scale(scale: torch.Tensor, component) -> torch.Tensor:
+    """The residual scale [n_x] with the component's learned states (Component.learned_states) at
+    infinity: residuals divided by it leave them out (no equation gives their rate)."""
+    scale = scale.clone()
+    scale[list(component.learned_states)] = math.inf
+    return scale
 
 
 def value_and_time_derivative(model, x0: torch.Tensor, u: torch.Tensor, t: torch.Tensor):

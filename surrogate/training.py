@@ -32,8 +32,8 @@ from reference_models.files import atomic_path, write_json
 from reference_models.progress import progress_bar
 
 from .data import load_metadata, load_split, machine_of
-from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, residual_scale,
-                     standardise)
+from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, physics_scale,
+                     residual_scale, standardise)
 from .models import NormStats, OperatorConfig, OperatorModel, build_model
 
 OPTIMIZERS = ("soap", "adam")
@@ -328,7 +328,7 @@ def _to_tensors(splits: dict, model: OperatorModel, machine) -> _Tensors:
         f_ref=_laid_out_like(f_ref.float(), probe),
         val_x0=f32(val_split["x0"]), val_u=f32(val_split["u"]), val_y=target(val_split["x"]),
         col_x0=None if col is None else f32(col["x0"]), col_u=None if col is None else f32(col["u"]),
-        scale=f32(residual_scale(train_split["x"], train_split["t"])),
+        scale=physics_scale(f32(residual_scale(train_split["x"], train_split["t"])), component),
         rhs=lambda x, u: component.rhs(x, u, params),
     )
 

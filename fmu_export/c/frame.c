@@ -32,8 +32,10 @@ WindowFrame window_frame(const double x[N_X], const double u[N_U])
     WindowFrame f = {0.0, 0.0, 0.0};
 #if OPFMU_FRAME
     f.a = u[OPFMU_FRAME_ANGLE_INPUT];
+#if OPFMU_FRAME_SPEED_STATE >= 0
     f.c = x[OPFMU_FRAME_SPEED_STATE] - OPFMU_FRAME_SPEED_REST; /* the speed's offset from rest */
     if (OPFMU_FRAME_SPEED_STEP > 0.0) f.c = OPFMU_FRAME_SPEED_STEP * floor(f.c / OPFMU_FRAME_SPEED_STEP + 0.5);
+#endif
 #if OPFMU_FRAME_ANGLE_STATE >= 0
     f.shift = f.a + OPFMU_FRAME_PERIOD * floor((x[OPFMU_FRAME_ANGLE_STATE] - f.a) / OPFMU_FRAME_PERIOD + 0.5);
 #else

@@ -162,11 +162,14 @@ double window_residual(const ModelState *m)
         double shift = m->slow_weight * (dot(m->slow_left, f) - dot(m->slow_left, rate));
         for (int i = 0; i < N_X; ++i) rate[i] += shift * m->slow_right[i];
     }
+    int known = 0;
     for (int i = 0; i < N_X; ++i) {
+        if (OPFMU_RESIDUAL_SCALE[i] == 0.0) continue; /* a learned rate: no equation to hold it to */
         double r = (rate[i] - f[i]) / OPFMU_RESIDUAL_SCALE[i];
         sum += r * r;
+        ++known;
     }
-    return sqrt(sum / (double)N_X);
+    return known > 0 ? sqrt(sum / (double)known) : 0.0;
 }
 
 static int outside(const double *v, const double *lo, const double *hi, int n)

@@ -37,15 +37,15 @@ def subsystem_buses(network, bus: int) -> tuple:
     return behind
 
 
-def boundary_power(network, V_bus: np.ndarray, theta_bus: np.ndarray, bus: int, behind=None) -> np.ndarray:
-    """[n] complex: P + jQ [pu, system base] that the sub-system behind host bus `bus` injects into
-    it (generator convention), from the bus voltages V_bus, theta_bus [n, n_bus] (pu, rad; the
-    network's bus order) and the pi model of each branch between `bus` and the buses `behind`
-    (default subsystem_buses(network, bus))."""
+def boundary_current(network, V_bus: np.ndarray, theta_bus: np.ndarray, bus: int, behind=None) -> np.ndarray:
+    """[n] complex: the current [pu, system base, network frame] that the sub-system behind host bus
+    `bus` injects into it, from the bus voltages V_bus, theta_bus [n, n_bus] (pu, rad; the network's
+    bus order) and the pi model of each branch between `bus` and the buses `behind` (default
+    subsystem_buses(network, bus))."""
     behind = set(subsystem_buses(network, bus) if behind is None else behind)
     V = np.asarray(V_bus) * np.exp(1j * np.asarray(theta_bus))
     i = network.bus_index(bus)
-    S = np.zeros(V.shape[0], complex)
+    current = np.zeros(V.shape[0], complex)
     for br in network.branches:
         ends = (br.from_bus, br.to_bus)
         if bus not in ends or not behind.intersection(ends):
@@ -54,8 +54,31 @@ def boundary_power(network, V_bus: np.ndarray, theta_bus: np.ndarray, bus: int, 
         m = br.tap * np.exp(1j * br.phi)
         j = network.bus_index(br.to_bus if br.from_bus == bus else br.from_bus)
         if br.from_bus == bus:  # the current from `bus` into the branch, tap at `bus`
-            into = (y + 0.5j * br.b) / br.tap ** 2 * V[:, i] - y / np.conj(m) * V[:, j]
+            current -= (y + 0.5j * br.b) / br.tap ** 2 * V[:, i] - y / np.conj(m) * V[:, j]
         else:
-            into = (y + 0.5j * br.b) * V[:, i] - y / m * V[:, j]
-        S -= V[:, i] * np.conj(into)
-    return S
+            current -= (y + 0.5j * br.b) * V[:, i] - y / m * V[:, j]
+    return current
+
+
+def boundary_power(network, V_bus: np.ndarray, theta_bus: np.ndarray, bus: int, behind=None) -> np.ndarray:
+    """[n] complex: P + jQ [pu, system base] that the sub-system behind host bus `bus` injects into
+    it (generator convention); arguments as boundary_current."""
+    V = np.asarray(V_bus)[:, network.bus_index(bus)] * np.exp(1j * np.asarray(theta_bus)[:, network.bus_index(bus)])
+    return V * np.conj(boundary_current(network, V_bus, theta_bus, bus, behind))
+
+
+def passive_admittance(network, load_admittances: np.ndarray, bus: int, behind=None) -> complex:
+    """Y [pu, system base]: the admittance the sub-system behind host bus `bus` presents there with
+    every device's current taken out (its branches, shunts and constant-impedance loads
+    `load_admittances` [n_bus], Kron-reduced onto `bus`): it draws Y V from the bus."""
+    behind = list(subsystem_buses(network, bus) if behind is None else behind)
+    inside = [network.bus_index(b) for b in behind]
+    b = network.bus_index(bus)
+    Y = network.ybus() + np.diag(np.asarray(load_admittances, complex))
+    own = 0j  # what the branches into the sub-system add to Y[b, b]
+    for br in network.branches:
+        if bus in (br.from_bus, br.to_bus) and set(behind).intersection((br.from_bus, br.to_bus)):
+            y = 1.0 / complex(br.r, br.x) + 0.5j * br.b
+            own += y / br.tap ** 2 if br.from_bus == bus else y
+    Y_ii, Y_ib, Y_bi = Y[np.ix_(inside, inside)], Y[inside, b], Y[b, inside]
+    return complex(own - Y_bi @ np.linalg.solve(Y_ii, Y_ib))

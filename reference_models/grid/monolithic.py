@@ -243,6 +243,9 @@ class System:
     `rhs(t, y, network)` is the right-hand side with the network (Case.reduced) solved inside."""
 
     def __init__(self, case: Case):
+        for unit in case.units:
+            for device in unit.devices:
+                device.component.require_known_rates("monolithic solve")
         self.case = case
         self.units = case.units
         self.wiring = tuple(unit_wiring([d.component.ports for d in u.devices], f"generator at bus {u.bus}", remote)

@@ -1,0 +1,370 @@
+"""Datasets of a sub-system seen through its boundary bus, recorded from its full detail: the windows a
+`subsystem` operator (reference_models.models.subsystem) learns from (issue 35, docs/subsystems.md).
+
+The sub-system file is attached at buses of host cases (reference_models.grid.attach), and each
+joint case runs through contingencies in opfmu's master with every device a native FMU: faults near
+and far (at the boundary bus itself, at its neighbours, anywhere), bolted or through an impedance,
+cleared in 50-200 ms, with or without a line opened, and generator trips (frequency events). What
+the host records at the boundary becomes the component's inputs and states, each row of the run:
+    Vs, theta_vs       the boundary bus voltage;
+    theta_f, theta_w   a BusFreq at the boundary (the sub-system's own settings) driven by theta_vs,
+                       linear between rows (blocks.bus_frequency, integrated exactly);
+    n                  V0 / V_own, the run's load-flow voltage at the boundary over the sub-system's own;
+    Ip, Iq             the devices' part of the current the sub-system injects (boundary.boundary_current,
+                       less the passive part (G + jB) V / n^2), in the voltage's frame.
+So the component's outputs give back the injected current of the detail row by row, exactly.
+Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
+runs, not the windows, are split into train, val and test, so a test window comes from a contingency
+no training window saw.
+
+The files are a dataset like any other (surrogate.data.datasets: x0, u, t, x per split and
+metadata.json written last), so training, export and the FMU builder take them unchanged. Every run's
+rows are kept under `.partial/` (atomically, by index): an interrupted generation resumes with the
+runs still missing, and a rerun of a finished one returns its metadata. Deterministic for a seed.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from reference_models.components import component
+from reference_models.files import write_json, write_npz
+from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
+from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+from reference_models.progress import progress_bar
+from reference_models.version import __version__
+from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
+
+SPLIT_SHARES = (("train", 0.7), ("val", 0.15), ("test", 0.15))  # of the runs
+GENERATING_MODELS = ("PVD1", "REGCA1", "REGCP1", "REGF1", "REGF2", "REGF3", "ESD1", "GENROU", "GENCLS")
+BUSFREQ_DEFAULTS = {"Tf": 0.02, "Tw": 0.1}  # ANDES' BusFreq defaults [s]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a sub-system dataset records: `runs` contingencies over the host cases `hosts` (ANDES
+    case names or files), `buses` attachment buses per host (drawn among its buses), each run to
+    `stop` s at `step` s; faults from `fault_start` s cleared after `clear` (low, high) s in whole
+    steps, a share `trips` of the runs a generator trip instead and a share `opened` of the faults
+    cleared with a line at the fault bus opened; windows of `horizon` s every `stride` s."""
+
+    hosts: tuple = ("ieee14", "kundur", "ieee39")
+    buses: int = 3
+    runs: int = 180
+    stop: float = 3.0
+    step: float = 0.01
+    fault_start: float = 0.5
+    clear: tuple = (0.05, 0.2)
+    trips: float = 0.2
+    opened: float = 0.25
+    horizon: float = 0.2
+    stride: float = 0.05
+
+    def to_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+def subsystem_params(records: dict, case, bus: int) -> dict:
+    """The `subsystem` component's parameters of the sub-system `records` (ANDES JSON records, its
+    own file) attached at `bus` of `case` (the joint case): its rating, its own boundary voltage,
+    its passive admittance referred to that voltage and the devices' currents there, its BusFreq."""
+    behind = subsystem_buses(case.network, bus)
+    b = case.network.bus_index(bus)
+    V0 = float(case.flow.V[b])
+    slack = records["Slack"][0]
+    V_own = float(slack.get("v0", 1.0))
+    n = V0 / V_own
+    Y = passive_admittance(case.network, case.flow.load_admittances(), bus, behind) * n ** 2
+    I0 = boundary_current(case.network, case.flow.V[None, :], case.flow.theta[None, :], bus, behind)[0]
+    V = V0 * np.exp(1j * case.flow.theta[b])
+    device = (I0 + Y / n ** 2 * V) * np.exp(-1j * case.flow.theta[b]) * n  # at the sub-system's own voltage
+    freq = records.get("BusFreq", [])
+    rating = sum(float(r.get("Sn", 0.0)) for model in GENERATING_MODELS for r in records.get(model, []))
+    return {"Sb": float(case.network.base_mva), "S": rating, "G": Y.real, "B": Y.imag, "V_own": V_own,
+            "Ip0": float(device.real), "Iq0": float(-device.imag),
+            "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
+            "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],
+            "busf_fn": float(case.network.f_hz)}
+
+
+def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
+    """(theta_f, theta_w) [n] of a BusFreq at rest at theta[0], driven by theta [n] linear between
+    the times t [n]: each lag integrated exactly over each interval (a lag of a ramp, then the
+    washout's lag of the lag's exact solution, approximated by its trapezoid average)."""
+    theta_f, theta_w = np.empty_like(theta), np.empty_like(theta)
+    theta_f[0] = theta_w[0] = theta[0]
+    for k in range(1, len(t)):
+        h = t[k] - t[k - 1]
+        theta_f[k] = _lag_of_ramp(theta_f[k - 1], theta[k - 1], theta[k], h, Tf)
+        theta_w[k] = _lag_of_ramp(theta_w[k - 1], theta_f[k - 1], theta_f[k], h, Tw)
+    return theta_f, theta_w
+
+
+def _lag_of_ramp(x: float, u0: float, u1: float, h: float, T: float) -> float:
+    """x(h) of T dx/dt = u - x from x, u linear from u0 to u1 over h (T = 0: x follows u)."""
+    if T <= 0.0:
+        return u1
+    e = math.exp(-h / T)
+    slope = (u1 - u0) / h if h > 0 else 0.0
+    return u1 - slope * T + (x - u0 + slope * T) * e
+
+
+def run_rows(result, case, bus: int, params: dict) -> dict:
+    """The component's inputs u [n, 2] and states x [n, 5] at the rows t [n] of a grid result
+    (module docstring)."""
+    net = case.network
+    b = net.bus_index(bus)
+    t = np.asarray(result.time, float)
+    V, theta = np.asarray(result.V_bus)[:, b], np.asarray(result.theta_bus)[:, b]
+    current = boundary_current(net, result.V_bus, result.theta_bus, bus)
+    n = float(case.flow.V[b]) / params["V_own"]
+    device = (current + complex(params["G"], params["B"]) / n ** 2 * V * np.exp(1j * theta)) * np.exp(-1j * theta)
+    theta_f, theta_w = bus_frequency_states(t, theta, params["busf_Tf"], params["busf_Tw"])
+    x = np.stack([theta_f, theta_w, device.real, -device.imag, np.full_like(t, n)], axis=1)
+    return {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
+
+
+def windows(rows: dict, plan: Plan) -> tuple:
+    """(x0 [W, 5], u [W, S, 2], x [W, S, 5]) of the windows of one run's rows on the grid of `plan`
+    (rows at whole steps; a run that ended early, at a loss of synchronism, gives fewer)."""
+    t = rows["t"]
+    grid = np.round(t / plan.step).astype(int)
+    keep = np.concatenate([grid[1:] != grid[:-1], [True]])  # the row after an event at a step
+    index = {g: k for g, k in zip(grid[keep], np.nonzero(keep)[0])}
+    size = int(round(plan.horizon / plan.step)) + 1
+    every = int(round(plan.stride / plan.step))
+    out = [], [], []
+    for start in range(0, int(grid[-1]) - size + 2, every):
+        picks = [index.get(start + s) for s in range(size)]
+        if any(p is None for p in picks):
+            continue
+        out[0].append(rows["x"][picks[0]])
+        out[1].append(rows["u"][picks])
+        out[2].append(rows["x"][picks])
+    if not out[0]:
+        return np.zeros((0, 5)), np.zeros((0, size, 2)), np.zeros((0, size, 5))
+    return np.array(out[0]), np.array(out[1]), np.array(out[2])
+
+
+@dataclass(frozen=True)
+class Run:
+    """One contingency of a dataset: the attachment (index into the plan's), the fault (bus,
+    impedance as (re, im) pu, clearing time; None: none), the line opened at clearing, the host
+    generator tripped (bus, name) at the fault start, and its split."""
+
+    attachment: int
+    split: str
+    fault_bus: int | None = None
+    impedance: tuple = (0.0, 0.0)
+    clear_s: float | None = None
+    opened: str | None = None
+    trip: tuple | None = None
+
+    def label(self, host: str, bus: int) -> str:
+        what = (f"fault at bus {self.fault_bus} ({complex(*self.impedance):.4g} pu) cleared at {self.clear_s:g} s"
+                + (f", {self.opened} opened" if self.opened else "")) if self.fault_bus is not None else \
+            f"generator {self.trip[1] or ''} at bus {self.trip[0]} tripped"
+        return f"{host} at bus {bus}: {what}"
+
+
+def attachment_buses(case_network, rng: np.random.Generator, count: int) -> list:
+    """`count` host buses (sorted) to attach at, drawn among the buses that carry no slack."""
+    slack = {g.bus for g in case_network.generators if g.kind == "slack"}
+    candidates = [b for b in case_network.buses if b not in slack]
+    return sorted(int(b) for b in rng.choice(candidates, size=min(count, len(candidates)), replace=False))
+
+
+def draw_runs(plan: Plan, cases: list, rng: np.random.Generator) -> list:
+    """The plan's runs over the attachments (joint case, host bus) of `cases`, in the order of the
+    attachments (module docstring: faults near and far, trips, the split by run)."""
+    splits = [name for name, share in SPLIT_SHARES for _ in range(int(round(share * plan.runs)))]
+    splits = (splits + ["train"] * plan.runs)[:plan.runs]
+    splits = [splits[i] for i in rng.permutation(plan.runs)]
+    runs = []
+    for k in range(plan.runs):
+        a = k % len(cases)
+        case, bus = cases[a]
+        behind = set(subsystem_buses(case.network, bus))
+        host = [b for b in case.network.buses if b not in behind]
+        if rng.uniform() < plan.trips:
+            gens = [g for g in case.network.generators if g.bus not in behind and g.kind != "slack"]
+            g = gens[rng.integers(len(gens))]
+            runs.append(Run(a, splits[k], trip=(int(g.bus), g.name)))
+            continue
+        near = [br.to_bus if br.from_bus == bus else br.from_bus for br in case.network.branches
+                if br.connects(bus) and not behind.intersection((br.from_bus, br.to_bus))]
+        where = rng.uniform()
+        fault_bus = bus if where < 0.4 else (near[rng.integers(len(near))] if where < 0.7 and near
+                                             else host[rng.integers(len(host))])
+        impedance = ANDES_FAULT_IMPEDANCE if rng.uniform() < 0.5 else 1j * 10 ** rng.uniform(-2.5, -0.5)
+        steps = rng.integers(int(round(plan.clear[0] / plan.step)), int(round(plan.clear[1] / plan.step)) + 1)
+        opened = None
+        if rng.uniform() < plan.opened:
+            branch = case.network.branch
+            lines = [n for n in case.network.trips_at(fault_bus)
+                     if not behind.intersection((branch(n).from_bus, branch(n).to_bus))]
+            opened = lines[rng.integers(len(lines))] if lines else None
+        runs.append(Run(a, splits[k], int(fault_bus), (float(impedance.real), float(impedance.imag)),
+                        round(plan.fault_start + steps * plan.step, 9), opened))
+    return runs
+
+
+def contingency_of(run: Run, case, plan: Plan) -> Contingency:
+    """The run's contingency on the joint case (without the case's own events)."""
+    if run.fault_bus is None:
+        from reference_models.grid.case import Event
+
+        trip = Event(kind="generator", time=plan.fault_start, bus=run.trip[0], generator=run.trip[1], status=0)
+        return Contingency(network=case.network, events=(trip,))
+    return Contingency(fault_bus=run.fault_bus, fault_start=plan.fault_start, clear_s=run.clear_s, trip=run.opened,
+                       fault_impedance=complex(*run.impedance), network=case.network)
+
+
+_WORKER_RUNNERS: dict = {}  # per process: attached case file -> (case, MasterRunner), reused across runs
+
+
+def _runner(attached: str, fmu_cache: str, step: float):
+    if attached not in _WORKER_RUNNERS:
+        from reference_models.grid.andes_case import case_from_file
+
+        from .fmus import generator_files
+        from .master import MasterSettings
+        from .runners import MasterRunner
+
+        case = case_from_file(Path(attached))
+        files = generator_files(case, "reference", Path(fmu_cache))
+        _WORKER_RUNNERS[attached] = (case, MasterRunner(files, case, MasterSettings(step=step)))
+    return _WORKER_RUNNERS[attached]
+
+
+def record_run(task: tuple) -> str:
+    """Runs one task (index, Run as dict, attached case file, host bus, params, plan as dict, FMU
+    cache, partial folder) and writes its rows (or why it failed) to partial/run_<index>.npz;
+    returns the file's name."""
+    index, run, attached, bus, params, plan, fmu_cache, partial = task
+    plan = Plan(**{k: tuple(v) if isinstance(v, list) else v for k, v in plan.items()})
+    out = Path(partial) / f"run_{index:05d}.npz"
+    case, runner = _runner(attached, fmu_cache, plan.step)
+    try:
+        result, _ = runner.run(contingency_of(Run(**run), case, plan), plan.stop, stop_at_loss=True)
+        rows = run_rows(result, case, bus, params)
+        write_npz(out, **rows, failed=np.array(""))
+    except (RuntimeError, ValueError, ArithmeticError) as exc:  # the master's one-line errors
+        write_npz(out, failed=np.array(str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__))
+    return out.name
+
+
+def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int) -> str:
+    digest = hashlib.sha256(subsystem)
+    digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__]).encode())
+    return digest.hexdigest()[:20]
+
+
+def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, workers: int = 1,
+             progress: bool = True, host_files: dict | None = None) -> dict:
+    """Generate (or resume, or find complete) the dataset of the sub-system file `subsystem`, whose
+    boundary is its bus `boundary` (its Slack's), in `out`; returns its metadata. host_files: {name:
+    case file} of hosts the plan names that are not ANDES' (default: ANDES' stock files).
+    DatasetError for a boundary that is not the sub-system's Slack bus or another dataset in `out`."""
+    import andes
+
+    from reference_models.grid.andes_case import ANDES_CASES, case_from_file
+    from reference_models.grid.attach import attached_file
+
+    from .fmus import generator_files
+
+    subsystem, out = Path(subsystem), Path(out)
+    records = json.loads(subsystem.read_text())
+    slack = records.get("Slack", [])
+    if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
+        raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
+                           f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
+    key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
+    if (out / "metadata.json").exists():
+        meta = load_metadata(out)
+        if meta.get("fingerprint") != key:
+            raise DatasetError(f"{out} holds another dataset; choose another --out")
+        return meta
+    partial = out / ".partial"
+    partial.mkdir(parents=True, exist_ok=True)
+    started = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    attachments, cases = [], []
+    for name in plan.hosts:
+        host = Path((host_files or {}).get(name) or andes.get_case(ANDES_CASES[name]))
+        plain = case_from_file(host)
+        for bus in attachment_buses(plain.network, rng, plan.buses):
+            path = attached_file(host, [(bus, subsystem)], out / ".attached")
+            case = case_from_file(path)
+            generator_files(case, "reference", out / ".fmus")  # built once, before the workers start
+            attachments.append((name, bus, str(path)))
+            cases.append((case, bus))
+    params = subsystem_params(records, cases[0][0], cases[0][1])
+    model = component("subsystem")
+    model.params(params)  # checked before anything runs
+    runs = draw_runs(plan, cases, rng)
+    tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
+              str(out / ".fmus"), str(partial)) for k, r in enumerate(runs)
+             if not (partial / f"run_{k:05d}.npz").exists()]
+    bar = progress_bar(len(runs), "sub-system runs", "run", progress, initial=len(runs) - len(tasks))
+    if workers > 1 and len(tasks) > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            for _ in pool.map(record_run, tasks, chunksize=1):
+                bar.update(1)
+    else:
+        for task in tasks:
+            record_run(task)
+            bar.update(1)
+    bar.close()
+    return _assemble(out, runs, attachments, params, plan, seed, key, started)
+
+
+def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan, seed: int, key: str,
+              started: float) -> dict:
+    """The splits and metadata.json from the runs' rows under out/.partial (metadata last)."""
+    model = component("subsystem")
+    p = model.params(params)
+    size = int(round(plan.horizon / plan.step)) + 1
+    t = np.round(np.arange(size) * plan.step, 12)
+    parts = {name: ([], [], [], []) for name, _ in SPLIT_SHARES}
+    failed, labels = [], {name: [] for name, _ in SPLIT_SHARES}
+    for k, run in enumerate(runs):
+        host, bus, _ = attachments[run.attachment]
+        with np.load(out / ".partial" / f"run_{k:05d}.npz") as data:
+            rows = {name: data[name] for name in data.files}
+        label = run.label(host, bus)
+        if str(rows["failed"]):
+            failed.append(f"{label}: {rows['failed']}")
+            continue
+        x0, u, x = windows(rows, plan)
+        group = parts[run.split]
+        group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))
+        labels[run.split].append(label)
+    counts, trained_on = {}, []
+    for name, _ in SPLIT_SHARES:
+        x0, u, x, family = parts[name]
+        if not x0:
+            raise DatasetError(f"no run of the {name} split succeeded ({len(failed)} failed: {failed[:1]})")
+        arrays = {"x0": np.concatenate(x0), "u": np.concatenate(u), "t": t, "x": np.concatenate(x),
+                  "family": np.array(family)}
+        write_npz(out / f"{name}.npz", **arrays)
+        counts[name] = len(arrays["x0"])
+        if name == "train":
+            trained_on.append(in_frame(arrays, model, p)[:2])
+    meta = {"format": FORMAT_VERSION, "fingerprint": key, "seed": seed,
+            "preset": {"name": "subsystem", **plan.to_dict()}, "component": model.name, "params": params,
+            "state_names": list(model.state_names), "input_names": list(model.input_names),
+            "horizon_s": plan.horizon, "n_points": size, "counts": counts,
+            "envelope": envelope_of(*trained_on[0], model),
+            "attachments": [{"host": h, "bus": b} for h, b, _ in attachments],
+            "runs": {name: labels[name] for name in labels}, "failed_runs": failed,
+            "versions": {"opfmu": __version__}, "wall_time_s": round(time.perf_counter() - started, 2)}
+    write_json(out / "metadata.json", meta)
+    return meta

@@ -1,0 +1,150 @@
+"""SUBSYSTEM: a whole sub-system (a feeder of inverters, a plant) seen through its boundary bus, the
+component its learned operator is an operator of (issue 35, docs/subsystems.md).
+
+States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES' BusFreq, network
+        frame; Ip, Iq [pu, system base]: the active and reactive current the sub-system's devices
+        deliver at the boundary, in the frame of the boundary voltage, > 0 generating; n [1]: the
+        boundary's load-flow voltage over the sub-system's own, V0 / V_own)
+Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
+Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
+        frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
+        measured boundary frequency)
+
+What is known is written here; what is not is learned:
+    the sub-system's boundary transformer has settled its tap to keep its inside at the voltages of
+    the sub-system's own load flow (an on-load tap changer before the study:
+    reference_models.grid.attach), so the inside sees the boundary voltage divided by about
+    n = V0 / V_own, a constant of the study (dn/dt = 0);
+    the network's passive part (lines, transformers and constant-impedance loads with every device's
+    current taken out, Kron-reduced onto the boundary at the sub-system's own voltage: G + jB [pu,
+    system base]) then draws
+        I_passive = -(G + jB) V / n^2,
+    the devices deliver I_dev = (Ip - j Iq) e^{j theta_vs}, so that
+        I = I_dev + I_passive,  P = Ip Vs - G Vs^2 / n^2,  Q = Iq Vs + B Vs^2 / n^2;
+    the boundary frequency is what a BusFreq at the boundary measures (blocks.bus_frequency):
+        busf_Tf dtheta_f/dt = theta_vs - theta_f,  busf_Tw dtheta_w/dt = theta_f - theta_w;
+    Ip and Iq follow the devices' controls, trips and limits, hundreds of states that the sub-system's
+    operator replaces: their rate is learned (`learned_states`), written here as 0.
+
+A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
+and on the devices through the operator. The state is rotation invariant but not speed invariant
+(the devices' frequency droops and trips read the speed): the drift frame only turns.
+
+Parameters: the system base Sb and the sub-system's rating S [MVA] (the sum of its generating
+devices' Sn); G, B; the boundary voltage V_own [pu] of the sub-system's own load flow and the
+devices' currents Ip0, Iq0 there (its rest: the learned rates have none of their own); the measurement's busf_Tf, busf_Tw [s], busf_fn [Hz]
+(the sub-system's own BusFreq settings). An operator of it is trained for one sub-system: its FMU
+holds them fixed.
+
+Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
+n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..blocks import bus_frequency
+from ..component import Component, Initialisation, Parameters, Quantity
+from ..drift import Drift
+from ..ports import BusPort, Ports
+from .common import check_ranges, finite_inputs
+
+PARAMETER_RANGES = {
+    "Sb": (1e-3, 1e5, "MVA"), "S": (1e-6, 1e6, "MVA"), "G": (-1e4, 1e4, "pu"), "B": (-1e4, 1e4, "pu"),
+    "V_own": (0.5, 1.5, "pu"), "Ip0": (-1e4, 1e4, "pu"), "Iq0": (-1e4, 1e4, "pu"),
+    "busf_Tf": (0.0, 10.0, "s"), "busf_Tw": (1e-3, 10.0, "s"), "busf_fn": (16.0, 400.0, "Hz"),
+}
+
+
+@dataclass(frozen=True)
+class SubsystemParams(Parameters):
+    """A sub-system at its boundary (module docstring): bases Sb, S [MVA]; passive admittance G, B
+    [pu, system base]; its own boundary voltage V_own [pu] and the devices' currents there Ip0, Iq0
+    [pu, system base]; the boundary
+    measurement busf_Tf, busf_Tw [s], busf_fn [Hz]."""
+
+    Sb: float = 100.0
+    S: float = 10.0
+    G: float = 0.0
+    B: float = 0.0
+    V_own: float = 1.0
+    Ip0: float = 0.0
+    Iq0: float = 0.0
+    busf_Tf: float = 0.02
+    busf_Tw: float = 0.1
+    busf_fn: float = 60.0
+
+    def check(self) -> None:
+        check_ranges(self, PARAMETER_RANGES)
+
+
+def derivatives(x, u, p: SubsystemParams, m):
+    """(dtheta_f, dtheta_w, dIp, dIq, dn)/dt: the measurement's; the devices' currents' are learned
+    (0); n is a constant of the study."""
+    d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
+    return d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4]
+
+
+def outputs(x, u, p: SubsystemParams, m):
+    """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
+    Ip, Iq = x[2], x[3]
+    Vs, theta = u[0], u[1]
+    c, s = m.cos(theta), m.sin(theta)
+    f = bus_frequency(m, theta, x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)[2]
+    G, B = p.G / (x[4] * x[4]), p.B / (x[4] * x[4])  # the passive part through the settled tap
+    V_re, V_im = Vs * c, Vs * s
+    I_re = Ip * c + Iq * s - (G * V_re - B * V_im)
+    I_im = Ip * s - Iq * c - (G * V_im + B * V_re)
+    return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
+
+
+def equilibrium(u, p: SubsystemParams) -> np.ndarray:
+    """The rest [5] under constant (Vs, theta_vs), as if the load flow had put the boundary at Vs:
+    the measurement at theta_vs, n = Vs / V_own, the devices delivering the power of the sub-system's
+    own load flow (Ip0 V_own, Iq0 V_own) through the settled tap."""
+    Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
+    if not Vs > 0.0:
+        raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
+    n = Vs / p.V_own
+    return np.array([theta, theta, p.Ip0 / n, p.Iq0 / n, n])
+
+
+def _start(given, p: SubsystemParams) -> tuple:
+    V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
+    if not (math.isfinite(V0) and V0 > 0.0):
+        raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
+    n = V0 / p.V_own
+    return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]), {}
+
+
+SUBSYSTEM = Component(
+    name="subsystem",
+    description="a sub-system seen through its boundary bus: passive network and measurement known, devices learned",
+    states=(Quantity("theta_f", "rad", "boundary angle through the measurement's filter (BusFreq)"),
+            Quantity("theta_w", "rad", "washout state of the boundary's frequency measurement (BusFreq)"),
+            Quantity("Ip", "pu", "devices' active current at the boundary, voltage frame (system base)"),
+            Quantity("Iq", "pu", "devices' reactive current at the boundary, voltage frame (system base; > 0 "
+                     "delivers reactive power)"),
+            Quantity("n", "1", "boundary load-flow voltage over the sub-system's own (V0 / V_own)")),
+    inputs=(Quantity("Vs", "pu", "boundary bus voltage magnitude", start=1.0, operating_range=(0.0, 1.2), minimum=0.0),
+            Quantity("theta_vs", "rad", "boundary bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
+    outputs=(Quantity("I_re", "pu", "current injected into the boundary bus, real part (network frame, system base)"),
+             Quantity("I_im", "pu", "current injected into the boundary bus, imaginary part (network frame, system base)"),
+             Quantity("P", "pu", "active power injected into the boundary bus (system base)"),
+             Quantity("Q", "pu", "reactive power injected into the boundary bus (system base)"),
+             Quantity("f", "pu", "measured boundary frequency (1: nominal)")),
+    params_type=SubsystemParams,
+    derivatives=derivatives,
+    output_equations=outputs,
+    equilibrium=equilibrium,
+    state_scales=(0.1, 0.1, 0.05, 0.05, 0.05),
+    # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0
+    affine_states=(0, 1, 4),
+    drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
+    ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
+    initialisation=Initialisation((), _start),
+    learned_states=(2, 3),
+)
