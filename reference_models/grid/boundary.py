@@ -82,3 +82,43 @@ def passive_admittance(network, load_admittances: np.ndarray, bus: int, behind=N
             own += y / br.tap ** 2 if br.from_bus == bus else y
     Y_ii, Y_ib, Y_bi = Y[np.ix_(inside, inside)], Y[inside, b], Y[b, inside]
     return complex(own - Y_bi @ np.linalg.solve(Y_ii, Y_ib))
+
+
+def with_equivalent(case, bus: int, device, fmu=None):
+    """`case` with the sub-system behind host bus `bus` replaced by the one bus device `device` at
+    `bus` (a `subsystem` equivalent: reference_models.models.subsystem), started from the load
+    flow's injection into `bus`; `fmu`: the unit's FMU entry (e.g. {"kind": "surrogate", "operator":
+    path}). The network, load flow, units and events keep what lies on the host's side; the new unit
+    is a load unit drawing minus that injection (case.operating_point)."""
+    from dataclasses import replace
+
+    from .case import Unit, operating_point, unit_start
+
+    net, flow = case.network, case.flow
+    behind = set(subsystem_buses(net, bus))
+    injected = boundary_power(net, flow.V[None, :], flow.theta[None, :], bus, behind)[0]
+    host = [b for b in net.buses if b not in behind]
+    rows = [net.bus_index(b) for b in host]
+    kept = [k for k, g in enumerate(net.generators) if g.bus not in behind]
+    network = replace(net, buses=tuple(host),
+                      branches=tuple(br for br in net.branches if not behind.intersection((br.from_bus, br.to_bus))),
+                      loads={b: s for b, s in net.loads.items() if b not in behind},
+                      shunts={b: s for b, s in net.shunts.items() if b not in behind},
+                      generators=tuple(net.generators[k] for k in kept),
+                      kv={b: v for b, v in net.kv.items() if b not in behind})
+    load_flow = replace(flow, buses=tuple(host), generator_buses=tuple(net.generators[k].bus for k in kept),
+                        V=flow.V[rows], theta=flow.theta[rows], P_gen=flow.P_gen[kept], Q_gen=flow.Q_gen[kept],
+                        S_load=flow.S_load[rows])
+    pairs = [(u, s) for u, s in zip(case.units, case.starts) if u.bus not in behind]
+    unit = Unit(bus, (device,), fmu, load=-complex(injected))
+    start = unit_start(unit, operating_point(unit, len(pairs), load_flow))
+    events = tuple(e for e in case.events if not behind.intersection(
+        b for b in (e.bus, *(_ends(net, e.branch) if e.branch else ())) if b is not None))
+    return replace(case, name=f"{case.name} with an equivalent at bus {bus}", network=network, flow=load_flow,
+                   units=tuple(u for u, _ in pairs) + (unit,), starts=tuple(s for _, s in pairs) + (start,),
+                   events=events, source=None)
+
+
+def _ends(network, branch: str) -> tuple:
+    br = network.branch(branch)
+    return br.from_bus, br.to_bus
