@@ -88,7 +88,7 @@ def subsystem_params(records: dict, case, bus: int) -> dict:
     freq = records.get("BusFreq", [])
     rating = sum(float(r.get("Sn", 0.0)) for model in GENERATING_MODELS for r in records.get(model, []))
     return {"Sb": float(case.network.base_mva), "S": rating, "G": Y.real, "B": Y.imag, "V_own": V_own,
-            "Ip0": float(device.real), "Iq0": float(-device.imag),
+            "Ip_own": float(device.real), "Iq_own": float(-device.imag),
             "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
             "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],
             "busf_fn": float(case.network.f_hz)}
@@ -96,15 +96,29 @@ def subsystem_params(records: dict, case, bus: int) -> dict:
 
 def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
     """(theta_f, theta_w) [n] of a BusFreq at rest at theta[0], driven by theta [n] linear between
-    the times t [n]: each lag integrated exactly over each interval (a lag of a ramp, then the
-    washout's lag of the lag's exact solution, approximated by its trapezoid average)."""
+    the times t [n]: both lags integrated exactly over each interval (`_lags_of_ramp`)."""
     theta_f, theta_w = np.empty_like(theta), np.empty_like(theta)
     theta_f[0] = theta_w[0] = theta[0]
     for k in range(1, len(t)):
-        h = t[k] - t[k - 1]
-        theta_f[k] = _lag_of_ramp(theta_f[k - 1], theta[k - 1], theta[k], h, Tf)
-        theta_w[k] = _lag_of_ramp(theta_w[k - 1], theta_f[k - 1], theta_f[k], h, Tw)
+        theta_f[k], theta_w[k] = _lags_of_ramp(theta_f[k - 1], theta_w[k - 1], theta[k - 1], theta[k],
+                                               t[k] - t[k - 1], Tf, Tw)
     return theta_f, theta_w
+
+
+def _lags_of_ramp(x: float, w: float, u0: float, u1: float, h: float, Tf: float, Tw: float) -> tuple:
+    """(x(h), w(h)) of Tf dx/dt = u - x, Tw dw/dt = x - w from (x, w), u linear from u0 to u1 over h.
+    x = r + A e^{-tau/Tf} with the ramp r = u0 - s Tf + s tau (s the slope), A = x - u0 + s Tf; w is
+    the lag of r plus the exact response to the exponential (Tf = 0: x follows u)."""
+    s = (u1 - u0) / h if h > 0 else 0.0
+    if Tf <= 0.0:
+        return u1, _lag_of_ramp(w, u0, u1, h, Tw)
+    A = x - u0 + s * Tf
+    r0, r1 = u0 - s * Tf, u1 - s * Tf
+    x_end = r1 + A * math.exp(-h / Tf)
+    if abs(Tf - Tw) <= 1e-12 * Tw:  # equal time constants: the resonant term A tau / T e^{-tau/T}
+        return x_end, _lag_of_ramp(w, r0, r1, h, Tw) + A * h / Tw * math.exp(-h / Tw)
+    C = A * Tf / (Tf - Tw)
+    return x_end, _lag_of_ramp(w - C, r0, r1, h, Tw) + C * math.exp(-h / Tf)
 
 
 def _lag_of_ramp(x: float, u0: float, u1: float, h: float, T: float) -> float:
@@ -343,6 +357,8 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if str(rows["failed"]):
             failed.append(f"{label}: {rows['failed']}")
             continue
+        # the measurement from the recorded angle here, not in the worker: one definition per dataset
+        rows["x"][:, 0], rows["x"][:, 1] = bus_frequency_states(rows["t"], rows["u"][:, 1], p.busf_Tf, p.busf_Tw)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

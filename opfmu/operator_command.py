@@ -28,6 +28,8 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from .subsystem_command import add_subsystem_options, cmd_subsystem
+
 RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the `machine` recipe: the families of `cosim`, and this
 # the `grid` recipe, for a machine in a network (D = 0, no governor): open-loop bus signals make such
 # a machine slip poles within a window (its bus angle stands still while it accelerates), which a
@@ -53,8 +55,8 @@ def add_operator_parser(sub) -> None:
     op = sub.add_parser("operator", help="your machine from data to FMU: data, training, export, FMUs, report",
                         description=__doc__.split("\n\n")[0] + " Resumable: rerun the same command after an "
                         "interruption. Takes about 20-30 minutes on 2 cores.")
-    op.add_argument("--machine", required=True, metavar="FILE",
-                    help="JSON file of machine parameters (of --component: SM4Params, GENROUParams)")
+    op.add_argument("--machine", default=None, metavar="FILE",
+                    help="JSON file of machine parameters (of --component: SM4Params, GENROUParams); or --subsystem")
     op.add_argument("--component", default="sm4", help="the machine's component: sm4 (default) or genrou "
                     "(with --recipe case)")
     op.add_argument("--case", default=None, metavar="NAME", help="the shipped grid case whose windows the case "
@@ -87,6 +89,7 @@ def add_operator_parser(sub) -> None:
     op.add_argument("--name", default=None, help="FMU model name prefix (default: the component's name in capitals, "
                     "e.g. SM4: SM4Surrogate, SM4Reference; GENROU: GENROUSurrogate, GENROUReference)")
     op.add_argument("--quiet", action="store_true", help="no progress bars")
+    add_subsystem_options(op)
     op.set_defaults(func=cmd_operator)
 
 
@@ -164,6 +167,10 @@ def cmd_operator(args) -> None:
     from surrogate.data import DatasetError
     from surrogate.training import TrainError
 
+    if args.subsystem is not None:
+        return cmd_subsystem(args)
+    if args.machine is None:
+        raise UserError("opfmu operator needs --machine FILE (a machine) or --subsystem FILE --boundary BUS")
     try:
         _run(args)
     except (OperatorError, ParameterError, DatasetError, TrainError) as exc:

@@ -1,0 +1,91 @@
+"""`opfmu operator --subsystem FILE --boundary BUS`: a sub-system's operator from its detail to its
+FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
+
+    opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
+                   [--buses N] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
+"""
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from .errors import UserError
+
+# the options of `opfmu operator` that only a machine takes, with their defaults
+MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "efd": None, "vs": None,
+                "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
+MAX_RUNS = 100_000
+
+
+def add_subsystem_options(op) -> None:
+    """The options of `opfmu operator` for a sub-system."""
+    op.add_argument("--subsystem", default=None, metavar="FILE",
+                    help="learn the sub-system in this case file (ANDES reads it; its one Slack stands for the grid "
+                         "at its boundary) instead of a machine: python -m reference_models.grid.subsystems writes one")
+    op.add_argument("--boundary", type=int, default=None, metavar="BUS",
+                    help="with --subsystem: its boundary bus (the bus of its Slack)")
+    op.add_argument("--runs", type=int, default=None, help="with --subsystem: contingencies recorded (default 240)")
+    op.add_argument("--hosts", nargs="+", default=None, metavar="NAME",
+                    help="with --subsystem: ANDES cases it is attached to (default ieee14 kundur ieee39)")
+    op.add_argument("--buses", type=int, default=None, help="with --subsystem: attachment buses per host (default 3)")
+
+
+def cmd_subsystem(args) -> None:
+    """Checks the sub-system request, then runs it; UserError (one line) before any work otherwise."""
+    from cosim.subsystem_data import Plan
+    from reference_models.grid.andes_case import ANDES_CASES
+
+    from .checks import MAX_COUNT, output_folder
+
+    given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
+    if given:
+        raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
+                        "--hosts, --buses, --epochs, --seed, --workers, --name")
+    if args.boundary is None:
+        raise UserError("--subsystem needs --boundary BUS (the bus of its Slack, where the grid stands)")
+    path = Path(args.subsystem)
+    if not path.is_file():
+        raise UserError(f"--subsystem: no file {path}")
+    try:
+        records = json.loads(path.read_text(encoding="utf-8")) if path.stat().st_size <= 64 * 2**20 else None
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        records = None
+    if not isinstance(records, dict) or not isinstance(records.get("Slack"), list):
+        raise UserError(f"--subsystem {path}: not a sub-system case (ANDES JSON with one Slack at its boundary)")
+    buses = [r.get("bus") for r in records["Slack"] if isinstance(r, dict)]
+    if buses != [args.boundary]:
+        raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
+                        f"({', '.join(map(str, buses)) or 'it has none'})")
+    hosts = tuple(args.hosts or Plan.hosts)
+    unknown = [h for h in hosts if h not in ANDES_CASES]
+    if unknown:
+        raise UserError(f"--hosts {' '.join(unknown)}: not a host case (known: {', '.join(ANDES_CASES)})")
+    plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
+                buses=Plan.buses if args.buses is None else args.buses)
+    if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
+            and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256):
+        raise UserError(f"--runs must lie in [10, {MAX_RUNS}], --buses in [1, 100], --epochs in [1, {MAX_COUNT}], "
+                        f"--seed in [0, {MAX_COUNT}] and --workers in [1, 256]")
+    name = args.name if args.name is not None else "Subsystem"
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,40}", name):
+        raise UserError(f"--name {name[:60]!r} must be a C identifier of at most 41 characters")
+    out = output_folder(args.out)
+    _learn(path, args.boundary, out, plan, args, name)
+
+
+def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
+    from cosim.subsystem_operator import learn
+    from surrogate.data import DatasetError
+    from surrogate.training import TrainError
+
+    try:
+        done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet)
+    except (DatasetError, TrainError) as exc:
+        raise UserError(str(exc)) from None
+    meta, result = done["data"], done["training"]
+    print(f"data: {sum(meta['counts'].values())} windows from {sum(len(v) for v in meta['runs'].values())} runs "
+          f"({len(meta['failed_runs'])} runs the detail did not finish) in {out / 'data'}")
+    print(f"training: {result.epochs} epochs, best validation MSE {result.best_val_mse:.3g} at epoch {result.best_epoch}")
+    print(f"operator: {done['operator']}\nFMU: {done['fmu']}\nregistered for {path.name}: "
+          f"--attach BUS={path}:surrogate runs it")

@@ -1,0 +1,101 @@
+"""A sub-system's operator (issue 35): the `subsystem` component (reference_models.models.subsystem),
+frames that only turn, learned states, its windows recorded from the detail (cosim.subsystem_data),
+and the way from them to an FMU that stands for the sub-system in a host case."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from reference_models.components import component
+from reference_models.drift import frame_of, from_frame, to_frame
+
+SUBSYSTEM = component("subsystem")
+
+
+def _params(**changes):
+    return SUBSYSTEM.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": 1.0, "Ip_own": 0.03, "Iq_own": 0.004, **changes})
+
+
+def test_the_subsystem_starts_from_the_load_flow_and_gives_back_its_injection():
+    p = _params(V_own=0.98)
+    given = {"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}
+    x, solved = SUBSYSTEM.initialisation.start(given, p)
+    assert solved == {} and x[4] == pytest.approx(1.03 / 0.98, rel=1e-15)
+    u = np.array([1.03, 0.4])
+    I_re, I_im, P, Q, f = SUBSYSTEM.output_equations(x, u, p, math)
+    S = 1.03 * np.exp(0.4j) * np.conj(complex(I_re, I_im))
+    assert (S.real, S.imag, P, Q) == pytest.approx((-0.012, 0.007, -0.012, 0.007), abs=1e-15)
+    assert f == 1.0 and np.all(SUBSYSTEM.rhs(x, u, p) == 0.0)  # at rest: the measurement at the angle
+
+
+def test_a_frame_without_a_speed_only_turns():
+    frame = frame_of(SUBSYSTEM.drift, _params())
+    rng = np.random.default_rng(0)
+    x0 = rng.normal(size=(6, 5)) + np.array([30.0, 30.0, 0, 0, 1])
+    u = rng.normal(size=(6, 4, 2)) + np.array([1.0, 30.0])
+    s = np.linspace(0, 0.03, 4)
+    x0_f, u_f, shift, c = to_frame(frame, x0, u, s)
+    assert np.all(c == 0.0) and np.allclose(u_f[:, 0, 1], 0.0)
+    assert np.array_equal(x0_f[:, 2:], x0[:, 2:]) and np.array_equal(u_f[..., 0], u[..., 0])
+    assert np.allclose(from_frame(frame, x0_f[:, None, :], s[:1], shift, c)[:, 0], x0, atol=1e-12)
+    assert json.loads(json.dumps(frame.to_dict()))["speed_state"] is None
+    assert type(frame).from_dict(frame.to_dict()) == frame
+
+
+def test_learned_rates_have_no_integrator():
+    from fmu_export.native_reference_fmu import NativeReferenceError, build_native_reference_fmu
+
+    assert list(SUBSYSTEM.physics_mask()) == [1, 1, 0, 0, 1]
+    with pytest.raises(NativeReferenceError, match="learned from data"):
+        build_native_reference_fmu("/nonexistent/never.fmu", "SubsystemReference", SUBSYSTEM)
+
+
+def test_the_boundary_measurement_of_the_windows_is_the_busfreq_of_the_angle():
+    from scipy.integrate import solve_ivp
+
+    from cosim.subsystem_data import bus_frequency_states
+
+    t = np.linspace(0.0, 0.5, 51)
+    theta = 0.2 + 0.8 * np.sin(7 * t) + np.where(t > 0.2, 0.3, 0.0)  # a jump, as at a fault
+    theta_f, theta_w = bus_frequency_states(t, theta, 0.02, 0.1)
+    p = _params()
+    for k in range(1, len(t)):
+        rate = lambda s, y: SUBSYSTEM.rhs(np.array([*y, 0.0, 0.0, 1.0]),  # noqa: E731
+                                          np.array([1.0, np.interp(s, t[k - 1:k + 1], theta[k - 1:k + 1])]), p)[:2]
+        y = solve_ivp(rate, (t[k - 1], t[k]), [theta_f[k - 1], theta_w[k - 1]], rtol=1e-11, atol=1e-13).y[:, -1]
+        assert y == pytest.approx([theta_f[k], theta_w[k]], abs=1e-9)
+
+
+@pytest.mark.andes
+def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
+    import andes
+
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from cosim.subsystem_data import run_rows, subsystem_params
+    from reference_models.grid.andes_case import ANDES_CASES, case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.boundary import boundary_current
+    from reference_models.grid.contingency import Contingency
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+
+    records = feeder(FeederSpec(units=10, seed=2))
+    sub = write_case(records, tmp_path / "feeder.json")
+    case = case_from_file(attached_file(andes.get_case(ANDES_CASES["ieee14"]), [(13, sub)], tmp_path))
+    params = subsystem_params(records, case, 13)
+    assert params["S"] == pytest.approx(sum(u["Sn"] for u in records["PVD1"]))
+    runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
+    result = runner.run(Contingency(fault_bus=13, fault_start=0.1, clear_s=0.2, fault_impedance=0.02j,
+                                    network=case.network), 0.5)[0]
+    runner.close()
+    rows = run_rows(result, case, 13, params)
+    p = SUBSYSTEM.params(params)
+    I_re, I_im, *_ = SUBSYSTEM.output_equations(rows["x"].T, rows["u"].T, p, np)
+    detail = boundary_current(case.network, result.V_bus, result.theta_bus, 13)
+    assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
+    assert rows["x"][0, 2:4] == pytest.approx([p.Ip_own / rows["x"][0, 4], p.Iq_own / rows["x"][0, 4]], rel=1e-9)
+    assert np.min(rows["u"][:, 0]) < 0.6  # the fault reached the boundary
