@@ -3,7 +3,8 @@
 
 The sub-system file is attached at buses of host cases (reference_models.grid.attach), and each
 joint case runs through contingencies in opfmu's master with every device a native FMU: faults near
-and far (at the boundary bus itself, at its neighbours, anywhere), bolted or through an impedance,
+and far (at the boundary bus itself, at its neighbours, anywhere), through 1e-4j pu (not at the
+boundary bus itself, where neither opfmu's master nor ANDES solves the detail) or an impedance,
 cleared in 50-200 ms, with or without a line opened, and generator trips (frequency events). What
 the host records at the boundary becomes the component's inputs and states, each row of the run:
     Vs, theta_vs       the boundary bus voltage;
@@ -195,6 +196,14 @@ def attachment_buses(case_network, rng: np.random.Generator, count: int) -> list
     return sorted(int(b) for b in rng.choice(candidates, size=min(count, len(candidates)), replace=False))
 
 
+def behind_bus(network, bus: int) -> set:
+    """The buses of the sub-system attached at `bus` (none where the case has none there)."""
+    try:
+        return set(subsystem_buses(network, bus))
+    except ValueError:
+        return set()
+
+
 def draw_runs(plan: Plan, cases: list, rng: np.random.Generator) -> list:
     """The plan's runs over the attachments (joint case, host bus) of `cases`, in the order of the
     attachments (module docstring: faults near and far, trips, the split by run)."""
@@ -205,7 +214,7 @@ def draw_runs(plan: Plan, cases: list, rng: np.random.Generator) -> list:
     for k in range(plan.runs):
         a = k % len(cases)
         case, bus = cases[a]
-        behind = set(subsystem_buses(case.network, bus))
+        behind = behind_bus(case.network, bus)
         host = [b for b in case.network.buses if b not in behind]
         if rng.uniform() < plan.trips:
             gens = [g for g in case.network.generators if g.bus not in behind and g.kind != "slack"]
@@ -217,7 +226,10 @@ def draw_runs(plan: Plan, cases: list, rng: np.random.Generator) -> list:
         where = rng.uniform()
         fault_bus = bus if where < 0.4 else (near[rng.integers(len(near))] if where < 0.7 and near
                                              else host[rng.integers(len(host))])
-        impedance = ANDES_FAULT_IMPEDANCE if rng.uniform() < 0.5 else 1j * 10 ** rng.uniform(-2.5, -0.5)
+        # 1e-4j at the boundary bus itself is beyond the detail: neither opfmu's master nor ANDES solves
+        # the feeder's network there (the units' currents follow bus angles of voltages near 0)
+        bolted = rng.uniform() < 0.5 and fault_bus != bus
+        impedance = ANDES_FAULT_IMPEDANCE if bolted else 1j * 10 ** rng.uniform(-2.5, -0.5)
         steps = rng.integers(int(round(plan.clear[0] / plan.step)), int(round(plan.clear[1] / plan.step)) + 1)
         opened = None
         if rng.uniform() < plan.opened:
@@ -337,12 +349,14 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
             record_run(task)
             bar.update(1)
     bar.close()
-    return _assemble(out, runs, attachments, params, plan, seed, key, started)
+    return _assemble(out, runs, attachments, params, plan, seed, key, started,
+                     {"kind": "detail", "subsystem": subsystem.name, "boundary": int(boundary)})
 
 
 def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan, seed: int, key: str,
-              started: float) -> dict:
-    """The splits and metadata.json from the runs' rows under out/.partial (metadata last)."""
+              started: float, source: dict) -> dict:
+    """The splits and metadata.json from the runs' rows under out/.partial (metadata last); `source`:
+    what the rows came from (metadata `source`)."""
     model = component("subsystem")
     p = model.params(params)
     size = int(round(plan.horizon / plan.step)) + 1
@@ -379,7 +393,7 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
             "state_names": list(model.state_names), "input_names": list(model.input_names),
             "horizon_s": plan.horizon, "n_points": size, "counts": counts,
             "envelope": envelope_of(*trained_on[0], model),
-            "attachments": [{"host": h, "bus": b} for h, b, _ in attachments],
+            "source": source, "attachments": [{"host": h, "bus": b} for h, b, _ in attachments],
             "runs": {name: labels[name] for name in labels}, "failed_runs": failed,
             "versions": {"opfmu": __version__}, "wall_time_s": round(time.perf_counter() - started, 2)}
     write_json(out / "metadata.json", meta)

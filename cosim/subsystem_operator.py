@@ -2,7 +2,8 @@
 `learn(subsystem, boundary, out)`, what `opfmu operator --subsystem FILE --boundary BUS` runs.
 
 Stages, each resumed where an interrupted call left it (call again with the same arguments):
-1. out/data: the windows of the sub-system's detail in host cases (cosim.subsystem_data);
+1. out/data: the windows of the sub-system's detail in host cases (cosim.subsystem_data), or of a
+   black box's replies to host voltages (an FMU with the bus port: cosim.black_box_data);
 2. out/run: the operator (TRAINING: an anchored Unstacked DeepONet, causal, physics on the states
    whose rates are known: the boundary's frequency measurement and n), resumed from its checkpoint;
 3. out/operator.onnx (checked against torch) and out/<NAME>Surrogate.fmu (checked against
@@ -54,16 +55,23 @@ def register(subsystem, operator) -> Path:
     return path
 
 
-def learn(subsystem, boundary: int, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
-          workers: int = 1, name: str = "Subsystem", progress: bool = True) -> dict:
+def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
+          workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None) -> dict:
     """Runs (or resumes) the stages of the module docstring; returns {"data": dataset metadata,
-    "training": TrainResult, "operator": path, "fmu": path, "registered": path}."""
+    "training": TrainResult, "operator": path, "fmu": path, "registered": path}. A sub-system given
+    as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva [MVA] and no
+    boundary."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.onnx_export import export_onnx
     from surrogate.training import train
 
     out = Path(out)
-    meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
+    if Path(subsystem).suffix.lower() == ".fmu":
+        from .black_box_data import generate_black_box
+
+        meta = generate_black_box(subsystem, out / "data", rating_mva, plan, seed, workers, progress)
+    else:
+        meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
     config = replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs))
     result = train(out / "data", config, out / "run", progress)
     operator = out / "operator.onnx"
@@ -74,3 +82,27 @@ def learn(subsystem, boundary: int, out, plan: Plan = Plan(), epochs: int | None
         build_surrogate_fmu(operator, fmu, model_name=f"{name}Surrogate")
     return {"data": meta, "training": result, "operator": operator, "fmu": fmu,
             "registered": register(subsystem, operator)}
+
+
+def surrogate_in(case, bus: int, subsystem):
+    """`case` (with the sub-system file `subsystem` attached at its bus `bus`) with that sub-system
+    run as its surrogate FMU: one `subsystem` device at `bus` whose operator is the one registered
+    for the file (boundary.with_equivalent); CouplingError where none is."""
+    import onnx
+
+    from reference_models.grid.boundary import with_equivalent
+    from reference_models.grid.case import Device
+    from surrogate.contract import ContractError, operator_metadata
+
+    from .fmu import CouplingError
+
+    operator = registered(subsystem)
+    if operator is None:
+        raise CouplingError(f"no operator is registered for the sub-system {Path(subsystem).name}: learn one with "
+                            f"opfmu operator --subsystem {subsystem} --boundary BUS --out DIR")
+    try:
+        meta = operator_metadata(onnx.load(str(operator), load_external_data=False))
+    except (ContractError, OSError, ValueError) as exc:
+        raise CouplingError(f"the operator registered for {Path(subsystem).name} ({operator}) is not usable: {exc}") from None
+    device = Device("subsystem", meta["component"], meta["params"])
+    return with_equivalent(case, bus, device, {"kind": "surrogate", "operator": str(operator)})

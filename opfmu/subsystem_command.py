@@ -3,6 +3,10 @@ FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
                    [--buses N] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
+    opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [the same options]
+
+A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
+host voltages (cosim.black_box_data).
 """
 from __future__ import annotations
 
@@ -29,24 +33,25 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--hosts", nargs="+", default=None, metavar="NAME",
                     help="with --subsystem: ANDES cases it is attached to (default ieee14 kundur ieee39)")
     op.add_argument("--buses", type=int, default=None, help="with --subsystem: attachment buses per host (default 3)")
+    op.add_argument("--rating", type=float, default=None, metavar="MVA",
+                    help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
 
 
 def cmd_subsystem(args) -> None:
     """Checks the sub-system request, then runs it; UserError (one line) before any work otherwise."""
-    from cosim.subsystem_data import Plan
-    from reference_models.grid.andes_case import ANDES_CASES
-
-    from .checks import MAX_COUNT, output_folder
-
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
                         "--hosts, --buses, --epochs, --seed, --workers, --name")
-    if args.boundary is None:
-        raise UserError("--subsystem needs --boundary BUS (the bus of its Slack, where the grid stands)")
     path = Path(args.subsystem)
     if not path.is_file():
         raise UserError(f"--subsystem: no file {path}")
+    if path.suffix.lower() == ".fmu":
+        return _black_box(path, args)
+    if args.rating is not None:
+        raise UserError("--rating is for a black box (--subsystem BOX.fmu); a case file's rating is its units' Sn")
+    if args.boundary is None:
+        raise UserError("--subsystem needs --boundary BUS (the bus of its Slack, where the grid stands)")
     try:
         records = json.loads(path.read_text(encoding="utf-8")) if path.stat().st_size <= 64 * 2**20 else None
     except (OSError, UnicodeDecodeError, ValueError, RecursionError):
@@ -57,6 +62,27 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
+    _learn(path, args.boundary, _output(args), _plan(args), args, _name(args))
+
+
+def _black_box(path: Path, args) -> None:
+    """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
+    import math
+
+    if args.boundary is not None:
+        raise UserError("--boundary is for a case file; a black box (an FMU) is its bus port")
+    if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
+        raise UserError("--subsystem BOX.fmu needs --rating MVA, its rating (a number in (0, 1e6])")
+    _learn(path, None, _output(args), _plan(args), args, _name(args))
+
+
+def _plan(args):
+    """The dataset plan of --hosts, --runs, --buses; UserError for one out of range."""
+    from cosim.subsystem_data import Plan
+    from reference_models.grid.andes_case import ANDES_CASES
+
+    from .checks import MAX_COUNT
+
     hosts = tuple(args.hosts or Plan.hosts)
     unknown = [h for h in hosts if h not in ANDES_CASES]
     if unknown:
@@ -67,25 +93,37 @@ def cmd_subsystem(args) -> None:
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256):
         raise UserError(f"--runs must lie in [10, {MAX_RUNS}], --buses in [1, 100], --epochs in [1, {MAX_COUNT}], "
                         f"--seed in [0, {MAX_COUNT}] and --workers in [1, 256]")
+    return plan
+
+
+def _name(args) -> str:
     name = args.name if args.name is not None else "Subsystem"
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]{0,40}", name):
         raise UserError(f"--name {name[:60]!r} must be a C identifier of at most 41 characters")
-    out = output_folder(args.out)
-    _learn(path, args.boundary, out, plan, args, name)
+    return name
+
+
+def _output(args) -> Path:
+    from .checks import output_folder
+
+    return output_folder(args.out)
 
 
 def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
+    from cosim.fmu import CouplingError
     from cosim.subsystem_operator import learn
     from surrogate.data import DatasetError
     from surrogate.training import TrainError
 
     try:
-        done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet)
-    except (DatasetError, TrainError) as exc:
+        done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
+                     args.rating)
+    except (DatasetError, TrainError, CouplingError) as exc:
         raise UserError(str(exc)) from None
     meta, result = done["data"], done["training"]
     print(f"data: {sum(meta['counts'].values())} windows from {sum(len(v) for v in meta['runs'].values())} runs "
           f"({len(meta['failed_runs'])} runs the detail did not finish) in {out / 'data'}")
     print(f"training: {result.epochs} epochs, best validation MSE {result.best_val_mse:.3g} at epoch {result.best_epoch}")
-    print(f"operator: {done['operator']}\nFMU: {done['fmu']}\nregistered for {path.name}: "
-          f"--attach BUS={path}:surrogate runs it")
+    print(f"operator: {done['operator']}\nFMU: {done['fmu']}")
+    if path.suffix.lower() != ".fmu":
+        print(f"registered for {path.name}: --attach BUS={path}:surrogate runs it")

@@ -99,3 +99,58 @@ def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
     assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
     assert rows["x"][0, 2:4] == pytest.approx([p.Ip_own / rows["x"][0, 4], p.Iq_own / rows["x"][0, 4]], rel=1e-9)
     assert np.min(rows["u"][:, 0]) < 0.6  # the fault reached the boundary
+
+
+def test_a_black_box_follows_the_replayed_voltage_as_its_own_equations_say(tmp_path):
+    from cosim.black_box_data import SETTLE_S, own_rest, replay
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
+
+    pv = component("pvd1")
+    box = tmp_path / "box.fmu"
+    build_native_reference_fmu(box, "BoxPVD1", pv, pv.params({"Sn": 5.0}), operating_point={"pref0": 0.03, "qref0": 0.0})
+    assert own_rest(box) == pytest.approx({"V_own": 1.0, "Ip_own": 0.03, "Iq_own": 0.0}, abs=1e-12)
+    t = np.arange(31) * 0.01
+    V, theta = np.where(t < 0.1, 1.0, 0.95), np.full_like(t, 0.3)
+    current = replay(box, t, V, theta) * np.exp(-0.3j)
+    # from 0.1 s the box holds 0.95 pu: its active current lags (tip = 20 ms) to P / V, exactly
+    tip, after = pv.params({"Sn": 5.0}).tip, t >= 0.1
+    expected = 0.03 / 0.95 + (0.03 - 0.03 / 0.95) * np.exp(-(t[after] - 0.1) / tip)
+    assert SETTLE_S > 0 and np.max(np.abs(current[~after] - 0.03)) < 1e-9
+    assert np.max(np.abs(current[after].real - expected)) < 1e-6 * 0.03
+
+
+def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
+    from cosim.black_box_data import own_rest
+    from fmu_export.native_reference_fmu import build_native_reference_fmu
+    from surrogate.data import DatasetError
+
+    exciter = component("sexs")
+    box = tmp_path / "exciter.fmu"
+    build_native_reference_fmu(box, "NotABox", exciter)
+    with pytest.raises(DatasetError, match="no bus port"):
+        own_rest(box)
+
+
+@pytest.mark.parametrize("args, says", [
+    (["--subsystem", "{box}", "--out", "{out}"], "needs --rating MVA"),
+    (["--subsystem", "{box}", "--rating", "5", "--boundary", "1", "--out", "{out}"], "--boundary is for a case file"),
+    (["--subsystem", "{feeder}", "--out", "{out}"], "needs --boundary BUS"),
+    (["--subsystem", "{feeder}", "--boundary", "7", "--out", "{out}"], "bus of its one Slack (1)"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--pm", "0.1", "0.9", "--out", "{out}"], "--pm: for a machine"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--runs", "3", "--out", "{out}"], "--runs must lie in"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--hosts", "nowhere", "--out", "{out}"], "not a host case"),
+    (["--out", "{out}"], "needs --machine FILE (a machine) or --subsystem"),
+])
+def test_a_bad_subsystem_request_is_one_line_and_exit_2_before_any_work(tmp_path, args, says):
+    import subprocess
+    import sys
+
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+
+    feeder_file = write_case(feeder(FeederSpec(units=10)), tmp_path / "feeder.json")
+    (tmp_path / "box.fmu").write_bytes(b"not read: refused before")
+    given = [a.format(box=tmp_path / "box.fmu", feeder=feeder_file, out=tmp_path / "out") for a in args]
+    done = subprocess.run([sys.executable, "-m", "opfmu", "operator", *given], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()

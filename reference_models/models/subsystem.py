@@ -32,7 +32,7 @@ and on the devices through the operator. The state is rotation invariant but not
 
 Parameters: the system base Sb and the sub-system's rating S [MVA] (the sum of its generating
 devices' Sn); G, B; the boundary voltage V_own [pu] of the sub-system's own load flow and the
-devices' currents Ip0, Iq0 there (its rest: the learned rates have none of their own); the measurement's busf_Tf, busf_Tw [s], busf_fn [Hz]
+devices' currents Ip_own, Iq_own there (its rest: the learned rates have none of their own); the measurement's busf_Tf, busf_Tw [s], busf_fn [Hz]
 (the sub-system's own BusFreq settings). An operator of it is trained for one sub-system: its FMU
 holds them fixed.
 
@@ -54,7 +54,7 @@ from .common import check_ranges, finite_inputs
 
 PARAMETER_RANGES = {
     "Sb": (1e-3, 1e5, "MVA"), "S": (1e-6, 1e6, "MVA"), "G": (-1e4, 1e4, "pu"), "B": (-1e4, 1e4, "pu"),
-    "V_own": (0.5, 1.5, "pu"), "Ip0": (-1e4, 1e4, "pu"), "Iq0": (-1e4, 1e4, "pu"),
+    "V_own": (0.5, 1.5, "pu"), "Ip_own": (-1e4, 1e4, "pu"), "Iq_own": (-1e4, 1e4, "pu"),
     "busf_Tf": (0.0, 10.0, "s"), "busf_Tw": (1e-3, 10.0, "s"), "busf_fn": (16.0, 400.0, "Hz"),
 }
 
@@ -62,7 +62,7 @@ PARAMETER_RANGES = {
 @dataclass(frozen=True)
 class SubsystemParams(Parameters):
     """A sub-system at its boundary (module docstring): bases Sb, S [MVA]; passive admittance G, B
-    [pu, system base]; its own boundary voltage V_own [pu] and the devices' currents there Ip0, Iq0
+    [pu, system base]; its own boundary voltage V_own [pu] and the devices' currents there Ip_own, Iq_own
     [pu, system base]; the boundary
     measurement busf_Tf, busf_Tw [s], busf_fn [Hz]."""
 
@@ -71,8 +71,8 @@ class SubsystemParams(Parameters):
     G: float = 0.0
     B: float = 0.0
     V_own: float = 1.0
-    Ip0: float = 0.0
-    Iq0: float = 0.0
+    Ip_own: float = 0.0
+    Iq_own: float = 0.0
     busf_Tf: float = 0.02
     busf_Tw: float = 0.1
     busf_fn: float = 60.0
@@ -104,12 +104,12 @@ def outputs(x, u, p: SubsystemParams, m):
 def equilibrium(u, p: SubsystemParams) -> np.ndarray:
     """The rest [5] under constant (Vs, theta_vs), as if the load flow had put the boundary at Vs:
     the measurement at theta_vs, n = Vs / V_own, the devices delivering the power of the sub-system's
-    own load flow (Ip0 V_own, Iq0 V_own) through the settled tap."""
+    own load flow (Ip_own V_own, Iq_own V_own) through the settled tap."""
     Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
     if not Vs > 0.0:
         raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
     n = Vs / p.V_own
-    return np.array([theta, theta, p.Ip0 / n, p.Iq0 / n, n])
+    return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n])
 
 
 def _start(given, p: SubsystemParams) -> tuple:
