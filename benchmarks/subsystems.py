@@ -11,9 +11,10 @@ Per N: reference_models.grid.subsystems.feeder(FeederSpec(units=N, seed)) (or pl
 attached at each --bus of --host (one sub-system per bus, seeds seed, seed + 1, ...;
 reference_models.grid.attach), a fault of 1e-4j pu at --fault from 1.0 s, cleared --clear s
 later, each run to --stop at h = 10 ms (ANDES: its trapezoid at 10 ms, and at 1 ms as the reference
-of the errors). Errors outside the fault's own steps: the power the feeder draws through its
-boundary buses (P, Q in % of the sub-systems' total unit rating, the largest over the boundaries;
-from the bus voltages and the admittances of the branches from each host bus into its sub-system),
+of the errors). Errors outside the fault's own steps: the power each sub-system injects into its
+boundary bus (P, Q in % of the sub-systems' total unit rating, the largest over the boundaries;
+reference_models.grid.boundary, from the bus voltages and the branches between the bus and its
+sub-system),
 the host's rotor angles relative to its first machine [deg], the boundary bus voltages [pu]. The FMUs are built (and cached) before a run
 is timed; the monolithic DAE runs up to --monolithic-units units. Writes OUT.json (every number), OUT.md (the tables) and OUT.png (cost against N).
 Needs ANDES.
@@ -39,30 +40,9 @@ from cosim.runners import MasterRunner, MonolithicRunner  # noqa: E402
 from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402
+from reference_models.grid.boundary import boundary_power  # noqa: E402
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
 from reference_models.grid.subsystems import FeederSpec, PlantSpec, feeder, plant, write_case  # noqa: E402
-
-
-def boundary_power(result, case, bus: int) -> np.ndarray:
-    """[n] complex: the power [pu, system base] flowing from host bus `bus` into the branches to the
-    sub-system's buses (numbered from 1000: reference_models.grid.attach)."""
-    net = case.network
-    i = net.bus_index(bus)
-    V = result.V_bus * np.exp(1j * result.theta_bus)
-    S = np.zeros(len(result.time), complex)
-    for br in net.branches:
-        if bus not in (br.from_bus, br.to_bus) or min(br.from_bus, br.to_bus) >= 1000 or \
-                max(br.from_bus, br.to_bus) < 1000:
-            continue
-        y = 1.0 / complex(br.r, br.x)
-        m = br.tap * np.exp(1j * br.phi)
-        j = net.bus_index(br.to_bus if br.from_bus == bus else br.from_bus)
-        if br.from_bus == bus:
-            current = (y + 0.5j * br.b) / br.tap ** 2 * V[:, i] - y / np.conj(m) * V[:, j]
-        else:
-            current = (y + 0.5j * br.b) * V[:, i] - y / m * V[:, j]
-        S += V[:, i] * np.conj(current)
-    return S
 
 
 def _common(a, b) -> tuple:
@@ -77,7 +57,8 @@ def errors(run, case_run, ref, case_ref, buses, rating: float, fault: tuple) -> 
     a, b, t = _common(run, ref)
     keep = ~((t >= fault[0] - 1e-9) & (t < fault[1] + 1e-9))
     a, b = a[keep], b[keep]
-    S = [(boundary_power(run, case_run, bus)[a], boundary_power(ref, case_ref, bus)[b]) for bus in buses]
+    S = [(boundary_power(case_run.network, run.V_bus, run.theta_bus, bus)[a],
+          boundary_power(case_ref.network, ref.V_bus, ref.theta_bus, bus)[b]) for bus in buses]
     machines = np.isfinite(ref.rotor_angle[0])
     host = [k for k, u in enumerate(case_ref.units) if u.bus < 1000 and machines[k]]
     host_run = [k for k, u in enumerate(case_run.units) if u.bus < 1000 and np.isfinite(run.rotor_angle[0, k])]

@@ -1,6 +1,7 @@
 """What a grid run leaves in its folder: result.csv (the columns of docs/grid.md, "What a run
 leaves": time, delta, omega [rad/s deviation], Efd per unit and V per bus, then the rest of
-GridResult.columns; a second line `# s,rad,...` gives each column's unit, and the times are
+GridResult.columns, then P_attach_<bus>, Q_attach_<bus> [pu] at each bus a sub-system is attached
+at; a second line `# s,rad,...` gives each column's unit, and the times are
 rounded to 1 ns, so that a time on the step grid reads as the multiple of the step it is),
 a figure of rotor angles relative to machine 1, speeds, terminal voltages and field voltages with
 every compared run on the same axes (beyond 10 machines the ones that swing most are coloured and
@@ -132,13 +133,29 @@ def _time_text(t: float) -> str:
     return (f"{t:.{TIME_DECIMALS}f}".rstrip("0").rstrip(".") or "0") if math.isfinite(t) else f"{t}"
 
 
-def write_csv(path, result, case=None) -> None:
+def attachment_columns(result, case, buses) -> dict:
+    """{"P_attach_<bus>", "Q_attach_<bus>": [n]} for each host bus of `buses` with a sub-system
+    attached (opfmu grid run --attach): the power the sub-system injects into that bus [pu, system
+    base, generator convention], from the result's bus voltages (reference_models.grid.boundary)."""
+    from reference_models.grid.boundary import boundary_power
+
+    out = {}
+    for bus in buses:
+        S = boundary_power(case.network, result.V_bus, result.theta_bus, bus)
+        out[f"P_attach_{bus}"], out[f"Q_attach_{bus}"] = S.real, S.imag
+    return out
+
+
+def write_csv(path, result, case=None, attached=()) -> None:
     """result.csv: a header line of the column names, a second line `# ` and each column's unit
     (column_units; readers skip it as a comment: numpy's genfromtxt(names=True), pandas'
     read_csv(comment="#")), then one row per communication point: the time rounded to 1 ns, the
     rest to 17 significant digits. `case`: the Case the result is of (speeds as deviations in
-    rad/s, every unit's field voltage: GridResult.columns)."""
+    rad/s, every unit's field voltage: GridResult.columns); `attached`: the host buses with a
+    sub-system attached, whose P_attach_<bus>, Q_attach_<bus> [pu] come last (attachment_columns;
+    needs `case`)."""
     columns = result.columns(case)
+    columns.update(attachment_columns(result, case, attached))
     names = list(columns)
     data = np.column_stack([np.asarray(columns[n], dtype=float) for n in names])
     text = io.StringIO()

@@ -5,6 +5,7 @@
     opfmu grid screen many contingencies on dask: CCTs, stable/unstable verdicts, first-swing peaks
     opfmu grid export the case's FMUs and DIR/case.json, which names every device's FMU, bus,
                       parameters, load-flow point, start values and links (cosim.export), for another master
+    opfmu grid feeder|plant  a generated sub-system case file (reference_models.grid.subsystems) for --attach
 
 The FMUs of every unit are built from its dynamic data (--dynamic-data, default the case's shipped
 file) into a cache (--fmu-cache, default ~/.cache/opfmu/fmus) the first time they are needed. A
@@ -19,6 +20,10 @@ fault opens the branch at --clear. What ANDES adjusted in a case file (the case'
 reference_models.grid.andes_case) and which devices run as surrogate FMUs are printed on stderr
 and written into the report (run, screen) and summary.json (run); --fmus surrogate for a case
 where no machine has an operator is refused.
+--attach BUS=NAME|FILE[:KIND] joins a sub-system at a bus (docs/grid.md, "Sub-systems behind a
+bus"): one runner (--fmus) runs host and sub-systems; :monolithic needs --fmus monolithic (or sets
+it where --fmus is left out), :reference a run of FMUs; run adds P_attach_<bus>, Q_attach_<bus> to
+result.csv and S_attach_<bus> to summary.json.
 Everything a command is asked is checked before any work and before anything is printed (one line,
 exit code 2): also that --out names a folder (not "", not a file; it is made only when the results
 are written, and removed again where that fails and leaves it empty), that screen's --workers are at
@@ -37,6 +42,7 @@ import tempfile
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from typing import NamedTuple
 
 from opfmu.errors import UserError
 
@@ -76,12 +82,14 @@ def _common(p, trip: bool = True) -> None:
                         "converted from ANDES (kundur, ieee14, ieee39, npcc), or a case file ANDES reads (xlsx, "
                         "json, or a PSS/E raw with --dyr; converted once, needs ANDES: pip install -e '.[andes]')")
     p.add_argument("--dyr", default=None, metavar="FILE", help="the PSS/E dyr file of a raw --case")
-    p.add_argument("--attach", action="append", default=[], metavar="BUS=FILE[:KIND]",
-                   help="attach the sub-system case FILE (a case ANDES reads whose only Slack is its boundary "
-                        "bus, e.g. python -m reference_models.grid.subsystems feeder) at the case's bus BUS; "
-                        "the power flow is solved jointly; KIND detail (default: every device, run as the rest "
-                        "of the case, --fmus) or aggregate (one unit of each model with the summed ratings "
-                        "behind an equivalent impedance); repeatable; needs ANDES")
+    p.add_argument("--attach", action="append", default=[], metavar="BUS=NAME|FILE[:KIND]",
+                   help="attach a sub-system at the case's bus BUS: the shipped feeder or plant (generated, 30 and "
+                        "20 units, seed 0) or a case file ANDES reads whose only Slack is its boundary bus (opfmu "
+                        "grid feeder|plant writes one); the power flow is solved jointly; KIND reference (default: "
+                        "every device, run by --fmus), monolithic (the same in the monolithic DAE: needs --fmus "
+                        "monolithic, or sets it where --fmus is left out) or aggregate (one unit of each model with "
+                        "the summed ratings behind an equivalent impedance); result.csv adds P_attach_BUS, "
+                        "Q_attach_BUS, summary.json S_attach_BUS; repeatable; needs ANDES")
     p.add_argument("--no-case-events", action="store_true",
                    help="leave the case's own events (line toggles, faults, generator trips) out (default: they "
                         "apply as in the case file, with the contingency)")
@@ -113,7 +121,7 @@ def _common(p, trip: bool = True) -> None:
 
 
 def add_grid_parser(sub) -> None:
-    grid = sub.add_parser("grid", help="network co-simulation of a shipped case: run, cct, screen",
+    grid = sub.add_parser("grid", help="network co-simulation of a grid case: run, cct, screen, export; feeder, plant",
                           description="A grid case with one FMU per device (machine, exciter) of each unit, the "
                                       "network solved at every communication point (Newton on the FMUs' directional "
                                       "derivatives), inputs linear over each step and the step iterated with "
@@ -190,6 +198,19 @@ def add_grid_parser(sub) -> None:
     exp.add_argument("--out", required=True, metavar="DIR", help="output folder")
     exp.set_defaults(func=cmd_export)
 
+    for name, what, units in (("feeder", "a radial distribution feeder of PVD1 units and loads behind a substation "
+                                         "transformer", 30),
+                              ("plant", "a utility-scale PV plant of REGCA1/REECA1/REPCA1 units behind a main "
+                                        "transformer", 20)):
+        sub_p = gsub.add_parser(name, help=f"write a generated {name} (a sub-system for --attach)",
+                                description=f"Writes {what}, its settings drawn per unit from --seed, as an ANDES "
+                                            "JSON case file whose only Slack is its boundary bus "
+                                            "(reference_models.grid.subsystems; docs/grid.md).")
+        sub_p.add_argument("--units", type=int, default=units, help=f"number of units (default {units})")
+        sub_p.add_argument("--seed", type=int, default=0, help="seed of the units' settings, >= 0 (default 0)")
+        sub_p.add_argument("--out", required=True, metavar="FILE", help="the case file to write (.json)")
+        sub_p.set_defaults(func=cmd_subsystem, subsystem=name)
+
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())[:300] or type(exc).__name__
@@ -249,36 +270,88 @@ def _case(args):
         raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
 
 
-ATTACH_KINDS = ("detail", "aggregate")  # how an attached sub-system runs (reference_models.grid.aggregate)
+ATTACH_KINDS = ("reference", "monolithic", "surrogate", "aggregate")  # DESIGN section 11 (not given: reference)
+SUBSYSTEM_NAMES = ("feeder", "plant")  # the shipped sub-systems (reference_models.grid.subsystems.SHIPPED)
+
+
+class Attachment(NamedTuple):
+    """One --attach BUS=NAME|FILE[:KIND]: the host bus, the sub-system (a shipped name or a case
+    file), its kind (None where not given: the full detail, run by the run's runner) and the text."""
+
+    bus: int
+    source: str
+    kind: str | None
+    text: str
 
 
 def _attachments(args) -> list:
-    """[(bus, sub-system file, kind)] of --attach BUS=FILE[:KIND]; UserError for one that is malformed."""
+    """The Attachments of --attach; UserError for one that is malformed, has an unknown kind, or
+    names neither a shipped sub-system (SUBSYSTEM_NAMES: the bare name, nothing else) nor a file."""
     out = []
     for text in args.attach:
-        bus, sep, path = text.partition("=")
-        head, colon, kind = path.rpartition(":")
-        if colon and kind in ATTACH_KINDS + ("surrogate",):
-            path = head
+        bus, sep, source = text.partition("=")
+        head, colon, kind = source.rpartition(":")
+        if colon and kind in ATTACH_KINDS:
+            source = head
+        elif colon and (head in SUBSYSTEM_NAMES or Path(head).is_file()) and not Path(source).is_file():
+            raise UserError(f"--attach {text}: unknown kind {kind!r} (one of {', '.join(ATTACH_KINDS)})")
         else:
-            kind = "detail"
-        if not sep or not bus.strip().lstrip("-").isdigit() or not path:
-            raise UserError(f"--attach takes BUS=FILE[:KIND] (a bus number of the case, a sub-system case file, "
-                            f"KIND one of {', '.join(ATTACH_KINDS)}), got {text!r}")
-        if kind == "surrogate":
-            raise UserError(f"--attach {text}: a sub-system surrogate is not available yet; run it as detail or "
-                            f"aggregate")
-        if not Path(path).is_file():
-            raise UserError(f"--attach {text}: no file {path}")
-        out.append((int(bus), Path(path), kind))
+            kind = None
+        if not sep or not bus.strip().lstrip("-").isdigit() or not source:
+            raise UserError(f"--attach takes BUS=NAME|FILE[:KIND] (a bus number of the case; a shipped sub-system, "
+                            f"{' or '.join(SUBSYSTEM_NAMES)}, or a sub-system case file; KIND one of "
+                            f"{', '.join(ATTACH_KINDS)}), got {text!r}")
+        if source not in SUBSYSTEM_NAMES and not Path(source).is_file():
+            raise UserError(f"--attach {text}: no file {source} (nor a shipped sub-system: "
+                            f"{', '.join(SUBSYSTEM_NAMES)})")
+        out.append(Attachment(int(bus), source, kind, text))
     return out
 
 
+def _attach_runner(attachments, fmus):
+    """--fmus as the kinds of `attachments` leave it. One runner runs the whole run, host and
+    sub-systems: --fmus. A kind that names one must agree with it: :monolithic (the DAE) needs
+    --fmus monolithic, and where --fmus is left out makes the run monolithic; :reference (native
+    FMUs in the master) needs a run of FMUs (--fmus reference, surrogate, python, or left out). No
+    kind, or :aggregate, runs in whatever --fmus runs. UserError for a conflict."""
+    given = fmus
+    if fmus is None and any(a.kind == "monolithic" for a in attachments):
+        fmus = "monolithic"
+    for a in attachments:
+        against = f"--fmus {given}" if given is not None else "another --attach's :monolithic"
+        if a.kind == "monolithic" and fmus != "monolithic":
+            raise UserError(f"--attach {a.text} runs the sub-system in the monolithic DAE, which then runs the whole "
+                            f"case: it conflicts with {against} (give --fmus monolithic or leave --fmus out)")
+        if a.kind == "reference" and fmus in REFERENCE_KINDS:
+            raise UserError(f"--attach {a.text} runs the sub-system as native FMUs in the master, which then runs "
+                            f"the whole case: it conflicts with {against} (leave the kind out: the sub-system then "
+                            f"runs where the case does)")
+    return fmus
+
+
+def _subsystem_file(attachment, folder: Path) -> Path:
+    """The case file attached for `attachment` (cache files under `folder`): a shipped name's
+    generated file (folder/subsystems, written once) or the file given, as it is for reference and
+    monolithic (the full detail) or its hand-made equivalent for aggregate (folder/attached,
+    reference_models.grid.aggregate); UserError for surrogate, which is not available yet."""
+    from reference_models.grid.aggregate import aggregate_file
+    from reference_models.grid.subsystems import shipped_file
+
+    if attachment.kind == "surrogate":
+        raise UserError(f"--attach {attachment.text}: a sub-system surrogate is not available yet; run it as "
+                        f"reference, monolithic or aggregate")
+    source = (shipped_file(attachment.source, folder / "subsystems") if attachment.source in SUBSYSTEM_NAMES
+              else Path(attachment.source))
+    return aggregate_file(source, folder / "attached") if attachment.kind == "aggregate" else source
+
+
 def _attached_case(args):
-    """The case of --case with the sub-systems of --attach attached (reference_models.grid.attach)."""
+    """The case of --case with the sub-systems of --attach attached (reference_models.grid.attach);
+    sets args.fmus as the kinds leave it (_attach_runner)."""
     import importlib.util
 
     attachments = _attachments(args)
+    args.fmus = _attach_runner(attachments, args.fmus)
     if args.dynamic_data is not None or args.dyr is not None:
         raise UserError("--attach goes with a shipped case converted from ANDES or a case file ANDES reads, "
                         "without --dynamic-data or --dyr")
@@ -299,15 +372,14 @@ def _attached_case(args):
         host = Path(args.case)
     else:
         raise UserError(f"unknown case {args.case!r} (known: {', '.join(CASES)}, or a case file ANDES reads)")
-    from reference_models.grid.aggregate import aggregate_file
-
-    folder = case_cache_dir() / "attached"
+    folder = case_cache_dir()
     try:
-        files = [(bus, aggregate_file(path, folder) if kind == "aggregate" else path)
-                 for bus, path, kind in attachments]
-        return case_from_file(attached_file(host, files, folder))
+        files = [(a.bus, _subsystem_file(a, folder)) for a in attachments]
+        return case_from_file(attached_file(host, files, folder / "attached"))
     except CaseError as exc:
         raise UserError(_one_line(exc)) from None
+    except OSError as exc:
+        raise UserError(f"cannot use the case cache {folder}: {exc.strerror or exc}") from None
 
 
 def _run_events(args, case) -> None:
@@ -496,11 +568,38 @@ def cmd_export(args) -> None:
     print(f"{case.name}: {count} FMU files and {path}" + (f" ({len(stated)} notes on the case above)" if stated else ""))
 
 
+def cmd_subsystem(args) -> None:
+    """opfmu grid feeder|plant: the generated sub-system written to --out (reference_models.grid.
+    subsystems); UserError before any work for --units or --seed out of the generator's range, or an
+    --out that is no .json file path in a folder that exists."""
+    from opfmu.checks import output_file
+    from reference_models.grid.subsystems import FeederSpec, PlantSpec, describe, records, write_case
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".json":
+        raise UserError(f"--out must name a .json file (an ANDES JSON case), got {args.out!r}")
+    output_file(out)
+    if not out.parent.is_dir():
+        raise UserError(f"--out {out}: no folder {out.parent}")
+    spec_type = PlantSpec if args.subsystem == "plant" else FeederSpec
+    try:
+        spec = spec_type(units=args.units, seed=args.seed)
+        data = records(spec)
+    except ValueError as exc:
+        raise UserError(f"{args.subsystem}: {_one_line(exc)}") from None
+    try:
+        path = write_case(data, out)
+    except OSError as exc:
+        raise UserError(f"cannot write {out}: {exc.strerror or exc}") from None
+    print(f"{describe(spec)}: {path}")
+
+
 def cmd_run(args) -> None:
     from cosim import outputs
 
     _check_out(args.out, outputs.RUN_FILES)
     case = _case(args)
+    attached = tuple(dict.fromkeys(a.bus for a in _attachments(args)))  # the host buses with sub-systems
     _fault_start(args)
     settings = _settings(args)
     _stop(args.stop, settings)
@@ -554,7 +653,8 @@ def cmd_run(args) -> None:
     summary = {"contingency": contingency.label, "case_events": list(contingency.case_event_labels(args.stop + 1e-9)),
                "fmus": main_kind, "stable": main.stable,
                "loss_of_synchronism_s": main.loss_of_synchronism_s, "timing": timings, "step_s": settings.step,
-               "passes": settings.passes, "fmi_version": args.fmi_version, "notes": stated}
+               "passes": settings.passes, "fmi_version": args.fmi_version, "notes": stated,
+               **_attach_ratings(case, attached)}
     fault, trips = contingency.fault_intervals(args.stop), contingency.trip_times(args.stop)
     for reference in outputs.REFERENCES:
         if reference in runs and len(runs) > 1:
@@ -563,7 +663,7 @@ def cmd_run(args) -> None:
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.RUN_FILES) as staging:
-            outputs.write_csv(staging / "result.csv", main, case)
+            outputs.write_csv(staging / "result.csv", main, case, attached)
             outputs.plot(staging / "result.png", runs, title, case)
             outputs.report(staging / "report.md", title, runs, timings, contingency, case,
                            [f"Note: {n}" for n in stated + notes]
@@ -581,6 +681,14 @@ def cmd_run(args) -> None:
             print(f"  {_label(kind)} against the {outputs.REFERENCES[reference]} run: rotor angles "
                   f"{e['angle_deg']:.3f} deg, terminal voltages {e['V']:.2g} pu{power}")
     print(f"written: {out / 'result.csv'}, {out / 'result.png'}, {out / 'report.md'}")
+
+
+def _attach_ratings(case, buses) -> dict:
+    """{"S_attach_<bus>": the rating [MVA] of the sub-system attached at each host bus of `buses`}
+    (reference_models.grid.boundary.subsystem_rating: the sum of its generating devices' Sn)."""
+    from reference_models.grid.boundary import subsystem_rating
+
+    return {f"S_attach_{bus}": subsystem_rating(case, bus) for bus in buses}
 
 
 def _label(kind) -> str:

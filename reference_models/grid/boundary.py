@@ -4,7 +4,10 @@ A sub-system attached at host bus B (reference_models.grid.attach) is the set of
 removing B cuts off from the case's slack: `subsystem_buses`. What it injects into B (generator
 convention, system base) is the sum over the branches between B and those buses of V_B conj(I)
 with I the branch current leaving B towards the host side negated: `boundary_power`. Works for a
-radial sub-system behind one bus, whatever its bus numbers.
+radial sub-system behind one bus, whatever its bus numbers. Its rating (`subsystem_rating`, MVA) is
+the sum of the ratings Sn of its generating devices: the bus devices of the generator units (not
+the loads) at its buses that declare a rating Sn (a PVD1, an REGCA1, a machine; a static generator
+without a converter declares none).
 """
 from __future__ import annotations
 
@@ -122,3 +125,12 @@ def with_equivalent(case, bus: int, device, fmu=None):
 def _ends(network, branch: str) -> tuple:
     br = network.branch(branch)
     return br.from_bus, br.to_bus
+
+
+def subsystem_rating(case, bus: int, behind=None) -> float:
+    """The rating [MVA] of the sub-system behind host bus `bus` of `case` (reference_models.grid.case.
+    Case): the sum of Sn over the bus devices of its generator units (Unit.load None) at the buses
+    `behind` (default subsystem_buses(case.network, bus)) that have a parameter Sn."""
+    behind = set(subsystem_buses(case.network, bus) if behind is None else behind)
+    return float(sum(getattr(u.machine.params, "Sn", 0.0) for u in case.units
+                     if u.bus in behind and u.load is None))

@@ -5,6 +5,11 @@ seeded, written as ANDES JSON ({model: [records]}).
     python -m reference_models.grid.subsystems feeder OUT.json [--units N] [--seed S]
     python -m reference_models.grid.subsystems plant OUT.json [--units N] [--seed S] [--feeders F]
 
+(`opfmu grid feeder|plant --units N --seed S --out FILE` writes the same.) The shipped names of
+DESIGN section 11, `feeder` and `plant` (`SHIPPED`: 30 and 20 units, seed 0), are written once into a
+cache folder and found there after (`shipped_file`). A sub-system has 1 to MAX_UNITS units and a
+seed >= 0 (numpy's Generator takes no negative seed).
+
 A sub-system file is a whole case on its own: its boundary bus (the bus it connects through) holds
 its only Slack, which stands for the grid it is attached to; `reference_models.grid.attach` replaces
 that Slack by the host's bus.
@@ -58,6 +63,7 @@ transformer and a collector never is, so the power through the main transformer 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
@@ -70,6 +76,15 @@ import numpy as np
 BASE_MVA = 100.0
 F_HZ = 60.0
 BOUNDARY_KV, FEEDER_KV = 69.0, 12.47
+MAX_UNITS = 1000  # the most units of a generated sub-system (beyond, ANDES and the runners take many minutes)
+
+
+def _check_size(what: str, units, seed) -> None:
+    """ValueError unless `units` is an integer in [1, MAX_UNITS] and `seed` one >= 0."""
+    if not (isinstance(units, int) and 1 <= units <= MAX_UNITS):
+        raise ValueError(f"a {what} needs at least one unit and at most {MAX_UNITS}, got {units!r}")
+    if not (isinstance(seed, int) and seed >= 0):
+        raise ValueError(f"the seed must be an integer >= 0, got {seed!r}")
 
 
 @dataclass(frozen=True)
@@ -92,8 +107,7 @@ class FeederSpec:
     drop: float = 0.04
 
     def __post_init__(self):
-        if not (isinstance(self.units, int) and self.units >= 1):
-            raise ValueError(f"a feeder needs at least one unit, got {self.units!r}")
+        _check_size("feeder", self.units, self.seed)
         if self.sections is not None and not (isinstance(self.sections, int) and self.sections >= 1):
             raise ValueError(f"sections must be a positive integer, got {self.sections!r}")
 
@@ -205,8 +219,7 @@ class PlantSpec:
     v_poi: float = 1.0
 
     def __post_init__(self):
-        if not (isinstance(self.units, int) and self.units >= 1):
-            raise ValueError(f"a plant needs at least one unit, got {self.units!r}")
+        _check_size("plant", self.units, self.seed)
         if self.feeders is not None and not (isinstance(self.feeders, int) and 1 <= self.feeders <= self.units):
             raise ValueError(f"feeders must be an integer from 1 to the number of units, got {self.feeders!r}")
         if not 0.0 < self.loading_min <= self.loading_max <= 0.95:
@@ -380,6 +393,33 @@ def write_case(records: dict, path) -> Path:
     return path
 
 
+SHIPPED = {"feeder": FeederSpec(units=30, seed=0), "plant": PlantSpec(units=20, seed=0)}  # DESIGN section 11's names
+
+
+def records(spec) -> dict:
+    """The ANDES records {model: [record]} of the sub-system `spec` (a FeederSpec or a PlantSpec)."""
+    return plant(spec) if isinstance(spec, PlantSpec) else feeder(spec)
+
+
+def describe(spec) -> str:
+    """One line naming the sub-system `spec`: its kind, units, sections or feeders and seed."""
+    if isinstance(spec, PlantSpec):
+        return f"PV plant of {spec.units} units on {spec.n_feeders} collector feeders (seed {spec.seed})"
+    return f"feeder of {spec.units} PVD1 units on {spec.n_sections} sections (seed {spec.seed})"
+
+
+def shipped_file(name: str, folder) -> Path:
+    """The case file of the shipped sub-system `name` (a key of SHIPPED) in `folder`: written there
+    the first time (atomically: write_case), found after. Its name holds the spec and a hash of this
+    module's source, so that a changed generator writes a new file rather than reusing a stale one."""
+    spec = SHIPPED[name]
+    digest = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:12]
+    path = Path(folder) / f"{name}_{spec.units}_units_seed_{spec.seed}_{digest}.json"
+    if not path.is_file():
+        write_case(records(spec), path)
+    return path
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m reference_models.grid.subsystems",
                                      description="writes a generated sub-system as an ANDES JSON case file")
@@ -402,12 +442,8 @@ def main(argv=None) -> int:
             spec = FeederSpec(units=args.units, seed=args.seed, sections=args.sections)
     except ValueError as exc:
         parser.exit(2, f"error: {exc}\n")
-    if args.kind == "plant":
-        path = write_case(plant(spec), args.out)
-        print(f"PV plant of {spec.units} units on {spec.n_feeders} collector feeders (seed {spec.seed}): {path}")
-    else:
-        path = write_case(feeder(spec), args.out)
-        print(f"feeder of {spec.units} PVD1 units on {spec.n_sections} sections (seed {spec.seed}): {path}")
+    path = write_case(records(spec), args.out)
+    print(f"{describe(spec)}: {path}")
     return 0
 
 
