@@ -136,12 +136,17 @@ def _time_text(t: float) -> str:
 def attachment_columns(result, case, buses) -> dict:
     """{"P_attach_<bus>", "Q_attach_<bus>": [n]} for each host bus of `buses` with a sub-system
     attached (opfmu grid run --attach): the power the sub-system injects into that bus [pu, system
-    base, generator convention], from the result's bus voltages (reference_models.grid.boundary)."""
-    from reference_models.grid.boundary import boundary_power
+    base, generator convention], from the result's bus voltages (reference_models.grid.boundary), or
+    for a sub-system run as its equivalent, the equivalent's own P and Q."""
+    from reference_models.grid.boundary import boundary_power, equivalent_units
 
     out = {}
     for bus in buses:
-        S = boundary_power(case.network, result.V_bus, result.theta_bus, bus)
+        units = equivalent_units(case, bus)
+        if units:
+            S = result.P[:, units].sum(axis=1) + 1j * result.Q[:, units].sum(axis=1)
+        else:
+            S = boundary_power(case.network, result.V_bus, result.theta_bus, bus)
         out[f"P_attach_{bus}"], out[f"Q_attach_{bus}"] = S.real, S.imag
     return out
 

@@ -31,17 +31,26 @@ TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=64, ancho
                        checkpoint_every=100)
 
 
+# the operators of the shipped sub-systems (`feeder`, `plant`): <name>-<first 16 hex digits of the
+# sha256 of the sub-system file>.onnx
+SHIPPED = Path(__file__).resolve().parents[1] / "surrogate" / "default" / "subsystems"
+
+
 def operator_registry() -> Path:
-    """The folder of registered sub-system operators: <sha256 of the sub-system file>.onnx."""
+    """The folder of the operators `learn` registered: <sha256 of the sub-system file>.onnx."""
     from reference_models.grid.andes_case import case_cache_dir
 
     return case_cache_dir() / "subsystem_operators"
 
 
 def registered(subsystem) -> Path | None:
-    """The operator registered for the sub-system file's content, or None."""
-    path = operator_registry() / f"{hashlib.sha256(Path(subsystem).read_bytes()).hexdigest()}.onnx"
-    return path if path.is_file() else None
+    """The operator for the sub-system file's content: one `learn` registered, else a shipped one,
+    else None."""
+    digest = hashlib.sha256(Path(subsystem).read_bytes()).hexdigest()
+    path = operator_registry() / f"{digest}.onnx"
+    if path.is_file():
+        return path
+    return next(iter(sorted(SHIPPED.glob(f"*-{digest[:16]}.onnx"))), None)
 
 
 def register(subsystem, operator) -> Path:

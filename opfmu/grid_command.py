@@ -134,9 +134,10 @@ def add_grid_parser(sub) -> None:
     run.add_argument("--clear", type=_time, default=None, metavar="SECONDS",
                      help="clearing time in s (before --stop), with --fault; without it, when --trip opens")
     run.add_argument("--stop", type=_time, default=5.0, help=f"end time in s (default 5, at most {MAX_STOP_S:g})")
-    run.add_argument("--compare", default="monolithic",
+    run.add_argument("--compare", default=None,
                      help="runs drawn on the same figure and compared in the report: a comma list of "
-                          "surrogate, reference, python, monolithic, andes, or none (default monolithic); every run "
+                          "surrogate, reference, python, monolithic, andes, or none (default monolithic; none with "
+                          "an --attach ...:surrogate, whose learned sub-system neither runs); every run "
                           "is compared with the monolithic and the ANDES run among them")
     run.add_argument("--out", required=True, metavar="DIR", help="output folder")
     run.add_argument("--host", choices=("master", "veragrid"), default="master",
@@ -317,6 +318,11 @@ def _attach_runner(attachments, fmus):
     given = fmus
     if fmus is None and any(a.kind == "monolithic" for a in attachments):
         fmus = "monolithic"
+    if any(a.kind == "surrogate" for a in attachments):
+        if fmus not in (None, "reference"):
+            raise UserError(f"--attach ...:surrogate runs the sub-system as its surrogate FMU beside the host's native "
+                            f"FMUs: it conflicts with --fmus {fmus} (give --fmus reference or leave it out)")
+        fmus = None  # each unit its own FMU: the host's native, the sub-system's surrogate
     for a in attachments:
         against = f"--fmus {given}" if given is not None else "another --attach's :monolithic"
         if a.kind == "monolithic" and fmus != "monolithic":
@@ -333,16 +339,26 @@ def _subsystem_file(attachment, folder: Path) -> Path:
     """The case file attached for `attachment` (cache files under `folder`): a shipped name's
     generated file (folder/subsystems, written once) or the file given, as it is for reference and
     monolithic (the full detail) or its hand-made equivalent for aggregate (folder/attached,
-    reference_models.grid.aggregate); UserError for surrogate, which is not available yet."""
+    reference_models.grid.aggregate); for surrogate the detail too, whose joint power flow starts
+    the surrogate (_surrogate)."""
     from reference_models.grid.aggregate import aggregate_file
     from reference_models.grid.subsystems import shipped_file
 
-    if attachment.kind == "surrogate":
-        raise UserError(f"--attach {attachment.text}: a sub-system surrogate is not available yet; run it as "
-                        f"reference, monolithic or aggregate")
     source = (shipped_file(attachment.source, folder / "subsystems") if attachment.source in SUBSYSTEM_NAMES
               else Path(attachment.source))
     return aggregate_file(source, folder / "attached") if attachment.kind == "aggregate" else source
+
+
+def _surrogate(case, attachment, path: Path):
+    """`case` with the sub-system of `attachment` (attached from the file `path`) run as its surrogate
+    FMU (cosim.subsystem_operator.surrogate_in); UserError where it has no operator."""
+    from cosim.fmu import CouplingError
+    from cosim.subsystem_operator import surrogate_in
+
+    try:
+        return surrogate_in(case, attachment.bus, path)
+    except CouplingError as exc:
+        raise UserError(f"--attach {attachment.text}: {_one_line(exc)}") from None
 
 
 def _attached_case(args):
@@ -375,7 +391,11 @@ def _attached_case(args):
     folder = case_cache_dir()
     try:
         files = [(a.bus, _subsystem_file(a, folder)) for a in attachments]
-        return case_from_file(attached_file(host, files, folder / "attached"))
+        case = case_from_file(attached_file(host, files, folder / "attached"))
+        for a, (bus, path) in zip(attachments, files):
+            if a.kind == "surrogate":
+                case = _surrogate(case, a, path)
+        return case
     except CaseError as exc:
         raise UserError(_one_line(exc)) from None
     except OSError as exc:
@@ -608,7 +628,12 @@ def cmd_run(args) -> None:
     if contingency.clear_s is not None and contingency.clear_s >= args.stop:
         raise UserError(f"the clearing at {args.clear:g} s must come before the stop at {args.stop:g} s")
     kinds_known = _run_kinds()
-    compare = [] if args.compare.strip() in ("", "none") else [k.strip() for k in args.compare.split(",")]
+    learned = any(a.kind == "surrogate" for a in _attachments(args))
+    text = args.compare if args.compare is not None else "none" if learned else "monolithic"
+    compare = [] if text.strip() in ("", "none") else [k.strip() for k in text.split(",")]
+    if learned and set(compare) & set(REFERENCE_KINDS):
+        raise UserError("--compare: an --attach ...:surrogate runs its sub-system as a learned FMU, which neither the "
+                        "monolithic DAE nor ANDES runs; compare with the detail in a run of its own (--attach BUS=FILE)")
     unknown = [k for k in compare if k not in kinds_known]
     if unknown:
         raise UserError(f"--compare: unknown run kind {unknown[0]!r} (known: {', '.join(kinds_known)}, none)")

@@ -66,10 +66,12 @@ def test_a_kind_that_disagrees_with_the_runner_or_a_bad_source_is_one_line_and_e
 
 
 @pytest.mark.andes
-def test_the_surrogate_kind_is_refused_in_one_line(tmp_path, capsys, case_cache):
-    err = _one_line_exit_2(capsys, ["grid", "run", "--case", HOST, "--attach", f"{BUS}=feeder:surrogate", *EVENT,
+def test_a_surrogate_without_an_operator_is_refused_in_one_line(tmp_path, capsys, case_cache):
+    unlearned = write_case(feeder(FeederSpec(units=10, seed=7)), tmp_path / "unlearned.json")
+    err = _one_line_exit_2(capsys, ["grid", "run", "--case", HOST, "--attach", f"{BUS}={unlearned}:surrogate", *EVENT,
                                     "--out", str(tmp_path / "out")])
-    assert "a sub-system surrogate is not available yet" in err
+    assert "no operator is registered for the sub-system unlearned.json" in err
+    assert "opfmu operator --subsystem" in err
     assert not (tmp_path / "out").exists()
 
 

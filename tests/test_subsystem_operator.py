@@ -154,3 +154,17 @@ def test_a_bad_subsystem_request_is_one_line_and_exit_2_before_any_work(tmp_path
     assert done.returncode == 2 and done.stdout == ""
     assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_a_part_of_the_host_that_hangs_off_the_attachment_bus_is_not_the_subsystem():
+    from reference_models.grid.boundary import subsystem_buses
+    from reference_models.grid.case import Branch, GeneratorData, Network
+
+    line = lambda a, b: Branch(a, b, 0.0, 0.1, 0.0, "line")  # noqa: E731
+    # 1 (slack) - 2 - 4; a generator 3 behind its step-up transformer at 2; a feeder 1000-1002 at 2
+    net = Network("t", 100.0, 60.0, (1, 2, 3, 4, 1000, 1001, 1002),
+                  (line(1, 2), line(2, 4), line(2, 3), line(2, 1000), line(1000, 1001), line(1001, 1002)),
+                  {}, {}, (GeneratorData(1, "slack", 1.0), GeneratorData(3, "pv", 1.0, 0.5)))
+    assert subsystem_buses(net, 2) == (1000, 1001, 1002)
+    with pytest.raises(ValueError, match="no sub-system is attached at bus 4"):
+        subsystem_buses(net, 4)

@@ -72,7 +72,6 @@ def test_the_case_file_is_written_whole(tmp_path):
     ("x=f.json", "--attach takes BUS=NAME|FILE"),
     ("9=missing.json", "no file missing.json"),
     ("9=missing.json:aggregate", "no file missing.json"),
-    pytest.param("9=f.json:surrogate", "a sub-system surrogate is not available yet", marks=pytest.mark.andes),
 ])
 def test_a_malformed_attachment_is_one_line_and_exit_code_2(attach, message, tmp_path, capsys, monkeypatch):
     from opfmu.cli import main

@@ -1,10 +1,10 @@
 """What a sub-system attached at a host bus exchanges with the host, read from the network alone.
 
 A sub-system attached at host bus B (reference_models.grid.attach) is the set of buses that
-removing B cuts off from the case's slack: `subsystem_buses`. What it injects into B (generator
+removing B cuts off from the case's slack and that attach numbered: `subsystem_buses`. What it injects into B (generator
 convention, system base) is the sum over the branches between B and those buses of V_B conj(I)
 with I the branch current leaving B towards the host side negated: `boundary_power`. Works for a
-radial sub-system behind one bus, whatever its bus numbers. Its rating (`subsystem_rating`, MVA) is
+radial sub-system behind one bus. Its rating (`subsystem_rating`, MVA) is
 the sum of the ratings Sn of its generating devices: the bus devices of the generator units (not
 the loads) at its buses that declare a rating Sn (a PVD1, an REGCA1, a machine; a static generator
 without a converter declares none).
@@ -15,8 +15,13 @@ import numpy as np
 
 
 def subsystem_buses(network, bus: int) -> tuple:
-    """The buses (numbers, file order) that removing host bus `bus` cuts off from the case's slack
-    bus (its first load-flow generator where none is a slack); ValueError where none are."""
+    """The buses (numbers, file order) of the sub-system attached at host bus `bus`: the parts of the
+    network that removing `bus` cuts off from the case's slack bus (its first load-flow generator
+    where none is a slack) and that attach numbered, each from a multiple of attach.BUS_BLOCK (a
+    part of the host that hangs off `bus` alone, a generator behind its step-up transformer, is not
+    one); ValueError where there are none."""
+    from .attach import BUS_BLOCK
+
     if bus not in network.buses:
         raise ValueError(f"{network.name} has no bus {bus}")
     neighbours = {b: set() for b in network.buses}
@@ -27,17 +32,27 @@ def subsystem_buses(network, bus: int) -> tuple:
     slack = next((g.bus for g in network.generators if g.kind == "slack"), None)
     if slack is None and network.generators:
         slack = network.generators[0].bus
-    seen, todo = {bus}, [slack] if slack is not None and slack != bus else []
-    seen.update(todo)
+    behind = set()
+    reached = {bus} | (_part(neighbours, slack, {bus}) if slack is not None and slack != bus else set())
+    for start in sorted(neighbours[bus] - reached):
+        part = _part(neighbours, start, {bus})
+        reached |= part
+        if min(part) > 0 and min(part) % BUS_BLOCK == 0:
+            behind |= part
+    if not behind:
+        raise ValueError(f"no sub-system is attached at bus {bus} of {network.name}: removing it cuts off no part "
+                         f"numbered from a multiple of {BUS_BLOCK}")
+    return tuple(b for b in network.buses if b in behind)
+
+
+def _part(neighbours: dict, start: int, removed: set) -> set:
+    """The buses connected to `start` without passing through `removed`."""
+    seen, todo = {start}, [start]
     while todo:
-        for nb in neighbours[todo.pop()] - seen:
+        for nb in neighbours[todo.pop()] - seen - removed:
             seen.add(nb)
             todo.append(nb)
-    behind = tuple(b for b in network.buses if b not in seen)
-    if not behind or slack == bus:
-        raise ValueError(f"no sub-system is attached at bus {bus} of {network.name}: removing it cuts no bus "
-                         f"off the slack")
-    return behind
+    return seen
 
 
 def boundary_current(network, V_bus: np.ndarray, theta_bus: np.ndarray, bus: int, behind=None) -> np.ndarray:
@@ -127,10 +142,19 @@ def _ends(network, branch: str) -> tuple:
     return br.from_bus, br.to_bus
 
 
+def equivalent_units(case, bus: int) -> list:
+    """Indices of the units at `bus` that stand for a whole sub-system (with_equivalent: a bus
+    device whose rates are partly learned, a `subsystem`)."""
+    return [k for k, u in enumerate(case.units) if u.bus == bus and u.machine.component.learned_states]
+
+
 def subsystem_rating(case, bus: int, behind=None) -> float:
     """The rating [MVA] of the sub-system behind host bus `bus` of `case` (reference_models.grid.case.
     Case): the sum of Sn over the bus devices of its generator units (Unit.load None) at the buses
-    `behind` (default subsystem_buses(case.network, bus)) that have a parameter Sn."""
+    `behind` (default subsystem_buses(case.network, bus)) that have a parameter Sn; for a sub-system
+    run as its equivalent (equivalent_units), the equivalent's rating S."""
+    if behind is None and equivalent_units(case, bus):
+        return float(sum(case.units[k].machine.params.S for k in equivalent_units(case, bus)))
     behind = set(subsystem_buses(case.network, bus) if behind is None else behind)
     return float(sum(getattr(u.machine.params, "Sn", 0.0) for u in case.units
                      if u.bus in behind and u.load is None))
