@@ -11,8 +11,8 @@ component's parameters in its parameter class's order (fixed parameters, start t
 and max their range where the component checks one: fmu_export.c_parameters). Booleans come after every Real,
 so that a value reference names one variable whatever its type (FMI 2.0 allows types to share
 them; importers that read by value reference alone do not). For SM4's native reference FMU this is
-Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, rtol 18, atol 19,
-I_N_re..Q_bus 20-27, V_lf..Q_lf 28-31, Pm_init 32, Efd_init 33, D..Wb 34-45. The C sources get the same table as generated `#define`s (`vr_header`); tests,
+Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, rotor_speed 14, delta0..Eq_p0 15-18, rtol 19,
+atol 20, I_N_re..Q_bus 21-28, V_lf..Q_lf 29-32, Pm_init 33, Efd_init 34, D..Wb 35-46. The C sources get the same table as generated `#define`s (`vr_header`); tests,
 benchmarks and importers read the model description.
 """
 from __future__ import annotations
