@@ -17,7 +17,7 @@ from fmu_export.binaries import fmi_headers
 from fmu_export.native_reference_fmu import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
                                          native_reference_variables)
 from fmu_export.python_reference_fmu import reference_variables
-from fmu_export.variables import BUS_OUTPUTS
+from fmu_export.variables import BUS_OUTPUTS, rate_unit
 from cosim.fmu import FMU as Slave
 from reference_models.models.genrou import GENROU
 from reference_models.ports import ports_of_model_description
@@ -131,6 +131,14 @@ def test_the_speed_in_pu_is_one_plus_omega_over_wb_and_means_what_a_standard_mac
         assert np.abs(omega).max() > 0.05  # rad/s
         np.testing.assert_allclose(in_pu, 1.0 + omega / p.Wb, rtol=0, atol=1e-15)
         slave.close()
+
+
+def test_each_state_derivative_declares_its_states_unit_per_second(unzipped):
+    units = {v.name: v.unit for v in unzipped[1].modelVariables}
+    assert [units[f"der({n})"] for n in SM4.state_names] == ["rad/s", "rad/s2", "pu/s", "pu/s"]
+    root = ElementTree.parse(f"{unzipped[0]}/modelDescription.xml").getroot()
+    assert root.find("UnitDefinitions/Unit[@name='rad/s2']/BaseUnit").attrib == {"rad": "1", "s": "-2"}
+    assert (rate_unit("s"), rate_unit("1"), rate_unit("-")) == ("1", "1/s", "1/s")  # a timer's rate: 1
 
 
 def test_default_initial_state_is_that_machines_equilibrium_and_stays_at_rest(unzipped, other):
