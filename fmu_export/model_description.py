@@ -23,7 +23,10 @@ from .variables import TIME, Variable, VariableTable, fmi3_value_references
 # SI base-unit exponents (and factor) of the units components use; a unit not listed is declared
 # without them. pu and 1 are dimensionless.
 BASE_UNITS = {"rad": {"rad": "1"}, "rad/s": {"rad": "1", "s": "-1"}, "s": {"s": "1"}, "pu": {}, "1": {},
-              "Hz": {"s": "-1"}, "1/s": {"s": "-1"}, "deg": {"rad": "1", "factor": repr(math.pi / 180.0)}}
+              "Hz": {"s": "-1"}, "1/s": {"s": "-1"}, "deg": {"rad": "1", "factor": repr(math.pi / 180.0)},
+              # the rates of the states (Model Exchange's derivatives: variables.rate_unit)
+              "pu/s": {"s": "-1"}, "rad/s2": {"rad": "1", "s": "-2"},
+              "deg/s": {"rad": "1", "s": "-1", "factor": repr(math.pi / 180.0)}}
 DIMENSIONLESS = ("", "-")  # how a variable without a unit may say so: declared as the unit "1"
 
 

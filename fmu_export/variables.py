@@ -11,8 +11,8 @@ component's parameters in its parameter class's order (fixed parameters, start t
 and max their range where the component checks one: fmu_export.c_parameters). Booleans come after every Real,
 so that a value reference names one variable whatever its type (FMI 2.0 allows types to share
 them; importers that read by value reference alone do not). For SM4's native reference FMU this is
-Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, delta0..Eq_p0 14-17, rtol 18, atol 19,
-I_N_re..Q_bus 20-27, V_lf..Q_lf 28-31, Pm_init 32, Efd_init 33, D..Wb 34-45. The C sources get the same table as generated `#define`s (`vr_header`); tests,
+Vs 0, theta_vs 1, Pm 2, Efd 3, delta..Eq_p 4-7, Id..Q 8-13, rotor_speed 14, delta0..Eq_p0 15-18, rtol 19,
+atol 20, I_N_re..Q_bus 21-28, V_lf..Q_lf 29-32, Pm_init 33, Efd_init 34, D..Wb 35-46. The C sources get the same table as generated `#define`s (`vr_header`); tests,
 benchmarks and importers read the model description.
 """
 from __future__ import annotations
@@ -343,6 +343,12 @@ def vr_header(variables: list[Variable], component: Component | None = None, gua
     return "\n".join(lines)
 
 
+def rate_unit(unit: str) -> str:
+    """The unit of the time derivative of a quantity in `unit`: 1/s of a dimensionless one, 1 of a
+    time [s], rad/s2 of a speed [rad/s], <unit>/s of any other."""
+    return {"": "1/s", "-": "1/s", "1": "1/s", "s": "1", "rad/s": "rad/s2"}.get(unit, f"{unit}/s")
+
+
 def exchange_variables(variables: VariableTable, component: Component, n_switching: int) -> VariableTable:
     """`variables` (a native reference FMU's table) with what Model Exchange adds after its last Real:
     each state's derivative `der(<state>)` (local, continuous; the model description's `derivative`
@@ -351,8 +357,7 @@ def exchange_variables(variables: VariableTable, component: Component, n_switchi
     declares them in ModelStructure). The Booleans' value references move up behind them."""
     units = {q.name: q.unit for q in component.states}
     added = [Variable(f"der({name})", -1, "local", f"time derivative of {name} on the branches locked at the last "
-                      "event", f"{units[name]}/s" if units[name] not in ("", "-", "1") else "1/s",
-                      derivative_of=name)
+                      "event", rate_unit(units[name]), derivative_of=name)
              for name in component.state_names]
     added += [Variable(f"event_indicator_{k}", -1, "local", f"switching function {k} of the right-hand side: a - b "
                        "of its condition a op b, whose sign change is an event") for k in range(n_switching)]

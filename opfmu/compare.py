@@ -346,10 +346,11 @@ def format_table(result: dict) -> str:
     """Per-output errors, then wall times and the speedup, as text."""
     component = result.get("component", COMPONENT)
     units = {q.name: q.unit for q in component.states + component.outputs}
+    width = max(10, 2 + max(map(len, result["metrics"]), default=0))  # a name column that fits every name
     lines = [f"{result['inputs']}: {result['stop_time_s']:g} s at h = {result['step_s'] * 1e3:g} ms",
-             f"{'output':<10}{'unit':<7}{'MAE':>11}{'RMSE':>11}{'MaxAE':>11}"]
+             f"{'output':<{width}}{'unit':<7}{'MAE':>11}{'RMSE':>11}{'MaxAE':>11}"]
     for name, m in result["metrics"].items():
-        lines.append(f"{name:<10}{units[name]:<7}{m['mae']:>11.3e}{m['rmse']:>11.3e}{m['maxae']:>11.3e}")
+        lines.append(f"{name:<{width}}{units[name]:<7}{m['mae']:>11.3e}{m['rmse']:>11.3e}{m['maxae']:>11.3e}")
     wall = result["wall_s"]
     inside = result["do_step_s"]
     steps = round(result["stop_time_s"] / result["step_s"])

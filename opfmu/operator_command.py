@@ -214,8 +214,8 @@ def _check_case(name: str, model, params) -> None:
 def _state_weights(model) -> list:
     """Data-loss weights of a non-SM4 machine's states: its rotor angle 5, its speed 2, the rest 1
     (the rotor angle is what a grid study reads; SM4's recipe weighs delta and Eq_p 5)."""
-    speed = model.state_names.index(model.ports.output("rotor_speed"))
-    return [5.0 if i == model.drift.angle_states[0] else 2.0 if i == speed else 1.0 for i in range(model.n_states)]
+    drift = model.drift
+    return [5.0 if i == drift.angle_states[0] else 2.0 if i == drift.speed_state else 1.0 for i in range(model.n_states)]
 
 
 def _json_object(path: Path) -> dict:

@@ -51,13 +51,14 @@ SIGNALS = {
                                 "(IEEEG1's low-pressure stages): the case takes it to that machine's unit as its "
                                 "mechanical_power (Unit.takes)"),
     "terminal_voltage": ("Vt", "pu", "terminal voltage magnitude: an exciter's input"),
-    "speed": ("omega", "rad/s", "rotor speed deviation: a machine's output, a governor's or stabiliser's input"),
+    "speed": ("omega", "rad/s", "rotor speed deviation from synchronous: SM4's speed state, which a grid result reads "
+              "(controls take rotor_speed)"),
     "electrical_power": ("Pe", "pu", "electrical power: a machine's output, a stabiliser's input"),
     "stabiliser_signal": ("Vss", "pu", "stabiliser output: a power system stabiliser's output, an exciter's input"),
     "voltage_reference": ("Vref", "pu", "voltage set point of an exciter"),
     "power_reference": ("Pref", "pu", "power set point of a governor"),
-    "rotor_speed": ("omega", "pu", "rotor speed in pu of synchronous speed (1 at rest): a standard machine's output, "
-                    "a standard governor's, exciter's or stabiliser's input"),
+    "rotor_speed": ("omega", "pu", "rotor speed in pu of synchronous speed (1 at rest): every synchronous machine's "
+                    "output (SM4's 1 + omega / Wb), a governor's, exciter's or stabiliser's input"),
     "field_current": ("XadIfd", "pu", "field current times the d-axis mutual reactance: a standard machine's output, "
                       "a static exciter's input"),
     "terminal_voltage_angle": ("theta_vs", "rad", "terminal voltage angle (network frame): an exciter's input"),

@@ -2,8 +2,10 @@
 
 States  x = (delta [rad], omega [rad/s, deviation from synchronous], Ed_p [pu], Eq_p [pu])
 Inputs  u = (Vs [pu], theta_vs [rad], Pm [pu] mechanical power, Efd [pu] field voltage)
-Outputs y = (Id, Iq, I_re, I_im, P, Q) [pu]: stator currents, bus current in the network frame,
-        power into the bus.
+Outputs y = (Id, Iq, I_re, I_im, P, Q, rotor_speed) [pu]: stator currents, bus current in the
+        network frame, power into the bus, and the rotor speed in pu of synchronous speed,
+        1 + omega / Wb (1 at rest): what a standard machine's omega is (GENROU, GENCLS), and what
+        the `rotor_speed` port link gives a governor or stabiliser.
 Arrays carry the state or input on their last axis: x [..., 4], u [..., 4].
 
 The equations see delta and theta_vs only through delta - theta_vs, and omega only through
@@ -104,12 +106,14 @@ def derivatives(x, u, p: SM4Params, m):
 
 
 def derived(x, u, p: SM4Params, m):
-    """(Id, Iq, I_re, I_im, P, Q) in pu.
+    """(Id, Iq, I_re, I_im, P, Q, rotor_speed) in pu.
 
     Bus current in the network frame: I = (Id + j Iq) exp(j (delta - pi/2));
-    power into the bus: P + jQ = Vs exp(j theta_vs) conj(I).
+    power into the bus: P + jQ = Vs exp(j theta_vs) conj(I);
+    rotor speed in pu of synchronous speed: 1 + omega / Wb (omega [rad/s] the deviation, Wb [rad/s]
+    the synchronous speed 2 pi fn).
     """
-    delta, _, Ed_p, Eq_p = x
+    delta, omega, Ed_p, Eq_p = x
     Vs, theta_vs = u[0], u[1]
     Id, Iq = stator_currents(delta, Ed_p, Eq_p, Vs, theta_vs, p, m)
     # exp(j(delta - pi/2)) = sin(delta) - j cos(delta)
@@ -118,7 +122,7 @@ def derived(x, u, p: SM4Params, m):
     V_re, V_im = Vs * m.cos(theta_vs), Vs * m.sin(theta_vs)
     P = V_re * I_re + V_im * I_im
     Q = V_im * I_re - V_re * I_im
-    return Id, Iq, I_re, I_im, P, Q
+    return Id, Iq, I_re, I_im, P, Q, 1.0 + omega / p.Wb
 
 
 def _steady_fluxes(angle, Vs, Efd, p: SM4Params):
@@ -202,7 +206,8 @@ SM4 = Component(
              Quantity("I_re", "pu", "bus current, real part (network frame)"),
              Quantity("I_im", "pu", "bus current, imaginary part (network frame)"),
              Quantity("P", "pu", "active power into the bus"),
-             Quantity("Q", "pu", "reactive power into the bus")),
+             Quantity("Q", "pu", "reactive power into the bus"),
+             Quantity("rotor_speed", "pu", "rotor speed in pu of synchronous speed, 1 + omega / Wb (1 at rest)")),
     params_type=SM4Params,
     derivatives=derivatives,
     output_equations=derived,
@@ -215,7 +220,8 @@ SM4 = Component(
     drift=Drift(angle_states=(0,), angle_inputs=(1,), speed_state=1, torque_inputs=((2, "D"),), speed_step=2.0),
     ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im")),
                 inputs=(Link("mechanical_power", "Pm"), Link("field_voltage", "Efd")),
-                outputs=(Link("rotor_angle", "delta"), Link("speed", "omega"), Link("electrical_power", "P"))),
+                outputs=(Link("rotor_angle", "delta"), Link("speed", "omega"), Link("rotor_speed", "rotor_speed"),
+                         Link("electrical_power", "P"))),
     initialisation=Initialisation(("Pm", "Efd"), lambda given, p: _start(given, p)),
     affine_current=True,
 )
@@ -234,7 +240,7 @@ def rhs(x, u, p: SM4Params = DEFAULT_PARAMS):
 
 
 def outputs(x, u, p: SM4Params = DEFAULT_PARAMS):
-    """Derived outputs (Id, Iq, I_re, I_im, P, Q) [..., 6] in pu for x [..., 4], u [..., 4]."""
+    """Derived outputs (Id, Iq, I_re, I_im, P, Q, rotor_speed) [..., 7] in pu for x [..., 4], u [..., 4]."""
     return SM4.output_values(x, u, p)
 
 

@@ -99,7 +99,8 @@ def test_the_drift_scenario_is_the_mix_scenario_turned_at_a_constant_speed(D):
 def test_comparison_reports_every_output_and_both_timings(extracted):
     inputs = scenario_inputs("slow", 0, 2.0, 0.01)
     result = compare(*extracted, inputs, 2.0, 0.01)
-    assert set(result["metrics"]) == {"delta", "omega", "Ed_p", "Eq_p", "Id", "Iq", "I_re", "I_im", "P", "Q"}
+    assert set(result["metrics"]) == {"delta", "omega", "Ed_p", "Eq_p", "Id", "Iq", "I_re", "I_im", "P", "Q",
+                                      "rotor_speed"}
     assert len(result["trajectories"]["reference"]["time"]) == 201
     assert result["metrics"]["delta"]["maxae"] < 0.02  # the shipped operator on a slow scenario
     assert all(result[k]["surrogate"] > 0 and result[k]["reference"] > 0 for k in ("wall_s", "do_step_s"))

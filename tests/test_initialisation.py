@@ -57,9 +57,10 @@ def test_the_machine_start_is_an_exact_equilibrium_of_sm4_that_injects_the_given
     assert isinstance(s, MachineStart) and s.x0.shape == (4,)
     u = np.array([V, theta, s.Pm, s.Efd])
     np.testing.assert_allclose(SM4.rhs(s.x0, u, params), 0.0, atol=1e-12)
-    Id, Iq, I_re, I_im, P_out, Q_out = SM4.output_values(s.x0, u, params)
+    Id, Iq, I_re, I_im, P_out, Q_out, speed = SM4.output_values(s.x0, u, params)
     np.testing.assert_allclose([P_out, Q_out], [P, Q], atol=1e-13)
     np.testing.assert_allclose([Id, Iq, I_re, I_im], [s.Id, s.Iq, s.I_re, s.I_im], atol=1e-13)
+    assert speed == 1.0  # at rest: synchronous speed in pu, as a standard machine's omega
     assert s.Pm == pytest.approx(P + (params.Rs + params.Re) * (s.I_re ** 2 + s.I_im ** 2), abs=1e-13)  # + losses
     terminal = V * np.exp(1j * theta) + complex(params.Re, params.Xep) * complex(s.I_re, s.I_im)
     assert s.Vt == pytest.approx(abs(terminal), abs=1e-15)

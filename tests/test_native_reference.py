@@ -4,6 +4,7 @@ import math
 import shutil
 import subprocess
 import zipfile
+from xml.etree import ElementTree
 
 import numpy as np
 import pytest
@@ -16,8 +17,10 @@ from fmu_export.binaries import fmi_headers
 from fmu_export.native_reference_fmu import (SOLVER_STARTS, NativeReferenceError, build_native_reference_fmu,
                                          native_reference_variables)
 from fmu_export.python_reference_fmu import reference_variables
-from fmu_export.variables import BUS_OUTPUTS
+from fmu_export.variables import BUS_OUTPUTS, rate_unit
 from cosim.fmu import FMU as Slave
+from reference_models.models.genrou import GENROU
+from reference_models.ports import ports_of_model_description
 from reference_models.scenarios import scenario
 from reference_models.sm4 import SM4
 
@@ -108,6 +111,34 @@ def test_variables_and_value_references_are_the_reference_fmus(unzipped):
     by_vr = {v.valueReference: v.name for v in md.modelVariables}
     deps = {by_vr[o.variable.valueReference]: [d.name for d in o.dependencies] for o in md.outputs}
     assert all(deps[s] == [] for s in SM4.state_names) and deps["P"] == ["Vs", "theta_vs"]
+
+
+def test_the_speed_in_pu_is_one_plus_omega_over_wb_and_means_what_a_standard_machines_omega_does(unzipped, other):
+    for fmu, p in ((unzipped, DEFAULT), (other, OTHER)):
+        root = ElementTree.parse(f"{fmu[0]}/modelDescription.xml").getroot()
+        linked = ports_of_model_description(root).output("rotor_speed")
+        units = {v.name: v.unit for v in fmu[1].modelVariables}
+        # a governor or stabiliser linked to SM4 gets what GENROU gives it: pu, 1 at synchronous speed
+        assert linked == "rotor_speed" and units[linked] == "pu" == {q.name: q.unit for q in GENROU.states}["omega"]
+        slave = Slave(fmu)
+        assert slave.get("rotor_speed")[0] == 1.0  # at rest
+        Vs, theta_vs, Pm, Efd = slave.get(*SM4.input_names)
+        speeds = []
+        for k in range(50):  # a voltage dip and more mechanical power: the machine speeds up
+            slave.step(0.01, 0.8 if k < 10 else Vs, theta_vs, Pm + 0.2, Efd)
+            speeds.append(slave.get("omega", "rotor_speed"))
+        omega, in_pu = np.array(speeds).T
+        assert np.abs(omega).max() > 0.05  # rad/s
+        np.testing.assert_allclose(in_pu, 1.0 + omega / p.Wb, rtol=0, atol=1e-15)
+        slave.close()
+
+
+def test_each_state_derivative_declares_its_states_unit_per_second(unzipped):
+    units = {v.name: v.unit for v in unzipped[1].modelVariables}
+    assert [units[f"der({n})"] for n in SM4.state_names] == ["rad/s", "rad/s2", "pu/s", "pu/s"]
+    root = ElementTree.parse(f"{unzipped[0]}/modelDescription.xml").getroot()
+    assert root.find("UnitDefinitions/Unit[@name='rad/s2']/BaseUnit").attrib == {"rad": "1", "s": "-2"}
+    assert (rate_unit("s"), rate_unit("1"), rate_unit("-")) == ("1", "1/s", "1/s")  # a timer's rate: 1
 
 
 def test_default_initial_state_is_that_machines_equilibrium_and_stays_at_rest(unzipped, other):

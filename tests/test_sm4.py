@@ -53,8 +53,8 @@ def test_the_equations_see_angles_only_through_their_difference_and_speed_throug
     turned_x, turned_u = x + [a, c, 0, 0], u + [0, a, p.D * c, 0]
     expected = rhs(x, u) + [c, 0, 0, 0]  # d delta/dt = omega carries the extra speed
     np.testing.assert_allclose(rhs(turned_x, turned_u), expected, rtol=1e-9, atol=1e-9)
-    # the stator currents and the power too: only the network-frame current turns with the angle
-    same = [0, 1, 4, 5]
+    # the stator currents, the power and the speed too: only the network-frame current turns with the angle
+    same = [0, 1, 4, 5, 6]
     np.testing.assert_allclose(outputs(x + [a, 0, 0, 0], u + [0, a, 0, 0])[:, same], outputs(x, u)[:, same], atol=1e-9)
 
 
@@ -88,21 +88,36 @@ def test_more_field_or_less_power_lowers_the_minimum_voltage():
 def test_bus_power_equals_air_gap_power_without_resistance():
     x, u = random_points()
     p = SM4Params()
-    Id, Iq, _, _, P, _ = outputs(x, u).T
+    Id, Iq, _, _, P, _, _ = outputs(x, u).T
     Pe = x[:, 2] * Id + x[:, 3] * Iq + (p.Xq_p - p.Xd_p) * Id * Iq
     np.testing.assert_allclose(P, Pe, rtol=0, atol=1e-12)
 
 
 def test_network_frame_current_has_the_dq_current_magnitude():
     x, u = random_points()
-    Id, Iq, I_re, I_im, _, _ = outputs(x, u).T
+    Id, Iq, I_re, I_im, _, _, _ = outputs(x, u).T
     np.testing.assert_allclose(np.hypot(I_re, I_im), np.hypot(Id, Iq), rtol=1e-12)
+
+
+def test_rotor_speed_is_in_pu_of_synchronous_speed_as_the_standard_machines_speed():
+    from reference_models.models.genrou import GENROU
+    from reference_models.ports import SIGNALS
+
+    x, u = random_points()
+    p = SM4Params(Wb=2 * np.pi * 60.0)
+    np.testing.assert_allclose(outputs(x, u, p)[:, 6], 1.0 + x[:, 1] / p.Wb, rtol=1e-15)
+    assert outputs(steady_state(1.0, 0.0, p), np.array([1.0, 0.0, PM, EFD]), p)[6] == 1.0
+    # the port link a governor or stabiliser takes: the same signal and unit as GENROU's omega
+    units = {q.name: q.unit for q in SM4.states + SM4.outputs}
+    genrou = {q.name: q.unit for q in GENROU.states + GENROU.outputs}
+    assert SM4.ports.output("rotor_speed") == "rotor_speed" and GENROU.ports.output("rotor_speed") == "omega"
+    assert units["rotor_speed"] == genrou["omega"] == SIGNALS["rotor_speed"][1] == "pu"
 
 
 def test_resistance_makes_bus_power_smaller_than_air_gap_power():
     p = SM4Params(Re=0.05)
     x = steady_state(1.0, 0.0, p)
-    Id, Iq, _, _, P, _ = outputs(x, np.array([1.0, 0.0, PM, EFD]), p)
+    Id, Iq, _, _, P, _, _ = outputs(x, np.array([1.0, 0.0, PM, EFD]), p)
     assert P == pytest.approx(PM - 0.05 * (Id**2 + Iq**2), abs=1e-10)
 
 

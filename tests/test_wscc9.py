@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from reference_models.grid import monolithic, wscc9
-from reference_models.grid.case import CaseError, load_units
+from reference_models.grid.case import CaseError, Source, load_units, unit_wiring
 from reference_models.grid.contingency import Contingency
 from reference_models.sm4 import SM4
 
@@ -87,6 +87,27 @@ def unit(bus, machine="sm4", exciter="ieee1"):
 def test_malformed_dynamic_data_is_refused_naming_the_generator(tmp_path, generators, message):
     with pytest.raises(CaseError, match=message):
         load_units(dynamic_data(tmp_path, generators), wscc9.GENERATOR_BUSES)
+
+
+def test_a_governor_on_an_sm4_machine_takes_its_speed_in_pu(tmp_path):
+    """TGOV1 (speed in pu, as GENROU gives it) on generator 1 takes SM4's rotor_speed = 1 + omega / Wb:
+    its valve is the lag 1 / (1 + s T1) of Pm0 - (rotor_speed - 1) / R along the run's own speed."""
+    governed = dict(unit(1), governor={"component": "tgov1", "params": {}})
+    case = wscc9.case(dynamic_data(tmp_path, [governed, unit(2), unit(3)]))
+    machine, _, governor = case.units[0].devices
+    wiring = unit_wiring([d.component.ports for d in case.units[0].devices])
+    assert wiring[2]["omega"] == Source("device", device=0, variable="rotor_speed")
+    r = monolithic.simulate(monolithic.System(case), Contingency(7, 0.1), 2.0, step=0.001)
+    valve, speed = r.device_states["TGOV1_1_LAG_y"], 1.0 + r.omega[:, 0] / machine.params.Wb
+    demand = valve[0] - (speed - 1.0) / governor.params.R  # Pref = R Pm0: at rest the valve is Pm0
+    T1, lagged = governor.params.T1, [valve[0]]
+    for k in range(1, len(r.time)):  # the lag's exact step with the demand linear between rows
+        h = r.time[k] - r.time[k - 1]
+        rate = (demand[k] - demand[k - 1]) / h
+        lagged.append(demand[k] - rate * T1 + (lagged[-1] - demand[k - 1] + rate * T1) * math.exp(-h / T1))
+    assert valve[0] == pytest.approx(wscc9.load_flow().P_gen[0], abs=1e-9)
+    assert valve.min() < valve[0] - 0.1  # the machine sped up by several rad/s, the valve closed
+    np.testing.assert_allclose(valve, lagged, rtol=0, atol=1e-5)
 
 
 def test_trips_that_keep_every_generator_connected():
