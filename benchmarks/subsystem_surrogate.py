@@ -2,11 +2,11 @@
 full detail and its hand-made aggregate, side by side in one run, on contingencies of host cases
 that training drew none of (issue 35, docs/subsystems.md).
 
-    python benchmarks/subsystem_surrogate.py --subsystem FILE [--at ieee14:9 ieee39:16 ...]
+    python benchmarks/subsystem_surrogate.py --subsystem FILE [--at ieee14:9 ieee39:16+25 ...]
                                              [--contingencies 8] [--stop 3] [--seed 100]
                                              [--out benchmarks/subsystem_surrogate]
 
-Per attachment HOST:BUS, contingencies drawn with --seed (training's seeds are 0 and up: a seed of
+Per attachment HOST:BUS[+BUS...] (the sub-system at each of those buses), contingencies drawn with --seed (training's seeds are 0 and up: a seed of
 100 and its own draw give other faults): faults at the boundary bus (through 0.01-0.1 pu), at a
 neighbour or anywhere in the host (through 1e-4j pu or 0.003-0.3 pu), cleared after 50-200 ms, and
 one host generator tripped. Each runs to --stop at h = 10 ms as
@@ -16,8 +16,8 @@ one host generator tripped. Each runs to --stop at h = 10 ms as
 * the aggregate (reference_models.grid.aggregate) as native FMUs;
 * the surrogate: the host's devices as native FMUs, the sub-system one surrogate FMU
   (cosim.subsystem_operator.surrogate_in).
-Errors outside the fault's own steps: the power and current the sub-system injects at its boundary
-(P, Q, |I| in % of its rating), the boundary voltage [pu] and the host's rotor angles relative to
+Errors outside the fault's own steps: the power and current each sub-system injects at its boundary
+(P, Q, |I| in % of its rating; the largest over the boundaries), the boundary voltage [pu] and the host's rotor angles relative to
 its first machine [deg]. Writes OUT.json (every number), OUT.md (the tables, the aggregate's errors
 over the surrogate's) and OUT.png (the boundary P and Q of the contingency where the aggregate is
 furthest off). Needs ANDES.
@@ -44,16 +44,19 @@ from cosim.subsystem_operator import registered, surrogate_in  # noqa: E402
 from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402
-from reference_models.grid.boundary import boundary_current, subsystem_buses, subsystem_rating  # noqa: E402
+from reference_models.grid.boundary import (boundary_current, equivalent_units, subsystem_buses,  # noqa: E402
+                                            subsystem_rating)
 from reference_models.grid.case import Event  # noqa: E402
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
 
 FAULT_START = 1.0  # s
 
 
-def contingencies(case, bus: int, count: int, rng) -> list:
-    """`count` - 1 faults and one generator trip on the host side of `case` (module docstring)."""
-    behind = set(subsystem_buses(case.network, bus))
+def contingencies(case, buses: list, count: int, rng) -> list:
+    """`count` - 1 faults and one generator trip on the host side of `case` (module docstring), near
+    the first of the attachment buses `buses`."""
+    bus = buses[0]
+    behind = set().union(*(subsystem_buses(case.network, b) for b in buses))
     host = [b for b in case.network.buses if b not in behind]
     near = [br.to_bus if br.from_bus == bus else br.from_bus for br in case.network.branches
             if br.connects(bus) and not behind.intersection((br.from_bus, br.to_bus))]
@@ -88,15 +91,15 @@ def on_host(contingency, case):
 
 
 def boundary(result, case, bus: int) -> tuple:
-    """(S [n] complex, |I| [n], V [n]) at the boundary: from the branches into the sub-system, or
-    where the case has none (the surrogate's) from its last unit's P, Q and bus current."""
+    """(S [n] complex, |I| [n], V [n]) at the boundary: from the branches into the sub-system, or for
+    a sub-system run as its surrogate from the equivalent's own P and Q."""
     i = case.network.bus_index(bus)
     V = result.V_bus[:, i] * np.exp(1j * result.theta_bus[:, i])
-    try:
-        current = boundary_current(case.network, result.V_bus, result.theta_bus, bus)
-    except ValueError:  # nothing behind the bus: the sub-system is the case's last unit
-        S = result.P[:, -1] + 1j * result.Q[:, -1]
+    units = equivalent_units(case, bus)
+    if units:
+        S = result.P[:, units].sum(axis=1) + 1j * result.Q[:, units].sum(axis=1)
         return S, np.abs(S) / np.maximum(np.abs(V), 1e-9), np.abs(V)
+    current = boundary_current(case.network, result.V_bus, result.theta_bus, bus)
     return V * np.conj(current), np.abs(current), np.abs(V)
 
 
@@ -110,8 +113,9 @@ def timed(make, contingency, stop):
     return result, time.perf_counter() - wall, time.process_time() - cpu
 
 
-def errors(run, ref, bus: int, rating: float, contingency) -> dict:
-    """Errors of run (result, case) against ref outside the fault's steps (module docstring)."""
+def errors(run, ref, buses: list, rating: float, contingency) -> dict:
+    """Errors of run (result, case) against ref outside the fault's steps (module docstring); rating
+    [pu]: each sub-system's."""
     (a_res, a_case), (b_res, b_case) = run, ref
     ta, tb = np.round(a_res.time, 9), np.round(b_res.time, 9)
     t = np.intersect1d(ta, tb)
@@ -119,18 +123,21 @@ def errors(run, ref, bus: int, rating: float, contingency) -> dict:
     if contingency.fault_bus is not None:
         keep = ~((t >= contingency.fault_start - 1e-9) & (t < contingency.clear_s + 1e-9))
         a, b = a[keep], b[keep]
-    (Sa, Ia, Va), (Sb, Ib, Vb) = boundary(a_res, a_case, bus), boundary(b_res, b_case, bus)
-    host_a = [k for k, u in enumerate(a_case.units) if u.bus in b_case.network.buses
-              and u.bus not in _behind(b_case, bus) and np.isfinite(a_res.rotor_angle[0, k])]
-    host_b = [k for k, u in enumerate(b_case.units) if u.bus not in _behind(b_case, bus)
-              and np.isfinite(b_res.rotor_angle[0, k])]
+    behind = set().union(*(_behind(b_case, bus) for bus in buses))
+    host_a = [k for k, u in enumerate(a_case.units) if u.bus in b_case.network.buses and u.bus not in behind
+              and not a_case.units[k].machine.component.learned_states and np.isfinite(a_res.rotor_angle[0, k])]
+    host_b = [k for k, u in enumerate(b_case.units) if u.bus not in behind and np.isfinite(b_res.rotor_angle[0, k])]
     da = (a_res.rotor_angle[a][:, host_a] - a_res.rotor_angle[a][:, host_a[:1]]) \
         - (b_res.rotor_angle[b][:, host_b] - b_res.rotor_angle[b][:, host_b[:1]])
-    return {"P_percent": float(100 * np.nanmax(np.abs(Sa[a].real - Sb[b].real)) / rating),
-            "Q_percent": float(100 * np.nanmax(np.abs(Sa[a].imag - Sb[b].imag)) / rating),
-            "I_percent": float(100 * np.nanmax(np.abs(Ia[a] - Ib[b])) / rating),
-            "V_boundary": float(np.nanmax(np.abs(Va[a] - Vb[b]))),
-            "angle_deg": float(np.degrees(np.nanmax(np.abs(da)))) if da.size else None}
+    out = {"P_percent": 0.0, "Q_percent": 0.0, "I_percent": 0.0, "V_boundary": 0.0,
+           "angle_deg": float(np.degrees(np.nanmax(np.abs(da)))) if da.size else None}
+    for bus in buses:
+        (Sa, Ia, Va), (Sb, Ib, Vb) = boundary(a_res, a_case, bus), boundary(b_res, b_case, bus)
+        out["P_percent"] = max(out["P_percent"], float(100 * np.nanmax(np.abs(Sa[a].real - Sb[b].real)) / rating))
+        out["Q_percent"] = max(out["Q_percent"], float(100 * np.nanmax(np.abs(Sa[a].imag - Sb[b].imag)) / rating))
+        out["I_percent"] = max(out["I_percent"], float(100 * np.nanmax(np.abs(Ia[a] - Ib[b])) / rating))
+        out["V_boundary"] = max(out["V_boundary"], float(np.nanmax(np.abs(Va[a] - Vb[b]))))
+    return out
 
 
 def _behind(case, bus) -> set:
@@ -160,13 +167,15 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         aggregate = aggregate_file(sub, tmp / "aggregates")
         for spec in args.at:
-            name, bus = spec.split(":")
-            bus = int(bus)
+            name, buses = spec.split(":")
+            buses = [int(b) for b in buses.split("+")]
             host = Path(andes.get_case(ANDES_CASES[name])) if name in ANDES_CASES else Path(name)
-            detail = case_from_file(attached_file(host, [(bus, sub)], tmp / "attached"))
-            agg = case_from_file(attached_file(host, [(bus, aggregate)], tmp / "attached"))
-            surrogate = surrogate_in(detail, bus, sub)
-            rating = subsystem_rating(detail, bus) / detail.network.base_mva
+            detail = case_from_file(attached_file(host, [(b, sub) for b in buses], tmp / "attached"))
+            agg = case_from_file(attached_file(host, [(b, aggregate) for b in buses], tmp / "attached"))
+            surrogate = detail
+            for b in buses:
+                surrogate = surrogate_in(surrogate, b, sub)
+            rating = subsystem_rating(detail, buses[0]) / detail.network.base_mva
             fmus = {label: generator_files(case, kind, tmp / "fmus") for label, case, kind in
                     (("detail", detail, "reference"), ("aggregate", agg, "reference"), ("surrogate", surrogate, None))}
             runners = {
@@ -177,7 +186,7 @@ def main(argv=None) -> int:
                 "surrogate FMU": (surrogate, lambda: MasterRunner(fmus["surrogate"], surrogate,
                                                                   MasterSettings(step=0.01))),
             }
-            for contingency in contingencies(detail, bus, args.contingencies, rng):
+            for contingency in contingencies(detail, buses, args.contingencies, rng):
                 runs = {}
                 for label, (case, make) in runners.items():
                     try:
@@ -187,16 +196,16 @@ def main(argv=None) -> int:
                         runs[label] = (None, case, None, None, str(exc).splitlines()[0][:160])
                 ref_label = next(k for k in ("detail, ANDES 1 ms", "detail, native FMUs") if runs[k][0] is not None) \
                     if any(runs[k][0] is not None for k in ("detail, ANDES 1 ms", "detail, native FMUs")) else None
-                what = f"{name} at bus {bus}: {describe(contingency)}"
+                what = f"{name} at bus {'+'.join(map(str, buses))}: {describe(contingency)}"
                 print(what, {k: (f"{v[2]:.2f} s" if v[4] is None else v[4][:60]) for k, v in runs.items()}, flush=True)
                 for label, (result, case, wall, cpu, failed) in runs.items():
-                    row = {"attachment": f"{name}:{bus}", "contingency": describe(contingency), "run": label,
+                    row = {"attachment": f"{name}:{'+'.join(map(str, buses))}", "contingency": describe(contingency), "run": label,
                            "wall_s": wall, "cpu_s": cpu, "failed": failed, "reference": ref_label, "rating_pu": rating}
                     if result is not None and ref_label is not None and label != ref_label:
-                        row.update(errors((result, case), runs[ref_label][:2], bus, rating, contingency))
+                        row.update(errors((result, case), runs[ref_label][:2], buses, rating, contingency))
                     rows.append(row)
                 if ref_label is not None:
-                    traces[what] = {label: (np.asarray(v[0].time), boundary(v[0], v[1], bus)[0])
+                    traces[what] = {label: (np.asarray(v[0].time), boundary(v[0], v[1], buses[0])[0])
                                     for label, v in runs.items() if v[0] is not None}
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -58,7 +58,7 @@ class Plan:
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
-    runs: int = 180
+    runs: int = 240
     stop: float = 3.0
     step: float = 0.01
     fault_start: float = 0.5
@@ -66,7 +66,7 @@ class Plan:
     trips: float = 0.2
     opened: float = 0.25
     horizon: float = 0.2
-    stride: float = 0.05
+    stride: float = 0.02
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -88,7 +88,7 @@ def subsystem_params(records: dict, case, bus: int) -> dict:
     device = (I0 + Y / n ** 2 * V) * np.exp(-1j * case.flow.theta[b]) * n  # at the sub-system's own voltage
     freq = records.get("BusFreq", [])
     rating = sum(float(r.get("Sn", 0.0)) for model in GENERATING_MODELS for r in records.get(model, []))
-    return {"Sb": float(case.network.base_mva), "S": rating, "G": Y.real, "B": Y.imag, "V_own": V_own,
+    return {"Sb": float(case.network.base_mva), "S": rating, "G": float(Y.real), "B": float(Y.imag), "V_own": V_own,
             "Ip_own": float(device.real), "Iq_own": float(-device.imag),
             "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
             "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],

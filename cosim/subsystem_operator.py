@@ -25,8 +25,8 @@ from .subsystem_data import Plan, generate
 
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
 # (their rates are affine: corrections.c), so the data loss weighs them little
-TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=64, anchored=True, time_taus=(0.01, 0.03, 0.1)),
-                       epochs=1500, patience=10**9, time_points=None, causal=True, physics=True,
+TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1)),
+                       epochs=2000, patience=10**9, time_points=None, causal=True, physics=True,
                        weights=LossWeights(physics_collocation=0.0), state_weights=(0.2, 0.2, 5.0, 5.0, 0.2),
                        checkpoint_every=100)
 

@@ -240,8 +240,13 @@ def build_network(case, fault_buses=()) -> VeraGridNetwork:
     data = {g.bus if g.name is None else (g.bus, g.name): g for g in net.generators}
     generators = []
     for unit in case.units:
-        if unit.load is not None:
-            raise CouplingError(f"the VeraGrid host runs generator units; the unit at bus {unit.bus} is a load")
+        if unit.load is not None:  # a unit that draws (a sub-system's equivalent, a dynamic load): its
+            # injection -load at the load flow's voltage, which VeraGrid's power flow then holds
+            gen = dev.Generator(name=f"unit {unit.bus} {len(generators)}", P=-float(unit.load.real) * base,
+                                vset=float(flow.V[net.bus_index(unit.bus)]))
+            grid.add_generator(buses[unit.bus], gen)
+            generators.append(gen)
+            continue
         g = data.get((unit.bus, unit.generator), data.get(unit.bus))
         gen = dev.Generator(name=f"gen {unit.bus}" + (f" {unit.generator}" if unit.generator else ""),
                             P=float(g.P or 0.0) * base, vset=float(g.V))

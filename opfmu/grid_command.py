@@ -645,7 +645,8 @@ def cmd_run(args) -> None:
             raise UserError(VERAGRID_MISSING)
         if args.fmus not in (None, "reference"):
             raise UserError(f"--host veragrid runs native FMUs (--fmus reference), not --fmus {args.fmus}")
-        main_kind = args.fmus = "reference"
+        if not learned:  # with an --attach ...:surrogate each unit keeps its own FMU
+            main_kind = args.fmus = "reference"
     kinds = [args.fmus] + [k for k in compare if k != main_kind]
     for kind in kinds:
         _check_fmus(case, kind, args.fmu_cache, contingency)

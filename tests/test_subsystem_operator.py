@@ -3,6 +3,7 @@ frames that only turn, learned states, its windows recorded from the detail (cos
 and the way from them to an FMU that stands for the sub-system in a host case."""
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 
@@ -197,3 +198,34 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_close_to_its_detail(tmp_pa
     for name in ("P_attach_9", "Q_attach_9"):
         assert np.max(np.abs(surrogate[name] - detail[name])[outside]) < 0.02 * rating
     assert np.ptp(detail["P_attach_9"]) > 0.2 * rating  # the fault moved the feeder
+
+
+@pytest.mark.andes
+@pytest.mark.veragrid
+@pytest.mark.skipif(importlib.util.find_spec("VeraGridEngine") is None, reason="no VeraGridEngine (optional host)")
+def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, monkeypatch):
+    """The shipped feeder's surrogate FMU as a device of VeraGrid's RMS simulation (explicit coupling,
+    its Norton port) through a fault in ieee14: what the own master gives."""
+    import csv
+
+    from opfmu.cli import main
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
+    common = ["grid", "run", "--case", "ieee14", "--attach", "9=feeder:surrogate", "--fault", "4", "--clear", "1.1",
+              "--stop", "1.6", "--no-case-events", "--fmu-cache", str(tmp_path / "fmus")]
+    assert main([*common, "--host", "veragrid", "--out", str(tmp_path / "veragrid")]) == 0
+    assert main([*common, "--out", str(tmp_path / "master")]) == 0
+
+    def columns(run):
+        with open(tmp_path / run / "result.csv") as f:
+            rows = [r for r in csv.reader(f) if not r[0].startswith("#")]
+        return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
+
+    vg, own = columns("veragrid"), columns("master")
+    rating = json.loads((tmp_path / "master" / "summary.json").read_text())["S_attach_9"] / 100.0
+    outside = (own["time"] < 1.0) | (own["time"] >= 1.1 + 1e-9)
+    for name in ("P_attach_9", "Q_attach_9"):
+        assert np.max(np.abs(vg[name] - own[name])[outside]) < 0.02 * rating
+    angles = [n for n in own if n.startswith("delta_")]
+    relative = lambda c: np.array([c[n] - c[angles[0]] for n in angles])  # noqa: E731
+    assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
