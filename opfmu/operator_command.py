@@ -18,6 +18,9 @@ Stages, each resumed where an interrupted run left it (rerun the same command):
 4. DIR/report.md: the single-window metrics on the test split and (SM4 recipes) 60 s
    co-simulations of both FMUs under fmpy at h = 10 ms on the built-in scenarios at the machine's
    operating point, with plots; the `case` recipe's operator is checked in its case instead.
+
+With --subsystem FILE (a sub-system's case file, or an FMU of one) instead of --machine, the command
+learns a whole sub-system seen through its boundary bus: opfmu/subsystem_command.py.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
-                   [--buses N] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
+                   [--buses N] [--stride S] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
     opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [the same options]
 
 A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
@@ -11,6 +11,7 @@ host voltages (cosim.black_box_data).
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -33,6 +34,8 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--hosts", nargs="+", default=None, metavar="NAME",
                     help="with --subsystem: ANDES cases it is attached to (default ieee14 kundur ieee39)")
     op.add_argument("--buses", type=int, default=None, help="with --subsystem: attachment buses per host (default 3)")
+    op.add_argument("--stride", type=float, default=None, metavar="S",
+                    help="with --subsystem: seconds between the starts of the windows of a run (default 0.02)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
 
@@ -42,7 +45,7 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --epochs, --seed, --workers, --name")
+                        "--hosts, --buses, --stride, --epochs, --seed, --workers, --name")
     path = Path(args.subsystem)
     if not path.is_file():
         raise UserError(f"--subsystem: no file {path}")
@@ -67,8 +70,6 @@ def cmd_subsystem(args) -> None:
 
 def _black_box(path: Path, args) -> None:
     """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
-    import math
-
     if args.boundary is not None:
         raise UserError("--boundary is for a case file; a black box (an FMU) is its bus port")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
@@ -88,11 +89,15 @@ def _plan(args):
     if unknown:
         raise UserError(f"--hosts {' '.join(unknown)}: not a host case (known: {', '.join(ANDES_CASES)})")
     plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
-                buses=Plan.buses if args.buses is None else args.buses)
+                buses=Plan.buses if args.buses is None else args.buses,
+                stride=Plan.stride if args.stride is None else args.stride)
+    steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
-            and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256):
+            and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)
+            and 1 <= round(steps) <= 100 and abs(steps - round(steps)) < 1e-9):
         raise UserError(f"--runs must lie in [10, {MAX_RUNS}], --buses in [1, 100], --epochs in [1, {MAX_COUNT}], "
-                        f"--seed in [0, {MAX_COUNT}] and --workers in [1, 256]")
+                        f"--seed in [0, {MAX_COUNT}], --workers in [1, 256] and --stride be 1 to 100 steps of "
+                        f"{plan.step:g} s")
     return plan
 
 

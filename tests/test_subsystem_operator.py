@@ -180,8 +180,7 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_close_to_its_detail(tmp_pa
     from opfmu.cli import main
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
-    common = ["grid", "run", "--case", "ieee14", "--fault", "4", "--clear", "1.08", "--stop", "2",
-              "--fmu-cache", str(tmp_path / "fmus")]
+    common = ["grid", "run", "--case", "ieee14", "--fault", "4", "--clear", "1.08", "--stop", "2"]
     assert main([*common, "--attach", "9=feeder:surrogate", "--out", str(tmp_path / "surrogate")]) == 0
     assert main([*common, "--attach", "9=feeder", "--compare", "none", "--out", str(tmp_path / "detail")]) == 0
 
@@ -212,7 +211,7 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
     common = ["grid", "run", "--case", "ieee14", "--attach", "9=feeder:surrogate", "--fault", "4", "--clear", "1.1",
-              "--stop", "1.6", "--no-case-events", "--fmu-cache", str(tmp_path / "fmus")]
+              "--stop", "1.6", "--no-case-events"]
     assert main([*common, "--host", "veragrid", "--out", str(tmp_path / "veragrid")]) == 0
     assert main([*common, "--out", str(tmp_path / "master")]) == 0
 
