@@ -80,7 +80,8 @@ def add_operator_parser(sub) -> None:
                          "at each bus (default machine)")
     op.add_argument("--horizon", type=float, default=1.0, help="window length T [s] (default 1; 0.3 for a machine "
                     "in a network with D = 0, whose swings within a window are large)")
-    op.add_argument("--epochs", type=int, default=RECIPE_TRAINING["epochs"], help="training epochs (default 1500)")
+    op.add_argument("--epochs", type=int, default=None,
+                    help="training epochs (default 1500 for a machine, 2000 for a sub-system)")
     op.add_argument("--windows", type=int, default=RECIPE_COUNTS["train"],
                     help=f"training windows (default {RECIPE_COUNTS['train']}; collocation, validation and test "
                          "windows scale with it)")
@@ -174,6 +175,8 @@ def cmd_operator(args) -> None:
         return cmd_subsystem(args)
     if args.machine is None:
         raise UserError("opfmu operator needs --machine FILE (a machine) or --subsystem FILE --boundary BUS")
+    if args.epochs is None:
+        args.epochs = RECIPE_TRAINING["epochs"]
     try:
         _run(args)
     except (OperatorError, ParameterError, DatasetError, TrainError) as exc:

@@ -88,6 +88,10 @@ def _plan(args):
     unknown = [h for h in hosts if h not in ANDES_CASES]
     if unknown:
         raise UserError(f"--hosts {' '.join(unknown)}: not a host case (known: {', '.join(ANDES_CASES)})")
+    if args.epochs is None:
+        from cosim.subsystem_operator import TRAINING
+
+        args.epochs = TRAINING.epochs
     plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
                 buses=Plan.buses if args.buses is None else args.buses,
                 stride=Plan.stride if args.stride is None else args.stride)

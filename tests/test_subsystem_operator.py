@@ -228,3 +228,30 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
     angles = [n for n in own if n.startswith("delta_")]
     relative = lambda c: np.array([c[n] - c[angles[0]] for n in angles])  # noqa: E731
     assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
+
+
+def test_the_feeder_surrogate_fmu_validates_and_rests_at_its_load_flow_under_fmpy_alone(tmp_path):
+    """A third-party master: fmpy's simulate_fmu with the start from the feeder's own load flow (the
+    component's initialisation) and the bus voltage held there."""
+    import onnx
+    from fmpy import simulate_fmu
+    from fmpy.validation import validate_fmu
+
+    from cosim.subsystem_operator import SHIPPED
+    from fmu_export.surrogate_fmu import build_surrogate_fmu
+    from surrogate.contract import operator_metadata
+
+    operator = next(SHIPPED.glob("feeder-*.onnx"))
+    fmu = tmp_path / "FeederSurrogate.fmu"
+    build_surrogate_fmu(operator, fmu, model_name="FeederSurrogate")
+    assert validate_fmu(str(fmu)) == []
+    p = operator_metadata(onnx.load(str(operator)))["params"]
+    V0, theta0 = p.V_own, 0.3
+    P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2  # its own load flow's injection
+    x0, _ = SUBSYSTEM.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
+    start = {**{f"{n}0": float(v) for n, v in zip(SUBSYSTEM.state_names, x0)}, "Vs": V0, "theta_vs": theta0}
+    result = simulate_fmu(str(fmu), start_values=start, stop_time=2.0, output_interval=0.01,
+                          output=["P", "Q", "I_re", "I_im", "in_envelope"])
+    rating = p.S / p.Sb
+    assert np.max(np.abs(result["P"] - P0)) < 0.005 * rating and np.max(np.abs(result["Q"] - Q0)) < 0.005 * rating
+    assert np.all(result["in_envelope"])
