@@ -442,7 +442,7 @@ def _surrogates(case, kind) -> str | None:
     if not named:
         return None
     others = sum(len(u.devices) for u in case.units) - len(named)
-    return (f"surrogate FMUs for {len(named)} machine{'s' if len(named) > 1 else ''}: {', '.join(named)}; native "
+    return (f"surrogate FMUs for {len(named)} bus device{'s' if len(named) > 1 else ''}: {', '.join(named)}; native "
             f"reference FMUs for the other {others} device{'s' if others != 1 else ''}")
 
 

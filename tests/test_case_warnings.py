@@ -224,7 +224,7 @@ def test_surrogate_runs_say_which_devices_are_surrogates():
 
     case = wscc9.case()
     text = _surrogates(case, "surrogate")
-    assert text.startswith("surrogate FMUs for 3 machines: SM4 at bus 1 (operator wscc9_gen1.onnx), SM4 at bus 2")
+    assert text.startswith("surrogate FMUs for 3 bus devices: SM4 at bus 1 (operator wscc9_gen1.onnx), SM4 at bus 2")
     assert text.endswith("native reference FMUs for the other 3 devices")
     assert _surrogates(case, "reference") is None and _surrogates(case, "monolithic") is None
 
