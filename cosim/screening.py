@@ -305,6 +305,7 @@ def screen_one(task: ScreeningTask) -> dict:
 
 
 WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an error (a start that failed)
+CLOSE_TIMEOUT_S = 15.0  # s: a client's or local cluster's close on an interrupted start, before it is tried again
 
 
 # the longest path of a Unix socket (sun_path: 108 bytes on Linux, 104 on the BSDs and macOS), less
@@ -373,18 +374,44 @@ def _local_cluster(workers: int, scratch: str):
 def _close_quietly(client, cluster) -> None:
     """Closes `client` (None: none yet) and `cluster` with Ctrl-C held off, on the way out of an
     interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
-    by the interrupt it follows: distributed's sync then raises UnboundLocalError) is tried once more."""
+    by the interrupt it follows: distributed's sync then raises UnboundLocalError) or that waits past
+    CLOSE_TIMEOUT_S (its event loop left waiting for a worker the interrupt stopped half-started) is
+    tried once more; where one still fails, this process's child processes (the fork server and the
+    workers it started) are ended, so that nothing outlives the command."""
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
+        closed = True
         for close in ([client.close] if client is not None else []) + [cluster.close]:
             for _ in range(2):
                 try:
-                    close()
+                    close(timeout=CLOSE_TIMEOUT_S)
                     break
-                except Exception:  # dask's own shutdown failed: once more, then the exit ends the rest
+                except Exception:  # dask's own shutdown failed or hung: once more
                     continue
+            else:
+                closed = False
+        if not closed:
+            _end_children()
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def _end_children() -> None:
+    """Terminates this process's descendants, and kills those still there a few seconds later."""
+    import psutil
+
+    children = psutil.Process().children(recursive=True)
+    for child in children:
+        try:
+            child.terminate()
+        except psutil.NoSuchProcess:
+            pass
+    _, alive = psutil.wait_procs(children, timeout=5.0)
+    for child in alive:
+        try:
+            child.kill()
+        except psutil.NoSuchProcess:
+            pass
 
 
 def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:
