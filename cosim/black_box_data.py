@@ -17,18 +17,17 @@ The rows go through the same windows, splits, metadata and resumption as the det
 from __future__ import annotations
 
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from reference_models.files import write_npz
-from reference_models.progress import progress_bar
-from surrogate.data.datasets import DatasetError, load_metadata
+from surrogate.data.datasets import DatasetError
 
 from .fmu import FMU, CouplingError
-from .subsystem_data import Plan, Run, _assemble, attachment_buses, contingency_of, draw_runs, fingerprint
+from .subsystem_data import (Plan, Run, _assemble, attachment_buses, contingency_of, draw_runs, finished, fingerprint,
+                             run_all)
 
 SETTLE_S = 2.0  # s the box rests at the run's load-flow voltage before the replay
 
@@ -122,10 +121,7 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     box, out = Path(box), Path(out)
     rest = own_rest(box)
     key = fingerprint(box.read_bytes(), 0, plan, seed)
-    if (out / "metadata.json").exists():
-        meta = load_metadata(out)
-        if meta.get("fingerprint") != key:
-            raise DatasetError(f"{out} holds another dataset; choose another --out")
+    if (meta := finished(out, key)) is not None:
         return meta
     partial = out / ".partial"
     partial.mkdir(parents=True, exist_ok=True)
@@ -146,14 +142,5 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
               str(out / ".fmus"), str(partial), str(box)) for k, r in enumerate(runs)
              if not (partial / f"run_{k:05d}.npz").exists()]
-    bar = progress_bar(len(runs), "black-box replays", "run", progress, initial=len(runs) - len(tasks))
-    if workers > 1 and len(tasks) > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            for _ in pool.map(record_replay, tasks, chunksize=1):
-                bar.update(1)
-    else:
-        for task in tasks:
-            record_replay(task)
-            bar.update(1)
-    bar.close()
+    run_all(record_replay, tasks, len(runs), "black-box replays", workers, progress)
     return _assemble(out, runs, attachments, params, plan, seed, key, started, {"kind": "black box", "fmu": box.name})

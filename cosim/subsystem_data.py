@@ -287,6 +287,32 @@ def record_run(task: tuple) -> str:
     return out.name
 
 
+def finished(out: Path, key: str) -> dict | None:
+    """The metadata of the complete dataset in `out` made with fingerprint `key`, None where there is
+    none yet; DatasetError where `out` holds another."""
+    if not (out / "metadata.json").exists():
+        return None
+    meta = load_metadata(out)
+    if meta.get("fingerprint") != key:
+        raise DatasetError(f"{out} holds another dataset; choose another --out")
+    return meta
+
+
+def run_all(record, tasks: list, total: int, desc: str, workers: int, progress: bool) -> None:
+    """Runs record(task) for each task (on `workers` processes where more than one), a progress bar
+    over all `total` runs of the dataset (those done before counted as done)."""
+    bar = progress_bar(total, desc, "run", progress, initial=total - len(tasks))
+    if workers > 1 and len(tasks) > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            for _ in pool.map(record, tasks, chunksize=1):
+                bar.update(1)
+    else:
+        for task in tasks:
+            record(task)
+            bar.update(1)
+    bar.close()
+
+
 def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int) -> str:
     digest = hashlib.sha256(subsystem)
     digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__]).encode())
@@ -313,10 +339,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
-    if (out / "metadata.json").exists():
-        meta = load_metadata(out)
-        if meta.get("fingerprint") != key:
-            raise DatasetError(f"{out} holds another dataset; choose another --out")
+    if (meta := finished(out, key)) is not None:
         return meta
     partial = out / ".partial"
     partial.mkdir(parents=True, exist_ok=True)
@@ -339,16 +362,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
               str(out / ".fmus"), str(partial)) for k, r in enumerate(runs)
              if not (partial / f"run_{k:05d}.npz").exists()]
-    bar = progress_bar(len(runs), "sub-system runs", "run", progress, initial=len(runs) - len(tasks))
-    if workers > 1 and len(tasks) > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            for _ in pool.map(record_run, tasks, chunksize=1):
-                bar.update(1)
-    else:
-        for task in tasks:
-            record_run(task)
-            bar.update(1)
-    bar.close()
+    run_all(record_run, tasks, len(runs), "sub-system runs", workers, progress)
     return _assemble(out, runs, attachments, params, plan, seed, key, started,
                      {"kind": "detail", "subsystem": subsystem.name, "boundary": int(boundary)})
 

@@ -171,14 +171,21 @@ def test_a_part_of_the_host_that_hangs_off_the_attachment_bus_is_not_the_subsyst
         subsystem_buses(net, 4)
 
 
+def _columns(run) -> dict:
+    """{column: [n]} of the result.csv in the run folder `run` (the units line skipped)."""
+    import csv
+
+    with open(run / "result.csv") as f:
+        rows = [r for r in csv.reader(f) if not r[0].startswith("#")]
+    return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
+
+
 @pytest.mark.andes
 def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_the_aggregate(tmp_path, monkeypatch):
     """`--attach 9=feeder:surrogate`: the shipped operator, one FMU beside ieee14's native FMUs, through
     a fault at the host's bus 4 cleared after 80 ms; its injection within 3 % of the feeder's rating
     of the detail's (measured 2.1 % and 1.5 %), and its active power at least 3 times closer than the
     hand-made aggregate's (11.7 %)."""
-    import csv
-
     from opfmu.cli import main
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
@@ -186,12 +193,7 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_
     for kind, extra in (("surrogate", []), ("reference", ["--compare", "none"]), ("aggregate", ["--compare", "none"])):
         assert main([*common, "--attach", f"9=feeder:{kind}", *extra, "--out", str(tmp_path / kind)]) == 0
 
-    def columns(run):
-        with open(tmp_path / run / "result.csv") as f:
-            rows = [r for r in csv.reader(f) if not r[0].startswith("#")]
-        return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
-
-    runs = {kind: columns(kind) for kind in ("surrogate", "reference", "aggregate")}
+    runs = {kind: _columns(tmp_path / kind) for kind in ("surrogate", "reference", "aggregate")}
     detail = runs["reference"]
     summary = json.loads((tmp_path / "surrogate" / "summary.json").read_text())
     rating = summary["S_attach_9"] / 100.0
@@ -210,8 +212,6 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_
 def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, monkeypatch):
     """The shipped feeder's surrogate FMU as a device of VeraGrid's RMS simulation (explicit coupling,
     its Norton port) through a fault in ieee14: what the own master gives."""
-    import csv
-
     from opfmu.cli import main
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
@@ -220,12 +220,7 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
     assert main([*common, "--host", "veragrid", "--out", str(tmp_path / "veragrid")]) == 0
     assert main([*common, "--out", str(tmp_path / "master")]) == 0
 
-    def columns(run):
-        with open(tmp_path / run / "result.csv") as f:
-            rows = [r for r in csv.reader(f) if not r[0].startswith("#")]
-        return {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
-
-    vg, own = columns("veragrid"), columns("master")
+    vg, own = _columns(tmp_path / "veragrid"), _columns(tmp_path / "master")
     rating = json.loads((tmp_path / "master" / "summary.json").read_text())["S_attach_9"] / 100.0
     outside = (own["time"] < 1.0) | (own["time"] >= 1.1 + 1e-9)
     for name in ("P_attach_9", "Q_attach_9"):
