@@ -40,11 +40,6 @@ from reference_models.models import STANDARD_MODELS  # noqa: E402
 RTOL = 1e-10  # CVode's relative tolerance (its absolute one: this times the states' nominal, 1)
 OUTPUT_INTERVAL = 0.01  # s
 GOAL = 1e-6  # of the values' scale
-# why a model cannot agree (docs/fmu.md, "The native reference FMU: Model Exchange")
-HELD = ("S0_y held on LVPL, which falls with the filtered voltage: placed on it at each integrator step "
-        "(Model Exchange) or each communication point (co-simulation), ANDES' semantics sampled at different "
-        "instants; the difference is LVPL's fall over the gap")
-WHY = {"REGCA1": HELD, "REGCP1": HELD}
 
 
 def input_signal(component, pieces) -> np.ndarray:
@@ -106,7 +101,7 @@ def compare(name: str, fmi_version: int, cache) -> dict:
         k = int(np.argmax(e))
         if e[k] > worst or variable is None:
             worst, variable, instant = float(e[k]), n, float(cs["time"][k])
-    status = "agrees" if worst <= GOAL else "differs" + (f" ({WHY[name]})" if name in WHY else "")
+    status = "agrees" if worst <= GOAL else "differs"
     return {**row, "difference": worst, "worst": variable, "at": instant, "status": status,
             "seconds": round(time.perf_counter() - began, 2)}
 

@@ -1,7 +1,8 @@
 """A generated feeder attached to a host case, run side by side in one process: its full detail as
-native FMUs in opfmu's master, in the monolithic DAE and in ANDES, and its hand-made aggregate
-(reference_models.grid.aggregate) as native FMUs; the aggregate's errors against the detail, and
-every run's wall and CPU time, for feeders of N units (issue 35).
+native FMUs in opfmu's master, in the monolithic DAE and in ANDES, its hand-made aggregate
+(reference_models.grid.aggregate) as native FMUs, and where an operator is registered for the
+generated file (`opfmu operator --subsystem FILE`), its surrogate FMU; their errors against the
+detail, and every run's wall and CPU time, for feeders of N units (issue 35).
 
     python benchmarks/subsystems.py [--host ieee14] [--bus 9 [BUS ...]] [--fault 4] [--kind feeder|plant]
                                     [--units 10 30 100 300] [--clear 0.1] [--stop 3] [--seed 0]
@@ -40,7 +41,8 @@ from cosim.runners import MasterRunner, MonolithicRunner  # noqa: E402
 from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402
-from reference_models.grid.boundary import boundary_power  # noqa: E402
+from cosim.subsystem_operator import registered, surrogate_in  # noqa: E402
+from reference_models.grid.boundary import boundary_power, equivalent_units  # noqa: E402
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
 from reference_models.grid.subsystems import FeederSpec, PlantSpec, feeder, plant, write_case  # noqa: E402
 
@@ -57,11 +59,11 @@ def errors(run, case_run, ref, case_ref, buses, rating: float, fault: tuple) -> 
     a, b, t = _common(run, ref)
     keep = ~((t >= fault[0] - 1e-9) & (t < fault[1] + 1e-9))
     a, b = a[keep], b[keep]
-    S = [(boundary_power(case_run.network, run.V_bus, run.theta_bus, bus)[a],
-          boundary_power(case_ref.network, ref.V_bus, ref.theta_bus, bus)[b]) for bus in buses]
+    S = [(injected(run, case_run, bus)[a], injected(ref, case_ref, bus)[b]) for bus in buses]
     machines = np.isfinite(ref.rotor_angle[0])
     host = [k for k, u in enumerate(case_ref.units) if u.bus < 1000 and machines[k]]
-    host_run = [k for k, u in enumerate(case_run.units) if u.bus < 1000 and np.isfinite(run.rotor_angle[0, k])]
+    host_run = [k for k, u in enumerate(case_run.units) if u.bus < 1000 and np.isfinite(run.rotor_angle[0, k])
+                and not u.machine.component.learned_states]
     da = (run.rotor_angle[a][:, host_run] - run.rotor_angle[a][:, host_run[:1]]) \
         - (ref.rotor_angle[b][:, host] - ref.rotor_angle[b][:, host[:1]])
     V = [np.abs(run.V_bus[a, case_run.network.bus_index(bus)] - ref.V_bus[b, case_ref.network.bus_index(bus)])
@@ -70,6 +72,26 @@ def errors(run, case_run, ref, case_ref, buses, rating: float, fault: tuple) -> 
             "Q_percent": float(100 * max(np.max(np.abs(x.imag - y.imag)) for x, y in S) / rating),
             "angle_deg": float(np.degrees(np.max(np.abs(da)))),
             "V_boundary": float(max(np.max(v) for v in V))}
+
+
+def injected(result, case, bus: int) -> np.ndarray:
+    """[n] complex: the power the sub-system behind `bus` injects into it: from the branches into it,
+    or for one run as its surrogate, the equivalent's own P + jQ."""
+    units = equivalent_units(case, bus)
+    if units:
+        return result.P[:, units].sum(axis=1) + 1j * result.Q[:, units].sum(axis=1)
+    return boundary_power(case.network, result.V_bus, result.theta_bus, bus)
+
+
+def with_surrogates(detail, subs):
+    """The detail case with each sub-system run as its surrogate FMU, or None where an operator is
+    not registered for one of them (opfmu operator --subsystem FILE)."""
+    if any(registered(path) is None for _, path in subs):
+        return None
+    case = detail
+    for bus, path in subs:
+        case = surrogate_in(case, bus, path)
+    return case
 
 
 def timed(runner, contingency, stop):
@@ -112,10 +134,11 @@ def main(argv=None) -> int:
             agg = case_from_file(attached_file(host, [(bus, aggregate_file(path, tmp / "aggregates"))
                                                       for bus, path in subs], tmp / "attached"))
             fault = (1.0, 1.0 + args.clear)
+            surrogate = with_surrogates(detail, subs)
             contingency = {name: Contingency(fault_bus=args.fault, fault_start=1.0, clear_s=fault[1],
                                              fault_impedance=ANDES_FAULT_IMPEDANCE, network=c.network,
                                              events=c.events)
-                           for name, c in (("detail", detail), ("aggregate", agg))}
+                           for name, c in (("detail", detail), ("aggregate", agg), ("surrogate", surrogate or detail))}
             runs = {}
             for label, case, runner in (
                     ("detail, native FMUs", detail,
@@ -127,8 +150,11 @@ def main(argv=None) -> int:
                     ("detail, ANDES 1 ms", detail, lambda: AndesRunner(detail, 0.001, rows=0.01)),
                     ("aggregate, native FMUs", agg,
                      lambda: MasterRunner(generator_files(agg, "reference", tmp / "fmus"), agg,
-                                          MasterSettings(step=0.01)))):
-                kind = "aggregate" if case is agg else "detail"
+                                          MasterSettings(step=0.01))),
+                    ("surrogate FMU", surrogate,
+                     lambda: surrogate and MasterRunner(generator_files(surrogate, None, tmp / "fmus"), surrogate,
+                                                        MasterSettings(step=0.01)))):
+                kind = "aggregate" if case is agg else "surrogate" if case is surrogate else "detail"
                 try:
                     made = runner()
                     if made is None:

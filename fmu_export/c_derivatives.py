@@ -17,7 +17,7 @@ import re
 
 from reference_models.component import Component
 
-from .c_equations import c_size, live_statements, p_argument, p_unused, symbolic
+from .c_equations import c_function, c_size, live_statements, p_argument, p_unused, symbolic
 from .c_parameters import ParamCondition, ParamExpr, c_literal
 
 _NAME = re.compile(r"\bd\d+\b")
@@ -194,3 +194,21 @@ def jacobians_c_source(component: Component, params) -> str:
     outs = c_jacobian_function("model_outputs_jacobian", component.output_equations, component, params,
                                len(component.outputs), f"{component.name} d(outputs)/d(x, u)")
     return header + rhs + "\n" + outs
+
+
+def start_equations_c_source(component: Component, params) -> str:
+    """C source of `model_start_equations(x, u, p, r)` and `component_start_jacobian(x, u, p, J)`
+    (model.h) for a component with start equations of its own (Component.start_equations), "" for
+    one without: its start solves its rates."""
+    if component.start_equations is None:
+        return ""
+    n_x, n_u = component.n_states, component.n_inputs
+    residuals = c_function("model_start_equations", component.start_equations, component, params,
+                           [f"start equation of {n}" for n in component.state_names],
+                           f"{component.name} start equations", linkage="OPFMU_INTERNAL")
+    jacobian = c_jacobian_function("start_equations_jacobian", component.start_equations, component, params, n_x,
+                                   f"{component.name} d(start equations)/d(x, u)")
+    return (residuals + "\n" + jacobian + "\n"
+            f"void component_start_jacobian(const double x[{c_size(n_x)}], const double u[{n_u}], const double p[], "
+            f"double J[{c_size(n_x) * (n_x + n_u)}])\n"
+            "{\n    start_equations_jacobian(x, u, p, J);\n}\n")

@@ -72,7 +72,7 @@ from .cross_check import cross_check
 from .fmu_archive import write_fmu
 from .model_description import model_description
 from .python_reference_fmu import machine_params
-from .self_start import config_lines as self_start_config, describe as describe_self_start
+from .self_start import config_lines as self_start_config, self_start_of
 from .self_start import variables as self_start_variables
 from .variables import (REFERENCE_EXTRAS, REFERENCE_STARTS, SYSTEM_BASE_MVA, exchange_variables, fmu_variables,
                         start_inputs, start_state, vr_header)
@@ -105,16 +105,6 @@ def native_reference_variables(component: Component = SM4, params=None):
                                             bus_outputs=True, space=space,
                                             self_start=spec and self_start_variables(spec, component)),
                               component, switching_c_source(component, space)[0])
-
-
-def self_start_of(component: Component, params, x_start, operating_point: dict | None = None):
-    """The start from the load flow the native reference FMU of `component` solves itself
-    (fmu_export.self_start.SelfStart), at its default rest x_start [n_x] under the start inputs;
-    None where it has none (its system is not square, or it fixes nothing to start from)."""
-    spec, _ = describe_self_start(component, params, x_start, start_inputs(component, operating_point))
-    if spec is None or not (spec.load_flow or spec.delivers or spec.solves):
-        return None
-    return spec
 
 
 def structure_of(component: Component, params=None) -> dict:

@@ -29,7 +29,7 @@ import numpy as np
 
 from reference_models.component import LOAD_FLOW, Component
 
-from .variables import Variable
+from .variables import Variable, start_inputs
 
 LOAD_FLOW_VARIABLES = (
     ("V_lf", "pu", "bus voltage magnitude at the load flow"),
@@ -114,9 +114,11 @@ def describe(component: Component, params, x_rest, u_rest) -> tuple:
                      if n in given.read and n in deliverable and n not in component.input_names)
     load_flow = bus is not None and any(k in given.read for k in LOAD_FLOW)
     conditions = (["P_lf", "Q_lf"] if load_flow else []) + [f"{n}{INIT_SUFFIX}" for n in delivers]
-    if len(solves) != len(conditions):
+    learned = [component.state_names[i] for i in component.learned_states]
+    if len(solves) + len(learned) != len(conditions):
         return None, (f"its start fixes {', '.join(conditions) or 'nothing'} but solves "
-                      f"{', '.join(solves) or 'no input'}: not one solved input per condition")
+                      f"{', '.join(list(solves) + learned) or 'no input'}: not one solved input or learned state "
+                      "per condition")
     solves = tuple(n for n in component.input_names if n in solves)
     spec = SelfStart(load_flow, delivers, solves, tuple(float(v) for v in flow),
                      tuple(float(values[n]) for n in delivers), None)
@@ -126,6 +128,16 @@ def describe(component: Component, params, x_rest, u_rest) -> tuple:
             return replace(spec, anchor=point), None
     return None, ("its start equations are singular at each start tried (a limit active there, or a state no rest "
                   "fixes: a storage's state of charge, an integrator of gain 0 that its output reads)")
+
+
+def self_start_of(component: Component, params, x_start, operating_point: dict | None = None):
+    """The start from the load flow a native FMU (reference or surrogate) of `component` solves itself
+    (fmu_export.self_start.SelfStart), at its default rest x_start [n_x] under the start inputs;
+    None where it has none (its system is not square, or it fixes nothing to start from)."""
+    spec, _ = describe(component, params, x_start, start_inputs(component, operating_point))
+    if spec is None or not (spec.load_flow or spec.delivers or spec.solves):
+        return None
+    return spec
 
 
 # the delivered values tried as the anchor where the default rest's Jacobian is singular (a limit is active there)
@@ -139,7 +151,8 @@ def _residual(component: Component, params, spec: SelfStart, z, u, flow, deliver
     x, u = np.asarray(z[:n_x], dtype=float), np.array(u, dtype=float)
     index = [component.input_names.index(n) for n in spec.solves]
     u[index] = z[n_x:]
-    out = list(np.asarray(component.rhs(x, u, params), dtype=float).reshape(-1)[:n_x])
+    rates = np.asarray(component.start_residual(x, u, params), dtype=float).reshape(-1)[:n_x]
+    out = [rates[i] for i in rate_rows(component)]
     y = dict(zip(component.output_names, np.asarray(component.output_values(x, u, params), dtype=float)))
     y.update(zip(component.state_names, x))
     if spec.load_flow:
@@ -149,6 +162,12 @@ def _residual(component: Component, params, spec: SelfStart, z, u, flow, deliver
         out += [power.real - flow[2], power.imag - flow[3]]
     out += [y[n] - d for n, d in zip(spec.delivers, delivered)]
     return np.array(out)
+
+
+def rate_rows(component: Component) -> list:
+    """The states whose start equations (their rates, or `start_equations`) are the start's first
+    rows, in order: all but the learned ones."""
+    return [i for i in range(component.n_states) if i not in component.learned_states]
 
 
 def _anchor(component: Component, params, spec: SelfStart, values: dict, delivered) -> Anchor | None:
@@ -173,10 +192,10 @@ def _anchor(component: Component, params, spec: SelfStart, values: dict, deliver
         columns.append((_residual(component, params, spec, z + e, u, flow, delivered)
                         - _residual(component, params, spec, z - e, u, flow, delivered)) / (2 * h))
     J = np.array(columns).T
-    n_x = component.n_states
-    inert = tuple(i for i in range(n_x) if not np.any(J[i]) and not np.any(J[:, i]))
+    rows = rate_rows(component)  # the state whose start equation each first row is
+    inert = tuple(i for k, i in enumerate(rows) if not np.any(J[k]) and not np.any(J[:, i]))
     for i in inert:
-        J[i, i] = 1.0
+        J[rows.index(i), i] = 1.0
     scale = np.max(np.abs(J), axis=1)
     if not np.all(scale > 0):
         return None
@@ -215,8 +234,14 @@ def config_lines(component: Component, spec: SelfStart) -> list:
                        else -1 - component.state_names.index(name))
     solved = [index[n] for n in spec.solves]
     anchor = spec.anchor
-    return [
+    rows = rate_rows(component)
+    own = ["#define OPFMU_HAS_START_EQUATIONS 1 /* model_start_equations replaces the rates */"] \
+        if component.start_equations is not None else []
+    return own + [
         "#define OPFMU_SELF_START 1 /* the FMU solves its start from the load flow (c/self_start.c) */",
+        f"#define SELF_START_N_RATE_ROWS {len(rows)} /* the states' own start equations: all but the learned */",
+        f"static const int SELF_START_RATE_ROWS[{max(len(rows), 1)}] = {{{', '.join(map(str, rows or [0]))}}}; "
+        "/* the state each first row is of */",
         f"#define SELF_START_LOAD_FLOW {int(spec.load_flow)} /* P_bus = P_lf and Q_bus = Q_lf are start equations */",
         f"#define SELF_START_N_DELIVERS {len(spec.delivers)}",
         f"#define SELF_START_N_SOLVES {len(spec.solves)}",

@@ -35,7 +35,7 @@ from surrogate.contract import ContractError, check_scale, drifted, operator_met
 from surrogate.frame_graph import network_graph
 
 from .binaries import PLUMBING, BuildError, check_fmi_version, compile_binaries, compile_c, targets
-from .c_derivatives import jacobians_c_source
+from .c_derivatives import jacobians_c_source, start_equations_c_source
 from .c_equations import c_size, equations_c_source, parameter_space
 from .c_parameters import parameters_c_source
 from .cross_check import cross_check
@@ -43,6 +43,8 @@ from .fmu_archive import write_fmu
 from .model_description import model_description
 from .onnx_to_c import generate_kernel, hex_literals
 from .platforms import host
+from .self_start import config_lines as self_start_config, self_start_of
+from .self_start import variables as self_start_variables
 from .variables import SURROGATE_EXTRAS, SYSTEM_BASE_MVA, fmu_variables, start_inputs, start_state, vr_header
 
 C_DIR = Path(__file__).parent / "c"
@@ -55,7 +57,8 @@ DEFAULT_REST_RADIUS = 1.0  # default of the parameter rest_radius (corrections.c
 DEFAULT_SLOW_WEIGHT = 1.0  # default of the parameter slow_weight (corrections.c: the slow-mode correction)
 DEFAULT_SWING_WEIGHT = 1.0  # default of the parameter swing_weight (corrections.c: the exact affine step)
 MODEL_SOURCES = ("cosimulation.c", "window.c", "corrections.c", "frame.c", "variables.c", "surrogate_variables.c",
-                 "linalg.c", "cosimulation.h", "model.h", "surrogate_state.h", "engine.h", "linalg.h")
+                 "linalg.c", "self_start.c", "cosimulation.h", "model.h", "surrogate_state.h", "engine.h", "linalg.h")
+START_C_FILES = ("self_start.c",)  # where the FMU starts itself from the load flow
 # beside the version's plumbing (binaries.PLUMBING) and the operator kernel (compiled once)
 C_FILES = ("cosimulation.c", "window.c", "corrections.c", "frame.c", "variables.c", "surrogate_variables.c", "linalg.c",
            "equations.c", "derivatives.c", "sensor_sums.c")
@@ -144,9 +147,11 @@ def component_config(kind: str, model_name: str, guid: str, component, state_hea
     return opening, tables
 
 
-def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer: int, kernel, space) -> str:
+def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer: int, kernel, space,
+                  self_start=None) -> str:
     """config.h: the FMU's sizes, defaults, envelope and component tables, all numbers or escaped
-    names (space: the trained ParameterSpace)."""
+    names (space: the trained ParameterSpace; self_start: the start from the load flow it solves, or
+    None)."""
     component = meta["component"]
     envelope = meta["envelope"]
     n_x, n_u = component.n_states, component.n_inputs
@@ -180,6 +185,7 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"static const double OPFMU_ENV_U_MAX[{n_u}] = {_c_array(envelope['u'][s][1] for s in component.input_names)};",
         f"static const double OPFMU_RESIDUAL_SCALE[{n_x}] = {_c_array(residual_scale)}; /* 0: a learned rate */",
         *frame_config(meta.get("frame"), n_x, n_u),
+        *(self_start_config(component, self_start) if self_start else []),
         "#endif", "",
     ]
     return "\n".join(lines)
@@ -301,7 +307,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
                          f"but the {component.name} component has {component.n_states} states and "
                          f"{component.n_inputs} inputs")
     space = parameter_space(component, params, trained=True)
-    variables = surrogate_variables(meta, onnx_path, space)
+    spec = self_start_of(component, params, x_default, meta.get("operating_point"))
+    variables = surrogate_variables(meta, onnx_path, space, spec)
     equations = ('#include <stdio.h>\n#include "engine.h"\n'
                  + equations_c_source(component, space, linkage="OPFMU_INTERNAL") + "\n"
                  + parameters_c_source(space, linkage="OPFMU_INTERNAL"))
@@ -317,7 +324,7 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
         (src / "operator_kernel.c").write_text(kernel.source)
         (src / "equations.c").write_text(equations)
         (src / "derivatives.c").write_text(derivatives)
-        (src / "variables.h").write_text(vr_header(variables, component))
+        (src / "variables.h").write_text(vr_header(variables, component, self_start=spec))
         first_layer = kernel.first_layer
         suffix = None
 
@@ -331,8 +338,10 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             first_layer = first_layer if suffix is not None else 0
         (src / "sensor_sums.c").write_text(sensor_sums_source(suffix, n_sensors, first_layer, meta.get("frame"),
                                                               meta["horizon_s"]))
-        (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel, space))
-        binaries = compile_binaries(tmp, model_name, [src / f for f in C_FILES], src, chosen, version, kernel_object)
+        (src / "config.h").write_text(config_header(model_name, guid, meta, x_default, first_layer, kernel, space,
+                                                    spec))
+        sources = [src / f for f in C_FILES + (START_C_FILES if spec else ())]
+        binaries = compile_binaries(tmp, model_name, sources, src, chosen, version, kernel_object)
         worst = check_kernel(binaries[host()], proto, meta, n_check)
         if not worst <= KERNEL_TOLERANCE:
             raise BuildError(f"compiled kernel differs from onnxruntime by {worst:.2e} (> {KERNEL_TOLERANCE:g}); "
@@ -347,9 +356,10 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             "checks": checks}
 
 
-def surrogate_variables(meta: dict, onnx_path: Path, space=None):
+def surrogate_variables(meta: dict, onnx_path: Path, space=None, spec=None):
     """The surrogate FMU's variable table (fmu_export.variables) for an operator's validated metadata;
-    space: its trained ParameterSpace (None: made here). A component with a bus port gets the bus
+    space: its trained ParameterSpace (None: made here); spec: the start from the load flow it solves
+    (fmu_export.self_start.self_start_of; None: none). A component with a bus port gets the bus
     port's outputs (the Norton equivalent at the surrogate's state, P and Q at the bus) on the system
     base its trained parameters name (`Sb`; 100 MVA where they name none)."""
     component, params = meta["component"], meta["params"]
@@ -357,15 +367,18 @@ def surrogate_variables(meta: dict, onnx_path: Path, space=None):
     base = float(getattr(params, "Sb", SYSTEM_BASE_MVA))
     return fmu_variables(component, params, default_state(meta, Path(onnx_path)), SURROGATE_EXTRAS,
                          surrogate_starts(meta), meta.get("operating_point"), bus_outputs=True, base_mva=base,
-                         space=space)
+                         space=space, self_start=spec and self_start_variables(spec, component))
 
 
 def derivatives_source(component, space) -> str:
     """derivatives.c of a native FMU: the component's exact partial derivatives (forward-mode tracing
     of its one definition, fmu_export.c_derivatives) at the parameters of the build's ParameterSpace
-    `space`, behind model.h's component_rhs_jacobian and component_output_jacobian."""
+    `space`, behind model.h's component_rhs_jacobian and component_output_jacobian; where the
+    component has start equations of its own, them and their Jacobian (model_start_equations,
+    component_start_jacobian: c/self_start.c solves them)."""
     n_x, n_u, n_y = component.n_states, component.n_inputs, len(component.outputs)
     return ('#include "model.h"\n' + jacobians_c_source(component, space) + "\n"
+            + start_equations_c_source(component, space) +
             f"void component_rhs_jacobian(const double x[{c_size(n_x)}], const double u[{n_u}], const double p[], "
             f"double J[{c_size(n_x) * (n_x + n_u)}])\n"
             "{\n    model_derivatives_jacobian(x, u, p, J);\n}\n\n"

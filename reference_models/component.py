@@ -121,6 +121,10 @@ class Component:
         through its boundary: reference_models.models.subsystem): `derivatives` gives 0 for them,
         an operator learns them from data alone (the physics losses and the FMU's residual leave
         them out), and nothing integrates the component (`require_known_rates`).
+    start_equations(x, u, p, m): where a start from the load flow needs other equations than the
+        rates, its residuals (a tuple of len(states), 0 at the start): a state constant through a
+        study (dx/dt = 0) that the load flow fixes (the sub-system's tap n = V0 / V_own). The rows
+        of learned states are not read (the load flow's P and Q fix them). None: the rates.
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
@@ -145,6 +149,7 @@ class Component:
     initialisation: Initialisation | None = None
     affine_current: bool = False
     learned_states: tuple = ()
+    start_equations: Callable | None = None
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]
@@ -219,6 +224,13 @@ class Component:
         if not self.states:  # nothing to stack: an empty last axis on the leading axes broadcast
             return _broadcast(m, x[..., :0], x, u, 0)
         return stack(self.derivatives(*columns, p, m))
+
+    def start_residual(self, x, u, p):
+        """[..., n_x]: the start equations' residuals (`start_equations`), the rates where it has none."""
+        if self.start_equations is None:
+            return self.rhs(x, u, p)
+        m, stack = _namespace(x)
+        return stack(self.start_equations(_columns(x, self.n_states), _columns(u, self.n_inputs), p, m))
 
     def output_values(self, x, u, p):
         """Derived outputs [..., n_y] for x [..., n_x], u [..., n_u] (numpy or torch, broadcast)."""

@@ -144,12 +144,33 @@ def test_active_current_is_held_on_the_low_voltage_power_limit_and_placed_on_it(
     x[2] = 0.6  # filtered voltage 0.6: LVPL = (0.6 - 0.5) / (1.0 - 0.5) = 0.2
     assert low_voltage_power_limit(math, 0.6, pg) == pytest.approx(0.2)
     x[0] = 0.25
-    placed = REGCA1.reset_states(x, ug, pg)
+    at_rest = ug.copy()
+    at_rest[0] = 0.6  # the bus voltage at the filtered one: LVPL rests
+    placed = REGCA1.reset_states(x, at_rest, pg)
     assert placed[0] == pytest.approx(0.2)
-    assert REGCA1.rhs(placed, ug, pg)[0] == 0.0  # pushed up: held
-    below = ug.copy()
+    assert REGCA1.rhs(placed, at_rest, pg)[0] == 0.0  # pushed up: held
+    below = at_rest.copy()
     below[2] = 0.1
     assert REGCA1.rhs(placed, below, pg)[0] < 0.0  # released downward
+
+
+@pytest.mark.parametrize("V", [0.55, 0.7], ids=["falling", "rising"])
+def test_active_current_on_a_moving_low_voltage_power_limit_moves_with_it(V):
+    """On LVPL while its free rate pushes up, S0_y moves as LVPL does (its slope times the filtered
+    voltage's rate), so that Model Exchange and co-simulation hold it alike; a free rate below the
+    limit's releases it."""
+    (xg, ug, pg), _ = _chain_start()
+    x = xg.copy()
+    x[2], x[0] = 0.6, 0.2  # on LVPL = 0.2
+    u = ug.copy()
+    u[0] = V
+    limit_rate = (pg.Lvpl1 / (pg.Brkpt - pg.Zerox)) * (V - 0.6) / pg.Tfltr
+    u[2] = 10.0  # the command far above: the free rate exceeds the limit's either way
+    assert REGCA1.rhs(x, u, pg)[0] == pytest.approx(limit_rate, rel=1e-12)
+    u[2] = 0.2 - 1.0 if V < 0.6 else 0.2  # a free rate below the limit's: released
+    free = min(u[2] - 0.2, pg.Rrpwr) / pg.Tg
+    assert free < limit_rate
+    assert REGCA1.rhs(x, u, pg)[0] == pytest.approx(free, rel=1e-12)
 
 
 def test_rate_limits_bound_tg_times_the_rate_and_the_reactive_one_acts_in_the_start_power_direction():
@@ -270,7 +291,8 @@ def andes_faulted(request):
 @pytest.mark.andes
 @pytest.mark.parametrize("t", [1.05, 2.5])
 def test_chain_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(andes_faulted, t):
-    """At ANDES' states and inputs: our dx/dt equals ANDES' f / Tf and our converter's P, Q and the
+    """At ANDES' states and inputs: our dx/dt equals ANDES' f / Tf (but on the LVPL limit, where ours
+    follows the limit and ANDES' is 0 between its placements) and our converter's P, Q and the
     controller's commands equal ANDES' (relative to the values compared). Mid-fault the dip logic
     is on (frozen states, reactive current injection capped by VDL1, the active current on LVPL);
     at 2.5 s the dip is over and its injection held (Thld = -2 s)."""
@@ -280,7 +302,12 @@ def test_chain_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(
         assert point["dip"] == 1.0 and point["at_lvpl"] and point["Iqinj"] > point["Iqmax"] > 0.0
     else:
         assert point["dip"] == 0.0 and 0.0 < xr[7] < pr.timer_cap
-    for ours, theirs in ((REGCA1.rhs(xg, ug, pg)[:3], point["regca1_rates"]),
+    ours_g = REGCA1.rhs(xg, ug, pg)[:3]
+    if point["at_lvpl"]:  # S0_y on LVPL: ANDES holds it (rate 0, placed at each step); ours moves with the limit
+        assert point["regca1_rates"][0] == 0.0
+        assert ours_g[0] == pytest.approx(pg.Lvpl1 / (pg.Brkpt - pg.Zerox) * ours_g[2], rel=1e-12)
+        ours_g[0] = 0.0
+    for ours, theirs in ((ours_g, point["regca1_rates"]),
                          (REECA1.rhs(xr, ur, pr)[:7], point["reeca1_rates"])):
         assert np.abs(theirs).max() > 1e-4  # not at rest
         np.testing.assert_allclose(ours, theirs, rtol=0.0, atol=1e-9 * np.abs(theirs).max())

@@ -15,8 +15,8 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
 from cosim.export import export_case
-from fmu_export.native_reference_fmu import build_native_reference_fmu, self_start_of
-from fmu_export.self_start import describe
+from fmu_export.native_reference_fmu import build_native_reference_fmu
+from fmu_export.self_start import describe, self_start_of
 from reference_models.components import COMPONENTS
 from reference_models.grid.case import shipped_case
 
@@ -241,8 +241,8 @@ def test_fmpys_simulate_fmu_of_a_machine_given_only_its_load_flow_stays_there(ex
     assert np.max(np.abs(result["Q_bus"] - d["load_flow"]["Q"])) <= 1e-9 * max(1.0, abs(d["load_flow"]["Q"]))
 
 
-SELF_STARTING = sorted(name for name, c in COMPONENTS.items()
-                       if self_start_of(c, c.params(), c.steady_state(c.start_inputs, c.params())) is not None)
+SELF_STARTING = sorted(name for name, c in COMPONENTS.items()  # a learned component's surrogate: test_subsystem_operator
+                       if not c.learned_states and self_start_of(c, c.params(), c.steady_state(c.start_inputs, c.params())) is not None)
 
 
 @pytest.mark.parametrize("name", SELF_STARTING)

@@ -230,9 +230,11 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
     assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
 
 
-def test_the_feeder_surrogate_fmu_validates_and_rests_at_its_load_flow_under_fmpy_alone(tmp_path):
-    """A third-party master: fmpy's simulate_fmu with the start from the feeder's own load flow (the
-    component's initialisation) and the bus voltage held there."""
+def test_the_feeder_surrogate_fmu_starts_itself_from_the_load_flow_and_rests_there_under_fmpy_alone(tmp_path):
+    """A third-party master: fmpy's simulate_fmu given nothing but the boundary's load flow (V_lf,
+    theta_lf, P_lf, Q_lf; the bus voltage left unset takes it). The FMU solves its start (the
+    component's initialisation: the measurement at the angle, the tap at V0 / V_own, the devices'
+    currents from P and Q) and rests there."""
     import onnx
     from fmpy import simulate_fmu
     from fmpy.validation import validate_fmu
@@ -249,9 +251,13 @@ def test_the_feeder_surrogate_fmu_validates_and_rests_at_its_load_flow_under_fmp
     V0, theta0 = p.V_own, 0.3
     P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2  # its own load flow's injection
     x0, _ = SUBSYSTEM.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
-    start = {**{f"{n}0": float(v) for n, v in zip(SUBSYSTEM.state_names, x0)}, "Vs": V0, "theta_vs": theta0}
-    result = simulate_fmu(str(fmu), start_values=start, stop_time=2.0, output_interval=0.01,
-                          output=["P", "Q", "I_re", "I_im", "in_envelope"])
+    result = simulate_fmu(str(fmu), start_values={"V_lf": V0, "theta_lf": theta0, "P_lf": P0, "Q_lf": Q0},
+                          stop_time=2.0, output_interval=0.01,
+                          output=["P", "Q", "I_re", "I_im", "in_envelope", "Vs", "theta_vs", *SUBSYSTEM.state_names])
+    for name, value in zip(SUBSYSTEM.state_names, x0):
+        assert result[name][0] == pytest.approx(value, rel=1e-10, abs=1e-12), name
+    assert (result["Vs"][0], result["theta_vs"][0]) == (pytest.approx(V0, rel=1e-15), pytest.approx(theta0, rel=1e-15))
+    assert (result["P"][0], result["Q"][0]) == (pytest.approx(P0, rel=1e-10), pytest.approx(Q0, rel=1e-10))
     rating = p.S / p.Sb
     assert np.max(np.abs(result["P"] - P0)) < 0.005 * rating and np.max(np.abs(result["Q"] - Q0)) < 0.005 * rating
     assert np.all(result["in_envelope"])

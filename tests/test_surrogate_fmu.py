@@ -227,6 +227,25 @@ def test_machine_at_rest_under_its_held_input_stays_exactly_at_rest(unzipped):
     np.testing.assert_allclose(states, np.tile(steady(), (300, 1)), rtol=0, atol=1e-6)
 
 
+def test_the_surrogate_starts_itself_from_the_load_flow_as_the_native_reference_does(unzipped, fmu_cache):
+    """Given only a load flow off the built one (V_lf, theta_lf, P_lf, Q_lf), the surrogate FMU solves
+    the same start as the machine's native reference FMU (fmu_export/c/self_start.c on the same
+    equations): states, Pm and Efd (Pm_init, Efd_init), the bus voltage left unset at the flow's."""
+    from fmu_export.build_cache import cached_native_reference_fmu
+
+    flow = {"V_lf": 1.03, "theta_lf": 0.25, "P_lf": 0.75, "Q_lf": 0.1}
+    native = Slave(cached_native_reference_fmu("SM4Reference", component=SM4, cache=fmu_cache), component=SM4,
+                   start=flow)
+    surrogate = Slave(unzipped, component=SM4, start=flow)
+    names = list(SM4.state_names) + ["Pm_init", "Efd_init", "Vs", "theta_vs", "P_bus", "Q_bus"]
+    ours, theirs = surrogate.get(*names), native.get(*names)
+    native.close()
+    np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12)
+    assert list(ours[-2:]) == pytest.approx([flow["P_lf"], flow["Q_lf"]], rel=1e-10)
+    assert ours[SM4.state_names.index("delta")] != pytest.approx(steady()[0], abs=0.1)  # not the built rest
+    surrogate.close()
+
+
 def test_without_the_rest_correction_the_machine_at_rest_moves_by_the_operators_error(unzipped, operator_reference):
     slave = Slave(unzipped, rest_radius=0.0)
     states = np.array([slave.step(0.01) for _ in range(300)])

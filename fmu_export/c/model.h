@@ -106,6 +106,12 @@ OPFMU_INTERNAL ModelStatus component_settle_start(ModelState *m, char *why, size
 /* self_start.c: the start from the load flow, unconditionally */
 OPFMU_INTERNAL ModelStatus self_start_solve(ModelState *m, char *why, size_t size);
 #endif
+#ifdef OPFMU_HAS_START_EQUATIONS
+/* the component's start equations where they differ from its rates (Component.start_equations):
+   their residuals r [OPFMU_N_STATES] and Jacobian J[i * OPFMU_N_COLUMNS + j] = d r_i / d (x, u)_j */
+OPFMU_INTERNAL void model_start_equations(const double x[], const double u[], const double p[], double r[]);
+OPFMU_INTERNAL void component_start_jacobian(const double x[], const double u[], const double p[], double J[]);
+#endif
 /* sets the time derivative of order `order` (1 [unit/s]; 2 [unit/s^2] where OPFMU_INPUT_ORDER is 2, in
    the model's d2u) of input c (0-based) for the next steps: over each, u + du tau + d2u tau^2 / 2 with
    tau the time into the step */

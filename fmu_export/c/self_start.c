@@ -1,7 +1,9 @@
 /* Self-initialisation of the native reference FMU from the load flow (fmu_export/self_start.py says
    which components have it and what they solve). Unknowns z = (x, s): the states and the inputs the
    start solves (SELF_START_SOLVES). Equations:
-       dx/dt (x, u) = 0                        the component's right-hand side
+       dx/dt (x, u) = 0                        the component's right-hand side (its start equations where
+                                               it has its own: OPFMU_HAS_START_EQUATIONS), a learned
+                                               state's left out (SELF_START_RATE_ROWS)
        P_bus = P_lf, Q_bus = Q_lf              where SELF_START_LOAD_FLOW (system base, generator convention)
        y_k = y_k_init                          each delivered output or state (SELF_START_DELIVERS)
    with the bus voltage inputs at V_lf, theta_lf and every other input as the importer set it. The solved
@@ -23,7 +25,9 @@
 
 #include "linalg.h"
 #include "model.h"
+#ifdef OPFMU_HAS_RESET
 #include "switching.h"
+#endif
 #include "variables.h"
 
 #define N_X OPFMU_N_STATES
@@ -31,6 +35,7 @@
 #define N_S SELF_START_N_SOLVES
 #define N_D SELF_START_N_DELIVERS
 #define N_Z (N_X + N_S)
+#define N_R SELF_START_N_RATE_ROWS /* rows of the states' own equations: N_Z less the load flow's and the delivered */
 #define N_Y (OPFMU_N_OUTPUTS > 0 ? OPFMU_N_OUTPUTS : 1)
 #define D_SIZE (N_D > 0 ? N_D : 1)
 
@@ -79,10 +84,17 @@ static void residual(const System *q, const double z[N_Z], double r[N_Z], double
 {
     double x[OPFMU_X_SIZE], u[N_U], dx[OPFMU_X_SIZE], y[N_Y];
     unpack(q, z, x, u);
+#ifdef OPFMU_HAS_START_EQUATIONS
+    model_start_equations(x, u, q->p, dx);
+#else
     model_derivatives(x, u, q->p, dx);
+#endif
     model_outputs(x, u, q->p, y);
-    for (int i = 0; i < N_X; ++i) r[i] = SELF_START_INERT[i] ? x[i] - SELF_START_ANCHOR_X[i] : dx[i];
-    int row = N_X;
+    for (int k = 0; k < N_R; ++k) {
+        const int i = SELF_START_RATE_ROWS[k];
+        r[k] = SELF_START_INERT[i] ? x[i] - SELF_START_ANCHOR_X[i] : dx[i];
+    }
+    int row = N_R;
 #if SELF_START_LOAD_FLOW
     const double v_re = q->flow[0] * cos(q->flow[1]), v_im = q->flow[0] * sin(q->flow[1]);
     const int i_re = (int)(VR_BUS_CURRENT_REAL - VR_FIRST_OUTPUT), i_im = (int)(VR_BUS_CURRENT_IMAGINARY - VR_FIRST_OUTPUT);
@@ -95,15 +107,22 @@ static void residual(const System *q, const double z[N_Z], double r[N_Z], double
     }
     if (!J) return;
     double Jf[OPFMU_X_SIZE * OPFMU_N_COLUMNS], Jy[N_Y * OPFMU_N_COLUMNS];
+#ifdef OPFMU_HAS_START_EQUATIONS
+    component_start_jacobian(x, u, q->p, Jf);
+#else
     component_rhs_jacobian(x, u, q->p, Jf);
+#endif
     component_output_jacobian(x, u, q->p, Jy);
     int column[N_Z]; /* z_j's column in the component's Jacobians (states, then inputs) */
     for (int j = 0; j < N_X; ++j) column[j] = j;
     for (int k = 0; k < N_S; ++k) column[N_X + k] = N_X + SELF_START_SOLVES[k];
     for (int j = 0; j < N_Z; ++j) {
         const int c = column[j];
-        for (int i = 0; i < N_X; ++i) J[i * N_Z + j] = SELF_START_INERT[i] ? (double)(i == j) : Jf[i * OPFMU_N_COLUMNS + c];
-        row = N_X;
+        for (int k = 0; k < N_R; ++k) {
+            const int i = SELF_START_RATE_ROWS[k];
+            J[k * N_Z + j] = SELF_START_INERT[i] ? (double)(i == j) : Jf[i * OPFMU_N_COLUMNS + c];
+        }
+        row = N_R;
 #if SELF_START_LOAD_FLOW
         const double di_re = Jy[i_re * OPFMU_N_COLUMNS + c], di_im = Jy[i_im * OPFMU_N_COLUMNS + c];
         J[row++ * N_Z + j] = v_re * di_re + v_im * di_im;

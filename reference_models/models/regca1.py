@@ -15,7 +15,9 @@ Equations (ANDES 2.0 model reference, RenGen: REGCA1), all on the system base:
     Tfltr dS2_y/dt = V - S2_y  (Tfltr = 0: S2_y held, V used)
     LVPL(S2_y) = F for S2_y <= Zerox, (S2_y - Zerox) Lvplsw Lvpl1 / (Brkpt - Zerox) + F up to Brkpt,
         9999 above, with F = 9999 (1 - Lvplsw)
-    Tg dS0_y/dt = min(Ipcmd - S0_y, Rrpwr), non-windup above LVPL(S2_y)
+    Tg dS0_y/dt = r = min(Ipcmd - S0_y, Rrpwr), non-windup above LVPL(S2_y): where S0_y >= LVPL - 1e-9 and
+        r > Tg dLVPL/dt, S0_y follows the limit (dS0_y/dt = dLVPL/dt, which is 0 where LVPL rests,
+        as ANDES holds it; Tfltr = 0: 0, the limit moving with the input)
         (reset: S0_y at or above LVPL while its rate is >= 0 is placed on LVPL)
     Tg dS1_y/dt = e, e = -Iqcmd - S1_y, clipped above at Iqrmax where q0 > 0, below at Iqrmin where q0 < 0
     dq0/dt = 0
@@ -54,6 +56,9 @@ PARAMETER_RANGES = {
     "Tfltr": (0.0, 100.0, "s"), "Khv": (0.0, 100.0, "pu"), "Iqrmax": (1e-3, 1e4, "pu"), "Iqrmin": (-1e4, -1e-3, "pu"),
 }
 NO_LVPL = 9999.0  # pu: ANDES' LVPL output where the limit is off
+# pu: S0_y within this below LVPL counts as on it, so that a state sliding along a falling limit stays held
+# through the round-off of its steps (the switching function S0_y - LVPL + HOLD_BAND keeps its sign)
+HOLD_BAND = 1e-9
 
 
 @dataclass(frozen=True)
@@ -113,12 +118,21 @@ def _active_rate(x, u, p: REGCA1Params, m):
     return clip(m, u[2] - x[0], -math.inf, p.Rrpwr), low_voltage_power_limit(m, filtered, p)
 
 
+def _limit_rate(x, u, p: REGCA1Params, m):
+    """dLVPL/dt [pu/s]: LVPL's slope times dS2_y/dt between Zerox and Brkpt, else 0 (0 where
+    Tfltr = 0: the limit then moves with the input, whose rate the equations do not see)."""
+    d_S2, filtered = lag(m, u[0], x[2], 1.0, p.Tfltr)
+    slope = p.Lvplsw * p.Lvpl1 / (p.Brkpt - p.Zerox)
+    return where(m, filtered <= p.Zerox, 0.0 * d_S2, where(m, filtered <= p.Brkpt, slope * d_S2, 0.0 * d_S2))
+
+
 def derivatives(x, u, p: REGCA1Params, m):
     """(dS0_y, dS1_y, dS2_y, dq0)/dt for x = (S0_y, S1_y, S2_y, q0), u = (Vs, theta_vs, Ipcmd, Iqcmd)."""
     S0_y, S1_y, S2_y, q0 = x
     Vs, _, _, Iqcmd = u
     rate, LVPL = _active_rate(x, u, p, m)
-    rate = where(m, S0_y >= LVPL, where(m, rate > 0.0, 0.0 * rate, rate), rate)
+    held = p.Tg * _limit_rate(x, u, p, m)  # on the limit, S0_y moves with it (a rate at most the free one)
+    rate = where(m, S0_y >= LVPL - HOLD_BAND, where(m, rate > held, held, rate), rate)
     e = -Iqcmd - S1_y
     e = where(m, q0 < 0.0, clip(m, e, p.Iqrmin * p.base_ratio, math.inf), e)
     e = where(m, q0 > 0.0, clip(m, e, -math.inf, p.Iqrmax * p.base_ratio), e)

@@ -88,6 +88,13 @@ def derivatives(x, u, p: SubsystemParams, m):
     return d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4]
 
 
+def start_equations(x, u, p: SubsystemParams, m):
+    """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
+    voltage (n V_own = Vs); the learned currents' rows are unread (the load flow's P, Q fix them)."""
+    d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
+    return d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0]
+
+
 def outputs(x, u, p: SubsystemParams, m):
     """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
     Ip, Iq = x[2], x[3]
@@ -147,4 +154,5 @@ SUBSYSTEM = Component(
     ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
     initialisation=Initialisation((), _start),
     learned_states=(2, 3),
+    start_equations=start_equations,
 )
