@@ -151,6 +151,10 @@ class CosimResult:
 
 RELAX_BOUNDS = (1.0, 50.0)  # the Aitken factor of an iterated step's end-voltage update
 MAX_STEPS = 1_000_000  # communication steps of one run (a row each in the result)
+# a network switch whose Newton solve fails from the voltages before it is continued from the network
+# before it: in steps of lambda of at most this, each cut by 4 where it fails, down to the smallest
+CONTINUATION_STEP = 0.25
+SMALLEST_CONTINUATION_STEP = 1e-4
 
 
 def check_steps(stop: float, step: float) -> None:
@@ -603,8 +607,41 @@ class GridMaster:
             "jacobian": (intp([i for i, _ in at]), intp([j for _, j in at]))}
         return plan
 
-    def _solve(self, network, V, theta_ref, active, timing: Timing):
-        """The unit-bus voltages [g] (complex, per unit) at which the network and the currents I(V) of
+    def _solve_switched(self, before, after, V, theta_ref, active, timing: Timing):
+        """_solve on the network `after` a switch (a fault, its clearing, a line opened or closed) from
+        V, theta_ref solved on the network `before` it. Where Newton from there fails (a deep fault at
+        a bus of angle-following current sources: each inverter's current turns with its bus voltage,
+        and the voltages move too far for one solve), the solution is continued from the network
+        before: on Y(lambda) = (1 - lambda) Y_before + lambda Y_after, lambda from 0 (solved) to 1, in
+        steps of at most CONTINUATION_STEP, each cut by 4 where its solve fails. CouplingError where a
+        step below SMALLEST_CONTINUATION_STEP fails: no solution near the path (ANDES' Newton fails
+        there as well)."""
+        try:
+            return self._solve(after.Y_real, V, theta_ref, active, timing)
+        except CouplingError as exc:
+            first = str(exc)
+        Y0, Y1 = before.Y_real, after.Y_real
+        lam, step = 0.0, CONTINUATION_STEP
+        while True:
+            target = min(1.0, lam + step)
+            try:
+                solved = self._solve((1.0 - target) * Y0 + target * Y1, V, theta_ref, active, timing)
+            except CouplingError:
+                step *= 0.25
+                if step < SMALLEST_CONTINUATION_STEP:
+                    raise CouplingError(f"{first} after the network switched, nor along a continuation from the "
+                                        f"network before it (solved up to {100 * lam:.4g} % of the way): its devices "
+                                        "have no operating point near there (a fault deeper than their currents "
+                                        "allow; try a larger --fault-impedance)") from None
+                continue
+            if target == 1.0:
+                return solved
+            V, _, theta_ref, _ = solved
+            lam, step = target, min(CONTINUATION_STEP, 2.0 * step)
+
+    def _solve(self, Y, V, theta_ref, active, timing: Timing):
+        """The unit-bus voltages [g] (complex, per unit) at which the network (its real admittance
+        matrix Y [2b, 2b], Case.reduced's Y_real) and the currents I(V) of
         the `active` units' machines agree, Newton from V on the reduced network's buses (units at
         one bus inject into it together: their currents are summed and their Jacobians accumulated;
         a step that raises the mismatch is halved until it does not);
@@ -617,7 +654,6 @@ class GridMaster:
         v = np.empty(2 * b)
         Vb = V[self._first]
         v[0::2], v[1::2] = Vb.real, Vb.imag
-        Y = network.Y_real
         g = len(units)
         plan = self._solve_plan(active)
         inputs, outputs = self._inputs, self._outputs
@@ -811,7 +847,7 @@ class GridMaster:
                               for x, u, i in zip(standing, self.units, self._gen_rows)])
         active = self._active(topology)
         V = self.case.flow.V_complex[self._gen_rows].copy()
-        V, I, theta, machine = self._solve(self.network(topology), V, theta_ref, active, timing)
+        V, I, theta, machine = self._solve(self.network(topology).Y_real, V, theta_ref, active, timing)
         for k in active:
             standing[k][0] = machine[k]
         rows = [self._row(0.0, V, I, theta, standing, active)]
@@ -851,7 +887,7 @@ class GridMaster:
                 self._set_measured("measured_end", self._measure(V1, theta1, topology, active))
                 self._step(t0, h, active, timing, before)
                 timing.passes += 1
-                new_V, I1, new_theta, machine = self._solve(self.network(topology), V1, theta1, active, timing)
+                new_V, I1, new_theta, machine = self._solve(self.network(topology).Y_real, V1, theta1, active, timing)
                 residual = new_V - V1
                 change = float(np.max(np.abs(residual)))
                 if change < s.tolerance or p == passes - 1 or not saved:
@@ -875,10 +911,11 @@ class GridMaster:
             for k in active:
                 standing[k] = [machine[k]] + [outputs[o:o_end] for o, o_end in self._controls[k]]
             if new_topology is not None:
-                topology = new_topology
+                before_switch, topology = self.network(topology), new_topology
                 active = self._active(topology)
                 checkpoints, rollbacks = self._live(active)
-                V, I, theta, machine = self._solve(self.network(topology), V, theta, active, timing)
+                V, I, theta, machine = self._solve_switched(before_switch, self.network(topology), V, theta, active,
+                                                            timing)
                 for k in active:
                     standing[k] = [machine[k]] + standing[k][1:]
                     self._machine_links(k)

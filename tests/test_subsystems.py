@@ -112,6 +112,32 @@ def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_faul
 
 
 @pytest.mark.andes
+def test_a_deep_fault_at_the_feeders_boundary_is_continued_from_the_network_before_it(tmp_path, capsys):
+    """ieee14 with the shipped feeder at bus 9, a fault at bus 9 itself: each PVD1's current turns
+    with its bus voltage's angle, and from the voltages before the fault Newton finds no solution
+    of the faulted network (through 0.009 pu: the run failed, as ANDES' does). Continued from the
+    network before the fault it runs (bus 9 at 0.04-0.05 pu); through 0.005 pu no solution
+    is near the path, and the refusal says how far it got."""
+    from opfmu.cli import main
+
+    def run(z, out):
+        return main(["grid", "run", "--case", "ieee14", "--attach", "9=feeder", "--fmus", "reference", "--fault", "9",
+                     "--fault-impedance", z, "--fault-start", "0.5", "--clear", "0.6", "--stop", "0.8",
+                     "--compare", "none", "--out", str(out)])
+
+    assert run("0.009", tmp_path / "deep") == 0, capsys.readouterr().err
+    lines = (tmp_path / "deep" / "result.csv").read_text().splitlines()
+    names = lines[0].split(",")
+    rows = np.array([[float(v) for v in line.split(",")] for line in lines[2:]])
+    during = rows[(rows[:, 0] >= 0.5) & (rows[:, 0] < 0.6), names.index("V_9")]
+    assert np.all((0.03 < during) & (during < 0.06)) and rows[-1, names.index("V_9")] > 0.95
+    capsys.readouterr()
+    assert run("0.005", tmp_path / "deeper") == 1
+    said = capsys.readouterr()
+    assert "nor along a continuation from the network before it (solved up to 99." in said.out + said.err
+
+
+@pytest.mark.andes
 def test_on_a_low_voltage_host_bus_the_substation_tap_keeps_the_feeders_own_voltages(tmp_path):
     """Kundur's bus 7 (a load bus at 0.96 pu): the feeder built for 1 pu at its boundary would sag into
     its units' Q-V droop (no rest); its substation transformer's tap settles instead, as an on-load
