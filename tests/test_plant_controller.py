@@ -66,21 +66,40 @@ def test_start_where_a_limit_keeps_a_pi_output_off_zero_is_refused():
         _at_rest(REPCA1.params({"Qmin": 0.1, "Qmax": 0.5}), _branch(1.0, 0.99, 0.2j))
 
 
-def test_below_vfrz_the_reactive_pi_stops_and_takes_no_input():
-    """A voltage error beyond the dead band: above Vfrz the PI integrates it and its output carries
-    Kp times it; below, the integrator stops and the output is the integrator alone (ANDES' held
-    input of 0 from rest); with freeze = 0 it keeps integrating."""
+def test_below_vfrz_the_reactive_pi_runs_on_the_error_held_from_the_dip_s_start():
+    """The filtered voltage s0_y has fallen to a dip (0.3 below Vref, 0.2 beyond the dead band) while
+    s_hold kept its value from rest (0 error): above Vfrz the PI integrates the live error and its
+    output carries Kp times it, and s_hold follows s0_y; below Vfrz (ANDES' eHld) the PI runs on the
+    held error, 0, and s_hold stands still; with freeze = 0 it always takes the live error."""
+    from reference_models.models.repca1 import HOLD_SYNC_S
+
     for freeze in (1.0, 0.0):
         p = REPCA1.params({"freeze": freeze, "Kp": 2.0, "Ki": 0.5})
         x, u = _at_rest(p, _branch(1.0 + 0.0j, 0.99, 0.2j))
         x[4] = 0.05  # s2_xi
-        u[REPCA1.input_names.index("Vref")] += 0.3  # error 0.3 - dbd2 = 0.2 beyond the band
+        x[2] -= 0.3  # s0_y; s_hold (x[9]) at rest
         for Vm, frozen in ((0.9, False), (0.7, bool(freeze))):
             u[0] = Vm
             rates = REPCA1.rhs(x, u, p)
             assert rates[4] == (0.0 if frozen else pytest.approx(0.5 * 0.2))
+            follows = rates[2] + (x[2] - x[9]) / HOLD_SYNC_S
+            assert rates[9] == (0.0 if frozen else pytest.approx(follows, rel=1e-12))
             s2_y = 0.05 + (0.0 if frozen else 2.0 * 0.2)  # Tft = Tfv: the lead-lag passes it to Qext
             assert REPCA1.output_values(x, u, p)[1] == pytest.approx(u[-1] + s2_y, rel=1e-14)
+
+
+def test_held_measurement_follows_the_live_one_and_comes_back_to_it_after_a_dip():
+    """Above Vfrz s_hold moves as s0_y does, plus (s0_y - s_hold) / HOLD_SYNC_S: equal ones move
+    together, a gap left by a dip closes with that time constant."""
+    from reference_models.models.repca1 import HOLD_SYNC_S
+
+    p = REPCA1.params()
+    x, u = _at_rest(p, _branch(1.0 + 0.0j, 0.99, 0.2j))
+    u[0] = 0.95  # a live voltage the filter moves toward
+    rates = REPCA1.rhs(x, u, p)
+    assert rates[9] == rates[2] != 0.0
+    x[9] = x[2] - 0.1  # s_hold left behind by a dip
+    assert REPCA1.rhs(x, u, p)[9] == pytest.approx(rates[2] + 0.1 / HOLD_SYNC_S, rel=1e-12)
 
 
 def test_frequency_error_beyond_its_dead_band_drives_the_active_power_with_ddn_or_dup_up_to_femax():
@@ -180,8 +199,16 @@ def _andes_point(ss) -> dict:
                               "ksg": r.config.ksg, "freeze": r.config.freeze, "busf_Tf": float(bf.Tf.v[j]),
                               "busf_Tw": float(bf.Tw.v[j]), "busf_fn": float(bf.fn.v[j])})
     theta0 = float(bf.a0.v[j])  # ANDES' BusFreq filters the angle less its initial value
-    variables = [(bf.L_y, j), (bf.WO_x, j)] + [(getattr(r, n), 0) for n in REPCA1.state_names[2:]]
+    variables = [(bf.L_y, j), (bf.WO_x, j)] + [(getattr(r, n), 0) for n in REPCA1.state_names[2:9]]
     x = np.array([float(v.v[i]) for v, i in variables]) + np.array([theta0, theta0] + [0.0] * 7)
+    # s_hold: the live measurement, or frozen, the one whose error (below the dead band's upper edge
+    # or above its lower one) is ANDES' held eHld
+    held = float(r.eHld.v[0])
+    s_hold = x[2 if p.RefFlag else 3]
+    if float(r.zf.v[0]):
+        reference = float(r.Vref.v[0] if p.RefFlag else r.Qlinef.v[0])
+        s_hold = reference - (held + (p.dbd2 if held > 0 else p.dbd1 if held < 0 else 0.0))
+    x = np.append(x, s_hold)
     rates = np.array([float(ss.dae.f[int(v.a[i])]) / float(ss.dae.Tf[int(v.a[i])]) for v, i in variables])
     measured = _andes_measured(ss)
     u = np.array([measured[n] for n in MEASURED] + [float(v) for v in (r.Vref.v[0], r.Qlinef.v[0], r.Plant_pref.v[0],
@@ -241,7 +268,7 @@ def test_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(andes_
     """At ANDES' states and inputs our dx/dt equals ANDES' f / Tf and our Pext, Qext, f equal ANDES'
     REECA1 Pref, Qref and BusFreq f (relative to the largest value compared). Mid-fault the voltage
     at bus 8 lies below Vfrz: with the freeze ANDES holds the PI input at its value from rest (0)
-    while the live error is far from 0 (ours: input 0, integrator stopped); without it the PI runs
+    while the live error is far from 0 (ours: the error of s_hold, 0, and s_hold stopped); without it the PI runs
     into Qmax on the clipped error emax; in the P and f mode the power error is clipped to femax."""
     mode, points = andes_faulted
     point = points[t]
@@ -257,5 +284,7 @@ def test_derivatives_and_outputs_match_andes_mid_fault_and_after_clearing(andes_
     np.testing.assert_allclose(u[2:6], point["services"], rtol=0, atol=1e-12 * np.abs(point["services"]).max())
     theirs = point["rates"]
     assert np.abs(theirs).max() > 1e-2  # not at rest
-    np.testing.assert_allclose(REPCA1.rhs(x, u, p), theirs, rtol=0, atol=1e-9 * np.abs(theirs).max())
+    ours = REPCA1.rhs(x, u, p)
+    np.testing.assert_allclose(ours[:9], theirs, rtol=0, atol=1e-9 * np.abs(theirs).max())
+    assert ours[9] == (0.0 if point["frozen"] else ours[2 if p.RefFlag else 3])  # s_hold: held, or the live one's
     np.testing.assert_allclose(REPCA1.output_values(x, u, p), point["outputs"], rtol=0, atol=1e-9)

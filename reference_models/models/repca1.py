@@ -24,9 +24,12 @@ Equations (ANDES 2.0 model reference, RenPlant: REPCA1; FreqMeasurement: BusFreq
     Tfltr ds0_y/dt = VCsel - s0_y,  Tfltr ds1_y/dt = Qbr - s1_y  (Tfltr = 0: held, the input used)
     Refsel = Vref - s0_y (RefFlag = 1: voltage control) or Qlinef - s1_y (RefFlag = 0: Q control)
     enf = db(Refsel) (dead band [dbd1, dbd2], the excess beyond its edges) clipped to [emin, emax]
-    frozen = freeze and Vm < Vfrz;  e = 0 where frozen, else enf
-    s2: PI kp = Kp, ki = Ki with tracking anti-windup (ks = kqs) on e, output s2_y within [Qmin, Qmax];
-        ds2_xi/dt = 0 where frozen
+    frozen = freeze and Vm < Vfrz;  e = enf, but where frozen the error of the held measurement:
+        e = db(Vref - s_hold) (RefFlag = 1; Qlinef - s_hold, RefFlag = 0) clipped to [emin, emax]
+    ds_hold/dt = 0 where frozen, else d read/dt + (read - s_hold) / HOLD_SYNC_S (read: s0_y,
+        RefFlag = 1; s1_y, RefFlag = 0): s_hold equals read until the dip and comes back to it
+        within 10 ms after it
+    s2: PI kp = Kp, ki = Ki with tracking anti-windup (ks = kqs) on e, output s2_y within [Qmin, Qmax]
     s3: lead-lag (1 + s Tft) / (1 + s Tfv) of s2_y:  Tfv ds3_x/dt = s2_y - s3_x,
         s3_y = Tft / Tfv (s2_y - s3_x) + s3_x  (Tfv = 0: a gain of 1, s3_x held)
     Qext = Qref0 + s3_y
@@ -38,16 +41,12 @@ Equations (ANDES 2.0 model reference, RenPlant: REPCA1; FreqMeasurement: BusFreq
 
 The freeze: ANDES holds the reactive PI's input (its VarHold eHld) at the value enf had when the
 measured voltage fell below Vfrz, and the PI keeps running on that held value: its integrator
-moves at Ki (e_hold - kqs (ys - y)) and its output is Kp e_hold + s2_xi (limited). Here a frozen PI
-takes the input 0 and its integrator stops. The two agree whenever enf = 0 at the freeze's start:
-the plant at rest (the PI's input is 0 at an integrator's rest within its limits) or its voltage
-(or Q) error within the dead band, as at a fault starting from steady state (ANDES' eHld is 0
-there: tests/test_plant_controller.py compares mid-fault). They differ where a dip begins while
-the error is beyond the dead band (a second dip during the recovery from the first, or a slow
-sag that passes through the band's edge before Vfrz): ANDES' integrator then drifts by Ki e_hold
-per second through the dip and its output carries Kp e_hold, ours holds the integrator and
-drops the proportional part; and where the PI sits on Qmin or Qmax at the freeze's start (ANDES'
-tracking term keeps moving its integrator, ours stops it). No sample state holds e_hold here.
+moves at Ki (e_hold - kqs (ys - y)) and its output is Kp e_hold + s2_xi (limited). Here the state
+s_hold is the measurement enf reads, stopped at the instant Vm crosses Vfrz (a located switching),
+so the held error is enf's there (with the set point of the moment: a Vref stepped during the dip
+moves it, ANDES' not), and the PI runs on it as ANDES' does. After the dip s_hold comes back to the
+live measurement with HOLD_SYNC_S (ANDES: at once). With Tfltr = 0 there is no filter state to
+hold: the frozen PI takes the input 0 and stops.
 
 The measured inputs, as ANDES computes them (its REPCA1 services Iline, Pline, Qline): the voltage
 Vm e^{j theta_m} of the measured bus (busr, else the converter's bus); with V1, V2 the voltages of
@@ -69,7 +68,8 @@ defaults for the flags VCFlag, RefFlag, Fflag (mandatory there); ours are 1.
 
 Start (ANDES' initialisation), given the measured inputs and the references the electrical
 controller demands (Pext, Qext at its start): theta_f = theta_w = theta_m (f = 1), s0_y = Vref =
-VCsel, s1_y = Qlinef = Qbr, s4_y = Plant_pref = Pbr, the PIs, the lead-lag and s6_y at 0,
+VCsel, s1_y = Qlinef = Qbr, s4_y = Plant_pref = Pbr, the PIs, the lead-lag and s6_y at 0, s_hold
+at the measurement it holds,
 Pref0 = Pext, Qref0 = Qext; ValueError where a limit keeps a PI's input or output off 0 there (0
 outside [emin, emax], [Qmin, Qmax], [femin, femax] or [Pmin, Pmax]: ANDES starts off its rest then).
 """
@@ -88,6 +88,9 @@ from .common import check_limits, check_ranges, finite_inputs
 from .reeca1 import _pi_rest as pi_rest
 
 FLAGS = ("VCFlag", "RefFlag", "Fflag", "PLflag", "freeze")
+# s [s]: the time constant that brings the held measurement back to the live one after a dip (ANDES:
+# at its next step); short against the plant's control, long against a 10 ms step's stability
+HOLD_SYNC_S = 0.01
 
 PARAMETER_RANGES = {
     "Tfltr": (0.0, 100.0, "s"), "Kp": (0.0, 1e4, "pu"), "Ki": (0.0, 1e4, "pu/s"), "Tft": (0.0, 100.0, "s"),
@@ -166,7 +169,7 @@ def _frozen(m, Vm, p: REPCA1Params, frozen, otherwise):
 
 def _signals(x, u, p: REPCA1Params, m) -> dict:
     """The controller's rates and algebraic signals (ANDES' names) at x, u."""
-    theta_f, theta_w, s0, s1, s2_xi, s3_x, s4, s5_xi, s6 = x
+    theta_f, theta_w, s0, s1, s2_xi, s3_x, s4, s5_xi, s6, s_hold = x
     Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, Vref, Qlinef, Plant_pref, Pref0, Qref0 = u
     d_f, d_w, f = bus_frequency(m, theta_m, theta_f, theta_w, p.busf_Tf, p.busf_Tw, p.busf_fn)
     if p.VCFlag:  # |V - (Rc + j Xc) Ibr|
@@ -179,8 +182,19 @@ def _signals(x, u, p: REPCA1Params, m) -> dict:
     d_s1, s1_y = lag(m, Qbr, s1, 1.0, p.Tfltr)
     Refsel = Vref - s0_y if p.RefFlag else Qlinef - s1_y
     enf = clip(m, dead_band(m, Refsel, p.dbd1, p.dbd2), p.emin, p.emax)
-    e = _frozen(m, Vm, p, 0.0 * enf, enf)
+    # the hold (ANDES' VarHold eHld): s_hold follows the measurement Refsel reads (its rate, and back to it
+    # within HOLD_SYNC_S after a dip) and stops where frozen; the frozen PI runs on the error it gives
+    read, read_rate = (s0_y, d_s0) if p.RefFlag else (s1_y, d_s1)
+    if p.Tfltr > 0:
+        held = clip(m, dead_band(m, (Vref if p.RefFlag else Qlinef) - s_hold, p.dbd1, p.dbd2), p.emin, p.emax)
+        e = _frozen(m, Vm, p, held, enf)
+        d_hold = _frozen(m, Vm, p, 0.0 * s_hold, read_rate + (read - s_hold) / HOLD_SYNC_S)
+    else:  # no filter state to hold: a frozen PI takes the input 0 and stops
+        e = _frozen(m, Vm, p, 0.0 * enf, enf)
+        d_hold = 0.0 * s_hold
     d_s2, s2_y = pi_tracking(m, e, s2_xi, p.Kp, p.Ki, p.kqs, p.Qmin, p.Qmax)
+    if p.Tfltr <= 0:
+        d_s2 = _frozen(m, Vm, p, 0.0 * d_s2, d_s2)
     d_s3, s3_y = lead_lag(m, s2_y, s3_x, 1.0, p.Tft, p.Tfv)
     d_s4, s4_y = lag(m, Pbr, s4, 1.0, p.Tp)
     fdbd = dead_band(m, 1.0 - f, p.fdbd1, p.fdbd2)
@@ -189,13 +203,13 @@ def _signals(x, u, p: REPCA1Params, m) -> dict:
     feout = clip(m, Perr, p.femin, p.femax)
     d_s5, s5_y = pi_tracking(m, feout, s5_xi, p.Kpg, p.Kig, p.ksg, p.Pmin, p.Pmax)
     d_s6, s6_y = lag(m, s5_y, s6, 1.0, p.Tg)
-    return dict(rates=(d_f, d_w, d_s0, d_s1, _frozen(m, Vm, p, 0.0 * d_s2, d_s2), d_s3, d_s4, d_s5, d_s6),
+    return dict(rates=(d_f, d_w, d_s0, d_s1, d_s2, d_s3, d_s4, d_s5, d_s6, d_hold),
                 f=f, VCsel=VCsel, e=e, s2_y=s2_y, s3_y=s3_y, feout=feout, s5_y=s5_y,
                 Pext=Pref0 + p.Fflag * s6_y, Qext=Qref0 + s3_y)
 
 
 def derivatives(x, u, p: REPCA1Params, m):
-    """dx/dt for x = (theta_f, theta_w, s0_y, s1_y, s2_xi, s3_x, s4_y, s5_xi, s6_y),
+    """dx/dt for x = (theta_f, theta_w, s0_y, s1_y, s2_xi, s3_x, s4_y, s5_xi, s6_y, s_hold),
     u = (Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, Vref, Qlinef, Plant_pref, Pref0, Qref0)."""
     return _signals(x, u, p, m)["rates"]
 
@@ -211,8 +225,9 @@ def equilibrium(u, p: REPCA1Params) -> np.ndarray:
     their inputs, each PI's integrator at rest (0 where its input is 0 or it is frozen, else on the
     limit its input drives it to), the lead-lag and s6_y at their inputs."""
     Vm, theta_m, Pbr, Qbr = finite_inputs(u, "REPCA1")[:4]
-    x = np.array([theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0])
+    x = np.array([theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0, 0.0])
     x[2] = _signals(x, u, p, math)["VCsel"]
+    x[9] = x[2] if p.RefFlag else x[3]
     s = _signals(x, u, p, math)
     x[4] = pi_rest(s["e"], p.Kp, p.kqs, p.Qmin, p.Qmax, 0.0)
     x[7] = pi_rest(s["feout"], p.Kpg, p.ksg, p.Pmin, p.Pmax, 0.0)
@@ -227,8 +242,9 @@ MEASURED = ("Vm", "theta_m", "Pbr", "Qbr", "Ibr_re", "Ibr_im")
 def _start(given, p: REPCA1Params) -> tuple:
     Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im = (float(given[n]) for n in MEASURED)
     u = [Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, 0.0, Qbr, Pbr, float(given["Pext"]), float(given["Qext"])]
-    x = [theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0]
+    x = [theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0, 0.0]
     x[2] = u[6] = float(_signals(x, u, p, math)["VCsel"])
+    x[9] = x[2] if p.RefFlag else x[3]
     moving = [n for n, r in zip(REPCA1.state_names, _signals(x, u, p, math)["rates"]) if r != 0.0]
     if moving:
         raise ValueError(f"REPCA1: no rest at the start ({', '.join(moving)} move): a limit keeps a PI's input or "
@@ -271,7 +287,9 @@ REPCA1 = Component(
             Quantity("s3_x", "pu", "lead-lag state of the reactive command"),
             Quantity("s4_y", "pu", "filtered branch active power"),
             Quantity("s5_xi", "pu", "active power PI integrator"),
-            Quantity("s6_y", "pu", "active power command (lag)")),
+            Quantity("s6_y", "pu", "active power command (lag)"),
+            Quantity("s_hold", "pu", "the measurement the reactive PI's error reads (s0_y, RefFlag = 1; s1_y, "
+                     "RefFlag = 0), held through a voltage dip (ANDES' eHld)")),
     inputs=INPUTS,
     outputs=(Quantity("Pext", "pu", "active power reference of the electrical controller (system base)"),
              Quantity("Qext", "pu", "reactive power reference of the electrical controller (system base)"),
@@ -280,7 +298,7 @@ REPCA1 = Component(
     derivatives=derivatives,
     output_equations=outputs,
     equilibrium=equilibrium,
-    state_scales=(0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.2, 0.1, 0.1),
+    state_scales=(0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.2, 0.1, 0.1, 0.1),
     # busf_Tf dtheta_f/dt = theta_m - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w
     affine_states=(0, 1),
     ports=Ports(inputs=(Link("measured_voltage", "Vm"), Link("measured_voltage_angle", "theta_m"),
