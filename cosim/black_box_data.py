@@ -63,7 +63,7 @@ def replay(fmu_path, t: np.ndarray, V: np.ndarray, theta: np.ndarray, name: str 
 def own_rest(fmu_path) -> dict:
     """The box's own voltage start V_own [pu] and its devices' currents at rest there (Ip_own,
     Iq_own: its whole current, in the voltage's frame), after SETTLE_S at its start voltage."""
-    with FMU(fmu_path, "rest", init=False) as box:
+    with FMU(fmu_path, "--subsystem", init=False) as box:
         v, a, _, _ = bus_port(box)
         V_own, theta = float(box.starts.get(v, 1.0)), float(box.starts.get(a, 0.0))
     t = np.arange(2) * 0.01

@@ -116,7 +116,10 @@ def extracted(path, directory=None, name: str = "a") -> tuple:
         if not str(md.generationTool or "").startswith("opfmu"):
             md = read_model_description(str(directory))  # checked against the FMI schema
     except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
-        raise CouplingError(f"{name}: {path.name} is not a readable FMU ({_one_line(exc)})") from None
+        said = _one_line(exc)
+        if directory is not None:  # where it was extracted to: gone with it
+            said = said.replace(str(directory), path.name)
+        raise CouplingError(f"{name}: {path.name} is not a readable FMU ({said})") from None
     return Path(directory), md
 
 

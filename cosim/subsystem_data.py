@@ -28,6 +28,8 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import shutil
+import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
@@ -298,14 +300,25 @@ def finished(out: Path, key: str) -> dict | None:
     return meta
 
 
+def _use_scratch(folder: str) -> None:
+    """A worker process' temporary files (its extracted FMUs) in `folder`."""
+    tempfile.tempdir = folder
+
+
 def run_all(record, tasks: list, total: int, desc: str, workers: int, progress: bool) -> None:
     """Runs record(task) for each task (on `workers` processes where more than one), a progress bar
     over all `total` runs of the dataset (those done before counted as done)."""
     bar = progress_bar(total, desc, "run", progress, initial=total - len(tasks))
     if workers > 1 and len(tasks) > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            for _ in pool.map(record, tasks, chunksize=1):
-                bar.update(1)
+        # the workers' FMU folders go into one scratch folder, removed here: a worker process ends
+        # without running its own clean-ups
+        scratch = tempfile.mkdtemp(prefix="opfmu_workers_")
+        try:
+            with ProcessPoolExecutor(workers, initializer=_use_scratch, initargs=(scratch,)) as pool:
+                for _ in pool.map(record, tasks, chunksize=1):
+                    bar.update(1)
+        finally:
+            shutil.rmtree(scratch, ignore_errors=True)
     else:
         for task in tasks:
             record(task)

@@ -26,6 +26,8 @@ def output_file(path) -> Path:
 def output_folder(path) -> Path:
     """`path` as a folder the command may create or fill; UserError, before any work, when it is a
     file, lies under a file or cannot be written."""
+    if isinstance(path, str) and not path.strip():
+        raise UserError("--out must name a folder (an empty name would be the current folder)")
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise UserError(f"{path} is a file, not a folder")

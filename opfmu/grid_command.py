@@ -244,6 +244,8 @@ def _case(args):
     from reference_models.grid import wscc9
     from reference_models.grid.case import DATA_DIR, CaseError, load_case, shipped_case
 
+    if not args.case.strip():
+        raise UserError(f"--case must name a case ({', '.join(CASES)}, or a case file ANDES reads)")
     if getattr(args, "attach", None):
         return _attached_case(args)
     if args.case not in CASES:

@@ -65,7 +65,26 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
-    _learn(path, args.boundary, _output(args), _plan(args), args, _name(args))
+    out, plan, name = _output(args), _plan(args), _name(args)
+    _check_case(path)
+    _learn(path, args.boundary, out, plan, args, name)
+
+
+def _check_case(path: Path) -> None:
+    """UserError unless ANDES reads and sets up the sub-system, its buses all reach its boundary and
+    its own power flow converges (reference_models.grid.attach.own_power_flow)."""
+    try:
+        import andes
+    except ImportError:
+        raise UserError("--subsystem FILE needs ANDES to read and run the case file: pip install -e '.[andes]'") \
+            from None
+    from reference_models.grid.attach import own_power_flow
+    from reference_models.grid.case import CaseError
+
+    try:
+        own_power_flow(andes, path)
+    except CaseError as exc:
+        raise UserError(" ".join(str(exc).split())) from None
 
 
 def _black_box(path: Path, args) -> None:
@@ -121,13 +140,14 @@ def _output(args) -> Path:
 def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
     from cosim.fmu import CouplingError
     from cosim.subsystem_operator import learn
+    from reference_models.grid.case import CaseError
     from surrogate.data import DatasetError
     from surrogate.training import TrainError
 
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
                      args.rating)
-    except (DatasetError, TrainError, CouplingError) as exc:
+    except (DatasetError, TrainError, CouplingError, CaseError) as exc:
         raise UserError(str(exc)) from None
     meta, result = done["data"], done["training"]
     print(f"data: {sum(meta['counts'].values())} windows from {sum(len(v) for v in meta['runs'].values())} runs "

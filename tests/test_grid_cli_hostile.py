@@ -156,6 +156,14 @@ def _gone(pids) -> bool:
     return not any(os.path.exists(f"/proc/{p}") for p in pids)
 
 
+@pytest.mark.parametrize("command", [["grid", "run", "--compare", "none", "--stop", "0.1"], ["grid", "export"]])
+def test_an_empty_case_or_dynamic_data_nested_past_the_parser_is_one_line_and_exit_code_2(command, tmp_path):
+    _refused(command + ["--case", "", "--out", "out"], tmp_path, "--case must name a case")
+    (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
+    _refused(command + ["--case", "ieee14", "--dynamic-data", "deep.json", "--out", "out"], tmp_path,
+             "deep.json is not a readable JSON file (maximum recursion depth exceeded")
+
+
 @pytest.mark.skipif(not os.path.isdir("/proc"), reason="finds the command's child processes in /proc")
 def test_ctrl_c_while_the_local_workers_start_ends_in_one_line_and_leaves_nothing(tmp_path):
     scratch = tmp_path / "tmp"

@@ -141,6 +141,7 @@ def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     (["--subsystem", "{feeder}", "--boundary", "1", "--runs", "3", "--out", "{out}"], "--runs must lie in"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--hosts", "nowhere", "--out", "{out}"], "not a host case"),
     (["--out", "{out}"], "needs --machine FILE (a machine) or --subsystem"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--out", ""], "--out must name a folder"),
 ])
 def test_a_bad_subsystem_request_is_one_line_and_exit_2_before_any_work(tmp_path, args, says):
     import subprocess
@@ -155,6 +156,50 @@ def test_a_bad_subsystem_request_is_one_line_and_exit_2_before_any_work(tmp_path
     assert done.returncode == 2 and done.stdout == ""
     assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("spoil, says", [
+    (lambda r: r.update(Line=r["Line"][:1]), "are not connected to its boundary"),  # the units' buses cut off
+    (lambda r: r["Bus"][1].update(Vn="abc"), "ANDES cannot set it up: ValueError"),
+    (lambda r: r["Line"][1].update(r=0.0, x=0.0), "own power flow does not converge"),
+])
+def test_a_subsystem_file_andes_cannot_run_is_refused_in_one_line_before_any_work(tmp_path, spoil, says):
+    """Checked by ANDES itself before anything is written: its own power flow, its buses joined to
+    its boundary (the same check `--attach` makes)."""
+    import subprocess
+    import sys
+
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+
+    records = feeder(FeederSpec(units=10))
+    spoil(records)
+    path = write_case(records, tmp_path / "spoilt.json")
+    done = subprocess.run([sys.executable, "-m", "opfmu", "operator", "--subsystem", str(path), "--boundary", "1",
+                           "--out", str(tmp_path / "out")], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def _leaves_a_folder(task):
+    """A dataset task that leaves a temporary folder behind, as a worker's extracted FMUs do."""
+    import tempfile
+
+    tempfile.mkdtemp(prefix="opfmu_fmu_")
+    return task
+
+
+def test_what_the_dataset_workers_leave_in_their_temporary_folder_goes_with_them(tmp_path, monkeypatch):
+    """A worker process ends without its clean-ups: run_all gives the workers one scratch folder and
+    removes it, so nothing stays in TMPDIR."""
+    import tempfile
+
+    from cosim.subsystem_data import run_all
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    run_all(_leaves_a_folder, list(range(4)), 4, "runs", workers=2, progress=False)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_part_of_the_host_that_hangs_off_the_attachment_bus_is_not_the_subsystem():

@@ -85,6 +85,26 @@ def test_a_malformed_attachment_is_one_line_and_exit_code_2(attach, message, tmp
 
 
 @pytest.mark.andes
+@pytest.mark.parametrize("spoil, message", [
+    (lambda r: r["Slack"][0].update(bus=77), "ANDES cannot set it up: KeyError"),  # a Slack on no bus
+    (lambda r: r.update(Line=r["Line"][:1]), "are not connected to its boundary"),
+    (lambda r: r["Bus"][1].update(Vn="abc"), "ANDES cannot set it up: ValueError"),
+])
+def test_a_subsystem_andes_cannot_run_is_one_line_and_exit_code_2(spoil, message, tmp_path, capsys, monkeypatch):
+    from opfmu.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    records = feeder(FeederSpec(units=10))
+    spoil(records)
+    write_case(records, tmp_path / "spoilt.json")
+    assert main(["grid", "run", "--case", "ieee14", "--attach", "9=spoilt.json", "--trip", "4-5", "--clear", "0.02",
+                 "--stop", "0.05", "--compare", "none", "--out", "out"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and message in err, err
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.andes
 def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_fault(tmp_path):
     import andes
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections import defaultdict
 from pathlib import Path
 
 from .case import CaseError
@@ -88,7 +89,7 @@ def merge(host: dict, host_refs: dict, subsystems: list) -> tuple:
     taken = max(int(b) for b in buses)
     for k, (bus, records, refs, path) in enumerate(subsystems):
         if bus not in buses:
-            raise CaseError(f"--attach {bus}={path}: the host has no bus {bus}")
+            raise CaseError(f"--attach {bus}=...: the host has no bus {bus}")
         boundary, slack = _boundary(records, path)
         first = (taken // BUS_BLOCK + 1) * BUS_BLOCK
         numbers = {boundary: bus}
@@ -164,28 +165,65 @@ def attached_file(host, attachments, folder) -> Path:
     out = Path(folder) / f"{host.stem}_attached_{digest.hexdigest()[:16]}.json"
     if out.exists():
         return out
-    ss = _load(andes, host)
-    host_records = case_records(ss)
-    subsystems = []
-    for bus, path in attachments:
-        sub = _load(andes, path)
-        subsystems.append((int(bus), case_records(sub), device_references(sub), path))
-    merged, regulated = merge(host_records, device_references(ss), subsystems)
     own = [_own_voltages(andes, path) for _, path in attachments]
-    targets = [(idx, tap_at_boundary, far, own[k][original]) for k, idx, tap_at_boundary, far, original in regulated]
-    pvs = {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems for r in records.get("PV", [])}
-    _settle(andes, merged, pvs, targets, Path(folder))
+    ss = _load(andes, host)
+    try:
+        host_records = case_records(ss)
+        subsystems = []
+        for bus, path in attachments:
+            sub = _load(andes, path)
+            subsystems.append((int(bus), case_records(sub), device_references(sub), path))
+        merged, regulated = merge(host_records, device_references(ss), subsystems)
+        targets = [(idx, tap_at_boundary, far, own[k][original])
+                   for k, idx, tap_at_boundary, far, original in regulated]
+        pvs = {f"{bus}:{r['idx']}" for bus, records, _, _ in subsystems for r in records.get("PV", [])}
+        _settle(andes, merged, pvs, targets, Path(folder))
+    except CaseError:
+        raise
+    except Exception as exc:  # ANDES raises what the files' values make its code raise
+        raise CaseError(f"ANDES cannot join {host.name} and its sub-systems: {type(exc).__name__}: {_said(exc)}") \
+            from None
     return write_case(merged, out)
 
 
 def own_power_flow(andes, path):
     """The ANDES system of the sub-system file `path` with its own power flow solved (its Slack the
-    grid); CaseError where ANDES cannot read it or the flow does not converge."""
+    grid); CaseError where ANDES cannot read or set it up, where a bus is not connected to its
+    boundary (the Slack's bus) through its lines in service, or where the flow does not converge."""
     ss = _load(andes, path)
-    ss.setup()
-    if not (ss.PFlow.run() and ss.PFlow.converged):
+    try:
+        ss.setup()
+        flowed = ss.PFlow.run() and ss.PFlow.converged
+    except Exception as exc:  # ANDES' setup and flow raise what the file's values make them raise
+        raise CaseError(f"{path}: ANDES cannot set it up: {type(exc).__name__}: {_said(exc)}") from None
+    cut_off = _cut_off(ss)
+    if cut_off:
+        raise CaseError(f"{path}: its buses {', '.join(map(str, cut_off[:8]))}{' ...' if len(cut_off) > 8 else ''} "
+                        "are not connected to its boundary (the bus of its Slack) through its lines in service")
+    if not flowed:
         raise CaseError(f"{path}: the sub-system's own power flow does not converge")
     return ss
+
+
+def _cut_off(ss) -> list:
+    """The buses of the set-up ANDES system `ss` that no path of lines in service joins to its
+    Slack's bus."""
+    links = defaultdict(set)
+    for a, b, on in zip(ss.Line.bus1.v, ss.Line.bus2.v, ss.Line.u.v):
+        if on:
+            links[a].add(b)
+            links[b].add(a)
+    reached = set(ss.Slack.bus.v)
+    todo = list(reached)
+    while todo:
+        for other in links[todo.pop()] - reached:
+            reached.add(other)
+            todo.append(other)
+    return [b for b in ss.Bus.idx.v if b not in reached]
+
+
+def _said(exc: BaseException) -> str:
+    return " ".join(str(exc).split())[:160]
 
 
 def _own_voltages(andes, path) -> dict:

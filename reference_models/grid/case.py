@@ -426,7 +426,7 @@ def _read_json(path: Path) -> dict:
         data = json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise CaseError(f"no case file {path}") from None
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise CaseError(f"{path} is not a readable JSON file ({' '.join(str(exc).split())[:120]})") from None
     if not isinstance(data, dict):
         raise CaseError(f"{path}: a JSON object is needed")
