@@ -1,7 +1,8 @@
-"""Self-initialisation of a native reference FMU from the load flow: what the FMU solves for at its start.
+"""Self-initialisation of a native FMU (reference or surrogate) from the load flow: what the FMU solves
+for at its start.
 
 A component's initialisation (reference_models.component.Initialisation) starts it at rest from what
-its surroundings fix. The native reference FMU solves the same rest itself, in C (c/self_start.c), as
+its surroundings fix. Its native FMUs solve the same rest themselves, in C (c/self_start.c), as
 one square system in its states x and the inputs it solves (`solves`: a machine's Pm and Efd, an
 exciter's Vref, a governor's Pref):
 

@@ -12,7 +12,8 @@ fmu_export.c_parameters, a trained ParameterSpace). With the static sources in c
 with fmi2_cs.c or fmi3_cs.c: the FMI 2.0 or 3.0 API over it; model.h: its interface to a model;
 window.c: the window-and-sensor engine; frame.c: the window frame; corrections.c;
 variables.c: the component's variables; surrogate_variables.c and surrogate_state.h: the
-surrogate's own variables and state; linalg.c) they compile into one binary per platform
+surrogate's own variables and state; linalg.c; self_start.c where the component starts from the load
+flow, as its native reference FMU does: fmu_export.self_start) they compile into one binary per platform
 (binaries.py), which needs the C runtime only. The host's compiled kernel is checked against
 onnxruntime, and the other platforms' binaries against the host's by running them where an emulator
 is installed (cross_check.py), before the FMU is written; the .onnx goes into resources/ and the C

@@ -1,4 +1,4 @@
-/* Self-initialisation of the native reference FMU from the load flow (fmu_export/self_start.py says
+/* Self-initialisation of a native FMU, reference or surrogate, from the load flow (fmu_export/self_start.py says
    which components have it and what they solve). Unknowns z = (x, s): the states and the inputs the
    start solves (SELF_START_SOLVES). Equations:
        dx/dt (x, u) = 0                        the component's right-hand side (its start equations where
