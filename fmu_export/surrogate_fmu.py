@@ -170,7 +170,7 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",
         f"#define OPFMU_RESIDUAL_LIMIT {_c_double(residual_limit(meta))} /* default of the parameter residual_limit */",
-        f"#define OPFMU_RESTART_JUMP {_c_double(DEFAULT_RESTART_JUMP)} /* default of the parameter restart_jump */",
+        f"#define OPFMU_RESTART_JUMP {_c_double(corrections['restart_jump'])} /* default of the parameter restart_jump */",
         f"#define OPFMU_REST_RADIUS {_c_double(corrections['rest_radius'])} /* default of the parameter rest_radius */",
         f"#define OPFMU_SLOW_WEIGHT {_c_double(corrections['slow_weight'])} /* default of the parameter slow_weight */",
         f"#define OPFMU_SWING_WEIGHT {_c_double(corrections['swing_weight'])} /* default of the parameter swing_weight */",
@@ -231,18 +231,24 @@ def rollover_horizon(meta: dict) -> float:
 
 
 def correction_defaults(component) -> dict:
-    """Defaults of the corrections' parameters (corrections.c). The rest and slow-mode corrections
-    read every state's rate from the right-hand side: off (0) for a component whose rates are
-    partly learned (Component.learned_states); the exact step of its affine states stays on."""
+    """Defaults of the parameters of the window's corrections (corrections.c) and restarts. For a
+    component whose rates are partly learned (Component.learned_states): the rest and slow-mode
+    corrections, which read every state's rate from the right-hand side, are off (0), and so are the
+    restarts at an input jump (restart_jump 0): its windows, like those it was trained on, start
+    every rollover horizon whatever the input does, and one that starts at a fault's clearing would
+    carry the devices' state through their two currents alone (measured: the feeder's largest P
+    error on ieee14 9.3 % of its rating, 16.3 % with restarts; docs/results.md). The exact step of
+    the affine states stays on."""
     learned = bool(component.learned_states)
     return {"rest_radius": 0.0 if learned else DEFAULT_REST_RADIUS,
-            "slow_weight": 0.0 if learned else DEFAULT_SLOW_WEIGHT, "swing_weight": DEFAULT_SWING_WEIGHT}
+            "slow_weight": 0.0 if learned else DEFAULT_SLOW_WEIGHT, "swing_weight": DEFAULT_SWING_WEIGHT,
+            "restart_jump": 0.0 if learned else DEFAULT_RESTART_JUMP}
 
 
 def surrogate_starts(meta: dict) -> dict:
     """Start values of the surrogate FMU's own parameters (SURROGATE_EXTRAS)."""
     return {"rollover_horizon": rollover_horizon(meta), "residual_limit": residual_limit(meta),
-            "restart_jump": DEFAULT_RESTART_JUMP, **correction_defaults(meta["component"])}
+            **correction_defaults(meta["component"])}
 
 
 def check_model_name(model_name) -> str:

@@ -228,9 +228,10 @@ def _columns(run) -> dict:
 @pytest.mark.andes
 def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_the_aggregate(tmp_path, monkeypatch):
     """`--attach 9=feeder:surrogate`: the shipped operator, one FMU beside ieee14's native FMUs, through
-    a fault at the host's bus 4 cleared after 80 ms; its injection within 3 % of the feeder's rating
-    of the detail's (measured 2.1 % and 1.5 %), and its active power at least 3 times closer than the
-    hand-made aggregate's (11.7 %)."""
+    a fault at the host's bus 4 cleared after 80 ms; its injection within 7 % (P) and 3 % (Q) of the
+    feeder's rating of the detail's (measured 5.6 % and 2.2 %; 2.1 % and 1.5 % with the windows
+    restarted at the fault's jumps, which doubled the largest P error elsewhere: docs/results.md),
+    and its active power at least 1.5 times closer than the hand-made aggregate's (11.7 %)."""
     from opfmu.cli import main
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
@@ -246,8 +247,8 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_
     outside = (detail["time"] < 1.0) | (detail["time"] >= 1.08 + 1e-9)
     error = {(kind, name): np.max(np.abs(runs[kind][name] - detail[name])[outside]) / rating
              for kind in ("surrogate", "aggregate") for name in ("P_attach_9", "Q_attach_9")}
-    assert error["surrogate", "P_attach_9"] < 0.03 and error["surrogate", "Q_attach_9"] < 0.03
-    assert error["aggregate", "P_attach_9"] > 3 * error["surrogate", "P_attach_9"]
+    assert error["surrogate", "P_attach_9"] < 0.07 and error["surrogate", "Q_attach_9"] < 0.03
+    assert error["aggregate", "P_attach_9"] > 1.5 * error["surrogate", "P_attach_9"]
     assert np.ptp(detail["P_attach_9"]) > 0.5 * rating  # the fault moved the feeder
 
 
