@@ -397,10 +397,12 @@ def _close_quietly(client, cluster) -> None:
 
 
 def _end_children() -> None:
-    """Terminates this process's descendants, and kills those still there a few seconds later."""
+    """Terminates this process's descendants, and kills those still there a few seconds later; not
+    multiprocessing's resource tracker, which ends with this process (ended, it is started again by
+    the next clean-up and reports every semaphore it never saw: tracebacks after the one line)."""
     import psutil
 
-    children = psutil.Process().children(recursive=True)
+    children = [c for c in psutil.Process().children(recursive=True) if not _resource_tracker(c)]
     for child in children:
         try:
             child.terminate()
@@ -412,6 +414,16 @@ def _end_children() -> None:
             child.kill()
         except psutil.NoSuchProcess:
             pass
+
+
+def _resource_tracker(process) -> bool:
+    """Whether the psutil Process is multiprocessing's resource tracker (False where it is gone)."""
+    import psutil
+
+    try:
+        return any("resource_tracker" in part for part in process.cmdline())
+    except psutil.Error:
+        return False
 
 
 def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool = True) -> list:

@@ -314,8 +314,8 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
                          f"but the {component.name} component has {component.n_states} states and "
                          f"{component.n_inputs} inputs")
     space = parameter_space(component, params, trained=True)
-    spec = self_start_of(component, params, x_default, meta.get("operating_point"))
-    variables = surrogate_variables(meta, onnx_path, space, spec)
+    spec = surrogate_self_start(meta, onnx_path)
+    variables = surrogate_variables(meta, onnx_path, space)
     equations = ('#include <stdio.h>\n#include "engine.h"\n'
                  + equations_c_source(component, space, linkage="OPFMU_INTERNAL") + "\n"
                  + parameters_c_source(space, linkage="OPFMU_INTERNAL"))
@@ -363,14 +363,22 @@ def build_surrogate_fmu(onnx_path, out, model_name: str = "SM4Surrogate", n_chec
             "checks": checks}
 
 
-def surrogate_variables(meta: dict, onnx_path: Path, space=None, spec=None):
+def surrogate_self_start(meta: dict, onnx_path: Path):
+    """The start from the load flow the surrogate FMU of an operator solves (as its component's
+    native reference FMU: fmu_export.self_start), None where the component has none."""
+    return self_start_of(meta["component"], meta["params"], default_state(meta, Path(onnx_path)),
+                         meta.get("operating_point"))
+
+
+def surrogate_variables(meta: dict, onnx_path: Path, space=None):
     """The surrogate FMU's variable table (fmu_export.variables) for an operator's validated metadata;
-    space: its trained ParameterSpace (None: made here); spec: the start from the load flow it solves
-    (fmu_export.self_start.self_start_of; None: none). A component with a bus port gets the bus
+    space: its trained ParameterSpace (None: made here). A component with a bus port gets the bus
     port's outputs (the Norton equivalent at the surrogate's state, P and Q at the bus) on the system
-    base its trained parameters name (`Sb`; 100 MVA where they name none)."""
+    base its trained parameters name (`Sb`; 100 MVA where they name none); one that starts from the
+    load flow, its start variables (surrogate_self_start)."""
     component, params = meta["component"], meta["params"]
     space = space or parameter_space(component, params, trained=True)
+    spec = surrogate_self_start(meta, onnx_path)
     base = float(getattr(params, "Sb", SYSTEM_BASE_MVA))
     return fmu_variables(component, params, default_state(meta, Path(onnx_path)), SURROGATE_EXTRAS,
                          surrogate_starts(meta), meta.get("operating_point"), bus_outputs=True, base_mva=base,
