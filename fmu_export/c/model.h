@@ -56,6 +56,18 @@ typedef enum { VAR_INPUT, VAR_PARAMETER, VAR_OUTPUT, VAR_LOCAL } VarKind;
 /* the declared size of an array of the states: at least 1, as C requires (n_x = 0: one unused) */
 #define OPFMU_X_SIZE (OPFMU_N_STATES > 0 ? OPFMU_N_STATES : 1)
 
+#ifdef OPFMU_SELF_START
+/* the start from the load flow (self_start.c), a field `start` of either model's ModelState */
+typedef struct {
+    double flow[4];           /* parameters V_lf [pu], theta_lf [rad], P_lf, Q_lf [pu, system base] */
+    double delivered[SELF_START_N_DELIVERS > 0 ? SELF_START_N_DELIVERS : 1]; /* parameters <y>_init */
+    double solved[SELF_START_N_SOLVES > 0 ? SELF_START_N_SOLVES : 1];        /* calculated <u>_init */
+    int stale;                /* 1 while the solved start may not match what is set */
+    int in_x;                 /* 1 where the state x holds the solved start (not x_start) */
+    int bus_voltage_set;      /* 1 once the importer set a bus voltage input: it keeps its value */
+} SelfStartState;
+#endif
+
 #include OPFMU_STATE_HEADER /* the model's ModelState */
 
 /* --- the component's equations (equations.c, derivatives.c: generated from its definition), at the
@@ -102,6 +114,9 @@ OPFMU_INTERNAL void component_defaults(ModelState *m);
    the solved inputs and their calculated parameters (self_start_solve), unless nothing was set since
    it last did; MODEL_ERROR (why written) where there is no such start. MODEL_OK otherwise. */
 OPFMU_INTERNAL ModelStatus component_settle_start(ModelState *m, char *why, size_t size);
+/* at the end of initialisation: the start settled (component_settle_start) and the state x at it, or
+   at the initial-state parameters x_start; MODEL_ERROR (why written) where there is no such start */
+OPFMU_INTERNAL ModelStatus component_initial_state(ModelState *m, char *why, size_t size);
 #ifdef OPFMU_SELF_START
 /* self_start.c: the start from the load flow, unconditionally */
 OPFMU_INTERNAL ModelStatus self_start_solve(ModelState *m, char *why, size_t size);

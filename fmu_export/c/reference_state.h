@@ -18,13 +18,7 @@ typedef struct {
     double x[OPFMU_X_SIZE];         /* state at `time` */
     double h_guess;                 /* the solver's step size to try next [s] (0: none yet) */
 #ifdef OPFMU_SELF_START
-    /* the start from the load flow (self_start.c) */
-    double start_flow[4];           /* parameters V_lf [pu], theta_lf [rad], P_lf, Q_lf [pu, system base] */
-    double start_delivered[SELF_START_N_DELIVERS > 0 ? SELF_START_N_DELIVERS : 1]; /* parameters <y>_init */
-    double start_solved[SELF_START_N_SOLVES > 0 ? SELF_START_N_SOLVES : 1];        /* calculated <u>_init */
-    int start_stale;                /* 1 while the solved start may not match what is set */
-    int self_started;               /* 1 where x holds the solved start (not x_start) */
-    int bus_voltage_set;            /* 1 once the importer set a bus voltage input: it keeps its value */
+    SelfStartState start;         /* the start from the load flow (model.h) */
 #endif
     int mode[OPFMU_G_SIZE];         /* the branches the right-hand side is locked to (switching.h) */
     double u_locked[OPFMU_N_INPUTS]; /* Model Exchange: the inputs at the last lock (model_exchange.c) */

@@ -62,8 +62,8 @@ static void system_at(const ModelState *m, double lambda, System *q)
     for (int i = 0; i < OPFMU_N_PARAMS; ++i) q->p[i] = blend(OPFMU_PARAM_START[i], m->p[i], lambda);
     model_derive(q->p);
     for (int c = 0; c < N_U; ++c) q->u[c] = blend(SELF_START_ANCHOR_U[c], m->u[c], lambda);
-    for (int k = 0; k < 4; ++k) q->flow[k] = blend(SELF_START_ANCHOR_FLOW[k], m->start_flow[k], lambda);
-    for (int k = 0; k < N_D; ++k) q->target[k] = blend(SELF_START_ANCHOR_DELIVERED[k], m->start_delivered[k], lambda);
+    for (int k = 0; k < 4; ++k) q->flow[k] = blend(SELF_START_ANCHOR_FLOW[k], m->start.flow[k], lambda);
+    for (int k = 0; k < N_D; ++k) q->target[k] = blend(SELF_START_ANCHOR_DELIVERED[k], m->start.delivered[k], lambda);
 #if SELF_START_LOAD_FLOW
     q->u[BUS_VOLTAGE_MAGNITUDE] = q->flow[0];
     q->u[BUS_VOLTAGE_ANGLE] = q->flow[1];
@@ -218,12 +218,12 @@ static void describe_start(const ModelState *m, char *text, size_t size)
     size_t used = 0;
     text[0] = '\0';
 #if SELF_START_LOAD_FLOW
-    used += (size_t)snprintf(text, size, "V_lf = %g pu, theta_lf = %g rad, P_lf = %g pu, Q_lf = %g pu", m->start_flow[0],
-                             m->start_flow[1], m->start_flow[2], m->start_flow[3]);
+    used += (size_t)snprintf(text, size, "V_lf = %g pu, theta_lf = %g rad, P_lf = %g pu, Q_lf = %g pu", m->start.flow[0],
+                             m->start.flow[1], m->start.flow[2], m->start.flow[3]);
 #endif
     for (int k = 0; k < N_D && used < size; ++k)
         used += (size_t)snprintf(text + used, size - used, "%s%s_init = %g", used ? ", " : "",
-                                 SELF_START_DELIVER_NAMES[k], m->start_delivered[k]);
+                                 SELF_START_DELIVER_NAMES[k], m->start.delivered[k]);
 }
 
 ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
@@ -283,11 +283,11 @@ ModelStatus self_start_solve(ModelState *m, char *message, size_t size)
                      OPFMU_INPUT_NAMES[c], u[c], OPFMU_INPUT_UNITS[c], OPFMU_INPUT_MIN[c], OPFMU_INPUT_UNITS[c]);
             return MODEL_ERROR;
         }
-        m->start_solved[k] = u[c];
+        m->start.solved[k] = u[c];
     }
     for (int k = 0; k < N_S; ++k) m->u[SELF_START_SOLVES[k]] = u[SELF_START_SOLVES[k]];
 #if SELF_START_LOAD_FLOW
-    if (!m->bus_voltage_set) { /* the bus voltage the host never set: the load flow's */
+    if (!m->start.bus_voltage_set) { /* the bus voltage the host never set: the load flow's */
         m->u[BUS_VOLTAGE_MAGNITUDE] = u[BUS_VOLTAGE_MAGNITUDE];
         m->u[BUS_VOLTAGE_ANGLE] = u[BUS_VOLTAGE_ANGLE];
     }

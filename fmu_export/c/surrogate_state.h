@@ -21,13 +21,7 @@ typedef struct {
                                      fmi2SetRealInputDerivatives) */
     double x_start[OPFMU_N_STATES]; /* parameters: initial state */
 #ifdef OPFMU_SELF_START
-    /* the start from the load flow (self_start.c), as the native reference FMU's (reference_state.h) */
-    double start_flow[4];         /* parameters V_lf [pu], theta_lf [rad], P_lf, Q_lf [pu, system base] */
-    double start_delivered[SELF_START_N_DELIVERS > 0 ? SELF_START_N_DELIVERS : 1]; /* parameters <y>_init */
-    double start_solved[SELF_START_N_SOLVES > 0 ? SELF_START_N_SOLVES : 1];        /* calculated <u>_init */
-    int start_stale;              /* 1 while the solved start may not match what is set */
-    int self_started;             /* 1 where x holds the solved start (not x_start) */
-    int bus_voltage_set;          /* 1 once the importer set a bus voltage input: it keeps its value */
+    SelfStartState start;         /* the start from the load flow (model.h) */
 #endif
     double p[OPFMU_P_SIZE];       /* parameters: the component's, fixed at the trained values (model.h) */
     double rollover_horizon;      /* parameter [s]: window length, <= the trained horizon */

@@ -153,9 +153,9 @@ void component_defaults(ModelState *m)
     memcpy(m->p, OPFMU_PARAM_START, OPFMU_N_PARAMS * sizeof *m->p);
     model_derive(m->p);
 #ifdef OPFMU_SELF_START
-    memcpy(m->start_flow, SELF_START_FLOW_DEFAULT, sizeof m->start_flow);
-    memcpy(m->start_delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start_delivered);
-    for (int k = 0; k < SELF_START_N_SOLVES; ++k) m->start_solved[k] = OPFMU_START_U[SELF_START_SOLVES[k]];
+    memcpy(m->start.flow, SELF_START_FLOW_DEFAULT, sizeof m->start.flow);
+    memcpy(m->start.delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start.delivered);
+    for (int k = 0; k < SELF_START_N_SOLVES; ++k) m->start.solved[k] = OPFMU_START_U[SELF_START_SOLVES[k]];
 #endif
 }
 
@@ -165,21 +165,31 @@ ModelStatus component_settle_start(ModelState *m, char *why, size_t size)
     /* start at x_start unless the importer set a start parameter off its default and no initial state
        other than the built one */
     if (memcmp(m->x_start, OPFMU_DEFAULT_X0, sizeof m->x_start)
-        || (!memcmp(m->start_flow, SELF_START_FLOW_DEFAULT, sizeof m->start_flow)
-            && !memcmp(m->start_delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start_delivered))) {
-        m->self_started = 0;
+        || (!memcmp(m->start.flow, SELF_START_FLOW_DEFAULT, sizeof m->start.flow)
+            && !memcmp(m->start.delivered, SELF_START_DELIVER_DEFAULT, sizeof m->start.delivered))) {
+        m->start.in_x = 0;
         return MODEL_OK;
     }
-    if (m->start_stale || !m->self_started) {
+    if (m->start.stale || !m->start.in_x) {
         if (self_start_solve(m, why, size) != MODEL_OK) return MODEL_ERROR;
-        m->start_stale = 0;
-        m->self_started = 1;
+        m->start.stale = 0;
+        m->start.in_x = 1;
     }
 #else
     (void)m;
     (void)why;
     (void)size;
 #endif
+    return MODEL_OK;
+}
+
+ModelStatus component_initial_state(ModelState *m, char *why, size_t size)
+{
+    if (component_settle_start(m, why, size) != MODEL_OK) return MODEL_ERROR;
+#ifdef OPFMU_SELF_START
+    if (m->start.in_x) return MODEL_OK; /* x holds the solved start */
+#endif
+    memcpy(m->x, m->x_start, sizeof m->x);
     return MODEL_OK;
 }
 
@@ -217,15 +227,15 @@ ModelStatus model_get_real(const ModelState *m, unsigned int vr, double *value)
 #endif
 #ifdef OPFMU_SELF_START
     if (IN_GROUP(vr, VR_FIRST_FLOW, 4 * SELF_START_LOAD_FLOW)) {
-        *value = m->start_flow[vr - VR_FIRST_FLOW];
+        *value = m->start.flow[vr - VR_FIRST_FLOW];
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_DELIVERED, SELF_START_N_DELIVERS)) {
-        *value = m->start_delivered[vr - VR_FIRST_DELIVERED];
+        *value = m->start.delivered[vr - VR_FIRST_DELIVERED];
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_SOLVED, SELF_START_N_SOLVES)) {
-        *value = m->start_solved[vr - VR_FIRST_SOLVED];
+        *value = m->start.solved[vr - VR_FIRST_SOLVED];
         return MODEL_OK;
     }
 #endif
@@ -265,11 +275,11 @@ static ModelStatus set_real(ModelState *m, unsigned int vr, double value, char *
     }
 #ifdef OPFMU_SELF_START
     if (IN_GROUP(vr, VR_FIRST_FLOW, 4 * SELF_START_LOAD_FLOW)) {
-        m->start_flow[vr - VR_FIRST_FLOW] = value;
+        m->start.flow[vr - VR_FIRST_FLOW] = value;
         return MODEL_OK;
     }
     if (IN_GROUP(vr, VR_FIRST_DELIVERED, SELF_START_N_DELIVERS)) {
-        m->start_delivered[vr - VR_FIRST_DELIVERED] = value;
+        m->start.delivered[vr - VR_FIRST_DELIVERED] = value;
         return MODEL_OK;
     }
 #endif
@@ -280,9 +290,9 @@ ModelStatus model_set_real(ModelState *m, unsigned int vr, double value, char *m
 {
     if (set_real(m, vr, value, message, size) != MODEL_OK) return MODEL_ERROR;
 #ifdef OPFMU_SELF_START
-    m->start_stale = 1;
+    m->start.stale = 1;
 #if SELF_START_LOAD_FLOW
-    if (vr == VR_FIRST_INPUT + BUS_VOLTAGE_MAGNITUDE || vr == VR_FIRST_INPUT + BUS_VOLTAGE_ANGLE) m->bus_voltage_set = 1;
+    if (vr == VR_FIRST_INPUT + BUS_VOLTAGE_MAGNITUDE || vr == VR_FIRST_INPUT + BUS_VOLTAGE_ANGLE) m->start.bus_voltage_set = 1;
 #endif
 #endif
     return MODEL_OK;
@@ -359,15 +369,15 @@ ModelStatus check_component_state(const ModelState *m, char *why, size_t size)
         return MODEL_ERROR;
     }
 #ifdef OPFMU_SELF_START
-    if (first_non_finite(m->start_flow, 4) >= 0 || first_non_finite(m->start_delivered, SELF_START_N_DELIVERS) >= 0
-        || first_non_finite(m->start_solved, SELF_START_N_SOLVES) >= 0) {
+    if (first_non_finite(m->start.flow, 4) >= 0 || first_non_finite(m->start.delivered, SELF_START_N_DELIVERS) >= 0
+        || first_non_finite(m->start.solved, SELF_START_N_SOLVES) >= 0) {
         snprintf(why, size, "a start parameter is not a finite number");
         return MODEL_ERROR;
     }
-    if ((m->self_started != 0 && m->self_started != 1) || (m->start_stale != 0 && m->start_stale != 1)
-        || (m->bus_voltage_set != 0 && m->bus_voltage_set != 1)) {
-        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->self_started, m->start_stale,
-                 m->bus_voltage_set);
+    if ((m->start.in_x != 0 && m->start.in_x != 1) || (m->start.stale != 0 && m->start.stale != 1)
+        || (m->start.bus_voltage_set != 0 && m->start.bus_voltage_set != 1)) {
+        snprintf(why, size, "the start's flags %d, %d, %d are not 0 or 1", m->start.in_x, m->start.stale,
+                 m->start.bus_voltage_set);
         return MODEL_ERROR;
     }
 #endif

@@ -341,13 +341,8 @@ static void evaluate(ModelState *m, int first, double tau0, double tau)
 
 ModelStatus model_initialize(ModelState *m, double start_time, char *message, size_t size)
 {
-    if (component_settle_start(m, message, size) != MODEL_OK) return MODEL_ERROR;
+    if (component_initial_state(m, message, size) != MODEL_OK) return MODEL_ERROR;
     m->time = start_time;
-#ifdef OPFMU_SELF_START
-    if (!m->self_started) memcpy(m->x, m->x_start, sizeof m->x); /* else x holds the solved start */
-#else
-    memcpy(m->x, m->x_start, sizeof m->x);
-#endif
     m->in_envelope = 1;
     m->input_time = start_time;
     memcpy(m->prev_end_u, m->u, sizeof m->u);
