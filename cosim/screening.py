@@ -18,8 +18,8 @@ once per thread and reuses them for every task it gets (the master rewinds them 
 the end of a screening every worker closes them and removes its folder. In this process (workers
 0) the files are used where they are. The client's own scratch folder (the local workers' folder,
 and where FMUs are extracted without dask) is removed at the end whatever happened (also on an
-interrupt). The local workers are forked from a fork server that ignores SIGINT, which they inherit: a
-Ctrl-C reaches the command alone (also while they start), and is reported once, by it.
+interrupt). The local workers are forked from a fork server started with SIGINT blocked, which they
+inherit: a Ctrl-C reaches the command alone (also while they start), and is reported once, by it.
 """
 from __future__ import annotations
 
@@ -40,6 +40,7 @@ from pathlib import Path
 
 from reference_models.files import atomic_path
 from reference_models.grid.contingency import Contingency
+from reference_models.interrupts import interrupts_held
 
 from .master import MasterSettings
 from .stability import critical_clearing_time, default_stop, first_swing_peak, run_verdict, runner_stable
@@ -330,10 +331,11 @@ def _short_socket_folder() -> None:
 def _local_cluster(workers: int, scratch: str):
     """(cluster, client): a LocalCluster of `workers` single-threaded processes with `scratch` as their
     folder, and its client. The workers are forked from multiprocessing's fork server, started with
-    SIGINT ignored: they inherit that, so a Ctrl-C reaches this process alone. A Ctrl-C while the
-    scheduler starts (a fraction of a second) is held until it is up; one while the workers start
-    is taken at once. Either closes the cluster, its workers with it, and raises KeyboardInterrupt.
-    RuntimeError where the workers are not all up within WORKER_START_TIMEOUT_S."""
+    SIGINT blocked (reference_models.interrupts): they inherit that, so a Ctrl-C reaches this process
+    alone. A Ctrl-C while the fork server, the scheduler and the workers start (a second or two) is
+    held until they are up (closing a half-started cluster waits on workers still starting); then the
+    cluster is closed, its workers with it, and KeyboardInterrupt raised. RuntimeError where the
+    workers are not all up within WORKER_START_TIMEOUT_S."""
     import multiprocessing.forkserver
 
     import dask
@@ -342,29 +344,22 @@ def _local_cluster(workers: int, scratch: str):
 
     with dask.config.set({"temporary-directory": scratch, "distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # the fork server's preloaded modules (distributed's)
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # inherited by the fork server (milliseconds)
+        cluster = client = None
         try:
-            _short_socket_folder()
-            multiprocessing.forkserver.ensure_running()
-            held = []
-            signal.signal(signal.SIGINT, lambda *_: held.append(True))
-            # no dashboard; the scheduler's HTTP server on a free local port (its default 8787 may be taken)
-            cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
-                                   silence_logs=logging.CRITICAL, local_directory=scratch)
-        finally:
-            signal.signal(signal.SIGINT, previous)
-        client = None
-        try:
-            if held:
-                raise KeyboardInterrupt
-            cluster.scale(workers)
-            client = Client(cluster)
-            try:
-                client.wait_for_workers(workers, timeout=WORKER_START_TIMEOUT_S)
-            except TimeoutError:
-                raise RuntimeError(f"the {workers} local dask workers did not start within "
-                                   f"{WORKER_START_TIMEOUT_S:g} s") from None
+            with interrupts_held():
+                _short_socket_folder()
+                multiprocessing.forkserver.ensure_running()
+                # no dashboard; the scheduler's HTTP server on a free local port (its default 8787 may be taken)
+                cluster = LocalCluster(n_workers=0, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
+                                       silence_logs=logging.CRITICAL, local_directory=scratch)
+                cluster.scale(workers)
+                client = Client(cluster)
+                try:
+                    client.wait_for_workers(workers, timeout=WORKER_START_TIMEOUT_S)
+                except TimeoutError:
+                    raise RuntimeError(f"the {workers} local dask workers did not start within "
+                                       f"{WORKER_START_TIMEOUT_S:g} s") from None
         except BaseException:
             _close_quietly(client, cluster)
             raise
@@ -372,7 +367,7 @@ def _local_cluster(workers: int, scratch: str):
 
 
 def _close_quietly(client, cluster) -> None:
-    """Closes `client` (None: none yet) and `cluster` with Ctrl-C held off, on the way out of an
+    """Closes `client` and `cluster` (None: not made yet) with Ctrl-C held off, on the way out of an
     interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
     by the interrupt it follows: distributed's sync then raises UnboundLocalError) or that waits past
     CLOSE_TIMEOUT_S (its event loop left waiting for a worker the interrupt stopped half-started) is
@@ -381,7 +376,7 @@ def _close_quietly(client, cluster) -> None:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         closed = True
-        for close in ([client.close] if client is not None else []) + [cluster.close]:
+        for close in [part.close for part in (client, cluster) if part is not None]:
             for _ in range(2):
                 try:
                     close(timeout=CLOSE_TIMEOUT_S)

@@ -2,14 +2,13 @@
 from __future__ import annotations
 
 import logging
-import signal
-import threading
 import warnings
 from contextlib import contextmanager
 
 import numpy as np
 
 from reference_models.components import component
+from reference_models.interrupts import interrupts_held
 from reference_models.signals import Signal
 from reference_models.simulate import SolverConfig, simulate
 
@@ -32,22 +31,6 @@ def solve_chunk(x0s: np.ndarray, signal_dicts: list, t: np.ndarray, solver: dict
 
 class SchedulerError(ValueError):
     """A dask scheduler address that cannot be used (unreachable, or not an address)."""
-
-
-@contextmanager
-def _interrupts_left_to_this_process():
-    """SIGINT ignored while the block starts worker processes, which inherit that: a Ctrl-C, sent to
-    the whole process group, then reaches only this process, whose KeyboardInterrupt closes the
-    cluster (SolveRunner.__exit__), instead of each worker printing its own traceback. A Ctrl-C
-    within the block itself is lost."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
 
 
 @contextmanager
@@ -92,15 +75,21 @@ class SolveRunner:
         elif self.workers > 0:
             from dask.distributed import Client, LocalCluster
 
-            with _interrupts_left_to_this_process(), warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
-                self._cluster = LocalCluster(
-                    n_workers=self.workers, threads_per_worker=1, processes=True,
-                    # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as an
-                    # error with a traceback; a failing solve still raises through its future
-                    dashboard_address=None, silence_logs=logging.CRITICAL,
-                )
-            self._client = Client(self._cluster)
+            # the workers start with SIGINT blocked: a Ctrl-C reaches this process alone, whose
+            # KeyboardInterrupt closes the cluster, instead of each worker printing its own traceback
+            try:
+                with interrupts_held(), warnings.catch_warnings():
+                    warnings.simplefilter("ignore")  # a busy default port: dask takes another and says so
+                    self._cluster = LocalCluster(
+                        n_workers=self.workers, threads_per_worker=1, processes=True,
+                        # CRITICAL: a worker's heartbeat failing while the cluster shuts down is logged as
+                        # an error with a traceback; a failing solve still raises through its future
+                        dashboard_address=None, silence_logs=logging.CRITICAL,
+                    )
+                self._client = Client(self._cluster)
+            except BaseException:  # a Ctrl-C held while the cluster started: __exit__ is not called
+                self.__exit__()
+                raise
         return self
 
     def __exit__(self, *exc):
