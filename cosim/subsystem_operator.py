@@ -65,11 +65,12 @@ def register(subsystem, operator) -> Path:
 
 
 def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
-          workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None) -> dict:
+          workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None,
+          bus_port: str | None = None) -> dict:
     """Runs (or resumes) the stages of the module docstring; returns {"data": dataset metadata,
     "training": TrainResult, "operator": path, "fmu": path, "registered": path}. A sub-system given
-    as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva [MVA] and no
-    boundary."""
+    as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva [MVA], no
+    boundary, and where its model description declares no bus port, `bus_port` (black_box_data.bus_port)."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.onnx_export import export_onnx
     from surrogate.training import train
@@ -78,7 +79,7 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
     if Path(subsystem).suffix.lower() == ".fmu":
         from .black_box_data import generate_black_box
 
-        meta = generate_black_box(subsystem, out / "data", rating_mva, plan, seed, workers, progress)
+        meta = generate_black_box(subsystem, out / "data", rating_mva, plan, seed, workers, progress, bus_port)
     else:
         meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
     config = replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs))

@@ -31,7 +31,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from .subsystem_command import add_subsystem_options, cmd_subsystem
+from .subsystem_command import add_subsystem_options, cmd_subsystem, subsystem_options_given
 
 RECIPE_FAMILIES_EXTRA = (("network", 0.14),)  # the `machine` recipe: the families of `cosim`, and this
 # the `grid` recipe, for a machine in a network (D = 0, no governor): open-loop bus signals make such
@@ -175,6 +175,9 @@ def cmd_operator(args) -> None:
         return cmd_subsystem(args)
     if args.machine is None:
         raise UserError("opfmu operator needs --machine FILE (a machine) or --subsystem FILE --boundary BUS")
+    given = subsystem_options_given(args)
+    if given:
+        raise UserError(f"{', '.join(given)}: for a sub-system (--subsystem FILE), not a machine (--machine)")
     if args.epochs is None:
         args.epochs = RECIPE_TRAINING["epochs"]
     try:

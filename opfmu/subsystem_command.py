@@ -3,7 +3,7 @@ FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
                    [--buses N] [--stride S] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
-    opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [the same options]
+    opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [--bus-port SPEC] [the same options]
 
 A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
 host voltages (cosim.black_box_data).
@@ -21,6 +21,13 @@ from .errors import UserError
 MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "efd": None, "vs": None,
                 "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
 MAX_RUNS = 100_000
+# the options of `opfmu operator` that only a sub-system takes (all default None)
+SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port")
+
+
+def subsystem_options_given(args) -> list:
+    """The sub-system-only options given on the command line, as written (--bus-port ...)."""
+    return [f"--{k.replace('_', '-')}" for k in SUBSYSTEM_ONLY if getattr(args, k, None) is not None]
 
 
 def add_subsystem_options(op) -> None:
@@ -38,6 +45,12 @@ def add_subsystem_options(op) -> None:
                     help="with --subsystem: seconds between the starts of the windows of a run (default 0.02)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
+    op.add_argument("--bus-port", default=None, metavar="SPEC",
+                    help="with --subsystem BOX.fmu whose model description declares no bus port (another tool's): "
+                         "its variables at the bus, V=NAME,theta=NAME and either I_re=NAME,I_im=NAME or P=NAME,Q=NAME "
+                         "(current or power into the bus; -NAME where the box gives what it draws); units from its "
+                         "model description: V in pu, theta in rad or deg, P and Q in pu of the system base or "
+                         "W, kW, MW (var, kvar, Mvar)")
 
 
 def cmd_subsystem(args) -> None:
@@ -51,8 +64,10 @@ def cmd_subsystem(args) -> None:
         raise UserError(f"--subsystem: no file {path}")
     if path.suffix.lower() == ".fmu":
         return _black_box(path, args)
-    if args.rating is not None:
-        raise UserError("--rating is for a black box (--subsystem BOX.fmu); a case file's rating is its units' Sn")
+    for option, value in (("--rating", args.rating), ("--bus-port", args.bus_port)):
+        if value is not None:
+            raise UserError(f"{option} is for a black box (--subsystem BOX.fmu); a case file's rating is its units' "
+                            "Sn, its bus its Slack's")
     if args.boundary is None:
         raise UserError("--subsystem needs --boundary BUS (the bus of its Slack, where the grid stands)")
     try:
@@ -93,6 +108,13 @@ def _black_box(path: Path, args) -> None:
         raise UserError("--boundary is for a case file; a black box (an FMU) is its bus port")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
         raise UserError("--subsystem BOX.fmu needs --rating MVA, its rating (a number in (0, 1e6])")
+    if args.bus_port is not None:
+        from cosim.black_box_data import parse_bus_port
+
+        try:
+            parse_bus_port(args.bus_port)
+        except ValueError as exc:
+            raise UserError(f"--bus-port {args.bus_port[:80]!r}: {exc}") from None
     _learn(path, None, _output(args), _plan(args), args, _name(args))
 
 
@@ -146,7 +168,7 @@ def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
 
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
-                     args.rating)
+                     args.rating, args.bus_port)
     except (DatasetError, TrainError, CouplingError, CaseError) as exc:
         raise UserError(str(exc)) from None
     meta, result = done["data"], done["training"]
