@@ -45,6 +45,8 @@ import weakref
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from reference_models.messages import one_line
+
 LOG_KEPT = 10_000  # log messages kept per instance (the latest)
 FD_STEP = 1e-6  # relative step of the finite-difference Jacobian for FMUs without directional derivatives
 
@@ -61,10 +63,6 @@ def _needed(member: str) -> bool:
     """What an instance needs of an FMU archive: all but its sources and documentation (the binaries,
     the model description, the resources), its sources' config.h aside (`input_order`)."""
     return member == "sources/config.h" or not member.startswith(("sources/", "documentation/"))
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())[:200]
 
 
 def _true(value) -> bool:
@@ -116,7 +114,7 @@ def extracted(path, directory=None, name: str = "a") -> tuple:
         if not str(md.generationTool or "").startswith("opfmu"):
             md = read_model_description(str(directory))  # checked against the FMI schema
     except Exception as exc:  # fmpy raises plain Exceptions for unreadable files
-        said = _one_line(exc)
+        said = one_line(exc)
         if directory is not None:  # where it was extracted to: gone with it
             said = said.replace(str(directory), path.name)
         raise CouplingError(f"{name}: {path.name} is not a readable FMU ({said})") from None
@@ -170,7 +168,7 @@ class FMU:
         try:
             root = ET.parse(self.directory / "modelDescription.xml").getroot()
         except (OSError, ET.ParseError) as exc:
-            raise CouplingError(f"{self.name}: cannot read the model description ({_one_line(exc)})") from None
+            raise CouplingError(f"{self.name}: cannot read the model description ({one_line(exc)})") from None
         self.version = 3 if str(md.fmiVersion).startswith("3") else 2
         self.model_name = md.modelName
         self.ports = ports_of_fmu(root)
@@ -280,7 +278,7 @@ class FMU:
         return self.messages[-1][1] if self.messages else "(no message logged)"
 
     def _said(self, exc) -> str:
-        return _one_line(exc) + (f" ({self.messages[-1][1]})" if self.messages else "")
+        return one_line(exc) + (f" ({self.messages[-1][1]})" if self.messages else "")
 
     def _check(self, status: int, what: str) -> None:
         if status > 1:  # Discard, Error, Fatal

@@ -11,6 +11,8 @@ from __future__ import annotations
 import subprocess
 from pathlib import Path
 
+from reference_models.messages import one_line
+
 from .platforms import Platform, PlatformError, by_name, check_linkage, host
 
 PLUMBING = {2: "fmi2_cs.c", 3: "fmi3_cs.c"}  # the FMI plumbing of each version (c/)
@@ -21,7 +23,7 @@ class BuildError(ValueError):
     message is one line."""
 
     def __init__(self, message: str):
-        super().__init__(" ".join(str(message).split()))
+        super().__init__(one_line(message, None))
 
 
 def fmi_headers() -> Path:

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 from opfmu.errors import UserError
+from reference_models.messages import explain
 
 MAX_COUNT = 10**9  # largest seed, epoch count or other count a flag or config file may give
 
@@ -57,7 +58,7 @@ def json_object_file(path, what: str) -> dict:
             raise UserError(f"{what} {path} is larger than 1 MB")
         data = json.loads(path.read_text(encoding="utf-8"), parse_constant=_no_constant)
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        reason = explain(exc)
         raise UserError(f"cannot read {what} {path}: {reason}") from None
     if not isinstance(data, dict):
         raise UserError(f"{what} {path} must be a JSON object, got {_json_type(data)}")

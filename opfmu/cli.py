@@ -15,6 +15,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from opfmu.checks import MAX_COUNT, check_fields, json_object_file, output_file, output_folder
 from opfmu.errors import UserError
+from reference_models.messages import one_line
 
 
 class _ScenarioNames:
@@ -595,10 +596,6 @@ def _version() -> str:
     return f"opfmu {__version__}"
 
 
-def _one_line(exc: Exception) -> str:
-    return " ".join(str(exc).splitlines())
-
-
 def interrupted_message(args) -> str:
     """The one line a Ctrl-C ends a command with: "rerun to resume" only where a rerun does (the
     finished chunks of a dataset and the last checkpoint of a training are kept)."""
@@ -621,15 +618,15 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
         args.func(args)
     except UserError as exc:
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        print(f"error: {one_line(exc, None)}", file=sys.stderr)
         return 2
     except ValueError as exc:
         if not _dataset_error(exc):
             raise
-        print(f"error: {_one_line(exc)}", file=sys.stderr)
+        print(f"error: {one_line(exc, None)}", file=sys.stderr)
         return 2
     except RuntimeError as exc:  # a failed reference solve: finished work is kept for the rerun
-        print(f"failed: {_one_line(exc)}", file=sys.stderr)
+        print(f"failed: {one_line(exc, None)}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(interrupted_message(args), file=sys.stderr)

@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import NamedTuple
 
 from opfmu.errors import UserError
+from reference_models.messages import one_line
 
 CASES = ("wscc9", "kundur", "ieee14", "ieee39", "npcc")  # reference_models.grid.case.SHIPPED_CASES
 CASE_FILE_SUFFIXES = (".xlsx", ".json", ".raw")  # case files ANDES reads
@@ -213,10 +214,6 @@ def add_grid_parser(sub) -> None:
         sub_p.set_defaults(func=cmd_subsystem, subsystem=name)
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split())[:300] or type(exc).__name__
-
-
 def _check_out(out, names) -> None:
     """UserError unless `out` (--out) names a folder that can take the files `names` (made only when
     they are written: cosim.outputs.result_set)."""
@@ -260,7 +257,7 @@ def _case(args):
         try:
             return case_from_file(args.case, args.dyr)
         except CaseError as exc:
-            raise UserError(_one_line(exc)) from None
+            raise UserError(one_line(exc, 300)) from None
     if args.dyr is not None:
         raise UserError(f"--dyr goes with a PSS/E raw case file, not the shipped case {args.case}")
     try:
@@ -270,7 +267,7 @@ def _case(args):
             return shipped_case(args.case)
         return load_case(DATA_DIR / f"{args.case}_network.json", args.dynamic_data, args.case)
     except CaseError as exc:
-        raise UserError(f"cannot use the dynamic data: {_one_line(exc)}") from None
+        raise UserError(f"cannot use the dynamic data: {one_line(exc, 300)}") from None
 
 
 ATTACH_KINDS = ("reference", "monolithic", "surrogate", "aggregate")  # DESIGN section 11 (not given: reference)
@@ -360,7 +357,7 @@ def _surrogate(case, attachment, path: Path):
     try:
         return surrogate_in(case, attachment.bus, path)
     except CouplingError as exc:
-        raise UserError(f"--attach {attachment.text}: {_one_line(exc)}") from None
+        raise UserError(f"--attach {attachment.text}: {one_line(exc, 300)}") from None
 
 
 def _attached_case(args):
@@ -399,7 +396,7 @@ def _attached_case(args):
                 case = _surrogate(case, a, path)
         return case
     except CaseError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     except OSError as exc:
         raise UserError(f"cannot use the case cache {folder}: {exc.strerror or exc}") from None
 
@@ -464,7 +461,7 @@ def _settings(args):
     try:
         return MasterSettings(step=args.step, coupling=args.coupling, passes=args.passes)
     except ValueError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
 
 
 def _fault_start(args) -> None:
@@ -483,7 +480,7 @@ def _stop(stop: float, settings) -> None:
     try:
         check_steps(stop, settings.step)
     except ValueError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
 
 
 def _fault_impedance(args) -> complex:
@@ -503,7 +500,7 @@ def _contingency(case, bus, clear, trip, args):
         return Contingency(bus, clear, trip, args.fault_start, _fault_impedance(args), case.network,
                            () if args.no_case_events else case.events)
     except ValueError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
 
 
 def _check_fmus(case, kind, fmu_cache=None, contingency=None) -> None:
@@ -529,14 +526,14 @@ def _check_fmus(case, kind, fmu_cache=None, contingency=None) -> None:
             try:
                 check_contingency(contingency)
             except ValueError as exc:
-                raise UserError(_one_line(exc)) from None
+                raise UserError(one_line(exc, 300)) from None
         return
     if fmu_cache is not None:
         output_folder(fmu_cache)
     try:
         fmus = check_unit_fmus(case, kind)
     except CouplingError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     if kind == "surrogate" and not any(f.kind == "surrogate" for f in fmus):
         raise UserError(f"--fmus surrogate: no machine of {case.name} has a surrogate operator in its dynamic data "
                         "(\"fmu\": {\"kind\": \"surrogate\", \"operator\": FILE}); run --fmus reference instead")
@@ -567,7 +564,7 @@ def _open(kind, case, settings, args, progress, **options):
     try:
         return open_runner(kind, case, settings, args.fmu_cache, progress, fmi_version=args.fmi_version, **options)
     except CouplingError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
 
 
 def cmd_export(args) -> None:
@@ -585,7 +582,7 @@ def cmd_export(args) -> None:
     try:
         path = export_case(case, args.out, args.fmus, args.fmi_version, cache, _progress)
     except CouplingError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     count = len({d["fmu"] for d in json.loads(path.read_text(encoding="utf-8"))["devices"]})
     print(f"{case.name}: {count} FMU files and {path}" + (f" ({len(stated)} notes on the case above)" if stated else ""))
 
@@ -608,7 +605,7 @@ def cmd_subsystem(args) -> None:
         spec = spec_type(units=args.units, seed=args.seed)
         data = records(spec)
     except ValueError as exc:
-        raise UserError(f"{args.subsystem}: {_one_line(exc)}") from None
+        raise UserError(f"{args.subsystem}: {one_line(exc, 300)}") from None
     try:
         path = write_case(data, out)
     except OSError as exc:
@@ -667,7 +664,7 @@ def cmd_run(args) -> None:
             except RuntimeError as exc:
                 if kind != "andes" and not host:
                     raise
-                raise UserError(_one_line(exc)) from None
+                raise UserError(one_line(exc, 300)) from None
             finally:
                 runner.close()
             label = kind or main_kind
@@ -811,7 +808,7 @@ def cmd_screen(args) -> None:
         try:
             scheduler = check_scheduler(args.scheduler)
         except SchedulerError as exc:
-            raise UserError(_one_line(exc)) from None
+            raise UserError(one_line(exc, 300)) from None
     case = _case(args)
     _fault_start(args)
     settings = _settings(args)
@@ -826,7 +823,7 @@ def cmd_screen(args) -> None:
     try:
         pairs = contingencies(case.network, buses, args.trips)
     except ValueError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     clear = args.clear if args.clear is not None else round(args.fault_start + SCREEN_CLEARING_S, 9)
     tasks_contingencies, left_out = [], []
     for bus, trip in pairs:
@@ -847,7 +844,7 @@ def cmd_screen(args) -> None:
         files = () if args.fmus in REFERENCE_KINDS else tuple(generator_files(case, args.fmus, args.fmu_cache,
                                                                                _progress, args.fmi_version))
     except CouplingError as exc:
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     kind = _main_kind(case, args.fmus)
     if kind == "andes":  # ANDES integrates at min(--step, REFERENCE_STEP), as in grid run and cct
         from dataclasses import replace
@@ -860,7 +857,7 @@ def cmd_screen(args) -> None:
     try:
         rows = screen(tasks, workers, scheduler, progress=not args.quiet)
     except SchedulerError as exc:  # the scheduler went away since it was checked
-        raise UserError(_one_line(exc)) from None
+        raise UserError(one_line(exc, 300)) from None
     out = Path(args.out)
     try:
         with outputs.result_set(out, outputs.SCREENING_FILES) as staging:

@@ -32,6 +32,7 @@ from pathlib import Path
 
 from reference_models.component import ParameterError
 from reference_models.initialisation import EXCITER, MACHINE, exciter_start, machine_start
+from reference_models.messages import explain
 from reference_models.ports import machine_inputs
 
 MAX_LOAD_FLOW_BYTES = 1024 * 1024
@@ -202,7 +203,7 @@ def _read_json(path: Path, what: str, limit: int):
     except InitError:
         raise
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        reason = explain(exc)
         raise InitError(f"cannot read {what} {path}: {reason}") from None
 
 

@@ -15,6 +15,8 @@ import math
 import re
 from pathlib import Path
 
+from reference_models.messages import one_line
+
 from .errors import UserError
 
 # the options of `opfmu operator` that only a machine takes, with their defaults
@@ -99,7 +101,7 @@ def _check_case(path: Path) -> None:
     try:
         own_power_flow(andes, path)
     except CaseError as exc:
-        raise UserError(" ".join(str(exc).split())) from None
+        raise UserError(one_line(exc, None)) from None
 
 
 def _black_box(path: Path, args) -> None:

@@ -18,6 +18,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from .drift import Drift
+from .messages import one_line
 from .ports import Ports
 
 MAX_PARAMETER_FILE_BYTES = 64 * 1024
@@ -303,11 +304,11 @@ class Component:
         except FileNotFoundError:
             raise ParameterError(f"cannot read machine file {path}: there is no such file") from None
         except OSError as exc:
-            raise ParameterError(f"cannot read machine file {path}: {exc.strerror or _one_line(exc)}") from None
+            raise ParameterError(f"cannot read machine file {path}: {exc.strerror or one_line(exc)}") from None
         except (UnicodeDecodeError, ValueError, RecursionError) as exc:
             if isinstance(exc, ParameterError):
                 raise
-            raise ParameterError(f"cannot read machine file {path}: {_one_line(exc)}") from None
+            raise ParameterError(f"cannot read machine file {path}: {one_line(exc)}") from None
         try:
             return self.params(values)
         except ParameterError as exc:
@@ -324,10 +325,6 @@ def _finite(value) -> bool:
 
 def _refuse_constant(name: str):
     raise ValueError(f"{name} is not a number this file may hold")
-
-
-def _one_line(exc: Exception) -> str:
-    return " ".join(str(exc).split())[:200]
 
 
 def _columns(a, n: int) -> list:

@@ -43,6 +43,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from .messages import explain
+
 #: The control signals components exchange: name -> (symbol, unit, meaning).
 SIGNALS = {
     "field_voltage": ("Efd", "pu", "field voltage: an exciter's output, a machine's input"),
@@ -296,6 +298,6 @@ def ports_of_fmu(path) -> Ports | None:
     except KeyError:
         raise PortError(f"{path} has no modelDescription.xml") from None
     except (OSError, zipfile.BadZipFile, ET.ParseError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        reason = explain(exc)
         raise PortError(f"cannot read the model description of {path}: {reason}") from None
     return ports_of_model_description(root)

@@ -12,6 +12,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from reference_models.messages import one_line
+
 # The largest difference allowed between onnxruntime and torch at export, relative to check_scale
 # (the build's check of the compiled kernel has its own, fmu_export.surrogate_fmu.KERNEL_TOLERANCE). Both
 # round to float32, in different orders: a DeepONet's answer is a sum of basis terms that can be
@@ -103,7 +105,7 @@ def operator_metadata(source) -> dict:
     try:
         params = comp.params(_json(raw, "params"))
     except ParameterError as exc:
-        raise ContractError(f"metadata params: {_one_line(exc)}") from None
+        raise ContractError(f"metadata params: {one_line(exc)}") from None
     except OverflowError:  # an integer beyond the range of a float
         raise ContractError("metadata params: a parameter is too large for a floating-point number") from None
     for key, expected in (("state_names", comp.state_names), ("input_names", comp.input_names)):
@@ -166,7 +168,7 @@ def _json(raw: dict, key: str):
     try:
         return json.loads(raw[key], parse_constant=_refuse_constant)
     except (ValueError, RecursionError) as exc:
-        raise ContractError(f"metadata {key} is not valid JSON ({_one_line(exc)[:100]}): {_show(raw[key])}") from None
+        raise ContractError(f"metadata {key} is not valid JSON ({one_line(exc)[:100]}): {_show(raw[key])}") from None
 
 
 def _number(raw: dict, key: str, value, what: str = "") -> float:
@@ -300,5 +302,3 @@ def _show(value) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _one_line(exc) -> str:
-    return " ".join(str(exc).split())[:200]

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from reference_models.files import atomic_path, write_json
+from reference_models.messages import one_line
 from reference_models.progress import progress_bar
 
 from .data import load_metadata, load_split, machine_of
@@ -383,7 +384,7 @@ def _restore(path: Path, model, optimizer, generator) -> _State:
     try:
         checkpoint = torch.load(path, weights_only=False)
     except Exception as exc:  # torch.load raises pickle's, zipfile's and its own errors for a damaged file
-        raise TrainError(f"{path} is not a readable checkpoint ({_reason(exc)}): remove it to train again") from None
+        raise TrainError(f"{path} is not a readable checkpoint ({one_line(exc)}): remove it to train again") from None
     model.load_state_dict(checkpoint["model"])
     optimizer.load_state_dict(checkpoint["optimizer"])
     generator.set_state(checkpoint["generator"])
@@ -435,12 +436,7 @@ def load_model(path) -> OperatorModel:
     try:
         payload = torch.load(path, weights_only=False)
     except Exception as exc:  # torch.load raises pickle's, zipfile's and its own errors for a damaged file
-        raise TrainError(f"{path} is not a readable model file ({_reason(exc)})") from None
+        raise TrainError(f"{path} is not a readable model file ({one_line(exc)})") from None
     model = build_model(OperatorConfig.from_dict(payload["model_config"]), NormStats.from_dict(payload["stats"]))
     model.load_state_dict(payload["state_dict"])
     return model.eval()
-
-
-def _reason(exc: Exception) -> str:
-    """An exception's message on one line, at most 200 characters."""
-    return " ".join(str(exc).split())[:200] or type(exc).__name__

@@ -29,6 +29,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
+from ..messages import one_line
 from .case import CaseError
 from .subsystems import write_case
 
@@ -181,7 +182,7 @@ def attached_file(host, attachments, folder) -> Path:
     except CaseError:
         raise
     except Exception as exc:  # ANDES raises what the files' values make its code raise
-        raise CaseError(f"ANDES cannot join {host.name} and its sub-systems: {type(exc).__name__}: {_said(exc)}") \
+        raise CaseError(f"ANDES cannot join {host.name} and its sub-systems: {type(exc).__name__}: {one_line(exc, 160)}") \
             from None
     return write_case(merged, out)
 
@@ -195,7 +196,7 @@ def own_power_flow(andes, path):
         ss.setup()
         flowed = ss.PFlow.run() and ss.PFlow.converged
     except Exception as exc:  # ANDES' setup and flow raise what the file's values make them raise
-        raise CaseError(f"{path}: ANDES cannot set it up: {type(exc).__name__}: {_said(exc)}") from None
+        raise CaseError(f"{path}: ANDES cannot set it up: {type(exc).__name__}: {one_line(exc, 160)}") from None
     cut_off = _cut_off(ss)
     if cut_off:
         raise CaseError(f"{path}: its buses {', '.join(map(str, cut_off[:8]))}{' ...' if len(cut_off) > 8 else ''} "
@@ -220,10 +221,6 @@ def _cut_off(ss) -> list:
             reached.add(other)
             todo.append(other)
     return [b for b in ss.Bus.idx.v if b not in reached]
-
-
-def _said(exc: BaseException) -> str:
-    return " ".join(str(exc).split())[:160]
 
 
 def _own_voltages(andes, path) -> dict:

@@ -32,6 +32,7 @@ from reference_models.component import Component
 from reference_models.components import component
 from reference_models.drift import frame_of, to_frame, trajectories_to_frame
 from reference_models.files import write_json, write_npz
+from reference_models.messages import explain
 from reference_models.progress import progress_bar
 
 from .envelope import probe_plan, reachable_box, reachable_summary
@@ -232,7 +233,7 @@ def _json_object(path: Path) -> dict:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:200]
+        reason = explain(exc)
         raise DatasetError(f"{path} is not readable JSON ({reason}): remove the dataset and regenerate it") from None
     if not isinstance(data, dict):
         raise DatasetError(f"{path} must be a JSON object: remove the dataset and regenerate it")
