@@ -67,12 +67,14 @@ def _with_units(fmu, units: dict) -> None:
 
 @pytest.fixture(scope="module")
 def third_party_box(tmp_path_factory):
-    from pythonfmu.builder import FmuBuilder
-
+    # built by pythonfmu's command in a Python of its own: in this one, a pythonfmu FMU loaded by an
+    # earlier test may have put the copy of pythonfmu from its resources (without binaries) first
     folder = tmp_path_factory.mktemp("third_party")
     script = folder / "third_party_load.py"
     script.write_text(BOX_SOURCE)
-    fmu = FmuBuilder.build_FMU(script, dest=folder)
+    subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", str(script), "-d", str(folder)], check=True,
+                   capture_output=True)
+    fmu = folder / "ThirdPartyLoad.fmu"
     _with_units(fmu, UNITS)
     return fmu
 
