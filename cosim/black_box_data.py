@@ -228,7 +228,8 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
 
     box, out = Path(box), Path(out)
     hosts = {name: Path(andes.get_case(ANDES_CASES[name])) for name in plan.hosts}
-    first = case_from_file(hosts[plan.hosts[0]]).network
+    read = {plan.hosts[0]: case_from_file(hosts[plan.hosts[0]])}  # the first host's base and frequency
+    first = read[plan.hosts[0]].network
     rest = own_rest(box, bus_port_spec, first.base_mva)
     key = fingerprint(box.read_bytes() + json.dumps(bus_port_spec).encode(), 0, plan, seed)
     if (meta := finished(out, key)) is not None:
@@ -239,7 +240,7 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     rng = np.random.default_rng(seed)
     attachments, cases = [], []
     for name, host in hosts.items():
-        case = case_from_file(host)
+        case = read[name] if name in read else case_from_file(host)
         generator_files(case, "reference", out / ".fmus")
         for bus in attachment_buses(case.network, rng, plan.buses):
             attachments.append((name, bus, str(host)))
