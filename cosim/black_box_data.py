@@ -254,4 +254,5 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
              if not (partial / f"run_{k:05d}.npz").exists()]
     run_all(record_replay, tasks, len(runs), "black-box replays", workers, progress)
     return _assemble(out, runs, attachments, params, plan, seed, key, started, {"kind": "black box", "fmu": box.name,
-                                                                           "bus_port": bus_port_spec})
+                                                                           "bus_port": bus_port_spec},
+                     component("subsystem"))

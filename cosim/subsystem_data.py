@@ -12,7 +12,10 @@ the host records at the boundary becomes the component's inputs and states, each
                        linear between rows (blocks.bus_frequency, integrated exactly);
     n                  V0 / V_own, the run's load-flow voltage at the boundary over the sub-system's own;
     Ip, Iq             the devices' part of the current the sub-system injects (boundary.boundary_current,
-                       less the passive part (G + jB) V / n^2), in the voltage's frame.
+                       less the passive part (G + jB) V / n^2), in the voltage's frame;
+    Qpi .. Pcmd        for a sub-system with a plant controller (component `subsystem_pc`): its
+                       REPCA1's states, each summed over the sub-system's REPCA1 (the master's
+                       device states).
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -41,6 +44,8 @@ from reference_models.components import component
 from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
+from reference_models.grid.result import device_labels
+from reference_models.models.subsystem import PLANT_CONTROLLER_STATES
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -133,9 +138,31 @@ def _lag_of_ramp(x: float, u0: float, u1: float, h: float, T: float) -> float:
     return u1 - slope * T + (x - u0 + slope * T) * e
 
 
-def run_rows(result, case, bus: int, params: dict) -> dict:
-    """The component's inputs u [n, 2] and states x [n, 5] at the rows t [n] of a grid result
-    (module docstring)."""
+def subsystem_model(records: dict):
+    """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`
+    where it has a plant controller (REPCA1), whose states it carries, else `subsystem`."""
+    return component("subsystem_pc" if records.get("REPCA1") else "subsystem")
+
+
+def controller_columns(case, bus: int, model) -> list:
+    """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
+    state columns of a grid result it sums: those of the REPCA1 behind the boundary `bus` of `case`."""
+    carried = model.state_names[5:]
+    if not carried:
+        return []
+    behind = set(subsystem_buses(case.network, bus))
+    devices = [label for unit, labels in zip(case.units, device_labels(case.units)) if unit.bus in behind
+               for d, label in zip(unit.devices, labels) if d.component.name == "repca1"]
+    if not devices:
+        raise ValueError(f"the sub-system at bus {bus} has no REPCA1 for its {model.name} states")
+    state = {name: own for name, own, _ in PLANT_CONTROLLER_STATES}
+    return [[f"{label}_{state[name]}" for label in devices] for name in carried]
+
+
+def run_rows(result, case, bus: int, params: dict, columns: list = ()) -> dict:
+    """The component's inputs u [n, 2] and states x [n, 5 + len(columns)] at the rows t [n] of a grid
+    result (module docstring); columns: per carried state the result's device states it sums
+    (controller_columns)."""
     net = case.network
     b = net.bus_index(bus)
     t = np.asarray(result.time, float)
@@ -144,12 +171,13 @@ def run_rows(result, case, bus: int, params: dict) -> dict:
     n = float(case.flow.V[b]) / params["V_own"]
     device = (current + complex(params["G"], params["B"]) / n ** 2 * V * np.exp(1j * theta)) * np.exp(-1j * theta)
     theta_f, theta_w = bus_frequency_states(t, theta, params["busf_Tf"], params["busf_Tw"])
-    x = np.stack([theta_f, theta_w, device.real, -device.imag, np.full_like(t, n)], axis=1)
+    carried = [np.sum([np.asarray(result.device_states[c], float) for c in group], axis=0) for group in columns]
+    x = np.stack([theta_f, theta_w, device.real, -device.imag, np.full_like(t, n), *carried], axis=1)
     return {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
 
 
 def windows(rows: dict, plan: Plan) -> tuple:
-    """(x0 [W, 5], u [W, S, 2], x [W, S, 5]) of the windows of one run's rows on the grid of `plan`
+    """(x0 [W, n_x], u [W, S, 2], x [W, S, n_x]) of the windows of one run's rows on the grid of `plan`
     (rows at whole steps; a run that ended early, at a loss of synchronism, gives fewer)."""
     t = rows["t"]
     grid = np.round(t / plan.step).astype(int)
@@ -166,7 +194,8 @@ def windows(rows: dict, plan: Plan) -> tuple:
         out[1].append(rows["u"][picks])
         out[2].append(rows["x"][picks])
     if not out[0]:
-        return np.zeros((0, 5)), np.zeros((0, size, 2)), np.zeros((0, size, 5))
+        n_x = rows["x"].shape[1]
+        return np.zeros((0, n_x)), np.zeros((0, size, 2)), np.zeros((0, size, n_x))
     return np.array(out[0]), np.array(out[1]), np.array(out[2])
 
 
@@ -274,15 +303,15 @@ def _runner(attached: str, fmu_cache: str, step: float):
 
 def record_run(task: tuple) -> str:
     """Runs one task (index, Run as dict, attached case file, host bus, params, plan as dict, FMU
-    cache, partial folder) and writes its rows (or why it failed) to partial/run_<index>.npz;
+    cache, partial folder, component name) and writes its rows (or why it failed) to partial/run_<index>.npz;
     returns the file's name."""
-    index, run, attached, bus, params, plan, fmu_cache, partial = task
+    index, run, attached, bus, params, plan, fmu_cache, partial, model = task
     plan = Plan(**{k: tuple(v) if isinstance(v, list) else v for k, v in plan.items()})
     out = Path(partial) / f"run_{index:05d}.npz"
     case, runner = _runner(attached, fmu_cache, plan.step)
     try:
         result, _ = runner.run(contingency_of(Run(**run), case, plan), plan.stop, stop_at_loss=True)
-        rows = run_rows(result, case, bus, params)
+        rows = run_rows(result, case, bus, params, controller_columns(case, bus, component(model)))
         write_npz(out, **rows, failed=np.array(""))
     except (RuntimeError, ValueError, ArithmeticError) as exc:  # the master's one-line errors
         write_npz(out, failed=np.array(str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__))
@@ -326,9 +355,9 @@ def run_all(record, tasks: list, total: int, desc: str, workers: int, progress: 
     bar.close()
 
 
-def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int) -> str:
+def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int, model: str = "subsystem") -> str:
     digest = hashlib.sha256(subsystem)
-    digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__]).encode())
+    digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__, model]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -351,7 +380,8 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
+    model = subsystem_model(records)
+    key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed, model.name)
     if (meta := finished(out, key)) is not None:
         return meta
     partial = out / ".partial"
@@ -369,22 +399,21 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
             attachments.append((name, bus, str(path)))
             cases.append((case, bus))
     params = subsystem_params(records, cases[0][0], cases[0][1])
-    model = component("subsystem")
     model.params(params)  # checked before anything runs
+    controller_columns(cases[0][0], cases[0][1], model)
     runs = draw_runs(plan, cases, rng)
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
-              str(out / ".fmus"), str(partial)) for k, r in enumerate(runs)
+              str(out / ".fmus"), str(partial), model.name) for k, r in enumerate(runs)
              if not (partial / f"run_{k:05d}.npz").exists()]
     run_all(record_run, tasks, len(runs), "sub-system runs", workers, progress)
     return _assemble(out, runs, attachments, params, plan, seed, key, started,
-                     {"kind": "detail", "subsystem": subsystem.name, "boundary": int(boundary)})
+                     {"kind": "detail", "subsystem": subsystem.name, "boundary": int(boundary)}, model)
 
 
 def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan, seed: int, key: str,
-              started: float, source: dict) -> dict:
-    """The splits and metadata.json from the runs' rows under out/.partial (metadata last); `source`:
-    what the rows came from (metadata `source`)."""
-    model = component("subsystem")
+              started: float, source: dict, model) -> dict:
+    """The splits and metadata.json from the runs' rows under out/.partial (metadata last) of the
+    component `model`; `source`: what the rows came from (metadata `source`)."""
     p = model.params(params)
     size = int(round(plan.horizon / plan.step)) + 1
     t = np.round(np.arange(size) * plan.step, 12)

@@ -24,11 +24,21 @@ from surrogate.training import TrainConfig
 from .subsystem_data import Plan, generate
 
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
-# (their rates are affine: corrections.c), so the data loss weighs them little
+# (their rates are affine: corrections.c), so the data loss weighs them little; a plant controller's
+# carried states (subsystem_pc) only feed the next window, so they weigh less than the currents
 TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1)),
                        epochs=2000, patience=10**9, time_points=None, causal=True, physics=True,
                        weights=LossWeights(physics_collocation=0.0), state_weights=(0.2, 0.2, 5.0, 5.0, 0.2),
                        checkpoint_every=100)
+CARRIED_WEIGHT = 1.0  # the data loss' weight of each carried controller state
+
+
+def training_config(state_names, seed: int, epochs: int | None) -> TrainConfig:
+    """TRAINING for a sub-system component of the states `state_names` (its carried states after
+    the boundary's five weighing CARRIED_WEIGHT)."""
+    weights = TRAINING.state_weights + (CARRIED_WEIGHT,) * (len(state_names) - len(TRAINING.state_weights))
+    return replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs),
+                   state_weights=weights)
 
 
 # the operators of the shipped sub-systems (`feeder`, `plant`): <name>-<first 16 hex digits of the
@@ -82,7 +92,7 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
         meta = generate_black_box(subsystem, out / "data", rating_mva, plan, seed, workers, progress, bus_port)
     else:
         meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
-    config = replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs))
+    config = training_config(meta["state_names"], seed, epochs)
     result = train(out / "data", config, out / "run", progress)
     operator = out / "operator.onnx"
     if not operator.exists() or operator.stat().st_mtime < (out / "run" / "result.json").stat().st_mtime:

@@ -122,10 +122,14 @@ class Component:
         through its boundary: reference_models.models.subsystem): `derivatives` gives 0 for them,
         an operator learns them from data alone (the physics losses and the FMU's residual leave
         them out), and nothing integrates the component (`require_known_rates`).
+    started_learned: the learned states a start from the load flow fixes through `start_equations`
+        (a sub-system's plant controller's integrators and lags, 0 at any rest); the other learned
+        states take the load flow's P and Q.
     start_equations(x, u, p, m): where a start from the load flow needs other equations than the
         rates, its residuals (a tuple of len(states), 0 at the start): a state constant through a
         study (dx/dt = 0) that the load flow fixes (the sub-system's tap n = V0 / V_own). The rows
-        of learned states are not read (the load flow's P and Q fix them). None: the rates.
+        of learned states are read for `started_learned` only (the load flow's P and Q fix the
+        others). None: the rates.
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
@@ -150,6 +154,7 @@ class Component:
     initialisation: Initialisation | None = None
     affine_current: bool = False
     learned_states: tuple = ()
+    started_learned: tuple = ()
     start_equations: Callable | None = None
 
     def __post_init__(self):
@@ -165,6 +170,9 @@ class Component:
         if not all(0 <= i < len(self.states) for i in self.learned_states) or \
                 set(self.learned_states) & set(self.affine_states):
             raise ValueError(f"component {self.name!r}: learned_states must index states that are not affine")
+        if not set(self.started_learned) <= set(self.learned_states) or \
+                (self.started_learned and self.start_equations is None):
+            raise ValueError(f"component {self.name!r}: started_learned must be learned states its start_equations fix")
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
         self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")

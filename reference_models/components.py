@@ -4,10 +4,10 @@ from __future__ import annotations
 from .component import Component
 from .ieee1 import IEEE1
 from .models import STANDARD_MODELS
-from .models.subsystem import SUBSYSTEM
+from .models.subsystem import SUBSYSTEM, SUBSYSTEM_PC
 from .sm4 import SM4
 
-COMPONENTS = {c.name: c for c in (SM4, IEEE1, *STANDARD_MODELS.values(), SUBSYSTEM)}
+COMPONENTS = {c.name: c for c in (SM4, IEEE1, *STANDARD_MODELS.values(), SUBSYSTEM, SUBSYSTEM_PC)}
 
 
 def component(name) -> Component:

@@ -102,6 +102,53 @@ def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
     assert np.min(rows["u"][:, 0]) < 0.6  # the fault reached the boundary
 
 
+@pytest.mark.andes
+def test_a_plant_carries_its_controllers_states_summed_over_its_repca1(tmp_path):
+    """A sub-system with a plant controller is a `subsystem_pc`: its windows carry the sums of its
+    REPCA1's PI integrators and command lags, 0 at the load flow, moved by a fault; the boundary
+    current comes back as for any sub-system."""
+    import andes
+
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from cosim.subsystem_data import controller_columns, run_rows, subsystem_model, subsystem_params
+    from fmu_export.self_start import self_start_of
+    from reference_models.grid.andes_case import ANDES_CASES, case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.boundary import boundary_current
+    from reference_models.grid.contingency import Contingency
+    from reference_models.grid.subsystems import PlantSpec, plant, write_case
+
+    records = plant(PlantSpec(units=4, seed=3))
+    model = subsystem_model(records)
+    assert model.name == "subsystem_pc" and model.state_names[5:] == ("Qpi", "Qcmd", "Ppi", "Pcmd")
+    sub = write_case(records, tmp_path / "plant.json")
+    case = case_from_file(attached_file(andes.get_case(ANDES_CASES["ieee14"]), [(9, sub)], tmp_path))
+    params = subsystem_params(records, case, 9)
+    runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
+    result = runner.run(Contingency(fault_bus=9, fault_start=0.1, clear_s=0.2, fault_impedance=0.05j,
+                                    network=case.network), 1.0)[0]
+    runner.close()
+    columns = controller_columns(case, 9, model)
+    assert [len(c) for c in columns] == [4] * 4 and columns[0][0].startswith("REPCA1_")
+    rows = run_rows(result, case, 9, params, columns)
+    x = rows["x"]
+    assert x.shape[1] == 9
+    for k, group in enumerate(columns):
+        assert np.array_equal(x[:, 5 + k], np.sum([result.device_states[c] for c in group], axis=0))
+    assert np.max(np.abs(x[0, 5:])) < 1e-9  # ANDES' REPCA1 starts them at 0
+    assert np.max(np.abs(x[:, 6])) > 1e-3 * params["S"] / params["Sb"]  # the fault moved the reactive command
+    p = model.params(params)
+    I_re, I_im, *_ = model.output_equations(x.T, rows["u"].T, p, np)
+    detail = boundary_current(case.network, result.V_bus, result.theta_bus, 9)
+    assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
+    # its FMU's start: the measurement, n and the carried states from their own equations, Ip and Iq
+    # from the load flow's P and Q
+    spec = self_start_of(model, p, model.equilibrium(np.array([1.0, 0.0]), p))
+    assert spec is not None and spec.load_flow
+
+
 def test_a_black_box_follows_the_replayed_voltage_as_its_own_equations_say(tmp_path):
     from cosim.black_box_data import SETTLE_S, own_rest, replay
     from fmu_export.native_reference_fmu import build_native_reference_fmu
@@ -276,11 +323,13 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
     assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
 
 
-def test_the_feeder_surrogate_fmu_starts_itself_from_the_load_flow_and_rests_there_under_fmpy_alone(tmp_path):
+@pytest.mark.parametrize("name", ["feeder", "plant"])
+def test_a_shipped_subsystem_surrogate_fmu_starts_itself_from_the_load_flow_and_rests_there_under_fmpy_alone(
+        tmp_path, name):
     """A third-party master: fmpy's simulate_fmu given nothing but the boundary's load flow (V_lf,
     theta_lf, P_lf, Q_lf; the bus voltage left unset takes it). The FMU solves its start (the
     component's initialisation: the measurement at the angle, the tap at V0 / V_own, the devices'
-    currents from P and Q) and rests there."""
+    currents from P and Q, a plant controller's carried states at 0) and rests there."""
     import onnx
     from fmpy import simulate_fmu
     from fmpy.validation import validate_fmu
@@ -289,19 +338,21 @@ def test_the_feeder_surrogate_fmu_starts_itself_from_the_load_flow_and_rests_the
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.contract import operator_metadata
 
-    operator = next(SHIPPED.glob("feeder-*.onnx"))
-    fmu = tmp_path / "FeederSurrogate.fmu"
-    build_surrogate_fmu(operator, fmu, model_name="FeederSurrogate")
+    operator = next(SHIPPED.glob(f"{name}-*.onnx"))
+    fmu = tmp_path / f"{name.title()}Surrogate.fmu"
+    build_surrogate_fmu(operator, fmu, model_name=f"{name.title()}Surrogate")
     assert validate_fmu(str(fmu)) == []
-    p = operator_metadata(onnx.load(str(operator)))["params"]
+    meta = operator_metadata(onnx.load(str(operator)))
+    model, p = meta["component"], meta["params"]
+    assert model.name == {"feeder": "subsystem", "plant": "subsystem_pc"}[name]
     V0, theta0 = p.V_own, 0.3
     P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2  # its own load flow's injection
-    x0, _ = SUBSYSTEM.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
+    x0, _ = model.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
     result = simulate_fmu(str(fmu), start_values={"V_lf": V0, "theta_lf": theta0, "P_lf": P0, "Q_lf": Q0},
                           stop_time=2.0, output_interval=0.01,
-                          output=["P", "Q", "I_re", "I_im", "in_envelope", "Vs", "theta_vs", *SUBSYSTEM.state_names])
-    for name, value in zip(SUBSYSTEM.state_names, x0):
-        assert result[name][0] == pytest.approx(value, rel=1e-10, abs=1e-12), name
+                          output=["P", "Q", "I_re", "I_im", "in_envelope", "Vs", "theta_vs", *model.state_names])
+    for state, value in zip(model.state_names, x0):
+        assert result[state][0] == pytest.approx(value, rel=1e-10, abs=1e-12), state
     assert (result["Vs"][0], result["theta_vs"][0]) == (pytest.approx(V0, rel=1e-15), pytest.approx(theta0, rel=1e-15))
     assert (result["P"][0], result["Q"][0]) == (pytest.approx(P0, rel=1e-10), pytest.approx(Q0, rel=1e-10))
     rating = p.S / p.Sb

@@ -4,7 +4,10 @@ component its learned operator is an operator of (issue 35, docs/subsystems.md).
 States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES' BusFreq, network
         frame; Ip, Iq [pu, system base]: the active and reactive current the sub-system's devices
         deliver at the boundary, in the frame of the boundary voltage, > 0 generating; n [1]: the
-        boundary's load-flow voltage over the sub-system's own, V0 / V_own)
+        boundary's load-flow voltage over the sub-system's own, V0 / V_own); a sub-system with a plant
+        controller (SUBSYSTEM_PC, `subsystem_pc`) carries four more: Qpi, Qcmd, Ppi, Pcmd [pu, system
+        base], its REPCA1's reactive PI integrator (s2_xi) and command lag (s3_x), active PI
+        integrator (s5_xi) and command lag (s6_y), each summed over the plant's REPCA1
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -24,7 +27,12 @@ What is known is written here; what is not is learned:
     the boundary frequency is what a BusFreq at the boundary measures (blocks.bus_frequency):
         busf_Tf dtheta_f/dt = theta_vs - theta_f,  busf_Tw dtheta_w/dt = theta_f - theta_w;
     Ip and Iq follow the devices' controls, trips and limits, hundreds of states that the sub-system's
-    operator replaces: their rate is learned (`learned_states`), written here as 0.
+    operator replaces: their rate is learned (`learned_states`), written here as 0;
+    a plant controller acts on every unit at once through states of seconds (its PI integrators) and
+    its command lags (50-150 ms, most of a window): these few plant-wide states are what two boundary
+    currents do not tell, so SUBSYSTEM_PC carries them, learned too (0 at any start, where ANDES'
+    REPCA1 starts them); its measurement filters (20-50 ms) follow the boundary voltage the operator
+    reads, and the units' own states are too many and too fast to carry.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -81,18 +89,29 @@ class SubsystemParams(Parameters):
         check_ranges(self, PARAMETER_RANGES)
 
 
+# the plant controllers' states a sub-system with them carries (SUBSYSTEM_PC), summed over its REPCA1
+# (each a share of one plant controller: their sums are the plant's): the reactive PI's integrator and
+# its command lag, the active PI's integrator and its command lag [pu, system base]
+PLANT_CONTROLLER_STATES = (("Qpi", "s2_xi", "plant controllers' reactive PI integrators"),
+                           ("Qcmd", "s3_x", "plant controllers' reactive commands beyond the units' own (lag state)"),
+                           ("Ppi", "s5_xi", "plant controllers' active PI integrators"),
+                           ("Pcmd", "s6_y", "plant controllers' active commands beyond the units' own (lag)"))
+N_BOUNDARY = 5  # theta_f, theta_w, Ip, Iq, n: the states of every sub-system
+
+
 def derivatives(x, u, p: SubsystemParams, m):
-    """(dtheta_f, dtheta_w, dIp, dIq, dn)/dt: the measurement's; the devices' currents' are learned
-    (0); n is a constant of the study."""
+    """(dtheta_f, dtheta_w, dIp, dIq, dn, then any carried controller's)/dt: the measurement's; the
+    devices' currents' and the controllers' are learned (0); n is a constant of the study."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    return d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4]
+    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *(0.0 * x[k] for k in range(N_BOUNDARY, len(x))))
 
 
 def start_equations(x, u, p: SubsystemParams, m):
     """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
-    voltage (n V_own = Vs); the learned currents' rows are unread (the load flow's P, Q fix them)."""
+    voltage (n V_own = Vs), a carried controller's states at 0 (its PI integrators and command lags
+    start there, ANDES' REPCA1); the learned currents' rows are unread (the load flow's P, Q fix them)."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    return d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0]
+    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *(x[k] for k in range(N_BOUNDARY, len(x))))
 
 
 def outputs(x, u, p: SubsystemParams, m):
@@ -108,51 +127,74 @@ def outputs(x, u, p: SubsystemParams, m):
     return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
 
 
-def equilibrium(u, p: SubsystemParams) -> np.ndarray:
-    """The rest [5] under constant (Vs, theta_vs), as if the load flow had put the boundary at Vs:
-    the measurement at theta_vs, n = Vs / V_own, the devices delivering the power of the sub-system's
-    own load flow (Ip_own V_own, Iq_own V_own) through the settled tap."""
-    Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
-    if not Vs > 0.0:
-        raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
-    n = Vs / p.V_own
-    return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n])
+def _equilibrium(carried: int):
+    def equilibrium(u, p: SubsystemParams) -> np.ndarray:
+        """The rest [5 + carried] under constant (Vs, theta_vs), as if the load flow had put the
+        boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering the power
+        of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled tap, a
+        carried controller at its start (0)."""
+        Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
+        if not Vs > 0.0:
+            raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
+        n = Vs / p.V_own
+        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + [0.0] * carried)
+    return equilibrium
 
 
-def _start(given, p: SubsystemParams) -> tuple:
-    V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
-    if not (math.isfinite(V0) and V0 > 0.0):
-        raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
-    n = V0 / p.V_own
-    return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]), {}
+def _starter(carried: int):
+    def start(given, p: SubsystemParams) -> tuple:
+        V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
+        if not (math.isfinite(V0) and V0 > 0.0):
+            raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
+        n = V0 / p.V_own
+        return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
+                        + [0.0] * carried), {}
+    return start
 
 
-SUBSYSTEM = Component(
-    name="subsystem",
-    description="a sub-system seen through its boundary bus: passive network and measurement known, devices learned",
-    states=(Quantity("theta_f", "rad", "boundary angle through the measurement's filter (BusFreq)"),
-            Quantity("theta_w", "rad", "washout state of the boundary's frequency measurement (BusFreq)"),
-            Quantity("Ip", "pu", "devices' active current at the boundary, voltage frame (system base)"),
-            Quantity("Iq", "pu", "devices' reactive current at the boundary, voltage frame (system base; > 0 "
-                     "delivers reactive power)"),
-            Quantity("n", "1", "boundary load-flow voltage over the sub-system's own (V0 / V_own)")),
-    inputs=(Quantity("Vs", "pu", "boundary bus voltage magnitude", start=1.0, operating_range=(0.0, 1.2), minimum=0.0),
-            Quantity("theta_vs", "rad", "boundary bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
-    outputs=(Quantity("I_re", "pu", "current injected into the boundary bus, real part (network frame, system base)"),
-             Quantity("I_im", "pu", "current injected into the boundary bus, imaginary part (network frame, system base)"),
-             Quantity("P", "pu", "active power injected into the boundary bus (system base)"),
-             Quantity("Q", "pu", "reactive power injected into the boundary bus (system base)"),
-             Quantity("f", "pu", "measured boundary frequency (1: nominal)")),
-    params_type=SubsystemParams,
-    derivatives=derivatives,
-    output_equations=outputs,
-    equilibrium=equilibrium,
-    state_scales=(0.1, 0.1, 0.05, 0.05, 0.05),
-    # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0
-    affine_states=(0, 1, 4),
-    drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
-    ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-    initialisation=Initialisation((), _start),
-    learned_states=(2, 3),
-    start_equations=start_equations,
-)
+BOUNDARY_STATES = (
+    Quantity("theta_f", "rad", "boundary angle through the measurement's filter (BusFreq)"),
+    Quantity("theta_w", "rad", "washout state of the boundary's frequency measurement (BusFreq)"),
+    Quantity("Ip", "pu", "devices' active current at the boundary, voltage frame (system base)"),
+    Quantity("Iq", "pu", "devices' reactive current at the boundary, voltage frame (system base; > 0 "
+             "delivers reactive power)"),
+    Quantity("n", "1", "boundary load-flow voltage over the sub-system's own (V0 / V_own)"))
+
+
+def _subsystem(name: str, description: str, carried: tuple) -> Component:
+    """The sub-system component with the boundary's states and the learned states `carried`
+    (Quantity, each 0 at the start)."""
+    extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried)))
+    return Component(
+        name=name,
+        description=description,
+        states=BOUNDARY_STATES + carried,
+        inputs=(Quantity("Vs", "pu", "boundary bus voltage magnitude", start=1.0, operating_range=(0.0, 1.2), minimum=0.0),
+                Quantity("theta_vs", "rad", "boundary bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
+        outputs=(Quantity("I_re", "pu", "current injected into the boundary bus, real part (network frame, system base)"),
+                 Quantity("I_im", "pu", "current injected into the boundary bus, imaginary part (network frame, system base)"),
+                 Quantity("P", "pu", "active power injected into the boundary bus (system base)"),
+                 Quantity("Q", "pu", "reactive power injected into the boundary bus (system base)"),
+                 Quantity("f", "pu", "measured boundary frequency (1: nominal)")),
+        params_type=SubsystemParams,
+        derivatives=derivatives,
+        output_equations=outputs,
+        equilibrium=_equilibrium(len(carried)),
+        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * len(carried),
+        # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0
+        affine_states=(0, 1, 4),
+        drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
+        ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
+        initialisation=Initialisation((), _starter(len(carried))),
+        learned_states=(2, 3) + extra,
+        started_learned=extra,
+        start_equations=start_equations,
+    )
+
+
+SUBSYSTEM = _subsystem("subsystem", "a sub-system seen through its boundary bus: passive network and measurement "
+                       "known, devices learned", ())
+SUBSYSTEM_PC = _subsystem("subsystem_pc", "a sub-system with a plant controller seen through its boundary bus: "
+                          "passive network and measurement known, devices and the controller's states learned",
+                          tuple(Quantity(n, "pu", f"{what} (sum over its REPCA1, system base)")
+                                for n, _, what in PLANT_CONTROLLER_STATES))
