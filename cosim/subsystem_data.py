@@ -13,7 +13,7 @@ the host records at the boundary becomes the component's inputs and states, each
     n                  V0 / V_own, the run's load-flow voltage at the boundary over the sub-system's own;
     Ip, Iq             the devices' part of the current the sub-system injects (boundary.boundary_current,
                        less the passive part (G + jB) V / n^2), in the voltage's frame;
-    Qpi .. Pcmd        for a sub-system with a plant controller (component `subsystem_pc`): its
+    Qpi .. Pcmd        where the plan carries the plant controller (component `subsystem_pc`): its
                        REPCA1's states, each summed over the sub-system's REPCA1 (the master's
                        device states).
 So the component's outputs give back the injected current of the detail row by row, exactly.
@@ -61,7 +61,9 @@ class Plan:
     case names or files), `buses` attachment buses per host (drawn among its buses), each run to
     `stop` s at `step` s; faults from `fault_start` s cleared after `clear` (low, high) s in whole
     steps, a share `trips` of the runs a generator trip instead and a share `opened` of the faults
-    cleared with a line at the fault bus opened; windows of `horizon` s every `stride` s."""
+    cleared with a line at the fault bus opened; windows of `horizon` s every `stride` s;
+    `carry_controller`: the windows carry the sub-system's plant controller states too (component
+    `subsystem_pc`, which needs an REPCA1; docs/subsystems.md)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -74,6 +76,7 @@ class Plan:
     opened: float = 0.25
     horizon: float = 0.2
     stride: float = 0.02
+    carry_controller: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -138,10 +141,15 @@ def _lag_of_ramp(x: float, u0: float, u1: float, h: float, T: float) -> float:
     return u1 - slope * T + (x - u0 + slope * T) * e
 
 
-def subsystem_model(records: dict):
-    """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`
-    where it has a plant controller (REPCA1), whose states it carries, else `subsystem`."""
-    return component("subsystem_pc" if records.get("REPCA1") else "subsystem")
+def subsystem_model(records: dict, carry_controller: bool = False):
+    """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
+    which carries its plant controller's states, where asked (DatasetError where it has no REPCA1),
+    else `subsystem`."""
+    if not carry_controller:
+        return component("subsystem")
+    if not records.get("REPCA1"):
+        raise DatasetError("the sub-system has no plant controller (REPCA1) whose states it could carry")
+    return component("subsystem_pc")
 
 
 def controller_columns(case, bus: int, model) -> list:
@@ -380,7 +388,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records)
+    model = subsystem_model(records, plan.carry_controller)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed, model.name)
     if (meta := finished(out, key)) is not None:
         return meta

@@ -24,7 +24,7 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
                 "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
-SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port")
+SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller")
 
 
 def subsystem_options_given(args) -> list:
@@ -45,6 +45,9 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--buses", type=int, default=None, help="with --subsystem: attachment buses per host (default 3)")
     op.add_argument("--stride", type=float, default=None, metavar="S",
                     help="with --subsystem: seconds between the starts of the windows of a run (default 0.02)")
+    op.add_argument("--carry-controller", action="store_true", default=None,
+                    help="with --subsystem FILE of a plant: carry its plant controller's (REPCA1) PI integrators "
+                         "and command lags as learned states (component subsystem_pc; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",
@@ -60,7 +63,7 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --epochs, --seed, --workers, --name")
+                        "--hosts, --buses, --stride, --carry-controller, --epochs, --seed, --workers, --name")
     path = Path(args.subsystem)
     if not path.is_file():
         raise UserError(f"--subsystem: no file {path}")
@@ -82,6 +85,8 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
+    if args.carry_controller and not records.get("REPCA1"):
+        raise UserError(f"--carry-controller: {path.name} has no plant controller (REPCA1) whose states it could carry")
     out, plan, name = _output(args), _plan(args), _name(args)
     _check_case(path)
     _learn(path, args.boundary, out, plan, args, name)
@@ -106,8 +111,9 @@ def _check_case(path: Path) -> None:
 
 def _black_box(path: Path, args) -> None:
     """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
-    if args.boundary is not None:
-        raise UserError("--boundary is for a case file; a black box (an FMU) is its bus port")
+    for option, value in (("--boundary", args.boundary), ("--carry-controller", args.carry_controller)):
+        if value is not None:
+            raise UserError(f"{option} is for a case file; a black box (an FMU) is its bus port, never read inside")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
         raise UserError("--subsystem BOX.fmu needs --rating MVA, its rating (a number in (0, 1e6])")
     if args.bus_port is not None:
@@ -137,7 +143,8 @@ def _plan(args):
         args.epochs = TRAINING.epochs
     plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
                 buses=Plan.buses if args.buses is None else args.buses,
-                stride=Plan.stride if args.stride is None else args.stride)
+                stride=Plan.stride if args.stride is None else args.stride,
+                carry_controller=bool(args.carry_controller))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)
