@@ -30,9 +30,10 @@ What is known is written here; what is not is learned:
     operator replaces: their rate is learned (`learned_states`), written here as 0;
     a plant controller acts on every unit at once through states of seconds (its PI integrators) and
     its command lags (50-150 ms, most of a window): these few plant-wide states are what two boundary
-    currents do not tell, so SUBSYSTEM_PC carries them, learned too (0 at any start, where ANDES'
-    REPCA1 starts them); its measurement filters (20-50 ms) follow the boundary voltage the operator
-    reads, and the units' own states are too many and too fast to carry.
+    currents do not tell, so SUBSYSTEM_PC carries them where asked (`--carry-controller`), learned
+    too (0 at any start, where ANDES' REPCA1 starts them; nothing holds their learned rates at 0 at
+    rest: docs/subsystems.md); its measurement filters (20-50 ms) follow the boundary voltage the
+    operator reads, and the units' own states are too many and too fast to carry.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
