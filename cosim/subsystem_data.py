@@ -311,8 +311,8 @@ def _runner(attached: str, fmu_cache: str, step: float):
 
 def record_run(task: tuple) -> str:
     """Runs one task (index, Run as dict, attached case file, host bus, params, plan as dict, FMU
-    cache, partial folder, component name) and writes its rows (or why it failed) to partial/run_<index>.npz;
-    returns the file's name."""
+    cache, partial folder, component name) and writes its rows (or why it failed) to
+    partial/run_<index>.npz; returns the file's name."""
     index, run, attached, bus, params, plan, fmu_cache, partial, model = task
     plan = Plan(**{k: tuple(v) if isinstance(v, list) else v for k, v in plan.items()})
     out = Path(partial) / f"run_{index:05d}.npz"
@@ -363,9 +363,9 @@ def run_all(record, tasks: list, total: int, desc: str, workers: int, progress: 
     bar.close()
 
 
-def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int, model: str = "subsystem") -> str:
+def fingerprint(subsystem: bytes, boundary: int, plan: Plan, seed: int) -> str:
     digest = hashlib.sha256(subsystem)
-    digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__, model]).encode())
+    digest.update(json.dumps([boundary, plan.to_dict(), seed, FORMAT_VERSION, __version__]).encode())
     return digest.hexdigest()[:20]
 
 
@@ -389,7 +389,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
     model = subsystem_model(records, plan.carry_controller)
-    key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed, model.name)
+    key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
     partial = out / ".partial"

@@ -241,7 +241,7 @@ def config_lines(component: Component, spec: SelfStart) -> list:
         if component.start_equations is not None else []
     return own + [
         "#define OPFMU_SELF_START 1 /* the FMU solves its start from the load flow (c/self_start.c) */",
-        f"#define SELF_START_N_RATE_ROWS {len(rows)} /* the states' own start equations: all but the learned ones P_lf, Q_lf fix */",
+        f"#define SELF_START_N_RATE_ROWS {len(rows)} /* all but the learned states P_lf, Q_lf fix */",
         f"static const int SELF_START_RATE_ROWS[{max(len(rows), 1)}] = {{{', '.join(map(str, rows or [0]))}}}; "
         "/* the state each first row is of */",
         f"#define SELF_START_LOAD_FLOW {int(spec.load_flow)} /* P_bus = P_lf and Q_bus = Q_lf are start equations */",

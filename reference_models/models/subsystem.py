@@ -161,6 +161,16 @@ BOUNDARY_STATES = (
              "delivers reactive power)"),
     Quantity("n", "1", "boundary load-flow voltage over the sub-system's own (V0 / V_own)"))
 
+BOUNDARY_INPUTS = (
+    Quantity("Vs", "pu", "boundary bus voltage magnitude", start=1.0, operating_range=(0.0, 1.2), minimum=0.0),
+    Quantity("theta_vs", "rad", "boundary bus voltage angle", start=0.0, operating_range=(-0.5, 0.5)))
+BOUNDARY_OUTPUTS = (
+    Quantity("I_re", "pu", "current injected into the boundary bus, real part (network frame, system base)"),
+    Quantity("I_im", "pu", "current injected into the boundary bus, imaginary part (network frame, system base)"),
+    Quantity("P", "pu", "active power injected into the boundary bus (system base)"),
+    Quantity("Q", "pu", "reactive power injected into the boundary bus (system base)"),
+    Quantity("f", "pu", "measured boundary frequency (1: nominal)"))
+
 
 def _subsystem(name: str, description: str, carried: tuple) -> Component:
     """The sub-system component with the boundary's states and the learned states `carried`
@@ -170,13 +180,8 @@ def _subsystem(name: str, description: str, carried: tuple) -> Component:
         name=name,
         description=description,
         states=BOUNDARY_STATES + carried,
-        inputs=(Quantity("Vs", "pu", "boundary bus voltage magnitude", start=1.0, operating_range=(0.0, 1.2), minimum=0.0),
-                Quantity("theta_vs", "rad", "boundary bus voltage angle", start=0.0, operating_range=(-0.5, 0.5))),
-        outputs=(Quantity("I_re", "pu", "current injected into the boundary bus, real part (network frame, system base)"),
-                 Quantity("I_im", "pu", "current injected into the boundary bus, imaginary part (network frame, system base)"),
-                 Quantity("P", "pu", "active power injected into the boundary bus (system base)"),
-                 Quantity("Q", "pu", "reactive power injected into the boundary bus (system base)"),
-                 Quantity("f", "pu", "measured boundary frequency (1: nominal)")),
+        inputs=BOUNDARY_INPUTS,
+        outputs=BOUNDARY_OUTPUTS,
         params_type=SubsystemParams,
         derivatives=derivatives,
         output_equations=outputs,
