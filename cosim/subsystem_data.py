@@ -45,7 +45,7 @@ from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
-from reference_models.models.subsystem import PLANT_CONTROLLER_STATES
+from reference_models.models.subsystem import N_BOUNDARY, PLANT_CONTROLLER_STATES
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -155,7 +155,7 @@ def subsystem_model(records: dict, carry_controller: bool = False):
 def controller_columns(case, bus: int, model) -> list:
     """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
     state columns of a grid result it sums: those of the REPCA1 behind the boundary `bus` of `case`."""
-    carried = model.state_names[5:]
+    carried = model.state_names[N_BOUNDARY:]
     if not carried:
         return []
     behind = set(subsystem_buses(case.network, bus))
@@ -408,7 +408,6 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
             cases.append((case, bus))
     params = subsystem_params(records, cases[0][0], cases[0][1])
     model.params(params)  # checked before anything runs
-    controller_columns(cases[0][0], cases[0][1], model)
     runs = draw_runs(plan, cases, rng)
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
               str(out / ".fmus"), str(partial), model.name) for k, r in enumerate(runs)
