@@ -26,11 +26,13 @@ from .subsystem_data import Plan, generate
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
 # (their rates are affine: corrections.c), so the data loss weighs them little; a plant controller's
 # carried states (subsystem_pc) only feed the next window, so they weigh less than the currents
-TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1)),
+TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1),
+                                            features=True),
                        epochs=2000, patience=10**9, time_points=None, causal=True, physics=True,
                        weights=LossWeights(physics_collocation=0.0), state_weights=(0.2, 0.2, 5.0, 5.0, 0.2),
                        checkpoint_every=100)
 CARRIED_WEIGHT = 1.0  # the data loss' weight of each carried controller state
+MEMBERS = 1  # operators trained per sub-system and exported as their mean
 
 
 def training_config(state_names, seed: int, epochs: int | None) -> TrainConfig:
@@ -76,11 +78,13 @@ def register(subsystem, operator) -> Path:
 
 def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
           workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None,
-          bus_port: str | None = None) -> dict:
+          bus_port: str | None = None, members: int = MEMBERS) -> dict:
     """Runs (or resumes) the stages of the module docstring; returns {"data": dataset metadata,
-    "training": TrainResult, "operator": path, "fmu": path, "registered": path}. A sub-system given
-    as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva [MVA], no
-    boundary, and where its model description declares no bus port, `bus_port` (black_box_data.bus_port)."""
+    "training": [TrainResult per member], "operator": path, "fmu": path, "registered": path}. A
+    sub-system given as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva
+    [MVA], no boundary, and where its model description declares no bus port, `bus_port`
+    (black_box_data.bus_port). members: operators trained on the data with seeds seed, seed + 1, ...
+    (out/run, out/run_2, ...), exported as their mean (surrogate.ensemble) where more than one."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.onnx_export import export_onnx
     from surrogate.training import train
@@ -92,15 +96,17 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
         meta = generate_black_box(subsystem, out / "data", rating_mva, plan, seed, workers, progress, bus_port)
     else:
         meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
-    config = training_config(meta["state_names"], seed, epochs)
-    result = train(out / "data", config, out / "run", progress)
+    runs = [out / "run"] + [out / f"run_{k}" for k in range(2, members + 1)]
+    results = [train(out / "data", training_config(meta["state_names"], seed + k, epochs), run, progress)
+               for k, run in enumerate(runs)]
     operator = out / "operator.onnx"
-    if not operator.exists() or operator.stat().st_mtime < (out / "run" / "result.json").stat().st_mtime:
-        export_onnx(out / "run", operator)
+    trained = max((run / "result.json").stat().st_mtime for run in runs)
+    if not operator.exists() or operator.stat().st_mtime < trained:
+        export_onnx(runs if members > 1 else runs[0], operator)
     fmu = out / f"{name}Surrogate.fmu"
     if not fmu.exists() or fmu.stat().st_mtime < operator.stat().st_mtime:
         build_surrogate_fmu(operator, fmu, model_name=f"{name}Surrogate")
-    return {"data": meta, "training": result, "operator": operator, "fmu": fmu,
+    return {"data": meta, "training": results, "operator": operator, "fmu": fmu,
             "registered": register(subsystem, operator)}
 
 

@@ -2,7 +2,8 @@
 FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
-                   [--buses N] [--stride S] [--epochs N] [--seed S] [--workers N] [--name NAME] [--quiet]
+                   [--buses N] [--stride S] [--members K] [--epochs N] [--seed S] [--workers N] [--name NAME]
+                   [--quiet]
     opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [--bus-port SPEC] [the same options]
 
 A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
@@ -24,7 +25,8 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
                 "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
-SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller")
+SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "members")
+MAX_MEMBERS = 16
 
 
 def subsystem_options_given(args) -> list:
@@ -45,6 +47,9 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--buses", type=int, default=None, help="with --subsystem: attachment buses per host (default 3)")
     op.add_argument("--stride", type=float, default=None, metavar="S",
                     help="with --subsystem: seconds between the starts of the windows of a run (default 0.02)")
+    op.add_argument("--members", type=int, default=None, metavar="K",
+                    help="with --subsystem: operators trained on the data (seeds --seed, --seed + 1, ...) and exported "
+                         "as their mean (default 1)")
     op.add_argument("--carry-controller", action="store_true", default=None,
                     help="with --subsystem FILE of a plant: carry its plant controller's (REPCA1) PI integrators "
                          "and command lags as learned states (component subsystem_pc; docs/subsystems.md)")
@@ -63,7 +68,9 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --epochs, --seed, --workers, --name")
+                        "--hosts, --buses, --stride, --carry-controller, --members, --epochs, --seed, --workers, --name")
+    if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
+        raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     path = Path(args.subsystem)
     if not path.is_file():
         raise UserError(f"--subsystem: no file {path}")
@@ -177,13 +184,16 @@ def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
 
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
-                     args.rating, args.bus_port)
+                     args.rating, args.bus_port, **({} if args.members is None else {"members": args.members}))
     except (DatasetError, TrainError, CouplingError, CaseError) as exc:
         raise UserError(str(exc)) from None
-    meta, result = done["data"], done["training"]
+    meta = done["data"]
     print(f"data: {sum(meta['counts'].values())} windows from {sum(len(v) for v in meta['runs'].values())} runs "
           f"({len(meta['failed_runs'])} runs the detail did not finish) in {out / 'data'}")
-    print(f"training: {result.epochs} epochs, best validation MSE {result.best_val_mse:.3g} at epoch {result.best_epoch}")
+    for k, result in enumerate(done["training"], start=1):
+        member = f" (operator {k} of {len(done['training'])})" if len(done["training"]) > 1 else ""
+        print(f"training{member}: {result.epochs} epochs, best validation MSE {result.best_val_mse:.3g} at epoch "
+              f"{result.best_epoch}")
     print(f"operator: {done['operator']}\nFMU: {done['fmu']}")
     if path.suffix.lower() != ".fmu":
         print(f"registered for {path.name}: --attach BUS={path}:surrogate runs it")

@@ -130,6 +130,11 @@ class Component:
         study (dx/dt = 0) that the load flow fixes (the sub-system's tap n = V0 / V_own). The rows
         of learned states are read for `started_learned` only (the load flow's P and Q fix the
         others). None: the rates.
+    window_features(p, sensor_times [S]): known linear functionals of an operator's inputs that its
+        branch reads besides them, A [n_f, n_x + n_u S] over x0 and the sensors flattened time-major
+        (the sub-system's measured frequency at each sensor time, exact for inputs linear between
+        sensors: what its units' droops act on, which the raw angles give only through the filter run
+        over all of them). None: none.
     reset(x, u, p, m): the states after the resets of its non-windup limits (ANDES'
         AntiWindup: a state at or beyond a limit while its unlimited derivative pushes outward is
         placed on the limit), a tuple of len(states); integrators apply it where they (re)start,
@@ -156,6 +161,7 @@ class Component:
     learned_states: tuple = ()
     started_learned: tuple = ()
     start_equations: Callable | None = None
+    window_features: Callable | None = None
 
     def __post_init__(self):
         names = [q.name for q in self.states + self.inputs + self.outputs]

@@ -4,7 +4,8 @@
 x [N, M, n_x] in physical units, that computes without any elementwise normalisation pass:
 
 * the standardisation of x0 and of the sensors (and the sensor scale) is folded into the weights and
-  bias of the first linear layer that reads them, so the raw [x0, u] go straight into one Gemm;
+  bias of the first linear layer that reads them, so the raw [x0, u] go straight into one Gemm; so
+  are window features (models.py), linear in [x0, u] themselves;
 * the decoding x = x_mean + x_std * y is folded into the last linear layer of the output path. For a
   DeepONet the per-state offset (x_mean + x_std * bias; anchored: x0 - x_std B tau(0), with tau(0)
   a constant) becomes one more coefficient per state, whose basis function is the constant 1
@@ -85,6 +86,21 @@ def _input_normalisation(model: OperatorModel, with_state: bool):
     return mean, scale
 
 
+def _first_layer(model: UnstackedDeepONet) -> nn.Linear:
+    """The branch's first layer over the raw [x0, u flattened], its normalisation and any window
+    features folded in: W_f (A v - f_mean) g / f_std is W_f g / f_std A v plus a constant."""
+    mean, scale = _input_normalisation(model, True)
+    first = model.branch_net[0]
+    if not model.config.features:
+        return fold_input(first, mean, scale)
+    n_raw = mean.numel()
+    w, b = first.weight.double(), first.bias.double()
+    w_raw = w[:, :n_raw] * scale.double()
+    w_f = w[:, n_raw:] * (model.sensor_scale / model.f_std).double()
+    return _linear(w_raw + w_f @ model.feature_map.double(),
+                   b - w_raw @ mean.double() - w_f @ model.f_mean.double())
+
+
 def _per_coefficient(per_state: torch.Tensor, latent: int) -> torch.Tensor:
     """[4] -> [4 * latent]: each state's value repeated over its coefficients (state-major)."""
     return per_state.repeat_interleave(latent)
@@ -136,7 +152,7 @@ class FoldedDeepONet(nn.Module):
 class FoldedUnstacked(FoldedDeepONet):
     def __init__(self, model: UnstackedDeepONet):
         super().__init__(model)
-        net = _replace(model.branch_net, 0, fold_input(model.branch_net[0], *_input_normalisation(model, True)))
+        net = _replace(model.branch_net, 0, _first_layer(model))
         self.branch_net = _replace(net, -1, self.last_layer(net[-1], model))
 
     def branch(self, x0, u):

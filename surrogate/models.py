@@ -14,7 +14,11 @@ normalisation is part of the model as buffers, fitted from the training split (`
 * inputs are standardised per channel and then multiplied by `sensor_gain * sqrt(n_x / S)`, so the
   n_u S sensor values together weigh about as much as the n_x initial-state values in the first layer;
 * time enters as features 2 t/T - 1 and exp(-t/tau) for the configured tau (10-100 ms: the omega
-  transient at the start of every window is that fast).
+  transient at the start of every window is that fast);
+* with `features` (Unstacked only), the branch also reads phi = A [x0, sensors], a fixed linear map
+  the component gives (`Component.window_features`: a measured frequency at each sensor time),
+  standardised per feature and scaled like the sensors. It is a better-conditioned view of inputs
+  the branch has anyway, so the export folds it into the first layer (folding.py).
 
 DeepONet output: the branch gives p coefficients per state, [N, n_x, p]; the trunk gives p basis
 functions of time shared by the states, [M, p]; x = x_mean + x_std * (B @ tau^T + b0), or
@@ -51,6 +55,8 @@ class OperatorConfig:
     anchored: DeepONets only: x(t) = x0 + B (tau(t) - tau(0)), so the operator returns x0 exactly at
         t = 0 (no jump when a co-simulation starts a new window from the state reached) and has no
         bias term; otherwise x(t) = B tau(t) + bias, free at t = 0 (the paper's form).
+    features: Unstacked only: the branch also reads the component's window features (NormStats'
+        feature_map), standardised.
     """
 
     arch: str = "unstacked"
@@ -61,6 +67,7 @@ class OperatorConfig:
     time_taus: tuple = (0.01, 0.03, 0.1)
     sensor_gain: float = 1.0
     anchored: bool = False
+    features: bool = False
 
     def __post_init__(self):
         if self.arch not in ARCHITECTURES:
@@ -69,6 +76,8 @@ class OperatorConfig:
             raise ValueError(f"unknown activation {self.activation!r} (known: {', '.join(ACTIVATIONS)})")
         if self.anchored and self.arch == "pinn":
             raise ValueError("anchored applies to the DeepONets (unstacked, stacked-n), not the pinn")
+        if self.features and self.arch != "unstacked":
+            raise ValueError(f"features apply to the unstacked DeepONet, not the {self.arch}")
         if min(self.width, self.depth, self.latent) < 1 or any(tau <= 0 for tau in self.time_taus):
             raise ValueError("width, depth, latent and every time tau must be positive")
         object.__setattr__(self, "time_taus", tuple(float(tau) for tau in self.time_taus))
@@ -85,7 +94,9 @@ class OperatorConfig:
 @dataclass(frozen=True)
 class NormStats:
     """Normalisation fitted from a training split: per-state mean/std of x [n_x], per-input mean/std
-    of u [n_u] (physical units), the horizon T [s] and the number of sensor times S."""
+    of u [n_u] (physical units), the horizon T [s] and the number of sensor times S; with window
+    features, their map A [n_f, n_x + n_u S] (rows) and the mean/std of A [x0, sensors] over the
+    split's windows [n_f]."""
 
     x_mean: tuple
     x_std: tuple
@@ -93,20 +104,31 @@ class NormStats:
     u_std: tuple
     horizon: float
     n_sensors: int
+    feature_map: tuple = ()
+    f_mean: tuple = ()
+    f_std: tuple = ()
 
     @classmethod
-    def fit(cls, split: dict) -> "NormStats":
-        """Statistics of a labeled split (dict with x [N, S, n_x], u [N, S, n_u], t [S])."""
+    def fit(cls, split: dict, feature_map=None) -> "NormStats":
+        """Statistics of a labeled split (dict with x0 [N, n_x], x [N, S, n_x], u [N, S, n_u], t [S]);
+        feature_map: A [n_f, n_x + n_u S] (a component's window_features) or None."""
         x = np.asarray(split["x"], dtype=float)
         u = np.asarray(split["u"], dtype=float)
+        as_tuple = lambda a: tuple(float(v) for v in a)  # noqa: E731
+        features = {}
+        if feature_map is not None:
+            A = np.asarray(feature_map, dtype=float)
+            phi = np.concatenate([np.asarray(split["x0"], dtype=float), u.reshape(len(u), -1)], axis=1) @ A.T
+            features = dict(feature_map=tuple(as_tuple(row) for row in A), f_mean=as_tuple(phi.mean(0)),
+                            f_std=as_tuple(_safe_std(phi)))
         x, u = x.reshape(-1, x.shape[-1]), u.reshape(-1, u.shape[-1])
         t = np.asarray(split["t"], dtype=float)
-        as_tuple = lambda a: tuple(float(v) for v in a)  # noqa: E731
         return cls(as_tuple(x.mean(0)), as_tuple(_safe_std(x)), as_tuple(u.mean(0)), as_tuple(_safe_std(u)),
-                   float(t[-1]), int(t.size))
+                   float(t[-1]), int(t.size), **features)
 
     def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        plain = lambda v: [plain(e) for e in v] if isinstance(v, tuple) else v  # noqa: E731
+        return {k: plain(v) for k, v in asdict(self).items()}
 
     @property
     def n_states(self) -> int:
@@ -116,9 +138,14 @@ class NormStats:
     def n_inputs(self) -> int:
         return len(self.u_mean)
 
+    @property
+    def n_features(self) -> int:
+        return len(self.feature_map)
+
     @classmethod
     def from_dict(cls, data: dict) -> "NormStats":
-        return cls(**{k: tuple(float(x) for x in v) if isinstance(v, list) else v for k, v in data.items()})
+        frozen = lambda v: tuple(frozen(e) for e in v) if isinstance(v, list) else float(v)  # noqa: E731
+        return cls(**{k: frozen(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
 def _safe_std(a: np.ndarray) -> np.ndarray:
@@ -162,6 +189,12 @@ class OperatorModel(nn.Module, ABC):
         sensor_scale = config.sensor_gain * math.sqrt(stats.n_states / stats.n_sensors)
         self.register_buffer("sensor_scale", torch.tensor(sensor_scale, **f32))
         self.register_buffer("time_taus", torch.tensor(config.time_taus, **f32))
+        if config.features and not stats.n_features:
+            raise ValueError("features asked for, but the normalisation holds no feature map")
+        if stats.n_features:
+            self.register_buffer("feature_map", torch.tensor(stats.feature_map, **f32))
+            self.register_buffer("f_mean", torch.tensor(stats.f_mean, **f32))
+            self.register_buffer("f_std", torch.tensor(stats.f_std, **f32))
 
     @property
     def n_time_features(self) -> int:
@@ -170,8 +203,12 @@ class OperatorModel(nn.Module, ABC):
     def stats(self) -> NormStats:
         """The normalisation as held in the buffers (what `build_model` needs to rebuild this model)."""
         as_tuple = lambda b: tuple(float(v) for v in b.tolist())  # noqa: E731
+        features = {}
+        if hasattr(self, "feature_map"):
+            features = dict(feature_map=tuple(as_tuple(row) for row in self.feature_map),
+                            f_mean=as_tuple(self.f_mean), f_std=as_tuple(self.f_std))
         return NormStats(as_tuple(self.x_mean), as_tuple(self.x_std), as_tuple(self.u_mean), as_tuple(self.u_std),
-                         float(self.horizon), self.n_sensors)
+                         float(self.horizon), self.n_sensors, **features)
 
     def encode_state(self, x0: torch.Tensor) -> torch.Tensor:
         """Standardised initial state [N, n_x]."""
@@ -180,6 +217,11 @@ class OperatorModel(nn.Module, ABC):
     def encode_sensors(self, u: torch.Tensor) -> torch.Tensor:
         """Scaled, standardised sensor values, flattened time-major: [N, S, n_u] -> [N, n_u S]."""
         return torch.flatten((u - self.u_mean) / self.u_std * self.sensor_scale, 1)
+
+    def encode_features(self, x0: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+        """Scaled, standardised window features [N, n_f]: A [x0, u flattened time-major]."""
+        phi = torch.cat([x0, torch.flatten(u, 1)], dim=-1) @ self.feature_map.T
+        return (phi - self.f_mean) / self.f_std * self.sensor_scale
 
     def time_features(self, t: torch.Tensor) -> torch.Tensor:
         """[M] times [s] -> [M, 1 + len(time_taus)]: 2 t/T - 1 and exp(-t/tau)."""
@@ -250,11 +292,14 @@ class UnstackedDeepONet(DeepONet):
     def __init__(self, config: OperatorConfig, stats: NormStats):
         super().__init__(config, stats)
         c = config
-        n_in = self.n_states + self.n_inputs * stats.n_sensors
+        n_in = self.n_states + self.n_inputs * stats.n_sensors + (stats.n_features if c.features else 0)
         self.branch_net = mlp(n_in, c.width, c.depth, self.n_states * c.latent, c.activation)
 
     def branch(self, x0, u):
-        z = torch.cat([self.encode_state(x0), self.encode_sensors(u)], dim=-1)
+        parts = [self.encode_state(x0), self.encode_sensors(u)]
+        if self.config.features:
+            parts.append(self.encode_features(x0, u))
+        z = torch.cat(parts, dim=-1)
         return self.branch_net(z).reshape(-1, self.n_states, self.config.latent)
 
 

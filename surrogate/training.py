@@ -187,7 +187,7 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
     splits = _load_splits(data_dir, config)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
-        model = build_model(config.model, NormStats.fit(splits["train"]))
+        model = build_model(config.model, NormStats.fit(splits["train"], _feature_map(config, machine, splits["train"])))
     tensors = _to_tensors(splits, model, machine)
     with _eager_heavyball():
         optimizer = _make_optimizer(model, config)
@@ -311,6 +311,18 @@ def _load_splits(data_dir: Path, config: TrainConfig) -> dict:
         if not np.array_equal(split["t"], splits["train"]["t"]):
             raise TrainError(f"the {name} split of {data_dir} has another time grid than the train split")
     return splits
+
+
+def _feature_map(config: TrainConfig, machine, split: dict):
+    """The window features' map A [n_f, n_x + n_u S] of the dataset's component at the split's sensor
+    times, where the model reads them; None where it does not."""
+    if not config.model.features:
+        return None
+    component, params = machine
+    if component.window_features is None:
+        raise TrainError(f"features asked for, but {component.name} gives no window features")
+    t = np.asarray(split["t"], dtype=float)
+    return component.window_features(params, np.linspace(0.0, t[-1], np.shape(split["u"])[1]))
 
 
 def _to_tensors(splits: dict, model: OperatorModel, machine) -> _Tensors:

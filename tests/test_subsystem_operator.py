@@ -70,6 +70,33 @@ def test_the_boundary_measurement_of_the_windows_is_the_busfreq_of_the_angle():
         assert y == pytest.approx([theta_f[k], theta_w[k]], abs=1e-9)
 
 
+@pytest.mark.parametrize("Tf", [0.02, 0.0])
+def test_the_window_features_are_the_measured_frequency_at_the_sensors_from_any_start(Tf):
+    from dataclasses import replace
+
+    from scipy.integrate import solve_ivp
+
+    p = replace(_params(), busf_Tf=Tf, busf_Tw=0.1)
+    t = np.linspace(0.0, 0.2, 21)
+    theta = 0.3 * np.sin(9 * t) + 0.4 * t
+    x0 = np.array([0.05, -0.02, 0.3, 0.1, 1.0])  # a measurement away from rest
+    A = SUBSYSTEM.window_features(p, t)
+    assert A.shape == (21, 5 + 2 * 21)
+    v = np.concatenate([x0, np.stack([np.ones_like(t), theta], axis=1).ravel()])
+
+    def rate(s, y):
+        return SUBSYSTEM.rhs(np.array([*y, 0.3, 0.1, 1.0]), np.array([1.0, np.interp(s, t, theta)]), p)[:2]
+
+    y = solve_ivp(rate, (0.0, 0.2), x0[:2], t_eval=t, rtol=1e-11, atol=1e-13, max_step=1e-3).y
+    if Tf == 0.0:
+        y[0] = theta  # the angle passes the filter unheld
+    f = np.array([SUBSYSTEM.output_values(np.array([a, b, 0.3, 0.1, 1.0]), np.array([1.0, th]), p)[4]
+                  for a, b, th in zip(*y, theta)])
+    np.testing.assert_allclose(A @ v, (f - 1.0) * p.busf_fn, rtol=0, atol=1e-7 * np.abs(f - 1).max() * p.busf_fn + 1e-12)
+    turned = v + np.concatenate([[0.7, 0.7, 0, 0, 0], np.tile([0.0, 0.7], 21)])  # every angle 0.7 rad on
+    np.testing.assert_allclose(A @ turned, A @ v, rtol=0, atol=1e-12)
+
+
 @pytest.mark.andes
 def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
     import andes
@@ -100,6 +127,35 @@ def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
     assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
     assert rows["x"][0, 2:4] == pytest.approx([p.Ip_own / rows["x"][0, 4], p.Iq_own / rows["x"][0, 4]], rel=1e-9)
     assert np.min(rows["u"][:, 0]) < 0.6  # the fault reached the boundary
+
+
+@pytest.mark.andes
+def test_a_subsystem_operator_reads_its_measured_frequency_and_exports_without_it(tmp_path, monkeypatch):
+    """`learn` end to end on a small feeder: the network reads the boundary's measured frequency at
+    every sensor (the component's window features, standardised), and the exported operator and its
+    FMU take the plain (x0, sensors): the features are folded into the branch's first layer."""
+    import onnx
+
+    from cosim.subsystem_data import Plan
+    from cosim.subsystem_operator import learn
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+    from surrogate.training import load_model
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
+    sub = write_case(feeder(FeederSpec(units=10, seed=4)), tmp_path / "feeder.json")
+    done = learn(sub, 1, tmp_path / "op", Plan(hosts=("ieee14",), buses=1, runs=6, stop=1.0, trips=0.0), epochs=3,
+                 progress=False)
+    model = load_model(tmp_path / "op" / "run")
+    t = np.linspace(0.0, float(model.horizon), model.n_sensors)
+    p = SUBSYSTEM.params(done["data"]["params"])
+    assert model.config.features
+    A = SUBSYSTEM.window_features(p, t)
+    np.testing.assert_allclose(model.feature_map.numpy(), A, rtol=0, atol=1e-6 * np.abs(A).max())  # float32
+    widths = {tuple(n.dims) for n in onnx.load(str(done["operator"])).graph.initializer if len(n.dims) == 2}
+    n_raw = 5 + 2 * model.n_sensors
+    assert model.branch_net[0].in_features == n_raw + model.n_sensors
+    assert any(n_raw in dims for dims in widths) and not any(n_raw + model.n_sensors in dims for dims in widths)
+    assert done["fmu"].is_file() and done["registered"].is_file()
 
 
 @pytest.mark.andes
@@ -191,6 +247,7 @@ def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     (["--subsystem", "{feeder}", "--boundary", "7", "--out", "{out}"], "bus of its one Slack (1)"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--pm", "0.1", "0.9", "--out", "{out}"], "--pm: for a machine"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--runs", "3", "--out", "{out}"], "--runs must lie in"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--members", "0", "--out", "{out}"], "--members 0: from 1 to 16"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--hosts", "nowhere", "--out", "{out}"], "not a host case"),
     (["--out", "{out}"], "needs --machine FILE (a machine) or --subsystem"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--out", ""], "--out must name a folder"),

@@ -191,6 +191,12 @@ def test_training_refuses_state_weights_that_do_not_give_one_weight_per_state_of
         train(paper_tiny[1], config(epochs=1, state_weights=(1.0, 1.0, 1.0)), tmp_path, progress=False)
 
 
+def test_training_refuses_window_features_of_a_component_that_gives_none(paper_tiny, tmp_path):
+    with pytest.raises(TrainError, match="sm4 gives no window features"):
+        train(paper_tiny[1], config(epochs=1, model=OperatorConfig(width=16, depth=2, latent=8, features=True)),
+              tmp_path, progress=False)
+
+
 def test_masked_data_loss_counts_only_the_times_before_the_cut():
     from surrogate.losses import data_loss
 

@@ -142,6 +142,47 @@ def _equilibrium(carried: int):
     return equilibrium
 
 
+def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.ndarray:
+    """A [S, n_x + 2 S]: the measured boundary frequency's deviation [Hz] at each sensor time of a
+    window as a linear function of the window's x0 (its theta_f, theta_w: states 0, 1) and its sensors
+    (Vs, theta_vs) flattened time-major, exact for a boundary angle linear between sensors (the
+    measurement is linear: busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f -
+    theta_w, f - fn = (theta_f - theta_w) / (2 pi busf_Tw); busf_Tf = 0 passes the angle). A
+    common rotation of every angle leaves it unchanged, so it reads a window's frame as well."""
+    import scipy.linalg
+
+    t = np.asarray(sensor_times, float)
+    n_v = n_x + 2 * t.size
+    angle = np.zeros((t.size, n_v))  # theta_vs at each sensor as a row over (x0, sensors)
+    angle[np.arange(t.size), n_x + 2 * np.arange(t.size) + 1] = 1.0
+    lagged = p.busf_Tf > 0.0
+    # z = (theta_f, theta_w) or, with the angle passing, (theta_w); augmented by the angle and its slope
+    F = np.array([[-1.0 / p.busf_Tf, 0.0], [1.0 / p.busf_Tw, -1.0 / p.busf_Tw]]) if lagged else \
+        np.array([[-1.0 / p.busf_Tw]])
+    g = np.array([1.0 / p.busf_Tf, 0.0]) if lagged else np.array([1.0 / p.busf_Tw])
+    k = F.shape[0]
+    z = np.zeros((k, n_v))
+    z[k - 1, 1] = 1.0  # theta_w(0)
+    if lagged:
+        z[0, 0] = 1.0  # theta_f(0)
+    out = np.zeros((t.size, n_v))
+
+    def deviation(z_now, row):
+        filtered = z_now[0] if lagged else angle[row]
+        return (filtered - z_now[k - 1]) / (2.0 * math.pi * p.busf_Tw)
+
+    out[0] = deviation(z, 0)
+    for j in range(1, t.size):
+        h = t[j] - t[j - 1]
+        system = np.zeros((k + 2, k + 2))
+        system[:k, :k], system[:k, k], system[k, k + 1] = F, g, 1.0
+        step = scipy.linalg.expm(system * h)
+        slope = (angle[j] - angle[j - 1]) / h
+        z = step[:k, :k] @ z + np.outer(step[:k, k], angle[j - 1]) + np.outer(step[:k, k + 1], slope)
+        out[j] = deviation(z, j)
+    return out
+
+
 def _starter(carried: int):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
@@ -195,6 +236,7 @@ def _subsystem(name: str, description: str, carried: tuple) -> Component:
         learned_states=(2, 3) + extra,
         started_learned=extra,
         start_equations=start_equations,
+        window_features=lambda p, sensor_times: measured_frequency_map(p, sensor_times, N_BOUNDARY + len(carried)),
     )
 
 
