@@ -26,8 +26,7 @@ from .subsystem_data import Plan, generate
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
 # (their rates are affine: corrections.c), so the data loss weighs them little; a plant controller's
 # carried states (subsystem_pc) only feed the next window, so they weigh less than the currents
-TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1),
-                                            features=True),
+TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1)),
                        epochs=2000, patience=10**9, time_points=None, causal=True, physics=True,
                        weights=LossWeights(physics_collocation=0.0), state_weights=(0.2, 0.2, 5.0, 5.0, 0.2),
                        checkpoint_every=100)
@@ -35,12 +34,13 @@ CARRIED_WEIGHT = 1.0  # the data loss' weight of each carried controller state
 MEMBERS = 1  # operators trained per sub-system and exported as their mean
 
 
-def training_config(state_names, seed: int, epochs: int | None) -> TrainConfig:
+def training_config(state_names, seed: int, epochs: int | None, features: bool = False) -> TrainConfig:
     """TRAINING for a sub-system component of the states `state_names` (its carried states after
-    the boundary's five weighing CARRIED_WEIGHT)."""
+    the boundary's five weighing CARRIED_WEIGHT); features: the branch also reads the boundary's
+    measured frequency at every sensor (the component's window features, surrogate/models.py)."""
     weights = TRAINING.state_weights + (CARRIED_WEIGHT,) * (len(state_names) - len(TRAINING.state_weights))
     return replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs),
-                   state_weights=weights)
+                   state_weights=weights, model=replace(TRAINING.model, features=features))
 
 
 # the operators of the shipped sub-systems (`feeder`, `plant`): <name>-<first 16 hex digits of the
@@ -78,13 +78,14 @@ def register(subsystem, operator) -> Path:
 
 def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
           workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None,
-          bus_port: str | None = None, members: int = MEMBERS) -> dict:
+          bus_port: str | None = None, members: int = MEMBERS, features: bool = False) -> dict:
     """Runs (or resumes) the stages of the module docstring; returns {"data": dataset metadata,
     "training": [TrainResult per member], "operator": path, "fmu": path, "registered": path}. A
     sub-system given as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva
     [MVA], no boundary, and where its model description declares no bus port, `bus_port`
     (black_box_data.bus_port). members: operators trained on the data with seeds seed, seed + 1, ...
-    (out/run, out/run_2, ...), exported as their mean (surrogate.ensemble) where more than one."""
+    (out/run, out/run_2, ...), exported as their mean (surrogate.ensemble) where more than one;
+    features: they read the boundary's measured frequency (training_config)."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.onnx_export import export_onnx
     from surrogate.training import train
@@ -97,7 +98,7 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
     else:
         meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
     runs = [out / "run"] + [out / f"run_{k}" for k in range(2, members + 1)]
-    results = [train(out / "data", training_config(meta["state_names"], seed + k, epochs), run, progress)
+    results = [train(out / "data", training_config(meta["state_names"], seed + k, epochs, features), run, progress)
                for k, run in enumerate(runs)]
     operator = out / "operator.onnx"
     trained = max((run / "result.json").stat().st_mtime for run in runs)

@@ -2,8 +2,8 @@
 FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
-                   [--buses N] [--stride S] [--members K] [--epochs N] [--seed S] [--workers N] [--name NAME]
-                   [--quiet]
+                   [--buses N] [--stride S] [--members K] [--frequency-features] [--epochs N] [--seed S]
+                   [--workers N] [--name NAME] [--quiet]
     opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [--bus-port SPEC] [the same options]
 
 A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
@@ -25,7 +25,8 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
                 "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
-SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "members")
+SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "members",
+                  "frequency_features")
 MAX_MEMBERS = 16
 
 
@@ -50,6 +51,9 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--members", type=int, default=None, metavar="K",
                     help="with --subsystem: operators trained on the data (seeds --seed, --seed + 1, ...) and exported "
                          "as their mean (default 1)")
+    op.add_argument("--frequency-features", action="store_true", default=None,
+                    help="with --subsystem: the operators also read the boundary's measured frequency at every sensor "
+                         "(docs/subsystems.md)")
     op.add_argument("--carry-controller", action="store_true", default=None,
                     help="with --subsystem FILE of a plant: carry its plant controller's (REPCA1) PI integrators "
                          "and command lags as learned states (component subsystem_pc; docs/subsystems.md)")
@@ -68,7 +72,8 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --members, --epochs, --seed, --workers, --name")
+                        "--hosts, --buses, --stride, --carry-controller, --members, --frequency-features, --epochs, "
+                        "--seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     path = Path(args.subsystem)
@@ -184,7 +189,8 @@ def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
 
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
-                     args.rating, args.bus_port, **({} if args.members is None else {"members": args.members}))
+                     args.rating, args.bus_port, **({} if args.members is None else {"members": args.members}),
+                     features=bool(args.frequency_features))
     except (DatasetError, TrainError, CouplingError, CaseError) as exc:
         raise UserError(str(exc)) from None
     meta = done["data"]

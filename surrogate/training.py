@@ -187,7 +187,8 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
     splits = _load_splits(data_dir, config)
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed)
-        model = build_model(config.model, NormStats.fit(splits["train"], _feature_map(config, machine, splits["train"])))
+        stats = NormStats.fit(splits["train"], _feature_map(config, machine, splits["train"]))
+        model = build_model(config.model, stats)
     tensors = _to_tensors(splits, model, machine)
     with _eager_heavyball():
         optimizer = _make_optimizer(model, config)

@@ -137,6 +137,7 @@ def test_a_malformed_bus_port_is_one_line_and_exit_2_before_the_box_is_opened(tm
 @pytest.mark.parametrize("argv, says", [
     (["--machine", "m.json", "--bus-port", "V=a,theta=b,P=c,Q=d"], "--bus-port: for a sub-system"),
     (["--machine", "m.json", "--rating", "5", "--boundary", "3"], "--boundary, --rating: for a sub-system"),
+    (["--machine", "m.json", "--members", "2", "--frequency-features"], "--members, --frequency-features: for a sub-system"),
 ])
 def test_sub_system_options_given_for_a_machine_are_refused(tmp_path, argv, says):
     code, out, err = opfmu(["operator", *argv, "--out", str(tmp_path / "out")])
