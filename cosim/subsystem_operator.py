@@ -4,11 +4,13 @@
 Stages, each resumed where an interrupted call left it (call again with the same arguments):
 1. out/data: the windows of the sub-system's detail in host cases (cosim.subsystem_data), or of a
    black box's replies to host voltages (an FMU with the bus port: cosim.black_box_data);
-2. out/run: the operator (TRAINING: an anchored Unstacked DeepONet, causal, physics on the states
-   whose rates are known: the boundary's frequency measurement and n), resumed from its checkpoint;
-3. out/operator.onnx (checked against torch) and out/<NAME>Surrogate.fmu (checked against
-   onnxruntime), and the operator registered for the sub-system file's content (`registered`), so
-   that `--attach BUS=FILE:surrogate` finds it.
+2. out/run (and out/run_2, ... for a mean of several): the operator (TRAINING: an anchored Unstacked
+   DeepONet, causal, physics on the states whose rates are known: the boundary's frequency
+   measurement and n; where asked, reading that measurement at every sensor), resumed from its
+   checkpoint;
+3. out/operator.onnx (checked against torch; several runs: their mean) and
+   out/<NAME>Surrogate.fmu (checked against onnxruntime), and the operator registered for the
+   sub-system file's content (`registered`), so that `--attach BUS=FILE:surrogate` finds it.
 """
 from __future__ import annotations
 
