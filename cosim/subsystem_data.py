@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import shutil
 import tempfile
 import time
@@ -40,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from reference_models.blocks import lags_of_ramp
 from reference_models.components import component
 from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
@@ -107,38 +107,13 @@ def subsystem_params(records: dict, case, bus: int) -> dict:
 
 def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
     """(theta_f, theta_w) [n] of a BusFreq at rest at theta[0], driven by theta [n] linear between
-    the times t [n]: both lags integrated exactly over each interval (`_lags_of_ramp`)."""
+    the times t [n]: both lags integrated exactly over each interval (reference_models.blocks.lags_of_ramp)."""
     theta_f, theta_w = np.empty_like(theta), np.empty_like(theta)
     theta_f[0] = theta_w[0] = theta[0]
     for k in range(1, len(t)):
-        theta_f[k], theta_w[k] = _lags_of_ramp(theta_f[k - 1], theta_w[k - 1], theta[k - 1], theta[k],
-                                               t[k] - t[k - 1], Tf, Tw)
+        theta_f[k], theta_w[k] = lags_of_ramp(theta_f[k - 1], theta_w[k - 1], theta[k - 1], theta[k],
+                                              t[k] - t[k - 1], Tf, Tw)
     return theta_f, theta_w
-
-
-def _lags_of_ramp(x: float, w: float, u0: float, u1: float, h: float, Tf: float, Tw: float) -> tuple:
-    """(x(h), w(h)) of Tf dx/dt = u - x, Tw dw/dt = x - w from (x, w), u linear from u0 to u1 over h.
-    x = r + A e^{-tau/Tf} with the ramp r = u0 - s Tf + s tau (s the slope), A = x - u0 + s Tf; w is
-    the lag of r plus the exact response to the exponential (Tf = 0: x follows u)."""
-    s = (u1 - u0) / h if h > 0 else 0.0
-    if Tf <= 0.0:
-        return u1, _lag_of_ramp(w, u0, u1, h, Tw)
-    A = x - u0 + s * Tf
-    r0, r1 = u0 - s * Tf, u1 - s * Tf
-    x_end = r1 + A * math.exp(-h / Tf)
-    if abs(Tf - Tw) <= 1e-12 * Tw:  # equal time constants: the resonant term A tau / T e^{-tau/T}
-        return x_end, _lag_of_ramp(w, r0, r1, h, Tw) + A * h / Tw * math.exp(-h / Tw)
-    C = A * Tf / (Tf - Tw)
-    return x_end, _lag_of_ramp(w - C, r0, r1, h, Tw) + C * math.exp(-h / Tf)
-
-
-def _lag_of_ramp(x: float, u0: float, u1: float, h: float, T: float) -> float:
-    """x(h) of T dx/dt = u - x from x, u linear from u0 to u1 over h (T = 0: x follows u)."""
-    if T <= 0.0:
-        return u1
-    e = math.exp(-h / T)
-    slope = (u1 - u0) / h if h > 0 else 0.0
-    return u1 - slope * T + (x - u0 + slope * T) * e
 
 
 def subsystem_model(records: dict, carry_controller: bool = False):

@@ -309,6 +309,33 @@ def bus_frequency(m, theta, theta_f, theta_w, Tf: float, Tw: float, fn: float):
     return d_f, d_w, 1.0 + deviation
 
 
+def lags_of_ramp(x, w, u0, u1, h: float, Tf: float, Tw: float) -> tuple:
+    """(x(h), w(h)) of Tf dx/dt = u - x, Tw dw/dt = x - w from (x, w), u linear from u0 to u1 over h
+    (a BusFreq's lag and washout states). Linear in (x, w, u0, u1): floats, or arrays of the
+    coefficients of one linear combination (subsystem.measured_frequency_map).
+    x = r + A e^{-tau/Tf} with the ramp r = u0 - s Tf + s tau (s the slope), A = x - u0 + s Tf; w is
+    the lag of r plus the exact response to the exponential (Tf = 0: x follows u)."""
+    s = (u1 - u0) / h if h > 0 else 0.0
+    if Tf <= 0.0:
+        return u1, lag_of_ramp(w, u0, u1, h, Tw)
+    A = x - u0 + s * Tf
+    r0, r1 = u0 - s * Tf, u1 - s * Tf
+    x_end = r1 + A * math.exp(-h / Tf)
+    if abs(Tf - Tw) <= 1e-12 * Tw:  # equal time constants: the resonant term A tau / T e^{-tau/T}
+        return x_end, lag_of_ramp(w, r0, r1, h, Tw) + A * h / Tw * math.exp(-h / Tw)
+    C = A * Tf / (Tf - Tw)
+    return x_end, lag_of_ramp(w - C, r0, r1, h, Tw) + C * math.exp(-h / Tf)
+
+
+def lag_of_ramp(x, u0, u1, h: float, T: float):
+    """x(h) of T dx/dt = u - x from x, u linear from u0 to u1 over h (T = 0: x follows u)."""
+    if T <= 0.0:
+        return u1
+    e = math.exp(-h / T)
+    slope = (u1 - u0) / h if h > 0 else 0.0
+    return u1 - slope * T + (x - u0 + slope * T) * e
+
+
 def lag_non_windup_between(m, u, x, K: float, T: float, low, high):
     """`lag_non_windup` with limits that are values of the namespace (e.g. proportional to an input):
     (dx/dt, y = x). T = 0: the state is held and y = K u clipped to [low, high] (its reset:

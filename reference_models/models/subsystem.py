@@ -55,7 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..blocks import bus_frequency
+from ..blocks import bus_frequency, lags_of_ramp
 from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
 from ..ports import BusPort, Ports
@@ -145,42 +145,21 @@ def _equilibrium(carried: int):
 def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.ndarray:
     """A [S, n_x + 2 S]: the measured boundary frequency's deviation [Hz] at each sensor time of a
     window as a linear function of the window's x0 (its theta_f, theta_w: states 0, 1) and its sensors
-    (Vs, theta_vs) flattened time-major, exact for a boundary angle linear between sensors (the
-    measurement is linear: busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f -
-    theta_w, f - fn = (theta_f - theta_w) / (2 pi busf_Tw); busf_Tf = 0 passes the angle). A
-    common rotation of every angle leaves it unchanged, so it reads a window's frame as well."""
-    import scipy.linalg
-
+    (Vs, theta_vs) flattened time-major, exact for a boundary angle linear between sensors: the
+    measurement (blocks.lags_of_ramp) stepped on rows of coefficients, f - fn = (theta_f - theta_w) /
+    (2 pi busf_Tw) (busf_Tf = 0: the angle passes). A common rotation of every angle leaves it
+    unchanged, so it reads a window's frame as well."""
     t = np.asarray(sensor_times, float)
     n_v = n_x + 2 * t.size
     angle = np.zeros((t.size, n_v))  # theta_vs at each sensor as a row over (x0, sensors)
     angle[np.arange(t.size), n_x + 2 * np.arange(t.size) + 1] = 1.0
-    lagged = p.busf_Tf > 0.0
-    # z = (theta_f, theta_w) or, with the angle passing, (theta_w); augmented by the angle and its slope
-    F = np.array([[-1.0 / p.busf_Tf, 0.0], [1.0 / p.busf_Tw, -1.0 / p.busf_Tw]]) if lagged else \
-        np.array([[-1.0 / p.busf_Tw]])
-    g = np.array([1.0 / p.busf_Tf, 0.0]) if lagged else np.array([1.0 / p.busf_Tw])
-    k = F.shape[0]
-    z = np.zeros((k, n_v))
-    z[k - 1, 1] = 1.0  # theta_w(0)
-    if lagged:
-        z[0, 0] = 1.0  # theta_f(0)
+    filtered, washed = (np.eye(n_v)[0] if p.busf_Tf > 0.0 else angle[0]), np.eye(n_v)[1]
     out = np.zeros((t.size, n_v))
-
-    def deviation(z_now, row):
-        filtered = z_now[0] if lagged else angle[row]
-        return (filtered - z_now[k - 1]) / (2.0 * math.pi * p.busf_Tw)
-
-    out[0] = deviation(z, 0)
+    out[0] = filtered - washed
     for j in range(1, t.size):
-        h = t[j] - t[j - 1]
-        system = np.zeros((k + 2, k + 2))
-        system[:k, :k], system[:k, k], system[k, k + 1] = F, g, 1.0
-        step = scipy.linalg.expm(system * h)
-        slope = (angle[j] - angle[j - 1]) / h
-        z = step[:k, :k] @ z + np.outer(step[:k, k], angle[j - 1]) + np.outer(step[:k, k + 1], slope)
-        out[j] = deviation(z, j)
-    return out
+        filtered, washed = lags_of_ramp(filtered, washed, angle[j - 1], angle[j], t[j] - t[j - 1], p.busf_Tf, p.busf_Tw)
+        out[j] = filtered - washed
+    return out / (2.0 * math.pi * p.busf_Tw)
 
 
 def _starter(carried: int):
