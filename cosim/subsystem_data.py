@@ -13,9 +13,10 @@ the host records at the boundary becomes the component's inputs and states, each
     n                  V0 / V_own, the run's load-flow voltage at the boundary over the sub-system's own;
     Ip, Iq             the devices' part of the current the sub-system injects (boundary.boundary_current,
                        less the passive part (G + jB) V / n^2), in the voltage's frame;
-    Qpi .. Pcmd        where the plan carries the plant controller (component `subsystem_pc`): its
-                       REPCA1's states, each summed over the sub-system's REPCA1 (the master's
-                       device states).
+    Vf .. Vhold        where the plan carries the plant controller (component `subsystem_pc`): its
+                       REPCA1's states (the master's device states), the integrators and lags
+                       summed over the sub-system's REPCA1, the filtered and held voltage (alike in
+                       all) averaged.
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -45,7 +46,7 @@ from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
-from reference_models.models.subsystem import N_BOUNDARY, PLANT_CONTROLLER_STATES
+from reference_models.models.subsystem import N_BOUNDARY, PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -82,10 +83,11 @@ class Plan:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
 
-def subsystem_params(records: dict, case, bus: int) -> dict:
+def subsystem_params(records: dict, case, bus: int, carry_controller: bool = False) -> dict:
     """The `subsystem` component's parameters of the sub-system `records` (ANDES JSON records, its
     own file) attached at `bus` of `case` (the joint case): its rating, its own boundary voltage,
-    its passive admittance referred to that voltage and the devices' currents there, its BusFreq."""
+    its passive admittance referred to that voltage and the devices' currents there, its BusFreq;
+    carry_controller: also its plant controller's (`subsystem_pc`: plant_controller_params)."""
     behind = subsystem_buses(case.network, bus)
     b = case.network.bus_index(bus)
     V0 = float(case.flow.V[b])
@@ -98,11 +100,55 @@ def subsystem_params(records: dict, case, bus: int) -> dict:
     device = (I0 + Y / n ** 2 * V) * np.exp(-1j * case.flow.theta[b]) * n  # at the sub-system's own voltage
     freq = records.get("BusFreq", [])
     rating = sum(float(r.get("Sn", 0.0)) for model in GENERATING_MODELS for r in records.get(model, []))
-    return {"Sb": float(case.network.base_mva), "S": rating, "G": float(Y.real), "B": float(Y.imag), "V_own": V_own,
-            "Ip_own": float(device.real), "Iq_own": float(-device.imag),
-            "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
-            "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],
-            "busf_fn": float(case.network.f_hz)}
+    params = {"Sb": float(case.network.base_mva), "S": rating, "G": float(Y.real), "B": float(Y.imag), "V_own": V_own,
+              "Ip_own": float(device.real), "Iq_own": float(-device.imag),
+              "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
+              "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],
+              "busf_fn": float(case.network.f_hz)}
+    return {**params, **plant_controller_params(case, bus, params)} if carry_controller else params
+
+
+# the REPCA1 parameters that are the unit's share of the plant's (gains, output limits); the others are
+# the plant's own in every share
+SHARED_OUT = ("Kp", "Ki", "Qmax", "Qmin", "Kpg", "Kig", "Pmax", "Pmin")
+
+
+def plant_controller_params(case, bus: int, params: dict) -> dict:
+    """The pc_ parameters of `subsystem_pc` (reference_models.models.subsystem): the one REPCA1 that
+    the REPCA1 behind the boundary `bus` of `case` are shares of, each gain and output limit the sum
+    of theirs. DatasetError where they are not: where one measures another bus or a branch, reads
+    another frequency measurement than the boundary's BusFreq (`params`' busf_*), or where their
+    gains and limits are not one share per unit of the plant's, or their other settings differ."""
+    behind = set(subsystem_buses(case.network, bus))
+    devices = [d for unit in case.units if unit.bus in behind for d in unit.devices if d.component.name == "repca1"]
+    if not devices:
+        raise DatasetError(f"the sub-system at bus {bus} has no plant controller (REPCA1) whose states it could carry")
+    for d in devices:
+        m = d.measures
+        if m is None or m.bus != bus or m.branch is not None:
+            what = "a branch (its line)" if m is not None and m.bus == bus else "another bus than the boundary (its busr)"
+            raise DatasetError(f"a REPCA1 of the sub-system measures {what}: its plant controller is carried as "
+                               "known physics only where every REPCA1 reads the boundary bus alone")
+        for name in ("busf_Tf", "busf_Tw", "busf_fn"):
+            if not np.isclose(getattr(d.params, name), params[name], rtol=1e-9, atol=0.0):
+                raise DatasetError(f"a REPCA1 of the sub-system reads a frequency measurement with {name} = "
+                                   f"{getattr(d.params, name):g}, the boundary's has {params[name]:g}")
+    values = {f.name: np.array([getattr(d.params, f.name) for d in devices]) for f in PLANT_CONTROLLER_FIELDS}
+    totals = {name: float(values[name].sum()) for name in SHARED_OUT}
+    shares = np.array([values[name] / totals[name] for name in SHARED_OUT if totals[name] != 0.0])
+    if len(shares) and not np.allclose(shares, shares[:1], rtol=1e-6, atol=1e-12):
+        raise DatasetError("the sub-system's REPCA1 are not shares of one plant controller: their gains and output "
+                           f"limits ({', '.join(SHARED_OUT)}) are not one share per unit of their sums")
+    for name, v in values.items():
+        if name not in SHARED_OUT and not np.allclose(v, v[0], rtol=1e-9, atol=0.0):
+            raise DatasetError(f"the sub-system's REPCA1 are not shares of one plant controller: their {name} differ")
+    out = {"pc_" + name: (totals[name] if name in SHARED_OUT else float(v[0])) for name, v in values.items()}
+    # a share's anti-windup tracking acts on its own output's excess, a share of the plant's: the sum
+    # of the shares' integrators moves as the plant's PI with a tracking gain of ks times the sum of the
+    # shares' squares (exact while the shares' normalised integrators run alike: below their limits)
+    weight = float(np.sum(shares[0] ** 2)) if len(shares) else 1.0
+    out["pc_kqs"], out["pc_ksg"] = out["pc_kqs"] * weight, out["pc_ksg"] * weight
+    return out
 
 
 def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
@@ -118,8 +164,8 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
 
 def subsystem_model(records: dict, carry_controller: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
-    which carries its plant controller's states, where asked (DatasetError where it has no REPCA1),
-    else `subsystem`."""
+    which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
+    plant_controller_params refuses the others), else `subsystem`."""
     if not carry_controller:
         return component("subsystem")
     if not records.get("REPCA1"):
@@ -129,7 +175,8 @@ def subsystem_model(records: dict, carry_controller: bool = False):
 
 def controller_columns(case, bus: int, model) -> list:
     """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
-    state columns of a grid result it sums: those of the REPCA1 behind the boundary `bus` of `case`."""
+    state columns of a grid result it combines, those of the REPCA1 behind the boundary `bus` of
+    `case`, and how ("sum" or "mean")."""
     carried = model.state_names[N_BOUNDARY:]
     if not carried:
         return []
@@ -138,14 +185,14 @@ def controller_columns(case, bus: int, model) -> list:
                for d, label in zip(unit.devices, labels) if d.component.name == "repca1"]
     if not devices:
         raise ValueError(f"the sub-system at bus {bus} has no REPCA1 for its {model.name} states")
-    state = {name: own for name, own, _ in PLANT_CONTROLLER_STATES}
-    return [[f"{label}_{state[name]}" for label in devices] for name in carried]
+    state = {name: (own, how) for name, own, how, _ in PLANT_CONTROLLER_STATES}
+    return [([f"{label}_{state[name][0]}" for label in devices], state[name][1]) for name in carried]
 
 
 def run_rows(result, case, bus: int, params: dict, columns: list = ()) -> dict:
     """The component's inputs u [n, 2] and states x [n, 5 + len(columns)] at the rows t [n] of a grid
-    result (module docstring); columns: per carried state the result's device states it sums
-    (controller_columns)."""
+    result (module docstring); columns: per carried state the result's device states it combines and
+    how (controller_columns)."""
     net = case.network
     b = net.bus_index(bus)
     t = np.asarray(result.time, float)
@@ -154,7 +201,9 @@ def run_rows(result, case, bus: int, params: dict, columns: list = ()) -> dict:
     n = float(case.flow.V[b]) / params["V_own"]
     device = (current + complex(params["G"], params["B"]) / n ** 2 * V * np.exp(1j * theta)) * np.exp(-1j * theta)
     theta_f, theta_w = bus_frequency_states(t, theta, params["busf_Tf"], params["busf_Tw"])
-    carried = [np.sum([np.asarray(result.device_states[c], float) for c in group], axis=0) for group in columns]
+    combine = {"sum": np.sum, "mean": np.mean}
+    carried = [combine[how]([np.asarray(result.device_states[c], float) for c in group], axis=0)
+               for group, how in columns]
     x = np.stack([theta_f, theta_w, device.real, -device.imag, np.full_like(t, n), *carried], axis=1)
     return {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
 
@@ -377,12 +426,12 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
         plain = case_from_file(host)
         for bus in attachment_buses(plain.network, rng, plan.buses):
             path = attached_file(host, [(bus, subsystem)], out / ".attached")
-            case = case_from_file(path)
-            generator_files(case, "reference", out / ".fmus")  # built once, before the workers start
             attachments.append((name, bus, str(path)))
-            cases.append((case, bus))
-    params = subsystem_params(records, cases[0][0], cases[0][1])
-    model.params(params)  # checked before anything runs
+            cases.append((case_from_file(path), bus))
+    params = subsystem_params(records, cases[0][0], cases[0][1], plan.carry_controller)
+    model.params(params)  # checked before anything is built or runs
+    for case, _ in cases:
+        generator_files(case, "reference", out / ".fmus")  # built once, before the workers start
     runs = draw_runs(plan, cases, rng)
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
               str(out / ".fmus"), str(partial), model.name) for k, r in enumerate(runs)

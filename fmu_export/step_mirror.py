@@ -45,7 +45,8 @@ inputs' derivatives du over it (fmi2SetRealInputDerivatives; 0: held), u(s) = u 
 * exact affine step (swing_weight > 0), on raw states and inputs: each affine state x_i (dx_i/dt =
   g(x) - k x_i) is integrated exactly over the piece from its value at the piece's start, g linear in
   time between its values at the piece's start and end states (and inputs), and x_i moves
-  swing_weight of the way to that solution;
+  swing_weight of the way to that solution, in the component's order (each end state reading the
+  affine states before it as already moved);
 * at the window's end a new window starts from the state there, under the input there.
 
 The rest correction and the slow mode of a window take the input at its first step's start.
@@ -170,12 +171,15 @@ def slow_mode(f, x, u):
 
 
 def affine_drive(f, i: int, x, u) -> tuple[float, float]:
-    """(g, k) of an affine state i, dx_i/dt = g - k x_i, at state x [n_x] under input u: g the rate at
-    x_i = 0, k its drop from x_i = 0 to x_i = 1."""
-    at_zero, at_one = np.array(x, dtype=float), np.array(x, dtype=float)
-    at_zero[i], at_one[i] = 0.0, 1.0
-    g = f(at_zero, u)[i]
-    return g, g - f(at_one, u)[i]
+    """(g, k) of an affine state i, dx_i/dt = g - k x_i, at state x [n_x] under input u: k = -d f_i / d x_i
+    by central differences (the piece it is on, for a piecewise affine state), g = f_i + k x_i."""
+    x = np.array(x, dtype=float)
+    d = 1e-6 * max(1.0, abs(x[i]))
+    hi, lo = x.copy(), x.copy()
+    hi[i] += d
+    lo[i] -= d
+    k = (f(lo, u)[i] - f(hi, u)[i]) / (2.0 * d)
+    return f(x, u)[i] + k * x[i], k
 
 
 def affine_step(value_start: float, g_start: float, g_end: float, k: float, h: float) -> float:
@@ -344,8 +348,8 @@ class StepMirror:
                     l, r = slow
                     fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u_end))
                     x = x + slow_weight * (l @ window["x"] + fix["slow_integral"] - l @ x) * r
-                for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's
-                    g_end, _ = affine_drive(self.f, i, x, u_end)
+                for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's; in order,
+                    g_end, _ = affine_drive(self.f, i, x, u_end)  # each reading the exact ones before it
                     x[i] += swing_weight * (affine_step(x_start[i], g_start, g_end, k, end - t) - x[i])
                 last_u, t, u = u, end, u_end
                 if not np.all(np.isfinite(x)):

@@ -107,7 +107,8 @@ class Component:
         equilibrium at the lowest voltage that has one); None: equilibrium's answer or its error.
     state_scales: a typical excursion of each state in its units (how far "near rest" reaches).
     affine_states: indices of states whose own derivative is affine in that state alone,
-        dx_i/dt = g(other states, u) - k x_i with k >= 0 constant (integrated exactly over a step).
+        dx_i/dt = g(other states, u) - k x_i with k >= 0 constant, or constant on pieces (a PI with
+        anti-windup, a hold): integrated exactly over a step, with k and g where the state is.
     drift: the component's angles and speed, when its equations are invariant under a common
         rotation and a constant extra speed of its frame (reference_models.drift); operators of
         it then work in the frame of each window. None: no such symmetry.
@@ -122,14 +123,10 @@ class Component:
         through its boundary: reference_models.models.subsystem): `derivatives` gives 0 for them,
         an operator learns them from data alone (the physics losses and the FMU's residual leave
         them out), and nothing integrates the component (`require_known_rates`).
-    started_learned: the learned states a start from the load flow fixes through `start_equations`
-        (a sub-system's plant controller's integrators and lags, 0 at any rest); the other learned
-        states take the load flow's P and Q.
     start_equations(x, u, p, m): where a start from the load flow needs other equations than the
         rates, its residuals (a tuple of len(states), 0 at the start): a state constant through a
         study (dx/dt = 0) that the load flow fixes (the sub-system's tap n = V0 / V_own). The rows
-        of learned states are read for `started_learned` only (the load flow's P and Q fix the
-        others). None: the rates.
+        of learned states are not read (the load flow's P and Q fix them). None: the rates.
     window_features(p, sensor_times [S]): known linear functionals of an operator's inputs that its
         branch reads besides them, A [n_f, n_x + n_u S] over x0 and the sensors flattened time-major
         (the sub-system's measured frequency at each sensor time, exact for inputs linear between
@@ -159,7 +156,6 @@ class Component:
     initialisation: Initialisation | None = None
     affine_current: bool = False
     learned_states: tuple = ()
-    started_learned: tuple = ()
     start_equations: Callable | None = None
     window_features: Callable | None = None
 
@@ -176,9 +172,6 @@ class Component:
         if not all(0 <= i < len(self.states) for i in self.learned_states) or \
                 set(self.learned_states) & set(self.affine_states):
             raise ValueError(f"component {self.name!r}: learned_states must index states that are not affine")
-        if not set(self.started_learned) <= set(self.learned_states) or \
-                (self.started_learned and self.start_equations is None):
-            raise ValueError(f"component {self.name!r}: started_learned must be learned states its start_equations fix")
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
         self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")

@@ -160,11 +160,14 @@ def test_a_subsystem_operator_reads_its_measured_frequency_and_exports_without_i
 
 
 @pytest.mark.andes
-def test_a_plant_carries_its_controllers_states_summed_over_its_repca1(tmp_path):
+def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1(tmp_path):
     """A sub-system whose plant controller is carried (--carry-controller) is a `subsystem_pc`: its
-    windows carry the sums of its REPCA1's PI integrators and command lags, 0 at the load flow, moved
-    by a fault; the boundary current comes back as for any sub-system."""
+    windows carry its REPCA1's states (integrators and lags summed, the filtered and held voltage
+    alike in all), and the one REPCA1 they are shares of, driven by the boundary's voltage alone,
+    integrates to what the detail's REPCA1 did through a fault; the boundary current comes back as
+    for any sub-system."""
     import andes
+    from scipy.integrate import solve_ivp
 
     from cosim.fmus import generator_files
     from cosim.master import MasterSettings
@@ -180,31 +183,118 @@ def test_a_plant_carries_its_controllers_states_summed_over_its_repca1(tmp_path)
     records = plant(PlantSpec(units=4, seed=3))
     assert subsystem_model(records).name == "subsystem"  # by default a plant carries no controller state
     model = subsystem_model(records, carry_controller=True)
-    assert model.name == "subsystem_pc" and model.state_names[5:] == ("Qpi", "Qcmd", "Ppi", "Pcmd")
+    assert model.name == "subsystem_pc" and model.state_names[5:] == ("Vf", "Vhold", "Qpi", "Qcmd", "Ppi", "Pcmd")
     sub = write_case(records, tmp_path / "plant.json")
     case = case_from_file(attached_file(andes.get_case(ANDES_CASES["ieee14"]), [(9, sub)], tmp_path))
-    params = subsystem_params(records, case, 9)
-    runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
-    result = runner.run(Contingency(fault_bus=9, fault_start=0.1, clear_s=0.2, fault_impedance=0.05j,
-                                    network=case.network), 1.0)[0]
-    runner.close()
-    columns = controller_columns(case, 9, model)
-    assert [len(c) for c in columns] == [4] * 4 and columns[0][0].startswith("REPCA1_")
-    rows = run_rows(result, case, 9, params, columns)
-    x = rows["x"]
-    assert x.shape[1] == 9
-    for k, group in enumerate(columns):
-        assert np.array_equal(x[:, 5 + k], np.sum([result.device_states[c] for c in group], axis=0))
-    assert np.max(np.abs(x[0, 5:])) < 1e-9  # ANDES' REPCA1 starts them at 0
-    assert np.max(np.abs(x[:, 6])) > 1e-3 * params["S"] / params["Sb"]  # the fault moved the reactive command
+    params = subsystem_params(records, case, 9, carry_controller=True)
     p = model.params(params)
-    I_re, I_im, *_ = model.output_equations(x.T, rows["u"].T, p, np)
+    assert p.pc_Kp == pytest.approx(records["REPCA1"][0]["Kp"] * 4, rel=0.5)  # the sum of four shares
+    runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
+    fault = Contingency(fault_bus=9, fault_start=0.1, clear_s=0.2, fault_impedance=0.05j, network=case.network)
+    result = runner.run(fault, 1.5)[0]
+    runner.close()
+    switchings = np.ravel(fault.fault_intervals(1.5))
+    columns = controller_columns(case, 9, model)
+    assert [len(c) for c, _ in columns] == [4] * 6 and columns[0][0][0].startswith("REPCA1_")
+    rows = run_rows(result, case, 9, params, columns)
+    x, u, t = rows["x"], rows["u"], rows["t"]
+    assert x.shape[1] == 11
+    for k, (group, how) in enumerate(columns):
+        assert np.allclose(x[:, 5 + k], getattr(np, how)([result.device_states[c] for c in group], axis=0), rtol=0, atol=1e-15)
+    start = model.equilibrium(u[0], p)
+    np.testing.assert_allclose(x[0, 5:], start[5:], rtol=0, atol=1e-9)  # ANDES' REPCA1 start
+    assert np.ptp(x[:, 6]) > 1e-3 * params["S"] / params["Sb"]  # the fault moved the reactive PI
+    # the measurement's and the carried controller's own equations along the detail's boundary voltage:
+    # linear between rows, held up to a switching (a row at one gives the network after it)
+    known = [0, 1] + list(range(5, 11))
+    carried = x[0, known].copy()
+    worst = np.zeros(len(known))
+    for k in range(len(t) - 1):
+        if t[k + 1] <= t[k]:
+            continue
+        switching = np.min(np.abs(switchings - t[k + 1])) < 1e-9
+        slope = 0.0 * u[k] if switching else (u[k + 1] - u[k]) / (t[k + 1] - t[k])
+
+        def rate(s, c, k=k, slope=slope):
+            state = x[k].copy()
+            state[known] = c
+            return np.array(model.derivatives(state, u[k] + slope * (s - t[k]), p, np), dtype=float)[known]
+        carried = solve_ivp(rate, (t[k], t[k + 1]), carried, rtol=1e-9, atol=1e-12, max_step=1e-3).y[:, -1]
+        worst = np.maximum(worst, np.abs(carried - x[k + 1, known]))
+    scale = np.ptp(x[:, 5:], axis=0) + 1e-6  # the detail's REPCA1 states (the measurement's are the data's own)
+    assert np.all(worst[2:] < 0.02 * scale), (worst, scale)
+    I_re, I_im, *_ = model.output_equations(x.T, u.T, p, np)
     detail = boundary_current(case.network, result.V_bus, result.theta_bus, 9)
     assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
-    # its FMU's start: the measurement, n and the carried states from their own equations, Ip and Iq
-    # from the load flow's P and Q
+    # its FMU's start: the measurement, n and the controller from their own equations, Ip and Iq from
+    # the load flow's P and Q
     spec = self_start_of(model, p, model.equilibrium(np.array([1.0, 0.0]), p))
     assert spec is not None and spec.load_flow
+
+
+@pytest.mark.andes
+def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_path, monkeypatch):
+    """Whatever its operator learned (here: three epochs), a `subsystem_pc` surrogate FMU steps the
+    plant controller's states by the controller's own equations (the exact step of its affine
+    states, each reading the ones before it): through a dip below the controller's freeze voltage
+    and back, then an over-frequency, they follow the component's equations integrated under the
+    same held inputs (within 1 % of how far they moved)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    from scipy.integrate import solve_ivp
+
+    from cosim.subsystem_data import Plan
+    from cosim.subsystem_operator import learn
+    from reference_models.grid.subsystems import PlantSpec, plant, write_case
+    from surrogate.contract import operator_metadata
+
+    import onnx
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
+    sub = write_case(plant(PlantSpec(units=4, seed=3)), tmp_path / "plant.json")
+    done = learn(sub, 1, tmp_path / "op", Plan(hosts=("ieee14",), buses=1, runs=6, stop=1.0, trips=0.0,
+                                               carry_controller=True), epochs=3, progress=False)
+    meta = operator_metadata(onnx.load(str(done["operator"])))
+    model, p = meta["component"], meta["params"]
+    assert model.name == "subsystem_pc"
+    V0, theta0 = 1.02, 0.2
+    P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2
+    x, _ = model.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
+    start = x.copy()
+    description = read_model_description(str(done["fmu"]))
+    ref = {v.name: v.valueReference for v in description.modelVariables}
+    fmu = FMU2Slave(guid=description.guid, unzipDirectory=extract(str(done["fmu"]), str(tmp_path / "fmu")),
+                    modelIdentifier=description.coSimulation.modelIdentifier, instanceName="plant")
+    fmu.instantiate()
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.setReal([ref[n] for n in ("V_lf", "theta_lf", "P_lf", "Q_lf")], [V0, theta0, P0, Q0])
+    fmu.exitInitializationMode()
+    known = [0, 1] + list(range(5, model.n_states))
+    names = [model.state_names[i] for i in known]
+    h, dip = 0.01, (0.5, 0.65)
+    voltage = lambda t: V0 - (V0 - 0.6) * (dip[0] <= t < dip[1]) + 0.03 * (t >= dip[1])  # noqa: E731
+    worst = np.zeros(len(known))
+    scale = np.zeros(len(known))
+    for k in range(150):
+        t = k * h
+        u = np.array([voltage(t), theta0 + 0.6 * max(t - 0.8, 0.0)])  # then 0.1 Hz over
+        fmu.setReal([ref["Vs"], ref["theta_vs"]], list(u))
+        fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+
+        def rate(s, c, u=u):
+            state = x.copy()
+            state[known] = c
+            return np.array(model.derivatives(state, u, p, np), dtype=float)[known]
+        x[known] = solve_ivp(rate, (t, t + h), x[known], rtol=1e-10, atol=1e-12, max_step=1e-3).y[:, -1]
+        got = np.array(fmu.getReal([ref[n] for n in names]))
+        worst = np.maximum(worst, np.abs(got - x[known]))
+        scale = np.maximum(scale, np.abs(x[known] - start[known]))
+    fmu.terminate()
+    fmu.freeInstance()
+    assert scale[names.index("Qpi")] > 1e-4 and scale[names.index("Vhold")] > 0.1  # the dip moved them,
+    assert scale[names.index("Ppi")] > 1e-5  # the over-frequency the active PI
+    assert np.all(worst <= 0.01 * scale + 1e-9), dict(zip(names, zip(worst, scale)))
 
 
 def test_a_black_box_follows_the_replayed_voltage_as_its_own_equations_say(tmp_path):
@@ -266,6 +356,32 @@ def test_a_bad_subsystem_request_is_one_line_and_exit_2_before_any_work(tmp_path
     assert done.returncode == 2 and done.stdout == ""
     assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.andes
+@pytest.mark.parametrize("spoil, says", [
+    (lambda r: [c.update(busr=2) for c in r["REPCA1"]], "measures another bus than the boundary"),  # the collector
+    (lambda r: r["REPCA1"][0].update(Kp=2 * r["REPCA1"][0]["Kp"]), "not one share per unit"),
+    (lambda r: r["REPCA1"][1].update(Tg=2 * r["REPCA1"][1]["Tg"]), "their Tg differ"),
+])
+def test_a_plant_controller_that_is_not_one_controller_of_the_boundary_is_refused_in_one_line(tmp_path, spoil, says):
+    """--carry-controller steps the plant controller by its equations driven by the boundary alone,
+    so it is refused, in one line before anything runs, where the REPCA1 measure another bus or are
+    not shares of one controller."""
+    import subprocess
+    import sys
+
+    from reference_models.grid.subsystems import PlantSpec, plant, write_case
+
+    records = plant(PlantSpec(units=4, seed=3))
+    spoil(records)
+    path = write_case(records, tmp_path / "plant.json")
+    done = subprocess.run([sys.executable, "-m", "opfmu", "operator", "--subsystem", str(path), "--boundary", "1",
+                           "--carry-controller", "--hosts", "ieee14", "--buses", "1", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and done.stdout == ""
+    assert says in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not list((tmp_path / "out").rglob("*.fmu")) and not list((tmp_path / "out").rglob("run_*.npz"))
 
 
 @pytest.mark.andes

@@ -23,7 +23,8 @@
    operator's fast dynamics carry the integral while the physics carries the slow drift.
 
    Exact step of the affine states (any kernel): a state x_i the component declares affine has the
-   rate dx_i/dt = g - k x_i with k >= 0 constant and g a function of the other states and the input
+   rate dx_i/dt = g - k x_i with k >= 0 (constant, or constant on pieces: a PI's anti-windup, taken
+   at the step's start) and g a function of the other states and the input
    (for SM4, omega: g = Wb/(2H) (Pm - Pe), k = Wb D/(2H), 62 1/s, and the operator finds omega's 16 ms
    transient at every input jump hardest). Over each step x_i is integrated exactly from where it
    was, with g taken linear in time between its values at the step's start and end states under the
@@ -177,21 +178,27 @@ void slow_correct(ModelState *m, double h, double rate_start)
     for (int i = 0; i < N_X; ++i) m->x[i] += shift * m->slow_right[i];
 }
 
-/* g and k from the right-hand side at x_i = 0 and x_i = 1 (it is affine in x_i) */
+/* g and k of the affine state i at x: k = -d f_i / d x_i by central differences (a state affine in
+   itself has one k; a piecewise affine one, a PI with its anti-windup, that of the piece it is on)
+   and g = f_i + k x_i, so that f_i = g - k x_i there */
+static void drive_of(const double x[N_X], const double u[N_U], int i, double *g, double *k)
+{
+    const double d = 1e-6 * fmax(1.0, fabs(x[i]));
+    double hi[N_X], lo[N_X], f[N_X], f_hi[N_X], f_lo[N_X];
+    memcpy(hi, x, sizeof hi);
+    memcpy(lo, x, sizeof lo);
+    hi[i] += d;
+    lo[i] -= d;
+    model_derivatives(x, u, TRAINED_P, f);
+    model_derivatives(hi, u, TRAINED_P, f_hi);
+    model_derivatives(lo, u, TRAINED_P, f_lo);
+    *k = (f_lo[i] - f_hi[i]) / (2.0 * d);
+    *g = f[i] + *k * x[i];
+}
+
 void affine_drive(const double x[N_X], const double u[N_U], double g[N_AFFINE_CAP], double k[N_AFFINE_CAP])
 {
-    for (int a = 0; a < OPFMU_N_AFFINE; ++a) {
-        const int i = OPFMU_AFFINE_STATES[a];
-        double at_rest[N_X], moving[N_X], f_rest[N_X], f_moving[N_X];
-        memcpy(at_rest, x, sizeof at_rest);
-        memcpy(moving, x, sizeof moving);
-        at_rest[i] = 0.0;
-        moving[i] = 1.0;
-        model_derivatives(at_rest, u, TRAINED_P, f_rest);
-        model_derivatives(moving, u, TRAINED_P, f_moving);
-        k[a] = f_rest[i] - f_moving[i];
-        g[a] = f_rest[i];
-    }
+    for (int a = 0; a < OPFMU_N_AFFINE; ++a) drive_of(x, u, OPFMU_AFFINE_STATES[a], &g[a], &k[a]);
 }
 
 /* x_i after a step of length h from x_start, solving dx_i/dt = g - k x_i exactly for g linear in time
@@ -204,14 +211,16 @@ static double affine_solution(double x_start, double g_start, double g_end, doub
     return decay * x_start + g_start * reach + (g_end - g_start) * (h - reach) / (k * h);
 }
 
+/* in the component's order, so that each affine state's end value reads the exact end values of the
+   affine states before it (a plant controller's filter before the PI that reads it) */
 void affine_step(ModelState *m, const double x_start[N_X], const double g_start[N_AFFINE_CAP],
                  const double k_start[N_AFFINE_CAP], double h)
 {
-    double g_end[N_AFFINE_CAP], k_end[N_AFFINE_CAP]; /* k is constant: the start's value is used */
-    affine_drive(m->x, m->u, g_end, k_end);
     for (int a = 0; a < OPFMU_N_AFFINE; ++a) {
         const int i = OPFMU_AFFINE_STATES[a];
-        double exact = affine_solution(x_start[i], g_start[a], g_end[a], k_start[a], h);
+        double g_end, k_end; /* k is constant over the step: the start's value is used */
+        drive_of(m->x, m->u, i, &g_end, &k_end);
+        double exact = affine_solution(x_start[i], g_start[a], g_end, k_start[a], h);
         m->x[i] += m->swing_weight * (exact - m->x[i]);
     }
 }

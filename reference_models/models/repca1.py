@@ -167,7 +167,7 @@ def _frozen(m, Vm, p: REPCA1Params, frozen, otherwise):
     return where(m, Vm < p.Vfrz, frozen, otherwise) if p.freeze else otherwise
 
 
-def _signals(x, u, p: REPCA1Params, m) -> dict:
+def signals(x, u, p: REPCA1Params, m) -> dict:
     """The controller's rates and algebraic signals (ANDES' names) at x, u."""
     theta_f, theta_w, s0, s1, s2_xi, s3_x, s4, s5_xi, s6, s_hold = x
     Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, Vref, Qlinef, Plant_pref, Pref0, Qref0 = u
@@ -211,12 +211,12 @@ def _signals(x, u, p: REPCA1Params, m) -> dict:
 def derivatives(x, u, p: REPCA1Params, m):
     """dx/dt for x = (theta_f, theta_w, s0_y, s1_y, s2_xi, s3_x, s4_y, s5_xi, s6_y, s_hold),
     u = (Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, Vref, Qlinef, Plant_pref, Pref0, Qref0)."""
-    return _signals(x, u, p, m)["rates"]
+    return signals(x, u, p, m)["rates"]
 
 
 def outputs(x, u, p: REPCA1Params, m):
     """(Pext, Qext) [pu, system base], f [pu]."""
-    s = _signals(x, u, p, m)
+    s = signals(x, u, p, m)
     return s["Pext"], s["Qext"], s["f"]
 
 
@@ -226,12 +226,12 @@ def equilibrium(u, p: REPCA1Params) -> np.ndarray:
     limit its input drives it to), the lead-lag and s6_y at their inputs."""
     Vm, theta_m, Pbr, Qbr = finite_inputs(u, "REPCA1")[:4]
     x = np.array([theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0, 0.0])
-    x[2] = _signals(x, u, p, math)["VCsel"]
+    x[2] = signals(x, u, p, math)["VCsel"]
     x[9] = x[2] if p.RefFlag else x[3]
-    s = _signals(x, u, p, math)
+    s = signals(x, u, p, math)
     x[4] = pi_rest(s["e"], p.Kp, p.kqs, p.Qmin, p.Qmax, 0.0)
     x[7] = pi_rest(s["feout"], p.Kpg, p.ksg, p.Pmin, p.Pmax, 0.0)
-    s = _signals(x, u, p, math)
+    s = signals(x, u, p, math)
     x[5], x[8] = s["s2_y"], s["s5_y"]
     return x
 
@@ -243,9 +243,9 @@ def _start(given, p: REPCA1Params) -> tuple:
     Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im = (float(given[n]) for n in MEASURED)
     u = [Vm, theta_m, Pbr, Qbr, Ibr_re, Ibr_im, 0.0, Qbr, Pbr, float(given["Pext"]), float(given["Qext"])]
     x = [theta_m, theta_m, 0.0, Qbr, 0.0, 0.0, Pbr, 0.0, 0.0, 0.0]
-    x[2] = u[6] = float(_signals(x, u, p, math)["VCsel"])
+    x[2] = u[6] = float(signals(x, u, p, math)["VCsel"])
     x[9] = x[2] if p.RefFlag else x[3]
-    moving = [n for n, r in zip(REPCA1.state_names, _signals(x, u, p, math)["rates"]) if r != 0.0]
+    moving = [n for n, r in zip(REPCA1.state_names, signals(x, u, p, math)["rates"]) if r != 0.0]
     if moving:
         raise ValueError(f"REPCA1: no rest at the start ({', '.join(moving)} move): a limit keeps a PI's input or "
                          "output off 0 (each of [emin, emax], [Qmin, Qmax], [femin, femax], [Pmin, Pmax] must hold 0)")

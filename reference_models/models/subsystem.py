@@ -5,9 +5,11 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         frame; Ip, Iq [pu, system base]: the active and reactive current the sub-system's devices
         deliver at the boundary, in the frame of the boundary voltage, > 0 generating; n [1]: the
         boundary's load-flow voltage over the sub-system's own, V0 / V_own); a sub-system with a plant
-        controller (SUBSYSTEM_PC, `subsystem_pc`) carries four more: Qpi, Qcmd, Ppi, Pcmd [pu, system
-        base], its REPCA1's reactive PI integrator (s2_xi) and command lag (s3_x), active PI
-        integrator (s5_xi) and command lag (s6_y), each summed over the plant's REPCA1
+        controller (SUBSYSTEM_PC, `subsystem_pc`) carries that controller's states too: Vf [pu] its
+        filtered boundary voltage (REPCA1 s0_y), Vhold [pu] the voltage its reactive PI reads, held
+        through a dip (s_hold), Qpi, Qcmd, Ppi, Pcmd [pu, system base] its reactive PI integrator
+        (s2_xi) and command lag (s3_x), active PI integrator (s5_xi) and command lag (s6_y), each
+        summed over the plant's REPCA1 (in this order: each reads only those before it)
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -29,11 +31,14 @@ What is known is written here; what is not is learned:
     Ip and Iq follow the devices' controls, trips and limits, hundreds of states that the sub-system's
     operator replaces: their rate is learned (`learned_states`), written here as 0;
     a plant controller acts on every unit at once through states of seconds (its PI integrators) and
-    its command lags (50-150 ms, most of a window): these few plant-wide states are what two boundary
-    currents do not tell, so SUBSYSTEM_PC carries them where asked (`--carry-controller`), learned
-    too (0 at any start, where ANDES' REPCA1 starts them; nothing holds their learned rates at 0 at
-    rest: docs/subsystems.md); its measurement filters (20-50 ms) follow the boundary voltage the
-    operator reads, and the units' own states are too many and too fast to carry.
+    its command lags (50-150 ms, most of a window), which two boundary currents do not tell; where
+    every REPCA1 of the sub-system reads the boundary bus alone (its voltage and frequency, no
+    monitored branch) and they are shares of one controller (every gain and output limit the
+    unit's share of the plant's, the rest alike), their sums are one REPCA1 with the plant's gains
+    and limits driven by the boundary voltage: SUBSYSTEM_PC carries its states (`--carry-controller`)
+    with their known equations (reference_models.models.repca1, its set point Vref = n V_own, the
+    load flow's boundary voltage); only its effect on the devices' currents is learned; the units'
+    own states are too many and too fast to carry.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -41,17 +46,20 @@ and on the devices through the operator. The state is rotation invariant but not
 
 Parameters: the system base Sb and the sub-system's rating S [MVA] (the sum of its generating
 devices' Sn); G, B; the boundary voltage V_own [pu] of the sub-system's own load flow and the
-devices' currents Ip_own, Iq_own there (its rest: the learned rates have none of their own); the measurement's busf_Tf, busf_Tw [s], busf_fn [Hz]
-(the sub-system's own BusFreq settings). An operator of it is trained for one sub-system: its FMU
+devices' currents Ip_own, Iq_own there (its rest: the learned rates have none of their own); the
+measurement's busf_Tf, busf_Tw [s], busf_fn [Hz] (the sub-system's own BusFreq settings);
+SUBSYSTEM_PC's also the plant controller's, REPCA1's named with pc_ (pc_Kp, ..., system base: the
+sums of its REPCA1's gains and limits). An operator of it is trained for one sub-system: its FMU
 holds them fixed.
 
 Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
-n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0.
+n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0; a plant controller's
+filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, make_dataclass
 
 import numpy as np
 
@@ -60,6 +68,7 @@ from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
 from ..ports import BusPort, Ports
 from .common import check_ranges, finite_inputs
+from .repca1 import REPCA1Params, signals as plant_controller_signals
 
 PARAMETER_RANGES = {
     "Sb": (1e-3, 1e5, "MVA"), "S": (1e-6, 1e6, "MVA"), "G": (-1e4, 1e4, "pu"), "B": (-1e4, 1e4, "pu"),
@@ -90,29 +99,73 @@ class SubsystemParams(Parameters):
         check_ranges(self, PARAMETER_RANGES)
 
 
-# the plant controllers' states a sub-system with them carries (SUBSYSTEM_PC), summed over its REPCA1
-# (each a share of one plant controller: their sums are the plant's): the reactive PI's integrator and
-# its command lag, the active PI's integrator and its command lag [pu, system base]
-PLANT_CONTROLLER_STATES = (("Qpi", "s2_xi", "plant controllers' reactive PI integrators"),
-                           ("Qcmd", "s3_x", "plant controllers' reactive commands beyond the units' own (lag state)"),
-                           ("Ppi", "s5_xi", "plant controllers' active PI integrators"),
-                           ("Pcmd", "s6_y", "plant controllers' active commands beyond the units' own (lag)"))
+# REPCA1's parameters but its measurement's (the sub-system's busf_* are the boundary's BusFreq)
+PLANT_CONTROLLER_FIELDS = tuple(f for f in fields(REPCA1Params) if not f.name.startswith("busf_"))
+
+
+def _plant_controller(self) -> REPCA1Params:
+    """The one REPCA1 that the sub-system's are shares of (its pc_ parameters, the boundary's BusFreq)."""
+    return REPCA1Params(**{f.name: getattr(self, "pc_" + f.name) for f in PLANT_CONTROLLER_FIELDS},
+                        busf_Tf=self.busf_Tf, busf_Tw=self.busf_Tw, busf_fn=self.busf_fn)
+
+
+def _check_with_controller(self) -> None:
+    SubsystemParams.check(self)
+    try:
+        self.plant_controller()
+    except ValueError as exc:  # REPCA1Params' ParameterError, named as this component's parameter
+        raise type(exc)(str(exc).replace("parameter ", "parameter pc_", 1)) from None
+
+
+SubsystemPCParams = make_dataclass(
+    "SubsystemPCParams", [("pc_" + f.name, float, f.default) for f in PLANT_CONTROLLER_FIELDS],
+    bases=(SubsystemParams,), frozen=True,
+    namespace={"plant_controller": _plant_controller, "check": _check_with_controller,
+               "__doc__": "A sub-system with a plant controller: SubsystemParams and, named pc_ + REPCA1's, "
+                          "the parameters of the one REPCA1 its REPCA1 are shares of (system base)."})
+SubsystemPCParams.__module__ = __name__
+
+
+# the plant controller's states a sub-system with one carries (SUBSYSTEM_PC): (name, its REPCA1's state,
+# how the REPCA1's are combined: summed where each is a share of the plant's, else alike in all, averaged)
+PLANT_CONTROLLER_STATES = (("Vf", "s0_y", "mean", "plant controller's filtered boundary voltage [pu]"),
+                           ("Vhold", "s_hold", "mean", "boundary voltage the plant controller's reactive PI reads, "
+                            "held through a dip [pu]"),
+                           ("Qpi", "s2_xi", "sum", "plant controller's reactive PI integrator"),
+                           ("Qcmd", "s3_x", "sum", "plant controller's reactive command (lag state)"),
+                           ("Ppi", "s5_xi", "sum", "plant controller's active PI integrator"),
+                           ("Pcmd", "s6_y", "sum", "plant controller's active command (lag)"))
 N_BOUNDARY = 5  # theta_f, theta_w, Ip, Iq, n: the states of every sub-system
 
 
+def _controller_rates(x, u, p, m) -> tuple:
+    """The rates of a carried plant controller's states (x[5:]: Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd): its
+    REPCA1 (repca1.signals) reading the boundary voltage and measurement, no branch (its filtered
+    branch powers stay 0), the set point Vref = n V_own (the load flow's boundary voltage)."""
+    zero = 0.0 * x[4]
+    Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd = x[N_BOUNDARY:]
+    rates = plant_controller_signals((x[0], x[1], Vf, zero, Qpi, Qcmd, zero, Ppi, Pcmd, Vhold),
+                                     (u[0], u[1], zero, zero, zero, zero, x[4] * p.V_own, zero, zero, zero, zero),
+                                     p.plant_controller(), m)["rates"]
+    return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
+
+
 def derivatives(x, u, p: SubsystemParams, m):
-    """(dtheta_f, dtheta_w, dIp, dIq, dn, then any carried controller's)/dt: the measurement's; the
-    devices' currents' and the controllers' are learned (0); n is a constant of the study."""
+    """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's)/dt: the measurement's and
+    the controller's; the devices' currents' are learned (0); n is a constant of the study."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *(0.0 * x[k] for k in range(N_BOUNDARY, len(x))))
+    carried = _controller_rates(x, u, p, m) if len(x) > N_BOUNDARY else ()
+    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *carried)
 
 
 def start_equations(x, u, p: SubsystemParams, m):
     """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
-    voltage (n V_own = Vs), a carried controller's states at 0 (its PI integrators and command lags
-    start there, ANDES' REPCA1); the learned currents' rows are unread (the load flow's P, Q fix them)."""
+    voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
+    integrators and command lags at 0 (ANDES' REPCA1 start); the learned currents' rows are unread
+    (the load flow's P, Q fix them)."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *(x[k] for k in range(N_BOUNDARY, len(x))))
+    carried = ((x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if len(x) > N_BOUNDARY else ())
+    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *carried)
 
 
 def outputs(x, u, p: SubsystemParams, m):
@@ -133,13 +186,19 @@ def _equilibrium(carried: int):
         """The rest [5 + carried] under constant (Vs, theta_vs), as if the load flow had put the
         boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering the power
         of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled tap, a
-        carried controller at its start (0)."""
+        carried controller at its start (_controller_start)."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
-        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + [0.0] * carried)
+        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried))
     return equilibrium
+
+
+def _controller_start(Vs: float, carried: int) -> list:
+    """A carried plant controller's states at its start under the boundary voltage Vs: its filter and
+    held voltage there, its integrators and lags at 0."""
+    return [Vs, Vs, 0.0, 0.0, 0.0, 0.0] if carried else []
 
 
 def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.ndarray:
@@ -169,7 +228,7 @@ def _starter(carried: int):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
         return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
-                        + [0.0] * carried), {}
+                        + _controller_start(V0, carried)), {}
     return start
 
 
@@ -192,9 +251,9 @@ BOUNDARY_OUTPUTS = (
     Quantity("f", "pu", "measured boundary frequency (1: nominal)"))
 
 
-def _subsystem(name: str, description: str, carried: tuple) -> Component:
-    """The sub-system component with the boundary's states and the learned states `carried`
-    (Quantity, each 0 at the start)."""
+def _subsystem(name: str, description: str, carried: tuple, params_type) -> Component:
+    """The sub-system component with the boundary's states and a plant controller's `carried`
+    (Quantity each; their equations: _controller_rates)."""
     extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried)))
     return Component(
         name=name,
@@ -202,26 +261,26 @@ def _subsystem(name: str, description: str, carried: tuple) -> Component:
         states=BOUNDARY_STATES + carried,
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
-        params_type=SubsystemParams,
+        params_type=params_type,
         derivatives=derivatives,
         output_equations=outputs,
         equilibrium=_equilibrium(len(carried)),
         state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * len(carried),
-        # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0
-        affine_states=(0, 1, 4),
+        # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
+        # plant controller's lags, PIs and hold, piecewise affine in their own state
+        affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
         initialisation=Initialisation((), _starter(len(carried))),
-        learned_states=(2, 3) + extra,
-        started_learned=extra,
+        learned_states=(2, 3),
         start_equations=start_equations,
         window_features=lambda p, sensor_times: measured_frequency_map(p, sensor_times, N_BOUNDARY + len(carried)),
     )
 
 
 SUBSYSTEM = _subsystem("subsystem", "a sub-system seen through its boundary bus: passive network and measurement "
-                       "known, devices learned", ())
+                       "known, devices learned", (), SubsystemParams)
 SUBSYSTEM_PC = _subsystem("subsystem_pc", "a sub-system with a plant controller seen through its boundary bus: "
-                          "passive network and measurement known, devices and the controller's states learned",
-                          tuple(Quantity(n, "pu", f"{what} (sum over its REPCA1, system base)")
-                                for n, _, what in PLANT_CONTROLLER_STATES))
+                          "passive network, measurement and plant controller known, devices learned",
+                          tuple(Quantity(n, "pu", f"{what} (its REPCA1's {how}, system base)")
+                                for n, _, how, what in PLANT_CONTROLLER_STATES), SubsystemPCParams)
