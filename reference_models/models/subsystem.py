@@ -128,9 +128,9 @@ SubsystemPCParams.__module__ = __name__
 
 # the plant controller's states a sub-system with one carries (SUBSYSTEM_PC): (name, its REPCA1's state,
 # how the REPCA1's are combined: summed where each is a share of the plant's, else alike in all, averaged)
-PLANT_CONTROLLER_STATES = (("Vf", "s0_y", "mean", "plant controller's filtered boundary voltage [pu]"),
+PLANT_CONTROLLER_STATES = (("Vf", "s0_y", "mean", "plant controller's filtered boundary voltage"),
                            ("Vhold", "s_hold", "mean", "boundary voltage the plant controller's reactive PI reads, "
-                            "held through a dip [pu]"),
+                            "held through a dip"),
                            ("Qpi", "s2_xi", "sum", "plant controller's reactive PI integrator"),
                            ("Qcmd", "s3_x", "sum", "plant controller's reactive command (lag state)"),
                            ("Ppi", "s5_xi", "sum", "plant controller's active PI integrator"),
@@ -282,5 +282,6 @@ SUBSYSTEM = _subsystem("subsystem", "a sub-system seen through its boundary bus:
                        "known, devices learned", (), SubsystemParams)
 SUBSYSTEM_PC = _subsystem("subsystem_pc", "a sub-system with a plant controller seen through its boundary bus: "
                           "passive network, measurement and plant controller known, devices learned",
-                          tuple(Quantity(n, "pu", f"{what} (its REPCA1's {how}, system base)")
+                          tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
+                                                                else "alike in every REPCA1)"))
                                 for n, _, how, what in PLANT_CONTROLLER_STATES), SubsystemPCParams)
