@@ -348,8 +348,8 @@ class StepMirror:
                     l, r = slow
                     fix["slow_integral"] += 0.5 * (end - t) * (rate_start + l @ self.f(x, u_end))
                     x = x + slow_weight * (l @ window["x"] + fix["slow_integral"] - l @ x) * r
-                for i, (g_start, k) in drives.items():  # k is constant: the C takes the start's; in order,
-                    g_end, _ = affine_drive(self.f, i, x, u_end)  # each reading the exact ones before it
+                for i, (g_start, k) in drives.items():  # k is the start's, so g at the end is f_i + k x_i;
+                    g_end = self.f(x, u_end)[i] + k * x[i]  # in order, each reading the exact ones before it
                     x[i] += swing_weight * (affine_step(x_start[i], g_start, g_end, k, end - t) - x[i])
                 last_u, t, u = u, end, u_end
                 if not np.all(np.isfinite(x)):

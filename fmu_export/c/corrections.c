@@ -211,15 +211,17 @@ static double affine_solution(double x_start, double g_start, double g_end, doub
     return decay * x_start + g_start * reach + (g_end - g_start) * (h - reach) / (k * h);
 }
 
-/* in the component's order, so that each affine state's end value reads the exact end values of the
-   affine states before it (a plant controller's filter before the PI that reads it) */
+/* k is constant over the step (the start's), so g at the end is f_i + k x_i there; in the component's
+   order, so that each affine state's end value reads the exact end values of the affine states before
+   it (a plant controller's filter before the PI that reads it) */
 void affine_step(ModelState *m, const double x_start[N_X], const double g_start[N_AFFINE_CAP],
                  const double k_start[N_AFFINE_CAP], double h)
 {
     for (int a = 0; a < OPFMU_N_AFFINE; ++a) {
         const int i = OPFMU_AFFINE_STATES[a];
-        double g_end, k_end; /* k is constant over the step: the start's value is used */
-        drive_of(m->x, m->u, i, &g_end, &k_end);
+        double f[N_X];
+        model_derivatives(m->x, m->u, TRAINED_P, f);
+        double g_end = f[i] + k_start[a] * m->x[i];
         double exact = affine_solution(x_start[i], g_start[a], g_end, k_start[a], h);
         m->x[i] += m->swing_weight * (exact - m->x[i]);
     }
