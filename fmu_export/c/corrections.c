@@ -36,18 +36,26 @@
 
 #include "engine.h"
 
-/* d f / d x at (x, u), by central differences */
+/* d f / d x_j at (x, u), by central differences */
+static void column(const double x[N_X], const double u[N_U], int j, double out[N_X])
+{
+    double d = 1e-6 * fmax(1.0, fabs(x[j])), hi[N_X], lo[N_X], fh[N_X], fl[N_X];
+    memcpy(hi, x, sizeof hi);
+    memcpy(lo, x, sizeof lo);
+    hi[j] += d;
+    lo[j] -= d;
+    model_derivatives(hi, u, TRAINED_P, fh);
+    model_derivatives(lo, u, TRAINED_P, fl);
+    for (int i = 0; i < N_X; ++i) out[i] = (fh[i] - fl[i]) / (2.0 * d);
+}
+
+/* d f / d x at (x, u) */
 static void jacobian(const double x[N_X], const double u[N_U], Matrix J)
 {
     for (int j = 0; j < N_X; ++j) {
-        double d = 1e-6 * fmax(1.0, fabs(x[j])), hi[N_X], lo[N_X], fh[N_X], fl[N_X];
-        memcpy(hi, x, sizeof hi);
-        memcpy(lo, x, sizeof lo);
-        hi[j] += d;
-        lo[j] -= d;
-        model_derivatives(hi, u, TRAINED_P, fh);
-        model_derivatives(lo, u, TRAINED_P, fl);
-        for (int i = 0; i < N_X; ++i) J[i][j] = (fh[i] - fl[i]) / (2.0 * d);
+        double c[N_X];
+        column(x, u, j, c);
+        for (int i = 0; i < N_X; ++i) J[i][j] = c[i];
     }
 }
 
@@ -178,27 +186,20 @@ void slow_correct(ModelState *m, double h, double rate_start)
     for (int i = 0; i < N_X; ++i) m->x[i] += shift * m->slow_right[i];
 }
 
-/* g and k of the affine state i at x: k = -d f_i / d x_i by central differences (a state affine in
-   itself has one k; a piecewise affine one, a PI with its anti-windup, that of the piece it is on)
-   and g = f_i + k x_i, so that f_i = g - k x_i there */
-static void drive_of(const double x[N_X], const double u[N_U], int i, double *g, double *k)
-{
-    const double d = 1e-6 * fmax(1.0, fabs(x[i]));
-    double hi[N_X], lo[N_X], f[N_X], f_hi[N_X], f_lo[N_X];
-    memcpy(hi, x, sizeof hi);
-    memcpy(lo, x, sizeof lo);
-    hi[i] += d;
-    lo[i] -= d;
-    model_derivatives(x, u, TRAINED_P, f);
-    model_derivatives(hi, u, TRAINED_P, f_hi);
-    model_derivatives(lo, u, TRAINED_P, f_lo);
-    *k = (f_lo[i] - f_hi[i]) / (2.0 * d);
-    *g = f[i] + *k * x[i];
-}
-
+/* g and k of each affine state i at x: k = -d f_i / d x_i (a state affine in itself has one k; a
+   piecewise affine one, a PI with its anti-windup, that of the piece it is on) and g = f_i + k x_i,
+   so that f_i = g - k x_i there */
 void affine_drive(const double x[N_X], const double u[N_U], double g[N_AFFINE_CAP], double k[N_AFFINE_CAP])
 {
-    for (int a = 0; a < OPFMU_N_AFFINE; ++a) drive_of(x, u, OPFMU_AFFINE_STATES[a], &g[a], &k[a]);
+    double f[N_X];
+    model_derivatives(x, u, TRAINED_P, f);
+    for (int a = 0; a < OPFMU_N_AFFINE; ++a) {
+        const int i = OPFMU_AFFINE_STATES[a];
+        double c[N_X];
+        column(x, u, i, c);
+        k[a] = -c[i];
+        g[a] = f[i] + k[a] * x[i];
+    }
 }
 
 /* x_i after a step of length h from x_start, solving dx_i/dt = g - k x_i exactly for g linear in time
