@@ -35,7 +35,7 @@ import shutil
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -156,9 +156,10 @@ def command_params(units: list, shares: np.ndarray) -> dict:
     """The cmd_ parameters of `subsystem_pc`: how the plant's units (`units`, one per REPCA1, its
     share of the plant `shares`) follow its commands. A unit whose REECA1 takes the commands as its
     power references (Pext always, Qext with PFFLAG = 0) counts with its share in cmd_kp, cmd_kq;
-    their lags (REECA1's tpfilt + Tpord and Tiq, plus the converter's Tg) are averaged by share."""
+    their lags (REECA1's tpfilt + Tpord and Tiq, plus the converter's Tg) and dip thresholds (Vdip)
+    are averaged by share."""
     kp = kq = 0.0
-    Tp, Tq = [], []
+    Tp, Tq, Vdip = [], [], []
     for unit, share in zip(units, shares):
         electrical = [d.params for d in unit.devices if d.component.name == "reeca1"]
         if not electrical:
@@ -166,13 +167,13 @@ def command_params(units: list, shares: np.ndarray) -> dict:
         e, Tg = electrical[0], float(getattr(unit.machine.params, "Tg", 0.0))
         kp += share
         kq += share * (e.PFFLAG == 0)
-        Tp.append((share, e.tpfilt + e.Tpord + Tg)), Tq.append((share, e.Tiq + Tg))
+        Tp.append((share, e.tpfilt + e.Tpord + Tg)), Tq.append((share, e.Tiq + Tg)), Vdip.append((share, e.Vdip))
 
     def mean(pairs, default):
         total = sum(w for w, _ in pairs)
         return float(sum(w * v for w, v in pairs) / total) if total > 0 else default
     return {"cmd_kp": float(min(kp, 1.0)), "cmd_kq": float(min(kq, 1.0)), "cmd_Tp": max(mean(Tp, 0.05), 1e-3),
-            "cmd_Tq": max(mean(Tq, 0.05), 1e-3)}
+            "cmd_Tq": max(mean(Tq, 0.05), 1e-3), "cmd_Vdip": mean(Vdip, 0.0)}
 
 
 def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
@@ -205,14 +206,16 @@ def command_currents(t: np.ndarray, u: np.ndarray, x: np.ndarray, model, p) -> n
     """(Ipc, Iqc) [n, 2] of `subsystem_pc` along rows t [n], u [n, 2], x [n, 11] (its states but the
     commanded currents): their lags at 0 at the start, driven by what the component's equations
     give them at each row (its rates at the lags' 0 are cmd_k command / Vs over cmd_T), linear
-    between rows, held across a switching (two rows at one time)."""
+    between rows, held where the units' controls freeze at both ends of a step (a dip) and across
+    a switching (two rows at one time)."""
     full = np.concatenate([x, np.zeros((len(t), 2))], axis=1)
-    rates = np.array(model.derivatives(full.T, u.T, p, np), dtype=float)[-2:].T  # [n, 2]
+    rates = np.array(model.derivatives(full.T, u.T, replace(p, cmd_Vdip=0.0), np), dtype=float)[-2:].T  # [n, 2]
     drive = rates * np.array([p.cmd_Tp, p.cmd_Tq])
+    frozen = u[:, 0] < p.cmd_Vdip * x[:, 4]
     out = np.zeros((len(t), 2))
     for k in range(1, len(t)):
         h = t[k] - t[k - 1]
-        if h <= 0.0:
+        if h <= 0.0 or (frozen[k - 1] and frozen[k]):
             out[k] = out[k - 1]
             continue
         out[k] = [lag_of_ramp(out[k - 1, j], drive[k - 1, j], drive[k, j], h, T) for j, T in enumerate((p.cmd_Tp, p.cmd_Tq))]

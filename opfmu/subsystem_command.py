@@ -56,8 +56,7 @@ def add_subsystem_options(op) -> None:
                          "(docs/subsystems.md)")
     op.add_argument("--carry-controller", action="store_true", default=None,
                     help="with --subsystem FILE of a plant whose REPCA1 read its boundary bus: carry its plant "
-                         "controller's states, and the units' currents that follow its commands, with their own "
-                         "equations (component subsystem_pc; docs/subsystems.md)")
+                         "controller's states with their own equations (component subsystem_pc; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",

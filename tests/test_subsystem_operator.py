@@ -195,6 +195,7 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
     Tq = [e["Tiq"] + g["Tg"] for e, g in zip(records["REECA1"], records["REGCA1"])]
     assert p.cmd_kp == pytest.approx(1.0) and p.cmd_kq == pytest.approx(1.0)
     assert min(Tq) <= p.cmd_Tq <= max(Tq) and p.cmd_Tp > p.cmd_Tq - max(Tq)
+    assert p.cmd_Vdip == pytest.approx(np.mean([e["Vdip"] for e in records["REECA1"]]), rel=0.05)
     runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
     fault = Contingency(fault_bus=9, fault_start=0.1, clear_s=0.2, fault_impedance=0.05j, network=case.network)
     result = runner.run(fault, 1.5)[0]
@@ -235,7 +236,8 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
         worst = np.maximum(worst, np.abs(carried - x[k + 1, known]))
     scale = np.ptp(x[:, 5:], axis=0) + 1e-6  # the detail's REPCA1 states (the measurement's are the data's own)
     assert np.all(worst[2:8] < 0.02 * scale[:6]), (worst, scale)
-    # the commanded currents: the data's lags see the controller's recorded commands linear between rows
+    # the commanded currents: their lags held through the dip, the freeze's instant within a step
+    # apart (the data's stepping holds a step frozen at both ends)
     assert np.all(worst[8:] < np.maximum(0.02 * scale[6:], 1e-3 * p.S / p.Sb)), (worst, scale)
     I_re, I_im, *_ = model.output_equations(x.T, u.T, p, np)
     detail = boundary_current(case.network, result.V_bus, result.theta_bus, 9)

@@ -46,10 +46,10 @@ What is known is written here; what is not is learned:
         cmd_Tp dIpc/dt = cmd_kp Pext / Vs - Ipc,  cmd_Tq dIqc/dt = cmd_kq Qext / Vs - Iqc
     (cmd_kp, cmd_kq: the share of the plant's rating whose units take the command; cmd_Tp, cmd_Tq:
     their lags, REECA1's tpfilt plus Tpord or its Tiq, plus REGCA1's Tg, averaged by rating; Vs at least
-    COMMAND_V_FLOOR), through dips too, and the operator learns the rest of Ip and Iq: the
-    collector's share and what the units' dip logic, current limits and trips do instead (holding
-    the lags through a dip, at the units' spread dip thresholds averaged, left that rest jumping
-    with every crossing of the average: docs/results.md).
+    COMMAND_V_FLOOR), held while the units' controls freeze (the voltage inside, Vs / n, below
+    cmd_Vdip, their dip thresholds averaged by rating: their own dip logic and current limits decide
+    there), and the operator learns the rest of Ip and Iq: the collector's share, the dips, limits
+    and trips.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -78,6 +78,7 @@ from ..blocks import NO_LIMIT, bus_frequency, clip, lags_of_ramp
 from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
 from ..ports import BusPort, Ports
+from ..piecewise import where
 from .common import check_ranges, finite_inputs
 from .repca1 import REPCA1Params, signals as plant_controller_signals
 
@@ -122,8 +123,10 @@ def _plant_controller(self) -> REPCA1Params:
 
 # the units' response to the plant controller's commands (SUBSYSTEM_PC's Ipc, Iqc): the share of the
 # plant's rating whose units take each command as their power reference, and their lag to it
+# and the voltage below which the units' controls freeze (their dip)
 COMMAND_FIELDS = (("cmd_kp", 1.0, (0.0, 1.0, "1")), ("cmd_kq", 1.0, (0.0, 1.0, "1")),
-                  ("cmd_Tp", 0.05, (1e-3, 10.0, "s")), ("cmd_Tq", 0.05, (1e-3, 10.0, "s")))
+                  ("cmd_Tp", 0.05, (1e-3, 10.0, "s")), ("cmd_Tq", 0.05, (1e-3, 10.0, "s")),
+                  ("cmd_Vdip", 0.0, (0.0, 1.5, "pu")))
 COMMAND_V_FLOOR = 0.5  # pu: the voltage a command is divided by stays above it
 
 
@@ -144,7 +147,8 @@ SubsystemPCParams = make_dataclass(
                "__doc__": "A sub-system with a plant controller: SubsystemParams; named pc_ + REPCA1's, the "
                           "parameters of the one REPCA1 its REPCA1 are shares of (system base); cmd_kp, cmd_kq "
                           "[1]: the share of its rating whose units take the controller's active and reactive "
-                          "commands as their power references, cmd_Tp, cmd_Tq [s] their lags to them."})
+                          "commands as their power references, cmd_Tp, cmd_Tq [s] their lags to them, cmd_Vdip "
+                          "[pu] the voltage below which their controls freeze."})
 SubsystemPCParams.__module__ = __name__
 
 
@@ -172,8 +176,8 @@ def _carried_rates(x, u, p, m) -> tuple:
     (repca1.signals) reading the boundary voltage and measurement, no branch (its filtered branch
     powers stay 0), the set point Vref = n V_own (the load flow's boundary voltage). The currents lag
     (cmd_Tp, cmd_Tq) the share cmd_kp, cmd_kq of its commands Pext, Qext over the boundary voltage
-    (at least COMMAND_V_FLOOR), through dips too: what the units' dip logic and current limits do
-    instead is learned."""
+    (at least COMMAND_V_FLOOR) and hold where the units' controls freeze: the voltage inside, Vs / n,
+    below cmd_Vdip, when the units' own dip logic and current limits decide."""
     zero = 0.0 * x[4]
     Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd, Ipc, Iqc = x[N_BOUNDARY:]
     signals = plant_controller_signals((x[0], x[1], Vf, zero, Qpi, Qcmd, zero, Ppi, Pcmd, Vhold),
@@ -183,6 +187,9 @@ def _carried_rates(x, u, p, m) -> tuple:
     Vs = clip(m, u[0], COMMAND_V_FLOOR, NO_LIMIT)
     d_p = (p.cmd_kp * signals["Pext"] / Vs - Ipc) / p.cmd_Tp
     d_q = (p.cmd_kq * signals["Qext"] / Vs - Iqc) / p.cmd_Tq
+    if p.cmd_Vdip > 0.0:
+        dip = u[0] < p.cmd_Vdip * x[4]
+        d_p, d_q = where(m, dip, 0.0 * d_p, d_p), where(m, dip, 0.0 * d_q, d_q)
     return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8], d_p, d_q
 
 
