@@ -35,12 +35,12 @@ import shutil
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from reference_models.blocks import lag_of_ramp, lags_of_ramp
+from reference_models.blocks import lags_of_ramp
 from reference_models.components import component
 from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
@@ -148,32 +148,7 @@ def plant_controller_params(case, bus: int, params: dict) -> dict:
     # shares' squares (exact while the shares' normalised integrators run alike: below their limits)
     weight = float(np.sum(shares[0] ** 2)) if len(shares) else 1.0
     out["pc_kqs"], out["pc_ksg"] = out["pc_kqs"] * weight, out["pc_ksg"] * weight
-    units = [unit for unit in case.units if unit.bus in behind for d in unit.devices if d.component.name == "repca1"]
-    return {**out, **command_params(units, shares[0] if len(shares) else np.full(len(units), 1.0 / len(units)))}
-
-
-def command_params(units: list, shares: np.ndarray) -> dict:
-    """The cmd_ parameters of `subsystem_pc`: how the plant's units (`units`, one per REPCA1, its
-    share of the plant `shares`) follow its commands. A unit whose REECA1 takes the commands as its
-    power references (Pext always, Qext with PFFLAG = 0) counts with its share in cmd_kp, cmd_kq;
-    their lags (REECA1's tpfilt + Tpord and Tiq, plus the converter's Tg) and dip thresholds (Vdip)
-    are averaged by share."""
-    kp = kq = 0.0
-    Tp, Tq, Vdip = [], [], []
-    for unit, share in zip(units, shares):
-        electrical = [d.params for d in unit.devices if d.component.name == "reeca1"]
-        if not electrical:
-            continue
-        e, Tg = electrical[0], float(getattr(unit.machine.params, "Tg", 0.0))
-        kp += share
-        kq += share * (e.PFFLAG == 0)
-        Tp.append((share, e.tpfilt + e.Tpord + Tg)), Tq.append((share, e.Tiq + Tg)), Vdip.append((share, e.Vdip))
-
-    def mean(pairs, default):
-        total = sum(w for w, _ in pairs)
-        return float(sum(w * v for w, v in pairs) / total) if total > 0 else default
-    return {"cmd_kp": float(min(kp, 1.0)), "cmd_kq": float(min(kq, 1.0)), "cmd_Tp": max(mean(Tp, 0.05), 1e-3),
-            "cmd_Tq": max(mean(Tq, 0.05), 1e-3), "cmd_Vdip": mean(Vdip, 0.0)}
+    return out
 
 
 def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float) -> tuple:
@@ -185,41 +160,6 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
         theta_f[k], theta_w[k] = lags_of_ramp(theta_f[k - 1], theta_w[k - 1], theta[k - 1], theta[k],
                                               t[k] - t[k - 1], Tf, Tw)
     return theta_f, theta_w
-
-
-def known_states(rows: dict, model, p) -> np.ndarray:
-    """The states x [n, model.n_states] of a run's recorded rows (run_rows) with what the component
-    `model` (parameters p) knows computed here, not in the worker (one definition per dataset): the
-    measurement from the recorded angle (bus_frequency_states) and, where it carries them, the
-    currents that follow the plant controller's commands (command_currents), taken out of the
-    devices' learned Ip, Iq."""
-    t, u, x = rows["t"], rows["u"], np.array(rows["x"], float)
-    x[:, 0], x[:, 1] = bus_frequency_states(t, u[:, 1], p.busf_Tf, p.busf_Tw)
-    if model.n_states == x.shape[1]:
-        return x
-    commands = command_currents(t, u, x, model, p)
-    x[:, 2:4] -= commands
-    return np.concatenate([x, commands], axis=1)
-
-
-def command_currents(t: np.ndarray, u: np.ndarray, x: np.ndarray, model, p) -> np.ndarray:
-    """(Ipc, Iqc) [n, 2] of `subsystem_pc` along rows t [n], u [n, 2], x [n, 11] (its states but the
-    commanded currents): their lags at 0 at the start, driven by what the component's equations
-    give them at each row (its rates at the lags' 0 are cmd_k command / Vs over cmd_T), linear
-    between rows, held where the units' controls freeze at both ends of a step (a dip) and across
-    a switching (two rows at one time)."""
-    full = np.concatenate([x, np.zeros((len(t), 2))], axis=1)
-    rates = np.array(model.derivatives(full.T, u.T, replace(p, cmd_Vdip=0.0), np), dtype=float)[-2:].T  # [n, 2]
-    drive = rates * np.array([p.cmd_Tp, p.cmd_Tq])
-    frozen = u[:, 0] < p.cmd_Vdip * x[:, 4]
-    out = np.zeros((len(t), 2))
-    for k in range(1, len(t)):
-        h = t[k] - t[k - 1]
-        if h <= 0.0 or (frozen[k - 1] and frozen[k]):
-            out[k] = out[k - 1]
-            continue
-        out[k] = [lag_of_ramp(out[k - 1, j], drive[k - 1, j], drive[k, j], h, T) for j, T in enumerate((p.cmd_Tp, p.cmd_Tq))]
-    return out
 
 
 def subsystem_model(records: dict, carry_controller: bool = False):
@@ -237,8 +177,7 @@ def controller_columns(case, bus: int, model) -> list:
     """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
     state columns of a grid result it combines, those of the REPCA1 behind the boundary `bus` of
     `case`, and how ("sum" or "mean")."""
-    recorded = {name for name, *_ in PLANT_CONTROLLER_STATES}
-    carried = [name for name in model.state_names[N_BOUNDARY:] if name in recorded]
+    carried = model.state_names[N_BOUNDARY:]
     if not carried:
         return []
     behind = set(subsystem_buses(case.network, bus))
@@ -519,7 +458,8 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if str(rows["failed"]):
             failed.append(f"{label}: {rows['failed']}")
             continue
-        rows["x"] = known_states(rows, model, p)
+        # the measurement from the recorded angle here, not in the worker: one definition per dataset
+        rows["x"][:, 0], rows["x"][:, 1] = bus_frequency_states(rows["t"], rows["u"][:, 1], p.busf_Tf, p.busf_Tw)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

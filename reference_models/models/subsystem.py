@@ -9,9 +9,7 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         filtered boundary voltage (REPCA1 s0_y), Vhold [pu] the voltage its reactive PI reads, held
         through a dip (s_hold), Qpi, Qcmd, Ppi, Pcmd [pu, system base] its reactive PI integrator
         (s2_xi) and command lag (s3_x), active PI integrator (s5_xi) and command lag (s6_y), each
-        summed over the plant's REPCA1, then Ipc, Iqc [pu, system base] the part of the devices'
-        currents that follows the controller's commands (in this order: each reads only those before
-        it; the devices deliver Ip + Ipc, Iq + Iqc)
+        summed over the plant's REPCA1 (in this order: each reads only those before it)
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -39,17 +37,8 @@ What is known is written here; what is not is learned:
     unit's share of the plant's, the rest alike), their sums are one REPCA1 with the plant's gains
     and limits driven by the boundary voltage: SUBSYSTEM_PC carries its states (`--carry-controller`)
     with their known equations (reference_models.models.repca1, its set point Vref = n V_own, the
-    load flow's boundary voltage); the units' own states are too many and too fast to carry, but
-    where they take its commands as their power references (REECA1: Ipcmd = Pref / V, and with
-    PFFLAG = 0 Iqcmd = Qref / V, behind their command and converter lags) their currents follow
-    the commands Pext, Qext it sends: SUBSYSTEM_PC carries that part as known lags,
-        cmd_Tp dIpc/dt = cmd_kp Pext / Vs - Ipc,  cmd_Tq dIqc/dt = cmd_kq Qext / Vs - Iqc
-    (cmd_kp, cmd_kq: the share of the plant's rating whose units take the command; cmd_Tp, cmd_Tq:
-    their lags, REECA1's tpfilt plus Tpord or its Tiq, plus REGCA1's Tg, averaged by rating; Vs at least
-    COMMAND_V_FLOOR), held while the units' controls freeze (the voltage inside, Vs / n, below
-    cmd_Vdip, their dip thresholds averaged by rating: their own dip logic and current limits decide
-    there), and the operator learns the rest of Ip and Iq: the collector's share, the dips, limits
-    and trips.
+    load flow's boundary voltage); only its effect on the devices' currents is learned; the units'
+    own states are too many and too fast to carry.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -65,7 +54,7 @@ holds them fixed.
 
 Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
 n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0; a plant controller's
-filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start), Ipc = Iqc = 0.
+filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start).
 """
 from __future__ import annotations
 
@@ -74,11 +63,10 @@ from dataclasses import dataclass, fields, make_dataclass
 
 import numpy as np
 
-from ..blocks import NO_LIMIT, bus_frequency, clip, lags_of_ramp
+from ..blocks import bus_frequency, lags_of_ramp
 from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
 from ..ports import BusPort, Ports
-from ..piecewise import where
 from .common import check_ranges, finite_inputs
 from .repca1 import REPCA1Params, signals as plant_controller_signals
 
@@ -121,18 +109,8 @@ def _plant_controller(self) -> REPCA1Params:
                         busf_Tf=self.busf_Tf, busf_Tw=self.busf_Tw, busf_fn=self.busf_fn)
 
 
-# the units' response to the plant controller's commands (SUBSYSTEM_PC's Ipc, Iqc): the share of the
-# plant's rating whose units take each command as their power reference, and their lag to it
-# and the voltage below which the units' controls freeze (their dip)
-COMMAND_FIELDS = (("cmd_kp", 1.0, (0.0, 1.0, "1")), ("cmd_kq", 1.0, (0.0, 1.0, "1")),
-                  ("cmd_Tp", 0.05, (1e-3, 10.0, "s")), ("cmd_Tq", 0.05, (1e-3, 10.0, "s")),
-                  ("cmd_Vdip", 0.0, (0.0, 1.5, "pu")))
-COMMAND_V_FLOOR = 0.5  # pu: the voltage a command is divided by stays above it
-
-
 def _check_with_controller(self) -> None:
     SubsystemParams.check(self)
-    check_ranges(self, {name: bounds for name, _, bounds in COMMAND_FIELDS})
     try:
         self.plant_controller()
     except ValueError as exc:  # REPCA1Params' ParameterError, named as this component's parameter
@@ -140,15 +118,11 @@ def _check_with_controller(self) -> None:
 
 
 SubsystemPCParams = make_dataclass(
-    "SubsystemPCParams", [("pc_" + f.name, float, f.default) for f in PLANT_CONTROLLER_FIELDS]
-    + [(name, float, default) for name, default, _ in COMMAND_FIELDS],
+    "SubsystemPCParams", [("pc_" + f.name, float, f.default) for f in PLANT_CONTROLLER_FIELDS],
     bases=(SubsystemParams,), frozen=True,
     namespace={"plant_controller": _plant_controller, "check": _check_with_controller,
-               "__doc__": "A sub-system with a plant controller: SubsystemParams; named pc_ + REPCA1's, the "
-                          "parameters of the one REPCA1 its REPCA1 are shares of (system base); cmd_kp, cmd_kq "
-                          "[1]: the share of its rating whose units take the controller's active and reactive "
-                          "commands as their power references, cmd_Tp, cmd_Tq [s] their lags to them, cmd_Vdip "
-                          "[pu] the voltage below which their controls freeze."})
+               "__doc__": "A sub-system with a plant controller: SubsystemParams and, named pc_ + REPCA1's, "
+                          "the parameters of the one REPCA1 its REPCA1 are shares of (system base)."})
 SubsystemPCParams.__module__ = __name__
 
 
@@ -161,61 +135,42 @@ PLANT_CONTROLLER_STATES = (("Vf", "s0_y", "mean", "plant controller's filtered b
                            ("Qcmd", "s3_x", "sum", "plant controller's reactive command (lag state)"),
                            ("Ppi", "s5_xi", "sum", "plant controller's active PI integrator"),
                            ("Pcmd", "s6_y", "sum", "plant controller's active command (lag)"))
-# and the units' currents that follow its commands (after the controller's states, which they read)
-COMMAND_STATES = (("Ipc", "devices' active current that follows the plant controller's active command, "
-                   "voltage frame (system base)"),
-                  ("Iqc", "devices' reactive current that follows the plant controller's reactive command, "
-                   "voltage frame (system base)"))
 N_BOUNDARY = 5  # theta_f, theta_w, Ip, Iq, n: the states of every sub-system
-N_CARRIED = len(PLANT_CONTROLLER_STATES) + len(COMMAND_STATES)  # SUBSYSTEM_PC's beyond those
 
 
-def _carried_rates(x, u, p, m) -> tuple:
-    """The rates of a carried plant controller's states (x[5:11]: Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd) and
-    of the currents that follow its commands (x[11:13]: Ipc, Iqc). The controller is its REPCA1
-    (repca1.signals) reading the boundary voltage and measurement, no branch (its filtered branch
-    powers stay 0), the set point Vref = n V_own (the load flow's boundary voltage). The currents lag
-    (cmd_Tp, cmd_Tq) the share cmd_kp, cmd_kq of its commands Pext, Qext over the boundary voltage
-    (at least COMMAND_V_FLOOR) and hold where the units' controls freeze: the voltage inside, Vs / n,
-    below cmd_Vdip, when the units' own dip logic and current limits decide."""
+def _controller_rates(x, u, p, m) -> tuple:
+    """The rates of a carried plant controller's states (x[5:]: Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd): its
+    REPCA1 (repca1.signals) reading the boundary voltage and measurement, no branch (its filtered
+    branch powers stay 0), the set point Vref = n V_own (the load flow's boundary voltage)."""
     zero = 0.0 * x[4]
-    Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd, Ipc, Iqc = x[N_BOUNDARY:]
-    signals = plant_controller_signals((x[0], x[1], Vf, zero, Qpi, Qcmd, zero, Ppi, Pcmd, Vhold),
-                                       (u[0], u[1], zero, zero, zero, zero, x[4] * p.V_own, zero, zero, zero, zero),
-                                       p.plant_controller(), m)
-    rates = signals["rates"]
-    Vs = clip(m, u[0], COMMAND_V_FLOOR, NO_LIMIT)
-    d_p = (p.cmd_kp * signals["Pext"] / Vs - Ipc) / p.cmd_Tp
-    d_q = (p.cmd_kq * signals["Qext"] / Vs - Iqc) / p.cmd_Tq
-    if p.cmd_Vdip > 0.0:
-        dip = u[0] < p.cmd_Vdip * x[4]
-        d_p, d_q = where(m, dip, 0.0 * d_p, d_p), where(m, dip, 0.0 * d_q, d_q)
-    return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8], d_p, d_q
+    Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd = x[N_BOUNDARY:]
+    rates = plant_controller_signals((x[0], x[1], Vf, zero, Qpi, Qcmd, zero, Ppi, Pcmd, Vhold),
+                                     (u[0], u[1], zero, zero, zero, zero, x[4] * p.V_own, zero, zero, zero, zero),
+                                     p.plant_controller(), m)["rates"]
+    return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
 
 
 def derivatives(x, u, p: SubsystemParams, m):
-    """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's and its commands')/dt: the
-    measurement's, the controller's and the commanded currents'; the rest of the devices' currents is
-    learned (0); n is a constant of the study."""
+    """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's)/dt: the measurement's and
+    the controller's; the devices' currents' are learned (0); n is a constant of the study."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    carried = _carried_rates(x, u, p, m) if len(x) > N_BOUNDARY else ()
+    carried = _controller_rates(x, u, p, m) if len(x) > N_BOUNDARY else ()
     return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *carried)
 
 
 def start_equations(x, u, p: SubsystemParams, m):
     """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
     voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
-    integrators and command lags at 0 (ANDES' REPCA1 start), so the commanded currents too; the
-    learned currents' rows are unread (the load flow's P, Q fix them)."""
+    integrators and command lags at 0 (ANDES' REPCA1 start); the learned currents' rows are unread
+    (the load flow's P, Q fix them)."""
     d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    carried = ((x[5] - u[0], x[6] - u[0], *x[7:]) if len(x) > N_BOUNDARY else ())
+    carried = ((x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if len(x) > N_BOUNDARY else ())
     return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *carried)
 
 
 def outputs(x, u, p: SubsystemParams, m):
-    """(I_re, I_im, P, Q) [pu, system base], f [pu]; the devices' currents are the learned Ip, Iq and
-    where carried the commanded Ipc, Iqc."""
-    Ip, Iq = (x[2] + x[11], x[3] + x[12]) if len(x) > N_BOUNDARY else (x[2], x[3])
+    """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
+    Ip, Iq = x[2], x[3]
     Vs, theta = u[0], u[1]
     c, s = m.cos(theta), m.sin(theta)
     f = bus_frequency(m, theta, x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)[2]
@@ -242,8 +197,8 @@ def _equilibrium(carried: int):
 
 def _controller_start(Vs: float, carried: int) -> list:
     """A carried plant controller's states at its start under the boundary voltage Vs: its filter and
-    held voltage there, its integrators and lags at 0, so its commands and the currents that follow them."""
-    return [Vs, Vs] + [0.0] * (N_CARRIED - 2) if carried else []
+    held voltage there, its integrators and lags at 0."""
+    return [Vs, Vs, 0.0, 0.0, 0.0, 0.0] if carried else []
 
 
 def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.ndarray:
@@ -298,7 +253,7 @@ BOUNDARY_OUTPUTS = (
 
 def _subsystem(name: str, description: str, carried: tuple, params_type) -> Component:
     """The sub-system component with the boundary's states and a plant controller's `carried`
-    (Quantity each; their equations: _carried_rates)."""
+    (Quantity each; their equations: _controller_rates)."""
     extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried)))
     return Component(
         name=name,
@@ -329,5 +284,4 @@ SUBSYSTEM_PC = _subsystem("subsystem_pc", "a sub-system with a plant controller 
                           "passive network, measurement and plant controller known, devices learned",
                           tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
                                                                 else "alike in every REPCA1)"))
-                                for n, _, how, what in PLANT_CONTROLLER_STATES)
-                          + tuple(Quantity(n, "pu", what) for n, what in COMMAND_STATES), SubsystemPCParams)
+                                for n, _, how, what in PLANT_CONTROLLER_STATES), SubsystemPCParams)
