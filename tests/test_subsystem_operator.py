@@ -538,3 +538,23 @@ def test_a_shipped_subsystem_surrogate_fmu_starts_itself_from_the_load_flow_and_
     rest = 0.005 * p.S / p.Sb
     assert np.max(np.abs(result["P"] - P0)) < rest and np.max(np.abs(result["Q"] - Q0)) < rest
     assert np.all(result["in_envelope"])
+
+
+@pytest.mark.parametrize("name", ["feeder", "plant"])
+def test_a_shipped_subsystem_name_finds_the_operator_shipped_for_its_generated_file(tmp_path, monkeypatch, name):
+    """`--attach BUS=feeder|plant:surrogate` looks its operator up by the bytes of the file the
+    generator writes for the name: the shipped operator must carry that file's digest, and its rating
+    must be that file's (the sum of its generating devices' Sn)."""
+    import onnx
+
+    from cosim.subsystem_operator import SHIPPED, registered
+    from reference_models.grid.subsystems import shipped_file
+    from surrogate.contract import operator_metadata
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))  # no operator a user registered
+    path = shipped_file(name, tmp_path / "subsystems")
+    operator = registered(path)
+    assert operator is not None and operator.parent == SHIPPED and operator.name.startswith(f"{name}-")
+    records = json.loads(path.read_text())
+    rating = sum(r["Sn"] for model in ("PVD1", "REGCA1") for r in records.get(model, []))
+    assert operator_metadata(onnx.load(str(operator)))["params"].S == pytest.approx(rating, rel=1e-12)
