@@ -105,10 +105,22 @@ def grid_fmu_cache(fmu_cache):
 
 
 def _interrupts_as_at_a_terminal():
-    """SIGINT back to its default in the child before it starts: a suite run in a background job
-    (`pytest &`: the shell ignores SIGINT there, and every program started from it inherits that)
-    still starts its commands as a terminal does."""
+    """SIGINT back to its default and unblocked in the child before it starts: a suite run in a
+    background job (`pytest &`: the shell ignores SIGINT there, and every program started from it
+    inherits that) or from a thread that blocks it (the signal mask survives fork and exec) still
+    starts its commands as a terminal does."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+def signal_dispositions(pid: int) -> str:
+    """The process's blocked, ignored and caught signal masks (/proc/PID/status; '' where it is gone
+    or not on Linux): what a test of Ctrl-C reports where the command did not take one."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            return " ".join(line.strip() for line in f if line.startswith(("SigBlk", "SigIgn", "SigCgt")))
+    except OSError:
+        return ""
 
 
 def opfmu_process(argv, **popen):

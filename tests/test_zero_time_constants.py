@@ -229,11 +229,16 @@ def test_andes_trapezoid_leaves_a_lagless_regulator_beyond_its_limits_after_a_cl
     T (y - y0) - h/2 (f + f0) = 0, is f = -f0. A bolted fault at the TA = 0 IEEET1's bus holds its
     LA_y at VRMAX (5.6 pu) mid-fault, as ours (the rates agree at 1.05 s); the step that leaves the
     limit leaves f != 0, and f alternates in sign from step to step from then on, undamped: at 2.5 s
-    ANDES' LA_y is 6.5 pu, beyond VRMAX, at KA times its input 1.07 pu (the exciter integrates the
-    two-step average, KA times the input, unclipped). The other IEEET1s agree with ANDES throughout;
-    the lagless one's exciter there differs, ANDES' by its numerical alternation."""
+    and the step after it ANDES' LA_y lies on either side of the value about which it alternates,
+    one of the two beyond VRMAX (the exciter integrates the two-step average, KA times the input,
+    unclipped). Which of the two steps holds which value, and the amplitude (6.5 or 7.4 pu above),
+    differ between machines with the round-off of ANDES' Newton iterations. The other IEEET1s agree
+    with ANDES throughout; the lagless one's exciter there differs, ANDES' by its numerical
+    alternation."""
     pytest.importorskip("andes")
-    for t, ss in zip(TIMES, _run(1e-4, TIMES)):
+    times = (TIMES[0], TIMES[1], TIMES[1] + 0.005)  # mid-fault, then two steps of h = 5 ms after clearing
+    after = []
+    for t, ss in zip(times, _run(1e-4, times)):
         lagless = _lagless(ss)
         VRMAX = float(ss.IEEET1.VRMAX.v[lagless])
         for i, (TA, difference, LA_y) in enumerate(_ieeet1_rates(ss)):
@@ -241,5 +246,7 @@ def test_andes_trapezoid_leaves_a_lagless_regulator_beyond_its_limits_after_a_cl
                 assert difference < 1e-5, (t, i, TA, difference)
             if i == lagless and t == TIMES[0]:
                 assert LA_y == pytest.approx(VRMAX, rel=1e-12)
-            if i == lagless and t == TIMES[1]:
-                assert LA_y > VRMAX and difference > 0.1, (LA_y, difference)
+            if i == lagless and t > TIMES[0]:
+                after.append((LA_y, difference))
+    (first, d1), (second, d2) = after
+    assert max(first, second) > VRMAX and min(first, second) < VRMAX - 5.0 and min(d1, d2) > 0.1, after
