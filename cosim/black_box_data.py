@@ -250,7 +250,8 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
             cases.append((case, bus))
     params = {"Sb": float(first.base_mva), "S": float(rating_mva), "G": 0.0, "B": 0.0, **rest,
               "busf_fn": float(first.f_hz)}
-    component("subsystem").params(params)  # checked before anything runs
+    model = component("subsystem_mem" if plan.memory else "subsystem")
+    model.params(params)  # checked before anything runs
     runs = draw_runs(plan, cases, rng)
     tasks = [(k, asdict(r), attachments[r.attachment][2], attachments[r.attachment][1], params, plan.to_dict(),
               str(out / ".fmus"), str(partial), str(box), bus_port_spec) for k, r in enumerate(runs)
@@ -258,4 +259,4 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     run_all(record_replay, tasks, len(runs), "black-box replays", workers, progress)
     return _assemble(out, runs, attachments, params, plan, seed, key, started, {"kind": "black box", "fmu": box.name,
                                                                            "bus_port": bus_port_spec},
-                     component("subsystem"))
+                     model)

@@ -16,7 +16,9 @@ the host records at the boundary becomes the component's inputs and states, each
     Vf .. Vhold        where the plan carries the plant controller (component `subsystem_pc`): its
                        REPCA1's states (the master's device states), the integrators and lags
                        summed over the sub-system's REPCA1, the filtered and held voltage (alike in
-                       all) averaged.
+                       all) averaged;
+    Vm1 .. Vm3         where the plan carries a memory (`subsystem_mem`, `subsystem_pc_mem`): Vs
+                       through the lags MEMORY_LAGS, linear between rows, integrated exactly.
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -40,13 +42,13 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_models.blocks import lags_of_ramp
+from reference_models.blocks import lag_of_ramp, lags_of_ramp
 from reference_models.components import component
 from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
-from reference_models.models.subsystem import N_BOUNDARY, PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES
+from reference_models.models.subsystem import MEMORY_LAGS, N_BOUNDARY, PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -64,7 +66,8 @@ class Plan:
     steps, a share `trips` of the runs a generator trip instead and a share `opened` of the faults
     cleared with a line at the fault bus opened; windows of `horizon` s every `stride` s;
     `carry_controller`: the windows carry the sub-system's plant controller states too (component
-    `subsystem_pc`, which needs an REPCA1; docs/subsystems.md)."""
+    `subsystem_pc`, which needs an REPCA1; docs/subsystems.md); `memory`: and a memory of the boundary
+    voltage (components `subsystem_mem`, `subsystem_pc_mem`)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -78,6 +81,7 @@ class Plan:
     horizon: float = 0.2
     stride: float = 0.02
     carry_controller: bool = False
+    memory: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -162,22 +166,37 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
     return theta_f, theta_w
 
 
-def subsystem_model(records: dict, carry_controller: bool = False):
+def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
-    plant_controller_params refuses the others), else `subsystem`."""
+    plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
+    voltage (`_mem`) where asked."""
+    suffix = "_mem" if memory else ""
     if not carry_controller:
-        return component("subsystem")
+        return component("subsystem" + suffix)
     if not records.get("REPCA1"):
         raise DatasetError("the sub-system has no plant controller (REPCA1) whose states it could carry")
-    return component("subsystem_pc")
+    return component("subsystem_pc" + suffix)
+
+
+def memory_states(t: np.ndarray, V: np.ndarray, lags) -> np.ndarray:
+    """[n, len(lags)]: a sub-system's memory (T dVm/dt = V - Vm for each T of `lags` [s]) at rest at V[0],
+    driven by the boundary voltage V [n] linear between the times t [n], integrated exactly over each
+    interval (blocks.lag_of_ramp); a lag holds its value across the two rows of a switching (rows at
+    one time)."""
+    out = np.empty((len(t), len(lags)))
+    out[0] = V[0]
+    for k in range(1, len(t)):
+        h = t[k] - t[k - 1]
+        out[k] = [lag_of_ramp(m, V[k - 1], V[k], h, T) if h > 0 else m for m, T in zip(out[k - 1], lags)]
+    return out
 
 
 def controller_columns(case, bus: int, model) -> list:
     """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
     state columns of a grid result it combines, those of the REPCA1 behind the boundary `bus` of
     `case`, and how ("sum" or "mean")."""
-    carried = model.state_names[N_BOUNDARY:]
+    carried = [name for name in model.state_names[N_BOUNDARY:] if name in {s[0] for s in PLANT_CONTROLLER_STATES}]
     if not carried:
         return []
     behind = set(subsystem_buses(case.network, bus))
@@ -412,7 +431,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records, plan.carry_controller)
+    model = subsystem_model(records, plan.carry_controller, plan.memory)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
@@ -460,6 +479,8 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
             continue
         # the measurement from the recorded angle here, not in the worker: one definition per dataset
         rows["x"][:, 0], rows["x"][:, 1] = bus_frequency_states(rows["t"], rows["u"][:, 1], p.busf_Tf, p.busf_Tw)
+        if "Vm1" in model.state_names:  # the memory from the recorded voltage, as the measurement
+            rows["x"] = np.concatenate([rows["x"], memory_states(rows["t"], rows["u"][:, 0], MEMORY_LAGS)], axis=1)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

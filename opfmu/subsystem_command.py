@@ -25,8 +25,8 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
                 "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
-SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "members",
-                  "frequency_features")
+SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
+                  "members", "frequency_features")
 MAX_MEMBERS = 16
 
 
@@ -57,6 +57,10 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--carry-controller", action="store_true", default=None,
                     help="with --subsystem FILE of a plant whose REPCA1 read its boundary bus: carry its plant "
                          "controller's states with their own equations (component subsystem_pc; docs/subsystems.md)")
+    op.add_argument("--memory", action="store_true", default=None,
+                    help="with --subsystem: carry the boundary voltage's recent past, the voltage through lags of "
+                         "0.05, 0.25 and 1 s, stepped exactly, which the operators read at each window's start "
+                         "(components subsystem_mem, subsystem_pc_mem; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",
@@ -72,7 +76,7 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --members, --frequency-features, --epochs, "
+                        "--hosts, --buses, --stride, --carry-controller, --memory, --members, --frequency-features, --epochs, "
                         "--seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
@@ -156,7 +160,7 @@ def _plan(args):
     plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
                 buses=Plan.buses if args.buses is None else args.buses,
                 stride=Plan.stride if args.stride is None else args.stride,
-                carry_controller=bool(args.carry_controller))
+                carry_controller=bool(args.carry_controller), memory=bool(args.memory))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)

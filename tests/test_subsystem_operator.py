@@ -70,6 +70,36 @@ def test_the_boundary_measurement_of_the_windows_is_the_busfreq_of_the_angle():
         assert y == pytest.approx([theta_f[k], theta_w[k]], abs=1e-9)
 
 
+def test_the_memory_of_the_windows_is_the_boundary_voltage_through_its_lags_and_holds_across_a_switching():
+    """The memory (subsystem_mem's Vm1..Vm3) of a run's rows: the component's own lags integrated along
+    the recorded voltage, linear between rows; at a switching (two rows at one time, the voltage
+    jumping between them) the lags hold their value."""
+    from scipy.integrate import solve_ivp
+
+    from cosim.subsystem_data import memory_states
+    from reference_models.components import component
+    from reference_models.models.subsystem import MEMORY_LAGS
+
+    model = component("subsystem_mem")
+    t = np.concatenate([np.linspace(0.0, 0.2, 21), np.linspace(0.2, 0.5, 31)])  # a switching at 0.2 s
+    V = 1.02 - 0.1 * np.sin(9 * t)
+    V[21:] -= 0.7  # a fault from 0.2 s on: the row after the switching
+    memory = memory_states(t, V, MEMORY_LAGS)
+    assert memory[21] == pytest.approx(memory[20], abs=0) and np.all(memory[0] == V[0])
+    p = _params()
+    for k in range(1, len(t)):
+        if t[k] == t[k - 1]:
+            continue
+
+        def rate(s, y, k=k):
+            x = np.array([0.0, 0.0, 0.0, 0.0, 1.0, *y])
+            return model.rhs(x, np.array([np.interp(s, t[k - 1:k + 1], V[k - 1:k + 1]), 0.0]), p)[5:]
+        y = solve_ivp(rate, (t[k - 1], t[k]), memory[k - 1], rtol=1e-11, atol=1e-13).y[:, -1]
+        assert y == pytest.approx(memory[k], abs=1e-9)
+    # 0.3 s into the fault the fast lag is near the fault's voltage, the slow one still far above it
+    assert abs(memory[-1][0] - V[-1]) < 0.05 and memory[-1][2] > V[-1] + 0.3
+
+
 @pytest.mark.parametrize("Tf", [0.02, 0.0])
 def test_the_window_features_are_the_measured_frequency_at_the_sensors_from_any_start(Tf):
     from dataclasses import replace
@@ -233,12 +263,14 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
 
 
 @pytest.mark.andes
-def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_path, monkeypatch):
+@pytest.mark.parametrize("memory", [False, True])
+def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_path, monkeypatch, memory):
     """Whatever its operator learned (here: three epochs), a `subsystem_pc` surrogate FMU steps the
     plant controller's states by the controller's own equations (the exact step of its affine
     states, each reading the ones before it): through a dip below the controller's freeze voltage
     and back, then an over-frequency, they follow the component's equations integrated under the
-    same held inputs (within 1 % of how far they moved)."""
+    same held inputs (within 1 % of how far they moved); with a memory (`subsystem_pc_mem`) its lags
+    of the boundary voltage too."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
     from scipy.integrate import solve_ivp
@@ -253,10 +285,10 @@ def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_pat
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
     sub = write_case(plant(PlantSpec(units=4, seed=3)), tmp_path / "plant.json")
     done = learn(sub, 1, tmp_path / "op", Plan(hosts=("ieee14",), buses=1, runs=6, stop=1.0, trips=0.0,
-                                               carry_controller=True), epochs=3, progress=False)
+                                               carry_controller=True, memory=memory), epochs=3, progress=False)
     meta = operator_metadata(onnx.load(str(done["operator"])))
     model, p = meta["component"], meta["params"]
-    assert model.name == "subsystem_pc"
+    assert model.name == "subsystem_pc" + ("_mem" if memory else "")
     V0, theta0 = 1.02, 0.2
     P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2
     x, _ = model.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
@@ -294,6 +326,8 @@ def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_pat
     fmu.freeInstance()
     assert scale[names.index("Qpi")] > 1e-4 and scale[names.index("Vhold")] > 0.1  # the dip moved them,
     assert scale[names.index("Ppi")] > 1e-5  # the over-frequency the active PI
+    if memory:
+        assert names[-3:] == ["Vm1", "Vm2", "Vm3"] and np.all(scale[-3:] > 0.05)
     assert np.all(worst <= 0.01 * scale + 1e-9), dict(zip(names, zip(worst, scale)))
 
 

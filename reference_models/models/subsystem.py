@@ -9,7 +9,9 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         filtered boundary voltage (REPCA1 s0_y), Vhold [pu] the voltage its reactive PI reads, held
         through a dip (s_hold), Qpi, Qcmd, Ppi, Pcmd [pu, system base] its reactive PI integrator
         (s2_xi) and command lag (s3_x), active PI integrator (s5_xi) and command lag (s6_y), each
-        summed over the plant's REPCA1 (in this order: each reads only those before it)
+        summed over the plant's REPCA1 (in this order: each reads only those before it); a sub-system
+        with a memory (SUBSYSTEM_MEM, SUBSYSTEM_PC_MEM) carries last Vm1, Vm2, Vm3 [pu]: the boundary
+        voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s)
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -38,7 +40,13 @@ What is known is written here; what is not is learned:
     and limits driven by the boundary voltage: SUBSYSTEM_PC carries its states (`--carry-controller`)
     with their known equations (reference_models.models.repca1, its set point Vref = n V_own, the
     load flow's boundary voltage); only its effect on the devices' currents is learned; the units'
-    own states are too many and too fast to carry.
+    own states are too many and too fast to carry;
+    which units tripped, how far their limits and lags have gone, is a function of the boundary
+    voltage's recent past that the two currents do not tell a window started after a fault: a
+    memory (`--memory`) carries that past as the boundary voltage through three lags,
+        T_k dVm_k/dt = Vs - Vm_k  (T_k: MEMORY_LAGS),
+    known states the FMU steps exactly, which the operator reads at each window's start (a fading
+    memory of the dip's depth, length and age: a delay embedding of the hidden states).
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -54,7 +62,8 @@ holds them fixed.
 
 Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
 n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0; a plant controller's
-filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start).
+filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start); a memory's lags
+at V0.
 """
 from __future__ import annotations
 
@@ -136,6 +145,8 @@ PLANT_CONTROLLER_STATES = (("Vf", "s0_y", "mean", "plant controller's filtered b
                            ("Ppi", "s5_xi", "sum", "plant controller's active PI integrator"),
                            ("Pcmd", "s6_y", "sum", "plant controller's active command (lag)"))
 N_BOUNDARY = 5  # theta_f, theta_w, Ip, Iq, n: the states of every sub-system
+N_CONTROLLER = len(PLANT_CONTROLLER_STATES)
+MEMORY_LAGS = (0.05, 0.25, 1.0)  # s: the memory's lags of the boundary voltage (Vm1, Vm2, Vm3)
 
 
 def _controller_rates(x, u, p, m) -> tuple:
@@ -143,29 +154,38 @@ def _controller_rates(x, u, p, m) -> tuple:
     REPCA1 (repca1.signals) reading the boundary voltage and measurement, no branch (its filtered
     branch powers stay 0), the set point Vref = n V_own (the load flow's boundary voltage)."""
     zero = 0.0 * x[4]
-    Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd = x[N_BOUNDARY:]
+    Vf, Vhold, Qpi, Qcmd, Ppi, Pcmd = x[N_BOUNDARY:N_BOUNDARY + N_CONTROLLER]
     rates = plant_controller_signals((x[0], x[1], Vf, zero, Qpi, Qcmd, zero, Ppi, Pcmd, Vhold),
                                      (u[0], u[1], zero, zero, zero, zero, x[4] * p.V_own, zero, zero, zero, zero),
                                      p.plant_controller(), m)["rates"]
     return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
 
 
-def derivatives(x, u, p: SubsystemParams, m):
-    """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's)/dt: the measurement's and
-    the controller's; the devices' currents' are learned (0); n is a constant of the study."""
-    d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    carried = _controller_rates(x, u, p, m) if len(x) > N_BOUNDARY else ()
-    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *carried)
+def _equations(carried: int, memory: tuple) -> tuple:
+    """(derivatives, start_equations) of a sub-system that carries `carried` plant controller states
+    (0 or N_CONTROLLER) and a memory of the lags `memory` [s] (after them)."""
+    first = N_BOUNDARY + carried  # the memory's first state
 
+    def derivatives(x, u, p: SubsystemParams, m):
+        """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's, then a memory's)/dt:
+        the measurement's, the controller's and the memory's; the devices' currents' are learned (0);
+        n is a constant of the study."""
+        d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
+        controller = _controller_rates(x, u, p, m) if carried else ()
+        lags = tuple((u[0] - x[first + k]) / T for k, T in enumerate(memory))
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags)
 
-def start_equations(x, u, p: SubsystemParams, m):
-    """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
-    voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
-    integrators and command lags at 0 (ANDES' REPCA1 start); the learned currents' rows are unread
-    (the load flow's P, Q fix them)."""
-    d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
-    carried = ((x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if len(x) > N_BOUNDARY else ())
-    return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *carried)
+    def start_equations(x, u, p: SubsystemParams, m):
+        """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
+        voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
+        integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs; the learned
+        currents' rows are unread (the load flow's P, Q fix them)."""
+        d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
+        controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
+        lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags)
+
+    return derivatives, start_equations
 
 
 def outputs(x, u, p: SubsystemParams, m):
@@ -181,17 +201,18 @@ def outputs(x, u, p: SubsystemParams, m):
     return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
 
 
-def _equilibrium(carried: int):
+def _equilibrium(carried: int, memory: int):
     def equilibrium(u, p: SubsystemParams) -> np.ndarray:
-        """The rest [5 + carried] under constant (Vs, theta_vs), as if the load flow had put the
-        boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering the power
-        of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled tap, a
-        carried controller at its start (_controller_start)."""
+        """The rest [5 + carried + memory] under constant (Vs, theta_vs), as if the load flow had put
+        the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering the
+        power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled tap,
+        a carried controller at its start (_controller_start), a memory at Vs."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
-        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried))
+        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
+                        + [Vs] * memory)
     return equilibrium
 
 
@@ -221,14 +242,14 @@ def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.nda
     return out / (2.0 * math.pi * p.busf_Tw)
 
 
-def _starter(carried: int):
+def _starter(carried: int, memory: int):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
         return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
-                        + _controller_start(V0, carried)), {}
+                        + _controller_start(V0, carried) + [V0] * memory), {}
     return start
 
 
@@ -251,37 +272,49 @@ BOUNDARY_OUTPUTS = (
     Quantity("f", "pu", "measured boundary frequency (1: nominal)"))
 
 
-def _subsystem(name: str, description: str, carried: tuple, params_type) -> Component:
-    """The sub-system component with the boundary's states and a plant controller's `carried`
-    (Quantity each; their equations: _controller_rates)."""
-    extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried)))
+MEMORY_STATES = tuple(Quantity(f"Vm{k + 1}", "pu", f"boundary voltage through a lag of {T:g} s (the memory)")
+                      for k, T in enumerate(MEMORY_LAGS))
+CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
+                                                          else "alike in every REPCA1)"))
+                          for n, _, how, what in PLANT_CONTROLLER_STATES)
+
+
+def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = ()) -> Component:
+    """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
+    each; their equations: _controller_rates) and a memory of the lags `memory` [s] (MEMORY_STATES)."""
+    extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory)))
+    derivatives, start_equations = _equations(len(carried), memory)
     return Component(
         name=name,
         description=description,
-        states=BOUNDARY_STATES + carried,
+        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)],
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
         params_type=params_type,
         derivatives=derivatives,
         output_equations=outputs,
-        equilibrium=_equilibrium(len(carried)),
-        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * len(carried),
+        equilibrium=_equilibrium(len(carried), len(memory)),
+        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory)),
         # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
-        # plant controller's lags, PIs and hold, piecewise affine in their own state
+        # plant controller's lags, PIs and hold, piecewise affine in their own state; the memory's lags
         affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-        initialisation=Initialisation((), _starter(len(carried))),
+        initialisation=Initialisation((), _starter(len(carried), len(memory))),
         learned_states=(2, 3),
         start_equations=start_equations,
-        window_features=lambda p, sensor_times: measured_frequency_map(p, sensor_times, N_BOUNDARY + len(carried)),
+        window_features=lambda p, sensor_times: measured_frequency_map(
+            p, sensor_times, N_BOUNDARY + len(carried) + len(memory)),
     )
 
 
-SUBSYSTEM = _subsystem("subsystem", "a sub-system seen through its boundary bus: passive network and measurement "
-                       "known, devices learned", (), SubsystemParams)
-SUBSYSTEM_PC = _subsystem("subsystem_pc", "a sub-system with a plant controller seen through its boundary bus: "
-                          "passive network, measurement and plant controller known, devices learned",
-                          tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
-                                                                else "alike in every REPCA1)"))
-                                for n, _, how, what in PLANT_CONTROLLER_STATES), SubsystemPCParams)
+_KNOWN = "passive network and measurement known, devices learned"
+_KNOWN_PC = "passive network, measurement and plant controller known, devices learned"
+_MEMORY = " and a memory of its boundary voltage"
+SUBSYSTEM = _subsystem("subsystem", f"a sub-system seen through its boundary bus: {_KNOWN}", (), SubsystemParams)
+SUBSYSTEM_PC = _subsystem("subsystem_pc", f"a sub-system with a plant controller seen through its boundary bus: "
+                          f"{_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams)
+SUBSYSTEM_MEM = _subsystem("subsystem_mem", f"a sub-system{_MEMORY} seen through its boundary bus: {_KNOWN}", (),
+                           SubsystemParams, MEMORY_LAGS)
+SUBSYSTEM_PC_MEM = _subsystem("subsystem_pc_mem", f"a sub-system with a plant controller{_MEMORY} seen through its "
+                              f"boundary bus: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams, MEMORY_LAGS)
