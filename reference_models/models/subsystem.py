@@ -10,8 +10,8 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         through a dip (s_hold), Qpi, Qcmd, Ppi, Pcmd [pu, system base] its reactive PI integrator
         (s2_xi) and command lag (s3_x), active PI integrator (s5_xi) and command lag (s6_y), each
         summed over the plant's REPCA1 (in this order: each reads only those before it); a sub-system
-        with a memory (SUBSYSTEM_MEM, SUBSYSTEM_PC_MEM) carries last Vm1, Vm2, Vm3 [pu]: the boundary
-        voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s)
+        with a memory (SUBSYSTEM_MEM, SUBSYSTEM_PC_MEM) carries after those Vm1, Vm2, Vm3 [pu]: the
+        boundary voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s)
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -41,9 +41,10 @@ What is known is written here; what is not is learned:
     with their known equations (reference_models.models.repca1, its set point Vref = n V_own, the
     load flow's boundary voltage); only its effect on the devices' currents is learned; the units'
     own states are too many and too fast to carry;
-    which units tripped, how far their limits and lags have gone, is a function of the boundary
-    voltage's recent past that the two currents do not tell a window started after a fault: a
-    memory (`--memory`) carries that past as the boundary voltage through three lags,
+    how deep and how long ago the last dip was, which the units' lags, limits and holds after a dip
+    went through, is a function of the boundary voltage's recent past that two currents do not
+    tell a window started after a fault: a memory (`--memory`) carries that past as the boundary
+    voltage through three lags,
         T_k dVm_k/dt = Vs - Vm_k  (T_k: MEMORY_LAGS),
     known states the FMU steps exactly, which the operator reads at each window's start (a fading
     memory of the dip's depth, length and age: a delay embedding of the hidden states).
