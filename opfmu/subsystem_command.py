@@ -76,8 +76,8 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --memory, --members, --frequency-features, --epochs, "
-                        "--seed, --workers, --name")
+                        "--hosts, --buses, --stride, --carry-controller, --memory, --members, --frequency-features, "
+                        "--epochs, --seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     path = Path(args.subsystem)
