@@ -145,14 +145,17 @@ def test_sub_system_options_given_for_a_machine_are_refused(tmp_path, argv, says
 
 
 @pytest.mark.andes
-def test_the_dataset_of_a_third_party_box_comes_from_the_host_voltages_replayed_into_it(third_party_box, tmp_path):
+@pytest.mark.parametrize("memory", [False, True])
+def test_the_dataset_of_a_third_party_box_comes_from_the_host_voltages_replayed_into_it(third_party_box, tmp_path,
+                                                                                       memory):
     from cosim.black_box_data import generate_black_box
     from cosim.subsystem_data import Plan
 
-    plan = Plan(hosts=("ieee14",), buses=1, runs=7, stop=1.0, trips=0.0)  # a run in each split
+    plan = Plan(hosts=("ieee14",), buses=1, runs=7, stop=1.0, trips=0.0, memory=memory)  # a run in each split
     meta = generate_black_box(third_party_box, tmp_path / "data", 20.0, plan, seed=3, progress=False,
                               bus_port_spec=SPEC)
     assert meta["source"] == {"kind": "black box", "fmu": third_party_box.name, "bus_port": SPEC}
+    assert meta["component"] == ("subsystem_mem" if memory else "subsystem")  # a box has a memory as a case has
     assert meta["failed_runs"] == [] and sum(meta["counts"].values()) > 0
     assert meta["params"]["Ip_own"] == pytest.approx(-P0_MW / 100.0, rel=1e-12)
     assert math.isclose(meta["params"]["V_own"], 1.0)
