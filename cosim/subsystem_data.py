@@ -48,7 +48,8 @@ from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
-from reference_models.models.subsystem import MEMORY_LAGS, N_BOUNDARY, PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES
+from reference_models.models.subsystem import (MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY, PLANT_CONTROLLER_FIELDS,
+                                              PLANT_CONTROLLER_STATES)
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -196,7 +197,8 @@ def controller_columns(case, bus: int, model) -> list:
     """Per state the `model` carries beyond the boundary's five (PLANT_CONTROLLER_STATES), the device
     state columns of a grid result it combines, those of the REPCA1 behind the boundary `bus` of
     `case`, and how ("sum" or "mean")."""
-    carried = [name for name in model.state_names[N_BOUNDARY:] if name in {s[0] for s in PLANT_CONTROLLER_STATES}]
+    recorded = {name for name, *_ in PLANT_CONTROLLER_STATES}
+    carried = [name for name in model.state_names[N_BOUNDARY:] if name in recorded]
     if not carried:
         return []
     behind = set(subsystem_buses(case.network, bus))
@@ -479,7 +481,7 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
             continue
         # the measurement from the recorded angle here, not in the worker: one definition per dataset
         rows["x"][:, 0], rows["x"][:, 1] = bus_frequency_states(rows["t"], rows["u"][:, 1], p.busf_Tf, p.busf_Tw)
-        if "Vm1" in model.state_names:  # the memory from the recorded voltage, as the measurement
+        if MEMORY_STATES[0].name in model.state_names:  # the memory from the recorded voltage, as the measurement
             rows["x"] = np.concatenate([rows["x"], memory_states(rows["t"], rows["u"][:, 0], MEMORY_LAGS)], axis=1)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
