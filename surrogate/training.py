@@ -33,6 +33,7 @@ from reference_models.messages import one_line
 from reference_models.progress import progress_bar
 
 from .data import load_metadata, load_split, machine_of
+from .heap import freed_memory_kept
 from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, physics_scale,
                      residual_scale, standardise)
 from .models import NormStats, OperatorConfig, OperatorModel, build_model
@@ -190,7 +191,7 @@ def train(data_dir, config: TrainConfig, run_dir, progress: bool = True) -> Trai
         stats = NormStats.fit(splits["train"], _feature_map(config, machine, splits["train"]))
         model = build_model(config.model, stats)
     tensors = _to_tensors(splits, model, machine)
-    with _eager_heavyball():
+    with _eager_heavyball(), freed_memory_kept():
         optimizer = _make_optimizer(model, config)
         generator = torch.Generator().manual_seed(config.seed)
         state = _State()

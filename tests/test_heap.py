@@ -1,0 +1,52 @@
+"""The heap a training runs on (surrogate.heap): glibc's, where freed blocks of a full-batch step stay
+for the next step (the effect on a training's speed is measured in docs/results.md, not here)."""
+import ctypes
+import resource
+
+import pytest
+
+from surrogate.heap import _glibc, freed_memory_kept
+
+PAGE = resource.getpagesize()
+BLOCK = 64 * 2**20  # above glibc's largest self-set mmap threshold (32 MB)
+
+pytestmark = pytest.mark.skipif(_glibc() is None, reason="the heap settings are glibc's")
+
+
+def _minor_faults() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+
+def _resident_bytes() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * PAGE
+
+
+def _pages_mapped_to_fill_a_block(libc, free: bool = True) -> int:
+    """Minor page faults of allocating BLOCK bytes and writing them (then freeing them)."""
+    pointer = libc.malloc(BLOCK)
+    assert pointer, "malloc failed"
+    before = _minor_faults()
+    libc.memset(pointer, 1, BLOCK)
+    faults = _minor_faults() - before
+    if free:
+        libc.free(pointer)
+    return faults
+
+
+def test_a_freed_block_is_given_again_without_new_pages_within_and_goes_back_to_the_kernel_after():
+    libc = _glibc()
+    libc.malloc.restype = ctypes.c_void_p
+    libc.malloc.argtypes = [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    libc.memset.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t]
+    with freed_memory_kept():
+        _pages_mapped_to_fill_a_block(libc)
+        again = _pages_mapped_to_fill_a_block(libc)
+        kept = _resident_bytes()
+    returned = kept - _resident_bytes()
+    after = _pages_mapped_to_fill_a_block(libc)
+    pages = BLOCK // PAGE
+    assert again < pages // 100, f"{again} of {pages} pages mapped anew for a block freed just before"
+    assert returned > BLOCK // 2, f"{returned} of the {BLOCK} bytes freed returned to the kernel on the way out"
+    assert after > pages // 2, f"after it, a block is mapped afresh ({after} of {pages} pages), as glibc does"
