@@ -8,9 +8,9 @@ about 60 % of a plant operator's training (perf: clear_page under the page fault
 mul kernels; 0.25 epochs/s against 0.63 with the memory kept, docs/results.md).
 
 `freed_memory_kept` raises glibc's mmap and trim thresholds for the duration (blocks up to 2 GB come
-from the heap and stay there when freed) and, on the way out, puts glibc's start values back and
-returns the heap's free memory to the kernel (malloc_trim). Elsewhere (Windows, macOS, musl) it does
-nothing.
+from the heap and stay there when freed) and, on the way out, sets them where glibc's own adjustment
+leaves a process that has freed large blocks (32 MB and 64 MB) and returns the heap's free memory to
+the kernel (malloc_trim). Elsewhere (Windows, macOS, musl) it does nothing.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import platform
 
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameters (malloc.h)
 M_MMAP_THRESHOLD = -3
-GLIBC_START_THRESHOLD = 128 * 1024  # both thresholds' start values [bytes]
+ADJUSTED_MMAP_THRESHOLD = 32 * 2**20  # the largest mmap threshold glibc sets itself [bytes]
 KEPT_THRESHOLD = 2**31 - 1  # the largest value mallopt takes (an int) [bytes]
 
 
@@ -35,22 +35,23 @@ def _glibc():
         return None
 
 
-def _set_thresholds(libc, value: int) -> None:
-    libc.mallopt(M_MMAP_THRESHOLD, value)
-    libc.mallopt(M_TRIM_THRESHOLD, value)
+def _set_thresholds(libc, mmap: int, trim: int) -> None:
+    libc.mallopt(M_MMAP_THRESHOLD, mmap)
+    libc.mallopt(M_TRIM_THRESHOLD, trim)
 
 
 @contextlib.contextmanager
 def freed_memory_kept():
-    """Within: freed blocks up to 2 GB stay in the heap for the next allocation. After: glibc's start
-    thresholds again (fixed, no longer self-adjusting) and the heap's free memory returned."""
+    """Within: freed blocks up to 2 GB stay in the heap for the next allocation. After: glibc's
+    thresholds where its own adjustment would have left them (fixed from then on) and the heap's
+    free memory returned."""
     libc = _glibc()
     if libc is None:
         yield
         return
-    _set_thresholds(libc, KEPT_THRESHOLD)
+    _set_thresholds(libc, KEPT_THRESHOLD, KEPT_THRESHOLD)
     try:
         yield
     finally:
-        _set_thresholds(libc, GLIBC_START_THRESHOLD)
+        _set_thresholds(libc, ADJUSTED_MMAP_THRESHOLD, 2 * ADJUSTED_MMAP_THRESHOLD)
         libc.malloc_trim(0)
