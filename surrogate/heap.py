@@ -3,25 +3,32 @@
 A full-batch epoch allocates and frees the same intermediate tensors at every step, hundreds of MB
 for a sub-system's tens of thousands of windows. glibc serves a block above its mmap threshold
 (128 kB at start, raised by itself to at most 32 MB) with a fresh mapping and unmaps it when it is
-freed, so every epoch the kernel maps and zeroes that memory again: on a 2-core machine that was
-about 60 % of a plant operator's training (perf: clear_page under the page faults of torch's add and
-mul kernels; 0.25 epochs/s against 0.63 with the memory kept, docs/results.md).
+freed, so every epoch the kernel maps and zeroes that memory again. On the 2-core machine of
+benchmarks/training_heap.md, a plant operator's epoch (83613 windows) spent 43 % of its CPU in the
+kernel and mapped 900 000 pages anew: 0.36 epochs/s, against 0.54 with the memory kept.
 
 `freed_memory_kept` raises glibc's mmap and trim thresholds for the duration (blocks up to 2 GB come
 from the heap and stay there when freed) and, on the way out, sets them where glibc's own adjustment
 leaves a process that has freed large blocks (32 MB and 64 MB) and returns the heap's free memory to
-the kernel (malloc_trim). Elsewhere (Windows, macOS, musl) it does nothing.
+the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the environment sets glibc's
+heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES), it does nothing. mallopt
+takes an int, so blocks above 2 GB are still mapped afresh; thresholds set in the environment before
+the process starts have no such bound (16 GB took the plant's epochs to 0.63 epochs/s):
+
+    MALLOC_MMAP_THRESHOLD_=17179869184 MALLOC_TRIM_THRESHOLD_=17179869184 opfmu operator ...
 """
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import os
 import platform
 
 M_TRIM_THRESHOLD = -1  # glibc's mallopt parameters (malloc.h)
 M_MMAP_THRESHOLD = -3
 ADJUSTED_MMAP_THRESHOLD = 32 * 2**20  # the largest mmap threshold glibc sets itself [bytes]
 KEPT_THRESHOLD = 2**31 - 1  # the largest value mallopt takes (an int) [bytes]
+ENVIRONMENT = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES")  # the user's own settings
 
 
 def _glibc():
@@ -46,7 +53,7 @@ def freed_memory_kept():
     thresholds where its own adjustment would have left them (fixed from then on) and the heap's
     free memory returned."""
     libc = _glibc()
-    if libc is None:
+    if libc is None or any(name in os.environ for name in ENVIRONMENT):
         yield
         return
     _set_thresholds(libc, KEPT_THRESHOLD, KEPT_THRESHOLD)
