@@ -24,15 +24,14 @@ def _resident_bytes() -> int:
         return int(f.read().split()[1]) * PAGE
 
 
-def _pages_mapped_to_fill_a_block(libc, free: bool = True) -> int:
-    """Minor page faults of allocating BLOCK bytes and writing them (then freeing them)."""
+def _pages_mapped_to_fill_a_block(libc) -> int:
+    """Minor page faults of allocating BLOCK bytes and writing them; the block is freed after."""
     pointer = libc.malloc(BLOCK)
     assert pointer, "malloc failed"
     before = _minor_faults()
     libc.memset(pointer, 1, BLOCK)
     faults = _minor_faults() - before
-    if free:
-        libc.free(pointer)
+    libc.free(pointer)
     return faults
 
 
