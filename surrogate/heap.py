@@ -8,7 +8,8 @@ benchmarks/training_heap.md, a plant operator's epoch (83613 windows) spent 43 %
 kernel and mapped 900 000 pages anew: 0.36 epochs/s, against 0.54 with the memory kept.
 
 `freed_memory_kept` raises glibc's mmap and trim thresholds for the duration (blocks up to 2 GB come
-from the heap and stay there when freed) and, on the way out, sets them where glibc's own adjustment
+from the heap and stay there when freed; in a thread that glibc moved to an arena of its own, whose
+heaps grow by at most 64 MB, blocks above that are still mapped afresh) and, on the way out, sets them where glibc's own adjustment
 leaves a process that has freed large blocks (32 MB and 64 MB) and returns the heap's free memory to
 the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the environment sets glibc's
 heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES), it does nothing. mallopt
