@@ -11,8 +11,11 @@ kernel and mapped 900 000 pages anew: 0.36 epochs/s, against 0.54 with the memor
 from the heap and stay there when freed; in a thread that glibc moved to an arena of its own, whose
 heaps grow by at most 64 MB, blocks above that are still mapped afresh) and, on the way out, sets them where glibc's own adjustment
 leaves a process that has freed large blocks (32 MB and 64 MB) and returns the heap's free memory to
-the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the environment sets glibc's
-heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES), it does nothing. mallopt
+the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the process started with an
+environment that sets glibc's heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES),
+it does nothing. What glibc read is the environment at the start (/proc/self/environ), not
+os.environ: dask's nanny puts MALLOC_TRIM_THRESHOLD_ into the os.environ of the process that starts
+its workers, as `opfmu operator` does before it trains, and glibc never reads it there. mallopt
 takes an int, so blocks above 2 GB are still mapped afresh; thresholds set in the environment before
 the process starts have no such bound (16 GB took the plant's epochs to 0.63 epochs/s):
 
@@ -43,6 +46,16 @@ def _glibc():
         return None
 
 
+def started_with_heap_settings() -> bool:
+    """Whether the environment this process started with (what glibc read) sets glibc's heap."""
+    try:
+        with open("/proc/self/environ", "rb") as f:
+            names = {entry.split(b"=", 1)[0].decode("utf-8", "replace") for entry in f.read().split(b"\0")}
+    except OSError:
+        names = set(os.environ)
+    return any(name in names for name in ENVIRONMENT)
+
+
 def _set_thresholds(libc, mmap: int, trim: int) -> None:
     libc.mallopt(M_MMAP_THRESHOLD, mmap)
     libc.mallopt(M_TRIM_THRESHOLD, trim)
@@ -54,7 +67,7 @@ def freed_memory_kept():
     thresholds where its own adjustment would have left them (fixed from then on) and the heap's
     free memory returned."""
     libc = _glibc()
-    if libc is None or any(name in os.environ for name in ENVIRONMENT):
+    if libc is None or started_with_heap_settings():
         yield
         return
     _set_thresholds(libc, KEPT_THRESHOLD, KEPT_THRESHOLD)
