@@ -15,7 +15,7 @@ the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the proces
 environment that sets glibc's heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES),
 it does nothing. What glibc read is the environment at the start (/proc/self/environ), not
 os.environ: dask's nanny puts MALLOC_TRIM_THRESHOLD_ into the os.environ of the process that starts
-its workers, as `opfmu operator` does before it trains, and glibc never reads it there. mallopt
+its workers, as `opfmu operator` does for a machine before it trains, and glibc never reads it there. mallopt
 takes an int, so blocks above 2 GB are still mapped afresh; thresholds set in the environment before
 the process starts have no such bound (16 GB took the plant's epochs to 0.63 epochs/s):
 
