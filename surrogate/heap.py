@@ -9,15 +9,16 @@ kernel and mapped 900 000 pages anew: 0.36 epochs/s, against 0.54 with the memor
 
 `freed_memory_kept` raises glibc's mmap and trim thresholds for the duration (blocks up to 2 GB come
 from the heap and stay there when freed; in a thread that glibc moved to an arena of its own, whose
-heaps grow by at most 64 MB, blocks above that are still mapped afresh) and, on the way out, sets them where glibc's own adjustment
-leaves a process that has freed large blocks (32 MB and 64 MB) and returns the heap's free memory to
-the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and where the process started with an
-environment that sets glibc's heap (MALLOC_MMAP_THRESHOLD_, MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES),
-it does nothing. What glibc read is the environment at the start (/proc/self/environ), not
-os.environ: dask's nanny puts MALLOC_TRIM_THRESHOLD_ into the os.environ of the process that starts
-its workers, as `opfmu operator` does for a machine before it trains, and glibc never reads it there. mallopt
-takes an int, so blocks above 2 GB are still mapped afresh; thresholds set in the environment before
-the process starts have no such bound (16 GB took the plant's epochs to 0.63 epochs/s):
+heaps grow by at most 64 MB, blocks above that are still mapped afresh) and, on the way out, sets
+them where glibc's own adjustment leaves a process that has freed large blocks (32 MB and 64 MB) and
+returns the heap's free memory to the kernel (malloc_trim). Elsewhere (Windows, macOS, musl), and
+where the process started with an environment that sets glibc's heap (MALLOC_MMAP_THRESHOLD_,
+MALLOC_TRIM_THRESHOLD_, GLIBC_TUNABLES), it does nothing. What glibc read is the environment at the
+start (/proc/self/environ), not os.environ: dask's nanny puts MALLOC_TRIM_THRESHOLD_ into the
+os.environ of the process that starts its workers, as `opfmu operator` does for a machine before it
+trains, and glibc never reads it there. mallopt takes an int, so blocks above 2 GB are still mapped
+afresh; thresholds set in the environment before the process starts have no such bound (16 GB took
+the plant's epochs to 0.63 epochs/s):
 
     MALLOC_MMAP_THRESHOLD_=17179869184 MALLOC_TRIM_THRESHOLD_=17179869184 opfmu operator ...
 """
