@@ -62,7 +62,7 @@ def measure() -> dict:
 
 
 def test_a_freed_block_is_given_again_without_new_pages_within_and_goes_back_to_the_kernel_after():
-    # a command's environment: without the heap settings that dask's nanny put into this process's
+    # a command's environment: without the heap setting that a test's dask nanny put into os.environ here
     env = {k: v for k, v in os.environ.items() if k not in ENVIRONMENT}
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
     done = subprocess.run([sys.executable, __file__], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
