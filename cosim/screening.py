@@ -306,7 +306,7 @@ def screen_one(task: ScreeningTask) -> dict:
 
 
 WORKER_START_TIMEOUT_S = 120.0  # s: the local workers not all up by then is an error (a start that failed)
-CLOSE_TIMEOUT_S = 15.0  # s: a client's or local cluster's close on an interrupted start, before it is tried again
+CLOSE_TIMEOUT_S = 15.0  # s: a client's or local cluster's close, before it is tried again
 
 
 # the longest path of a Unix socket (sun_path: 108 bytes on Linux, 104 on the BSDs and macOS), less
@@ -366,9 +366,23 @@ def _local_cluster(workers: int, scratch: str):
     return cluster, client
 
 
+def close_workers(client, cluster, close=close_runners) -> None:
+    """Runs `close` (by default close_runners: the runners' FMUs and the travelled files) on every
+    worker of `client`, then closes `client` and `cluster` (None: a remote scheduler's, left running)
+    as _close_quietly does. A worker already gone took its runners with it. A Ctrl-C while `close`
+    runs ends it there; the client and the cluster are closed all the same, and KeyboardInterrupt
+    then raised."""
+    try:
+        client.run(close)
+    except Exception:  # a worker gone: its runners ended with it
+        pass
+    finally:
+        _close_quietly(client, cluster)
+
+
 def _close_quietly(client, cluster) -> None:
-    """Closes `client` and `cluster` (None: not made yet) with Ctrl-C held off, on the way out of an
-    interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
+    """Closes `client` and `cluster` (None: not made yet, or a remote scheduler's) with Ctrl-C held
+    off, at the end of a screening or on the way out of an interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
     by the interrupt it follows: distributed's sync then raises UnboundLocalError) or that waits past
     CLOSE_TIMEOUT_S (its event loop left waiting for a worker the interrupt stopped half-started) is
     tried once more; where one still fails, this process's child processes (the fork server and the
@@ -463,13 +477,7 @@ def screen(tasks, workers: int = 2, scheduler: str | None = None, progress: bool
                 rows[futures[future]] = future.result()
                 report.update()
         finally:
-            try:
-                client.run(close_runners)
-            except BaseException:
-                pass
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            close_workers(client, cluster)
         return rows
     finally:
         if report is not None:
