@@ -536,7 +536,7 @@ def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, 
     assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
 
 
-@pytest.mark.parametrize("name", ["feeder", "plant"])
+@pytest.mark.parametrize("name", ["feeder", "feeder100", "plant"])
 def test_a_shipped_subsystem_surrogate_fmu_starts_itself_from_the_load_flow_and_rests_there_under_fmpy_alone(
         tmp_path, name):
     """A third-party master: fmpy's simulate_fmu given nothing but the boundary's load flow (V_lf,
@@ -591,4 +591,22 @@ def test_a_shipped_subsystem_name_finds_the_operator_shipped_for_its_generated_f
     assert operator is not None and operator.parent == SHIPPED and operator.name.startswith(f"{name}-")
     records = json.loads(path.read_text())
     rating = sum(r["Sn"] for model in ("PVD1", "REGCA1") for r in records.get(model, []))
+    assert operator_metadata(onnx.load(str(operator)))["params"].S == pytest.approx(rating, rel=1e-12)
+
+
+def test_the_100_unit_feeder_of_seed_0_finds_the_operator_shipped_for_its_generated_file(tmp_path, monkeypatch):
+    """The cost against N (benchmarks/subsystems.py) attaches the generator's feeder of 100 units
+    (seed 0): an operator is shipped for the bytes of that file, with its rating."""
+    import onnx
+
+    from cosim.subsystem_operator import SHIPPED, registered
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+    from surrogate.contract import operator_metadata
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))  # no operator a user registered
+    path = tmp_path / "feeder100.json"
+    write_case(feeder(FeederSpec(units=100, seed=0)), path)
+    operator = registered(path)
+    assert operator is not None and operator.parent == SHIPPED and operator.name.startswith("feeder100-")
+    rating = sum(r["Sn"] for r in json.loads(path.read_text())["PVD1"])
     assert operator_metadata(onnx.load(str(operator)))["params"].S == pytest.approx(rating, rel=1e-12)
