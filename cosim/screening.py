@@ -381,12 +381,13 @@ def close_workers(client, cluster, close=close_runners) -> None:
 
 
 def _close_quietly(client, cluster) -> None:
-    """Closes `client` and `cluster` (None: not made yet, or a remote scheduler's) with Ctrl-C held
-    off, at the end of a screening or on the way out of an interrupted or failed start. A close that dask's shutdown breaks half-way (its coroutine cancelled
-    by the interrupt it follows: distributed's sync then raises UnboundLocalError) or that waits past
-    CLOSE_TIMEOUT_S (its event loop left waiting for a worker the interrupt stopped half-started) is
-    tried once more; where one still fails, this process's child processes (the fork server and the
-    workers it started) are ended, so that nothing outlives the command."""
+    """Closes `client` and `cluster` (None: not made yet, or a remote scheduler's) with Ctrl-C held off,
+    at the end of a screening or on the way out of an interrupted or failed start. A close that dask's
+    shutdown breaks half-way (its coroutine cancelled by the interrupt it follows: distributed's sync
+    then raises UnboundLocalError) or that waits past CLOSE_TIMEOUT_S (its event loop left waiting for a
+    worker the interrupt stopped half-started) is tried once more; where one still fails, this process's
+    child processes (the fork server and the workers it started) are ended, so that nothing outlives the
+    command."""
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         closed = True
