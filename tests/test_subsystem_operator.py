@@ -574,39 +574,38 @@ def test_a_shipped_subsystem_surrogate_fmu_starts_itself_from_the_load_flow_and_
     assert np.all(result["in_envelope"])
 
 
-@pytest.mark.parametrize("name", ["feeder", "plant"])
-def test_a_shipped_subsystem_name_finds_the_operator_shipped_for_its_generated_file(tmp_path, monkeypatch, name):
-    """`--attach BUS=feeder|plant:surrogate` looks its operator up by the bytes of the file the
-    generator writes for the name: the shipped operator must carry that file's digest, and its rating
-    must be that file's (the sum of its generating devices' Sn)."""
+def _finds_the_operator_shipped_for(path, prefix: str) -> None:
+    """The operator registered for the file `path` is a shipped one named `prefix`-..., and its rating
+    is that file's (the sum of its generating devices' Sn)."""
     import onnx
 
     from cosim.subsystem_operator import SHIPPED, registered
-    from reference_models.grid.subsystems import shipped_file
     from surrogate.contract import operator_metadata
 
-    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))  # no operator a user registered
-    path = shipped_file(name, tmp_path / "subsystems")
     operator = registered(path)
-    assert operator is not None and operator.parent == SHIPPED and operator.name.startswith(f"{name}-")
+    assert operator is not None and operator.parent == SHIPPED and operator.name.startswith(f"{prefix}-")
     records = json.loads(path.read_text())
     rating = sum(r["Sn"] for model in ("PVD1", "REGCA1") for r in records.get(model, []))
     assert operator_metadata(onnx.load(str(operator)))["params"].S == pytest.approx(rating, rel=1e-12)
 
 
+@pytest.mark.parametrize("name", ["feeder", "plant"])
+def test_a_shipped_subsystem_name_finds_the_operator_shipped_for_its_generated_file(tmp_path, monkeypatch, name):
+    """`--attach BUS=feeder|plant:surrogate` looks its operator up by the bytes of the file the
+    generator writes for the name: the shipped operator must carry that file's digest, and its rating
+    must be that file's."""
+    from reference_models.grid.subsystems import shipped_file
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))  # no operator a user registered
+    _finds_the_operator_shipped_for(shipped_file(name, tmp_path / "subsystems"), name)
+
+
 def test_the_100_unit_feeder_of_seed_0_finds_the_operator_shipped_for_its_generated_file(tmp_path, monkeypatch):
     """The cost against N (benchmarks/subsystems.py) attaches the generator's feeder of 100 units
     (seed 0): an operator is shipped for the bytes of that file, with its rating."""
-    import onnx
-
-    from cosim.subsystem_operator import SHIPPED, registered
     from reference_models.grid.subsystems import FeederSpec, feeder, write_case
-    from surrogate.contract import operator_metadata
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))  # no operator a user registered
     path = tmp_path / "feeder100.json"
     write_case(feeder(FeederSpec(units=100, seed=0)), path)
-    operator = registered(path)
-    assert operator is not None and operator.parent == SHIPPED and operator.name.startswith("feeder100-")
-    rating = sum(r["Sn"] for r in json.loads(path.read_text())["PVD1"])
-    assert operator_metadata(onnx.load(str(operator)))["params"].S == pytest.approx(rating, rel=1e-12)
+    _finds_the_operator_shipped_for(path, "feeder100")
