@@ -168,8 +168,7 @@ def cmd_operator(args) -> None:
     from opfmu.errors import UserError
     from reference_models.component import ParameterError
 
-    from surrogate.data import DatasetError
-    from surrogate.training import TrainError
+    from surrogate.errors import DatasetError, TrainError
 
     if args.subsystem is not None:
         return cmd_subsystem(args)

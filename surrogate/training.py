@@ -33,6 +33,7 @@ from reference_models.messages import one_line
 from reference_models.progress import progress_bar
 
 from .data import load_metadata, load_split, machine_of
+from .errors import TrainError
 from .heap import freed_memory_kept
 from .losses import (LossWeights, data_loss, physics_collocation_loss, physics_data_loss, physics_scale,
                      residual_scale, standardise)
@@ -40,10 +41,6 @@ from .models import NormStats, OperatorConfig, OperatorModel, build_model
 
 OPTIMIZERS = ("soap", "adam")
 LR_SCHEDULES = ("constant", "cosine")
-
-
-class TrainError(ValueError):
-    """A run that cannot be started or resumed as asked."""
 
 
 @dataclass(frozen=True)

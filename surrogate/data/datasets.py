@@ -35,6 +35,7 @@ from reference_models.files import write_json, write_npz
 from reference_models.messages import explain
 from reference_models.progress import progress_bar
 
+from ..errors import DatasetError
 from .envelope import probe_plan, reachable_box, reachable_summary
 from .presets import LABELED, SPLITS, Preset
 from .runner import SolveRunner
@@ -52,10 +53,6 @@ def fingerprint(preset: Preset, seed: int, params) -> str:
     text = json.dumps({"preset": preset.to_dict(), "seed": seed, "params": params.to_dict(),
                        "format": FORMAT_VERSION, "opfmu": __version__}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
-
-
-class DatasetError(ValueError):
-    """A dataset directory that cannot be used as asked."""
 
 
 def generate(preset: Preset, out: str | Path, seed: int = 0, runner: SolveRunner | None = None,
