@@ -18,7 +18,11 @@ the host records at the boundary becomes the component's inputs and states, each
                        summed over the sub-system's REPCA1, the filtered and held voltage (alike in
                        all) averaged;
     Vm1 .. Vm3         where the plan carries a memory (`subsystem_mem`, `subsystem_pc_mem`): Vs
-                       through the lags MEMORY_LAGS, linear between rows, integrated exactly.
+                       through the lags MEMORY_LAGS, linear between rows, integrated exactly;
+    df_units           where the plan carries the devices' measured frequency (`subsystem_uf`): the
+                       rating-weighted mean of the frequency deviation [Hz] that the devices behind
+                       the boundary which measure one (a BusFreq's theta_f, theta_w among their
+                       states) read at their own buses, less the boundary's measurement above.
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -33,6 +37,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import tempfile
 import time
@@ -49,7 +54,7 @@ from reference_models.grid.boundary import boundary_current, passive_admittance,
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
 from reference_models.models.subsystem import (MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY, PLANT_CONTROLLER_FIELDS,
-                                              PLANT_CONTROLLER_STATES)
+                                              PLANT_CONTROLLER_STATES, UNIT_FREQUENCY_STATE)
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -68,7 +73,8 @@ class Plan:
     cleared with a line at the fault bus opened; windows of `horizon` s every `stride` s;
     `carry_controller`: the windows carry the sub-system's plant controller states too (component
     `subsystem_pc`, which needs an REPCA1; docs/subsystems.md); `memory`: and a memory of the boundary
-    voltage (components `subsystem_mem`, `subsystem_pc_mem`)."""
+    voltage (components `subsystem_mem`, `subsystem_pc_mem`); `unit_frequency`: the devices' own
+    measured frequency (component `subsystem_uf`, neither of those)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -83,6 +89,7 @@ class Plan:
     stride: float = 0.02
     carry_controller: bool = False
     memory: bool = False
+    unit_frequency: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -167,11 +174,17 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
     return theta_f, theta_w
 
 
-def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False):
+def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False,
+                    unit_frequency: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
     plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
-    voltage (`_mem`) where asked."""
+    voltage (`_mem`) where asked; `subsystem_uf` where the devices' measured frequency is asked
+    (DatasetError together with either of the others)."""
+    if unit_frequency:
+        if carry_controller or memory:
+            raise DatasetError("the devices' measured frequency is carried without a plant controller or a memory")
+        return component("subsystem_uf")
     suffix = "_mem" if memory else ""
     if not carry_controller:
         return component("subsystem" + suffix)
@@ -210,10 +223,30 @@ def controller_columns(case, bus: int, model) -> list:
     return [([f"{label}_{state[name][0]}" for label in devices], state[name][1]) for name in carried]
 
 
-def run_rows(result, case, bus: int, params: dict, columns: list = ()) -> dict:
+def unit_frequency_columns(case, bus: int, model) -> list:
+    """Where the `model` carries df_units, (bus, weight, busf_Tf, busf_Tw) of each device behind the
+    boundary `bus` of `case` that measures the frequency at its own bus (theta_f, theta_w among its
+    states; its BusFreq's busf_Tf, busf_Tw [s]) and has a rating Sn (the weight); else []. ValueError
+    where the sub-system has none."""
+    if UNIT_FREQUENCY_STATE.name not in model.state_names:
+        return []
+    behind = set(subsystem_buses(case.network, bus)) - {bus}
+    out = [(unit.bus, float(d.params.Sn), float(d.params.busf_Tf), float(d.params.busf_Tw))
+           for unit in case.units for d in unit.devices
+           if unit.bus in behind and {"theta_f", "theta_w"} <= set(d.component.state_names)
+           and all(hasattr(d.params, k) for k in ("Sn", "busf_Tf", "busf_Tw"))]
+    if not out:
+        raise ValueError(f"no device behind bus {bus} measures the frequency at its own bus: nothing for df_units")
+    return out
+
+
+def run_rows(result, case, bus: int, params: dict, columns: list = (), units: list = ()) -> dict:
     """The component's inputs u [n, 2] and states x [n, 5 + len(columns)] at the rows t [n] of a grid
     result (module docstring); columns: per carried state the result's device states it combines and
-    how (controller_columns)."""
+    how (controller_columns); units: the devices whose measured frequency the rows' f_units [n] (Hz
+    from nominal, their rating-weighted mean) averages (unit_frequency_columns; none: no f_units),
+    each a BusFreq of its settings along its own bus' recorded angle as the boundary's measurement is
+    (bus_frequency_states), so that at a switching both see the same angles."""
     net = case.network
     b = net.bus_index(bus)
     t = np.asarray(result.time, float)
@@ -226,7 +259,13 @@ def run_rows(result, case, bus: int, params: dict, columns: list = ()) -> dict:
     carried = [combine[how]([np.asarray(result.device_states[c], float) for c in group], axis=0)
                for group, how in columns]
     x = np.stack([theta_f, theta_w, device.real, -device.imag, np.full_like(t, n), *carried], axis=1)
-    return {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
+    rows = {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
+    if units:
+        theta_bus = np.asarray(result.theta_bus)
+        measured = [np.subtract(*bus_frequency_states(t, theta_bus[:, net.bus_index(at)], Tf, Tw)) / (2.0 * math.pi * Tw)
+                    for at, _, Tf, Tw in units]
+        rows["f_units"] = np.average(measured, axis=0, weights=[w for _, w, _, _ in units])
+    return rows
 
 
 def windows(rows: dict, plan: Plan) -> tuple:
@@ -364,7 +403,9 @@ def record_run(task: tuple) -> str:
     case, runner = _runner(attached, fmu_cache, plan.step)
     try:
         result, _ = runner.run(contingency_of(Run(**run), case, plan), plan.stop, stop_at_loss=True)
-        rows = run_rows(result, case, bus, params, controller_columns(case, bus, component(model)))
+        model = component(model)
+        rows = run_rows(result, case, bus, params, controller_columns(case, bus, model),
+                        unit_frequency_columns(case, bus, model))
         write_npz(out, **rows, failed=np.array(""))
     except (RuntimeError, ValueError, ArithmeticError) as exc:  # the master's one-line errors
         write_npz(out, failed=np.array(str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__))
@@ -433,7 +474,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records, plan.carry_controller, plan.memory)
+    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
@@ -483,6 +524,9 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         rows["x"][:, 0], rows["x"][:, 1] = bus_frequency_states(rows["t"], rows["u"][:, 1], p.busf_Tf, p.busf_Tw)
         if MEMORY_STATES[0].name in model.state_names:  # the memory from the recorded voltage, as the measurement
             rows["x"] = np.concatenate([rows["x"], memory_states(rows["t"], rows["u"][:, 0], MEMORY_LAGS)], axis=1)
+        if UNIT_FREQUENCY_STATE.name in model.state_names:  # the devices' measurement less the boundary's
+            boundary = (rows["x"][:, 0] - rows["x"][:, 1]) / (2.0 * np.pi * p.busf_Tw)
+            rows["x"] = np.concatenate([rows["x"], (rows["f_units"] - boundary)[:, None]], axis=1)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

@@ -115,7 +115,7 @@ def describe(component: Component, params, x_rest, u_rest) -> tuple:
                      if n in given.read and n in deliverable and n not in component.input_names)
     load_flow = bus is not None and any(k in given.read for k in LOAD_FLOW)
     conditions = (["P_lf", "Q_lf"] if load_flow else []) + [f"{n}{INIT_SUFFIX}" for n in delivers]
-    learned = [component.state_names[i] for i in component.learned_states]
+    learned = [component.state_names[i] for i in component.learned_states if i not in component.started_states]
     if len(solves) + len(learned) != len(conditions):
         return None, (f"its start fixes {', '.join(conditions) or 'nothing'} but solves "
                       f"{', '.join(list(solves) + learned) or 'no input'}: not one solved input or learned state "
@@ -167,8 +167,10 @@ def _residual(component: Component, params, spec: SelfStart, z, u, flow, deliver
 
 def rate_rows(component: Component) -> list:
     """The states whose start equations (their rates, or `start_equations`) are the start's first
-    rows, in order: all but the learned ones (the load flow's P and Q fix them)."""
-    return [i for i in range(component.n_states) if i not in component.learned_states]
+    rows, in order: all but the learned ones whose start the load flow's P and Q fix (those not in
+    Component.started_states)."""
+    return [i for i in range(component.n_states)
+            if i not in component.learned_states or i in component.started_states]
 
 
 def _anchor(component: Component, params, spec: SelfStart, values: dict, delivered) -> Anchor | None:

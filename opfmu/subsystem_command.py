@@ -26,7 +26,7 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
 SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
-                  "members", "frequency_features")
+                  "unit_frequency", "members", "frequency_features")
 MAX_MEMBERS = 16
 
 
@@ -61,6 +61,10 @@ def add_subsystem_options(op) -> None:
                     help="with --subsystem: carry the boundary voltage's recent past, the voltage through lags of "
                          "0.05, 0.25 and 1 s, stepped exactly, which the operators read at each window's start "
                          "(components subsystem_mem, subsystem_pc_mem; docs/subsystems.md)")
+    op.add_argument("--unit-frequency", action="store_true", default=None,
+                    help="with --subsystem FILE: carry how far the frequency its devices measure at their own buses "
+                         "is off the boundary's, learned, which the operators read at each window's start (component "
+                         "subsystem_uf; not with --carry-controller or --memory; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",
@@ -76,7 +80,8 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --memory, --members, --frequency-features, "
+                        "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --members, "
+                        "--frequency-features, "
                         "--epochs, --seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
@@ -101,6 +106,8 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
+    if args.unit_frequency and (args.carry_controller or args.memory):
+        raise UserError("--unit-frequency: not with --carry-controller or --memory")
     if args.carry_controller and not records.get("REPCA1"):
         raise UserError(f"--carry-controller: {path.name} has no plant controller (REPCA1) whose states it could carry")
     out, plan, name = _output(args), _plan(args), _name(args)
@@ -127,7 +134,8 @@ def _check_case(path: Path) -> None:
 
 def _black_box(path: Path, args) -> None:
     """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
-    for option, value in (("--boundary", args.boundary), ("--carry-controller", args.carry_controller)):
+    for option, value in (("--boundary", args.boundary), ("--carry-controller", args.carry_controller),
+                          ("--unit-frequency", args.unit_frequency)):
         if value is not None:
             raise UserError(f"{option} is for a case file; a black box (an FMU) is its bus port, never read inside")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
@@ -160,7 +168,8 @@ def _plan(args):
     plan = Plan(hosts=hosts, runs=Plan.runs if args.runs is None else args.runs,
                 buses=Plan.buses if args.buses is None else args.buses,
                 stride=Plan.stride if args.stride is None else args.stride,
-                carry_controller=bool(args.carry_controller), memory=bool(args.memory))
+                carry_controller=bool(args.carry_controller), memory=bool(args.memory),
+                unit_frequency=bool(args.unit_frequency))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)

@@ -123,6 +123,8 @@ class Component:
         through its boundary: reference_models.models.subsystem): `derivatives` gives 0 for them,
         an operator learns them from data alone (the physics losses and the FMU's residual leave
         them out), and nothing integrates the component (`require_known_rates`).
+    started_states: the learned states whose start `start_equations` fixes (a learned measurement
+        that starts at its rest); the others' start the load flow fixes (their rows are unread).
     start_equations(x, u, p, m): where a start from the load flow needs other equations than the
         rates, its residuals (a tuple of len(states), 0 at the start): a state constant through a
         study (dx/dt = 0) that the load flow fixes (the sub-system's tap n = V0 / V_own). The rows
@@ -156,6 +158,7 @@ class Component:
     initialisation: Initialisation | None = None
     affine_current: bool = False
     learned_states: tuple = ()
+    started_states: tuple = ()
     start_equations: Callable | None = None
     window_features: Callable | None = None
 
@@ -172,6 +175,8 @@ class Component:
         if not all(0 <= i < len(self.states) for i in self.learned_states) or \
                 set(self.learned_states) & set(self.affine_states):
             raise ValueError(f"component {self.name!r}: learned_states must index states that are not affine")
+        if not set(self.started_states) <= set(self.learned_states):
+            raise ValueError(f"component {self.name!r}: started_states must be learned states")
         if self.drift is not None:
             self.drift.check(len(self.states), len(self.inputs))
         self.ports.check(self.input_names, self.state_names + self.output_names, f"component {self.name!r}")

@@ -32,6 +32,25 @@ def test_the_subsystem_starts_from_the_load_flow_and_gives_back_its_injection():
     assert f == 1.0 and np.all(SUBSYSTEM.rhs(x, u, p) == 0.0)  # at rest: the measurement at the angle
 
 
+def test_a_subsystem_carrying_its_devices_measured_frequency_starts_it_at_the_boundarys_from_the_load_flow():
+    """subsystem_uf's df_units is learned, but its start is known (0: every device's measurement at
+    rest with the boundary's); the FMU's own start from the load flow solves the rest as for
+    `subsystem` and fixes df_units by its start equation, not by the load flow."""
+    from fmu_export.self_start import describe, rate_rows
+
+    model = component("subsystem_uf")
+    p = model.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": 0.98, "Ip_own": 0.03, "Iq_own": 0.004})
+    x, _ = model.initialisation.start({"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}, p)
+    assert x[5] == 0.0 and np.array_equal(x[:5], SUBSYSTEM.initialisation.start(
+        {"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}, SUBSYSTEM.params(p.to_dict()))[0])
+    assert model.learned_states == (2, 3, 5) and list(model.physics_mask()) == [1, 1, 0, 0, 1, 0]
+    assert rate_rows(model) == [0, 1, 4, 5]
+    x_rest = model.equilibrium(model.start_inputs, p)
+    spec, why = describe(model, p, x_rest, model.start_inputs)
+    assert why is None and spec.load_flow
+    assert np.all(model.start_residual(x, np.array([1.03, 0.4]), p)[[0, 1, 4, 5]] == pytest.approx(0.0, abs=1e-15))
+
+
 def test_a_frame_without_a_speed_only_turns():
     frame = frame_of(SUBSYSTEM.drift, _params())
     rng = np.random.default_rng(0)
@@ -157,6 +176,47 @@ def test_the_windows_give_back_the_current_the_detail_injects(tmp_path):
     assert np.max(np.abs(I_re + 1j * I_im - detail)) < 1e-12 * max(1.0, np.max(np.abs(detail)))
     assert rows["x"][0, 2:4] == pytest.approx([p.Ip_own / rows["x"][0, 4], p.Iq_own / rows["x"][0, 4]], rel=1e-9)
     assert np.min(rows["u"][:, 0]) < 0.6  # the fault reached the boundary
+
+
+@pytest.mark.andes
+def test_the_devices_measured_frequency_of_the_rows_is_what_their_own_busfreq_reads(tmp_path):
+    """df_units of a run's rows (subsystem_uf): the rating-weighted mean of a BusFreq along each
+    PVD1's own bus angle, as the boundary's measurement is made, less the boundary's; it follows
+    what the PVD1 measure in the master (their own states) from 50 ms after each switching on (at a
+    switching the rows give the angle after it, which the devices see from then on), is 0 at rest,
+    off the boundary's by tenths of a Hz through a fault near it and by hundredths 0.4 s after its
+    clearing."""
+    import andes
+
+    from cosim.fmus import generator_files
+    from cosim.master import MasterSettings
+    from cosim.runners import MasterRunner
+    from cosim.subsystem_data import bus_frequency_states, run_rows, subsystem_params, unit_frequency_columns
+    from reference_models.grid.andes_case import ANDES_CASES, case_from_file
+    from reference_models.grid.attach import attached_file
+    from reference_models.grid.contingency import Contingency
+    from reference_models.grid.subsystems import FeederSpec, feeder, write_case
+
+    records = feeder(FeederSpec(units=10, seed=2))
+    sub = write_case(records, tmp_path / "feeder.json")
+    case = case_from_file(attached_file(andes.get_case(ANDES_CASES["ieee14"]), [(13, sub)], tmp_path))
+    units = unit_frequency_columns(case, 13, component("subsystem_uf"))
+    assert len(units) == 10 and unit_frequency_columns(case, 13, SUBSYSTEM) == []
+    runner = MasterRunner(generator_files(case, "reference", tmp_path / "fmus"), case, MasterSettings(step=0.01))
+    result = runner.run(Contingency(fault_bus=13, fault_start=0.1, clear_s=0.2, fault_impedance=0.02j,
+                                    network=case.network), 0.6)[0]
+    runner.close()
+    rows = run_rows(result, case, 13, subsystem_params(records, case, 13), units=units)
+    t = rows["t"]
+    theta_f, theta_w = result.device_column("PVD1", "theta_f"), result.device_column("PVD1", "theta_w")
+    Sn = np.array([float(u.machine.params.Sn) for u in case.units if u.machine.component.name == "pvd1"])
+    own = (theta_f - theta_w) @ Sn / Sn.sum() / (2 * np.pi * 0.1)
+    settled = t >= 0.25
+    assert np.all(rows["f_units"][t < 0.1] == 0.0) and np.all(own[t < 0.1] == 0.0)
+    assert np.max(np.abs(rows["f_units"] - own)[settled]) < 0.03 * np.max(np.abs(own))
+    boundary = np.subtract(*bus_frequency_states(t, rows["u"][:, 1], 0.02, 0.1)) / (2 * np.pi * 0.1)
+    df = rows["f_units"] - boundary
+    assert np.max(np.abs(df[(t >= 0.1) & (t < 0.2)])) > 0.1 and 0.005 < abs(df[-1]) < 0.05
 
 
 @pytest.mark.andes

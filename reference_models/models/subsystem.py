@@ -11,7 +11,10 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         (s2_xi) and command lag (s3_x), active PI integrator (s5_xi) and command lag (s6_y), each
         summed over the plant's REPCA1 (in this order: each reads only those before it); a sub-system
         with a memory (SUBSYSTEM_MEM, SUBSYSTEM_PC_MEM) carries after those Vm1, Vm2, Vm3 [pu]: the
-        boundary voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s)
+        boundary voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s); a sub-system whose devices' own
+        measured frequency is carried (SUBSYSTEM_UF, `subsystem_uf`) carries last df_units [Hz]: the
+        rating-weighted mean of the frequency its devices measure at their own buses, less the
+        boundary's measured frequency
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -47,7 +50,13 @@ What is known is written here; what is not is learned:
     voltage through three lags,
         T_k dVm_k/dt = Vs - Vm_k  (T_k: MEMORY_LAGS),
     known states the FMU steps exactly, which the operator reads at each window's start (a fading
-    memory of the dip's depth, length and age: a delay embedding of the hidden states).
+    memory of the dip's depth, length and age: a delay embedding of the hidden states);
+    the devices inside measure the frequency at their own buses, whose angles move against the
+    boundary's as the sub-system's currents change through its impedances: a droop or trip acting
+    on it sees, just after a clearing and while the generation falls, a frequency some 0.01-0.05 Hz
+    off the boundary's, in a filter whose state a window started there does not see: with
+    `--unit-frequency` the operator carries that difference, df_units (learned: it follows the
+    devices' currents), and reads it at each window's start.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -162,10 +171,12 @@ def _controller_rates(x, u, p, m) -> tuple:
     return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
 
 
-def _equations(carried: int, memory: tuple) -> tuple:
+def _equations(carried: int, memory: tuple, unit_frequency: bool = False) -> tuple:
     """(derivatives, start_equations) of a sub-system that carries `carried` plant controller states
-    (0 or N_CONTROLLER) and a memory of the lags `memory` [s] (after them)."""
+    (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them) and the devices' measured
+    frequency (last, learned, 0 at rest)."""
     first = N_BOUNDARY + carried  # the memory's first state
+    last = first + len(memory)  # df_units, where carried
 
     def derivatives(x, u, p: SubsystemParams, m):
         """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's, then a memory's)/dt:
@@ -174,17 +185,20 @@ def _equations(carried: int, memory: tuple) -> tuple:
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = _controller_rates(x, u, p, m) if carried else ()
         lags = tuple((u[0] - x[first + k]) / T for k, T in enumerate(memory))
-        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags)
+        units = (0.0 * x[last],) if unit_frequency else ()
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags, *units)
 
     def start_equations(x, u, p: SubsystemParams, m):
         """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
         voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
-        integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs; the learned
-        currents' rows are unread (the load flow's P, Q fix them)."""
+        integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs, the devices'
+        measurement at the boundary's; the learned currents' rows are unread (the load flow's P, Q
+        fix them)."""
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
-        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags)
+        units = (x[last],) if unit_frequency else ()
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *units)
 
     return derivatives, start_equations
 
@@ -202,18 +216,19 @@ def outputs(x, u, p: SubsystemParams, m):
     return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
 
 
-def _equilibrium(carried: int, memory: int):
+def _equilibrium(carried: int, memory: int, unit_frequency: bool = False):
     def equilibrium(u, p: SubsystemParams) -> np.ndarray:
-        """The rest [5 + carried + memory] under constant (Vs, theta_vs), as if the load flow had put
-        the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering the
-        power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled tap,
-        a carried controller at its start (_controller_start), a memory at Vs."""
+        """The rest [5 + carried + memory (+ 1)] under constant (Vs, theta_vs), as if the load flow had
+        put the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering
+        the power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled
+        tap, a carried controller at its start (_controller_start), a memory at Vs, the devices'
+        measurement at the boundary's (df_units = 0)."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
         return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
-                        + [Vs] * memory)
+                        + [Vs] * memory + [0.0] * unit_frequency)
     return equilibrium
 
 
@@ -243,14 +258,14 @@ def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.nda
     return out / (2.0 * math.pi * p.busf_Tw)
 
 
-def _starter(carried: int, memory: int):
+def _starter(carried: int, memory: int, unit_frequency: bool = False):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
         return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
-                        + _controller_start(V0, carried) + [V0] * memory), {}
+                        + _controller_start(V0, carried) + [V0] * memory + [0.0] * unit_frequency), {}
     return start
 
 
@@ -275,37 +290,43 @@ BOUNDARY_OUTPUTS = (
 
 MEMORY_STATES = tuple(Quantity(f"Vm{k + 1}", "pu", f"boundary voltage through a lag of {T:g} s (the memory)")
                       for k, T in enumerate(MEMORY_LAGS))
+UNIT_FREQUENCY_STATE = Quantity("df_units", "Hz", "the devices' own measured frequency (rating-weighted mean) "
+                                "less the boundary's")
 CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
                                                           else "alike in every REPCA1)"))
                           for n, _, how, what in PLANT_CONTROLLER_STATES)
 
 
-def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = ()) -> Component:
+def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = (),
+               unit_frequency: bool = False) -> Component:
     """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
-    each; their equations: _controller_rates) and a memory of the lags `memory` [s] (MEMORY_STATES)."""
+    each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and,
+    where `unit_frequency`, the devices' measured frequency (UNIT_FREQUENCY_STATE, learned)."""
     extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory)))
-    derivatives, start_equations = _equations(len(carried), memory)
+    units = (N_BOUNDARY + len(extra),) if unit_frequency else ()
+    derivatives, start_equations = _equations(len(carried), memory, unit_frequency)
+    n_x = N_BOUNDARY + len(extra) + len(units)
     return Component(
         name=name,
         description=description,
-        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)],
+        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)] + (UNIT_FREQUENCY_STATE,) * unit_frequency,
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
         params_type=params_type,
         derivatives=derivatives,
         output_equations=outputs,
-        equilibrium=_equilibrium(len(carried), len(memory)),
-        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory)),
+        equilibrium=_equilibrium(len(carried), len(memory), unit_frequency),
+        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory)) + (0.02,) * len(units),
         # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
         # plant controller's lags, PIs and hold, piecewise affine in their own state; the memory's lags
         affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-        initialisation=Initialisation((), _starter(len(carried), len(memory))),
-        learned_states=(2, 3),
+        initialisation=Initialisation((), _starter(len(carried), len(memory), unit_frequency)),
+        learned_states=(2, 3) + units,
+        started_states=units,
         start_equations=start_equations,
-        window_features=lambda p, sensor_times: measured_frequency_map(
-            p, sensor_times, N_BOUNDARY + len(carried) + len(memory)),
+        window_features=lambda p, sensor_times: measured_frequency_map(p, sensor_times, n_x),
     )
 
 
@@ -319,3 +340,5 @@ SUBSYSTEM_MEM = _subsystem("subsystem_mem", f"a sub-system{_MEMORY} seen through
                            SubsystemParams, MEMORY_LAGS)
 SUBSYSTEM_PC_MEM = _subsystem("subsystem_pc_mem", f"a sub-system with a plant controller{_MEMORY} seen through its "
                               f"boundary bus: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams, MEMORY_LAGS)
+SUBSYSTEM_UF = _subsystem("subsystem_uf", "a sub-system seen through its boundary bus, its devices' own measured "
+                          f"frequency carried: {_KNOWN}", (), SubsystemParams, unit_frequency=True)
