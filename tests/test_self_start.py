@@ -15,7 +15,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
 from cosim.export import export_case
-from fmu_export.native_reference_fmu import build_native_reference_fmu
+from fmu_export.build_cache import cached_native_reference_fmu
 from fmu_export.self_start import describe, self_start_of
 from reference_models.components import COMPONENTS
 from reference_models.grid.case import shipped_case
@@ -148,11 +148,10 @@ def test_a_host_that_chains_calculated_parameters_starts_a_unit_from_the_load_fl
 
 
 @pytest.mark.parametrize("fmi_version", [2, 3])
-def test_a_machine_starts_at_a_load_flow_point_far_from_its_default(tmp_path, fmi_version):
+def test_a_machine_starts_at_a_load_flow_point_far_from_its_default(fmi_version):
     """GENROU at -2.5 rad and an underexcited point: the continuation from the anchor gets there."""
     genrou = COMPONENTS["genrou"]
-    path = tmp_path / "g.fmu"
-    build_native_reference_fmu(path, "GENROUReference", genrou, fmi_version=fmi_version)
+    path = cached_native_reference_fmu("GENROUReference", genrou, fmi_version=fmi_version)
     fmu = Instance(path)
     point = {"V_lf": 0.96, "theta_lf": -2.5, "P_lf": 0.9, "Q_lf": -0.25}
     fmu.set(point)
@@ -167,14 +166,13 @@ def test_a_machine_starts_at_a_load_flow_point_far_from_its_default(tmp_path, fm
     assert close(p, 0.9) and close(q, -0.25)  # it delivers the load flow's power
 
 
-def test_a_start_that_has_no_rest_is_refused_with_the_reason(tmp_path):
+def test_a_start_that_has_no_rest_is_refused_with_the_reason():
     """EXAC1 asked for Efd = 50 pu: its regulator would sit beyond VRMAX = 8 pu (Python refuses it too)."""
     exac1 = COMPONENTS["exac1"]
     given = dict(zip(exac1.input_names, exac1.start_inputs)) | {"Efd": 50.0}
     with pytest.raises(ValueError, match="outside"):
         exac1.start(given, exac1.params())
-    path = tmp_path / "e.fmu"
-    build_native_reference_fmu(path, "EXAC1Reference", exac1, fmi_version=3)
+    path = cached_native_reference_fmu("EXAC1Reference", exac1, fmi_version=3)
     fmu = Instance(path)
     fmu.set({"Efd_init": 50.0})
     fmu.enter()
@@ -196,12 +194,11 @@ def test_components_whose_references_follow_relations_of_their_own_get_no_self_s
                          COMPONENTS["genrou"].steady_state(None, COMPONENTS["genrou"].params())).solves == ("Pm", "Efd")
 
 
-def test_an_initial_state_the_importer_sets_wins_over_the_start_parameters(tmp_path):
+def test_an_initial_state_the_importer_sets_wins_over_the_start_parameters():
     """As opfmu's master and the VeraGrid host do; a host that sets every declared start value as
     well (the start parameters at their defaults) starts there too."""
     genrou = COMPONENTS["genrou"]
-    path = tmp_path / "g.fmu"
-    build_native_reference_fmu(path, "GENROUReference", genrou)
+    path = cached_native_reference_fmu("GENROUReference", genrou)
     declared = {v.name: float(v.start) for v in read_model_description(str(path)).modelVariables
                 if v.causality == "parameter" and v.start is not None}
     x = np.array(genrou.steady_state(None, genrou.params())) * 1.01
@@ -212,12 +209,11 @@ def test_an_initial_state_the_importer_sets_wins_over_the_start_parameters(tmp_p
     assert fmu.get(list(genrou.state_names)) == list(x)
 
 
-def test_a_host_that_sets_only_parameters_starts_as_built(tmp_path):
+def test_a_host_that_sets_only_parameters_starts_as_built():
     """No start parameter off its default: the built start, whatever the parameters (a host that
     changes a limit and starts as it always did)."""
     genrou = COMPONENTS["genrou"]
-    path = tmp_path / "g.fmu"
-    build_native_reference_fmu(path, "GENROUReference", genrou)
+    path = cached_native_reference_fmu("GENROUReference", genrou)
     fmu = Instance(path)
     fmu.set({"xd": 2.1, "M": 9.0})
     fmu.enter()
@@ -246,7 +242,7 @@ SELF_STARTING = sorted(name for name, c in COMPONENTS.items()  # a learned compo
 
 
 @pytest.mark.parametrize("name", SELF_STARTING)
-def test_every_model_that_starts_itself_solves_the_start_its_initialisation_gives(name, tmp_path):
+def test_every_model_that_starts_itself_solves_the_start_its_initialisation_gives(name):
     """At a load flow or delivered values 5 % and (a bus device) 0.3 rad off the built ones, against
     Component.start; held states that nothing reads aside."""
     component = COMPONENTS[name]
@@ -254,8 +250,7 @@ def test_every_model_that_starts_itself_solves_the_start_its_initialisation_give
     u = np.array(component.start_inputs)
     x = component.steady_state(u, params)
     spec = self_start_of(component, params, x)
-    path = tmp_path / "m.fmu"
-    build_native_reference_fmu(path, f"{name.upper()}Reference", component)
+    path = cached_native_reference_fmu(f"{name.upper()}Reference", component)
     fmu = Instance(path)
     given = dict(zip(component.input_names, u))
     asked = {}
