@@ -19,7 +19,7 @@ import shutil
 from dataclasses import replace
 from pathlib import Path
 
-from reference_models.models.subsystem import MEMORY_STATES
+from reference_models.models.subsystem import MEMORY_STATES, UNIT_FREQUENCY_STATE
 from surrogate.losses import LossWeights
 from surrogate.models import OperatorConfig
 from surrogate.training import TrainConfig
@@ -29,23 +29,26 @@ from .subsystem_data import Plan, generate
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
 # (their rates are affine: corrections.c), so the data loss weighs them little; a plant controller's
 # carried states (subsystem_pc) only feed the next window, so they weigh less than the currents; a
-# memory's lags (subsystem_mem) are stepped exactly from the input alone and weigh as theta_f
+# memory's lags (subsystem_mem) are stepped exactly from the input alone and weigh as theta_f; the
+# devices' measured frequency (subsystem_uf) only feeds the next window and spikes at every switching:
+# at the controller's weight it took capacity from the currents (docs/results.md), so it weighs as theta_f
 TRAINING = TrainConfig(model=OperatorConfig(width=128, depth=3, latent=96, anchored=True, time_taus=(0.01, 0.03, 0.1)),
                        epochs=2000, patience=10**9, time_points=None, causal=True, physics=True,
                        weights=LossWeights(physics_collocation=0.0), state_weights=(0.2, 0.2, 5.0, 5.0, 0.2),
                        checkpoint_every=100)
 CARRIED_WEIGHT = 1.0  # the data loss' weight of each carried controller state
 MEMORY_WEIGHT = 0.2  # and of each of a memory's lags
+UNIT_FREQUENCY_WEIGHT = 0.2  # and of the devices' measured frequency
 MEMBERS = 1  # operators trained per sub-system and exported as their mean
 
 
 def training_config(state_names, seed: int, epochs: int | None, features: bool = False) -> TrainConfig:
     """TRAINING for a sub-system component of the states `state_names` (its carried states after
-    the boundary's five weighing CARRIED_WEIGHT, a memory's lags MEMORY_WEIGHT); features: the branch
-    also reads the boundary's measured frequency at every sensor (the component's window features,
-    surrogate/models.py)."""
-    memory = {q.name for q in MEMORY_STATES}
-    weights = TRAINING.state_weights + tuple(MEMORY_WEIGHT if name in memory else CARRIED_WEIGHT
+    the boundary's five weighing CARRIED_WEIGHT, a memory's lags MEMORY_WEIGHT, the devices' measured
+    frequency UNIT_FREQUENCY_WEIGHT); features: the branch also reads the boundary's measured
+    frequency at every sensor (the component's window features, surrogate/models.py)."""
+    weight = {**{q.name: MEMORY_WEIGHT for q in MEMORY_STATES}, UNIT_FREQUENCY_STATE.name: UNIT_FREQUENCY_WEIGHT}
+    weights = TRAINING.state_weights + tuple(weight.get(name, CARRIED_WEIGHT)
                                              for name in state_names[len(TRAINING.state_weights):])
     return replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs),
                    state_weights=weights, model=replace(TRAINING.model, features=features))
