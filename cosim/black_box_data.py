@@ -218,8 +218,13 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     """Generate (or resume, or find complete) the dataset of the black-box FMU `box` (its rating
     rating_mva [MVA]) in `out`; returns its metadata. bus_port_spec: where its bus is when its model
     description declares no bus port (bus_port). DatasetError for an FMU without a bus port, a
-    spec that does not fit it, a plan that carries a plant controller (a box is not read inside) or
-    another dataset in `out`."""
+    spec that does not fit it, a plan that carries a plant controller or the devices' measured
+    frequency (a box is not read inside) or another dataset in `out`."""
+    box, out = Path(box), Path(out)
+    if plan.carry_controller:
+        raise DatasetError(f"{box.name}: a black box is not read inside, so it has no plant controller states to carry")
+    if plan.unit_frequency:
+        raise DatasetError(f"{box.name}: a black box is not read inside, so what its devices measure is not known")
     import andes
 
     from reference_models.components import component
@@ -227,9 +232,6 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
 
     from .fmus import generator_files
 
-    box, out = Path(box), Path(out)
-    if plan.carry_controller:
-        raise DatasetError(f"{box.name}: a black box is not read inside, so it has no plant controller states to carry")
     hosts = {name: Path(andes.get_case(ANDES_CASES[name])) for name in plan.hosts}
     read = {plan.hosts[0]: case_from_file(hosts[plan.hosts[0]])}  # the first host's base and frequency
     first = read[plan.hosts[0]].network

@@ -409,6 +409,18 @@ def test_a_black_box_follows_the_replayed_voltage_as_its_own_equations_say(tmp_p
     assert np.max(np.abs(current[after].real - expected)) < 1e-6 * 0.03
 
 
+@pytest.mark.parametrize("carried, says", [({"carry_controller": True}, "it has no plant controller states"),
+                                            ({"unit_frequency": True}, "what its devices measure")])
+def test_a_black_box_is_refused_states_of_its_inside_before_anything_runs(tmp_path, carried, says):
+    from cosim.black_box_data import generate_black_box
+    from cosim.subsystem_data import Plan
+    from surrogate.errors import DatasetError
+
+    with pytest.raises(DatasetError, match=f"not read inside, so {says}"):
+        generate_black_box(tmp_path / "box.fmu", tmp_path / "data", 5.0, Plan(**carried))
+    assert not (tmp_path / "data").exists()
+
+
 def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     from cosim.black_box_data import own_rest
     from fmu_export.native_reference_fmu import build_native_reference_fmu
