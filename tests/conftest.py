@@ -166,6 +166,23 @@ def pytest_configure(config):
         torch.set_num_threads(max(1, usable_cores() // workers))
 
 
+# the modules that take longest on 2 workers (pytest --durations on a 2-core machine: FMU builds for every
+# model, whole commands, trainings in module fixtures), heaviest first: they start first, so that
+# at the end no worker waits idle behind one of them while the other runs it (pyproject: loadscope,
+# without xdist's reorder by test count, which put the modules of few long tests last)
+LONGEST_FIRST = ("test_standard_model_fmus.py", "test_self_start.py", "test_compare.py", "test_surrogate_fmu.py",
+                 "test_user_machine.py", "test_grid_cli.py", "test_onnx_export.py", "test_operator_command.py",
+                 "test_subsystem_operator.py", "test_any_machine_commands.py", "test_native_reference.py",
+                 "test_grid_cli_hostile.py", "test_grid_master.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """LONGEST_FIRST's modules first, in its order; the others after them in the order collected (a
+    stable sort keeps each module's tests together and in order)."""
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
 def optional_tools() -> dict:
     """{program: Debian package} of the optional tools: the cross compilers and emulators of the
     other platforms (fmu_export.platforms), and valgrind."""
