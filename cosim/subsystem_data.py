@@ -223,6 +223,12 @@ def controller_columns(case, bus: int, model) -> list:
     return [([f"{label}_{state[name][0]}" for label in devices], state[name][1]) for name in carried]
 
 
+def frequency_deviation(theta_f, theta_w, Tw: float):
+    """The frequency deviation [Hz] a BusFreq of washout Tw [s] measures from its states theta_f,
+    theta_w [rad] (blocks.bus_frequency: (f - 1) fn)."""
+    return (np.asarray(theta_f) - np.asarray(theta_w)) / (2.0 * math.pi * Tw)
+
+
 def unit_frequency_columns(case, bus: int, model) -> list:
     """Where the `model` carries df_units, (bus, weight, busf_Tf, busf_Tw) of each device behind the
     boundary `bus` of `case` that measures the frequency at its own bus (theta_f, theta_w among its
@@ -262,7 +268,7 @@ def run_rows(result, case, bus: int, params: dict, columns: list = (), units: li
     rows = {"t": t, "u": np.stack([V, theta], axis=1), "x": x}
     if units:
         theta_bus = np.asarray(result.theta_bus)
-        measured = [np.subtract(*bus_frequency_states(t, theta_bus[:, net.bus_index(at)], Tf, Tw)) / (2.0 * math.pi * Tw)
+        measured = [frequency_deviation(*bus_frequency_states(t, theta_bus[:, net.bus_index(at)], Tf, Tw), Tw)
                     for at, _, Tf, Tw in units]
         rows["f_units"] = np.average(measured, axis=0, weights=[w for _, w, _, _ in units])
     return rows
@@ -525,7 +531,7 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if MEMORY_STATES[0].name in model.state_names:  # the memory from the recorded voltage, as the measurement
             rows["x"] = np.concatenate([rows["x"], memory_states(rows["t"], rows["u"][:, 0], MEMORY_LAGS)], axis=1)
         if UNIT_FREQUENCY_STATE.name in model.state_names:  # the devices' measurement less the boundary's
-            boundary = (rows["x"][:, 0] - rows["x"][:, 1]) / (2.0 * np.pi * p.busf_Tw)
+            boundary = frequency_deviation(rows["x"][:, 0], rows["x"][:, 1], p.busf_Tw)
             rows["x"] = np.concatenate([rows["x"], (rows["f_units"] - boundary)[:, None]], axis=1)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]

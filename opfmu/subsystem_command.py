@@ -81,8 +81,7 @@ def cmd_subsystem(args) -> None:
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
                         "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --members, "
-                        "--frequency-features, "
-                        "--epochs, --seed, --workers, --name")
+                        "--frequency-features, --epochs, --seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     path = Path(args.subsystem)
