@@ -169,8 +169,9 @@ def pytest_configure(config):
 # the modules that take longest on 2 workers (pytest --durations on a 2-core machine: FMU builds for every
 # model, whole commands, trainings in module fixtures), heaviest first: they start first, so that
 # at the end no worker waits idle behind one of them while the other runs it (pyproject: loadscope,
-# without xdist's reorder by test count, which put the modules of few long tests last)
-LONGEST_FIRST = ("test_standard_model_fmus.py", "test_self_start.py", "test_compare.py", "test_surrogate_fmu.py",
+# without xdist's reorder by test count, which put the modules of few long tests last); test_self_start
+# after the standard models' FMUs, most of whose builds it then takes from the run's build cache
+LONGEST_FIRST = ("test_standard_model_fmus.py", "test_compare.py", "test_surrogate_fmu.py", "test_self_start.py",
                  "test_user_machine.py", "test_grid_cli.py", "test_onnx_export.py", "test_operator_command.py",
                  "test_subsystem_operator.py", "test_any_machine_commands.py", "test_native_reference.py",
                  "test_grid_cli_hostile.py", "test_grid_master.py")
