@@ -25,12 +25,15 @@ from fmpy.fmi1 import printLogMessage
 from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
                        fmi2CallbackLoggerTYPE)
 
+from reference_models.interrupts import called_from_c
+
 Sink = Callable[[int, bytes, bytes], None]  # (fmi2Status, category, message)
 
 _SINKS: dict[int, Callable[[], Sink | None]] = {}
 _KEYS = itertools.count(1)
 
 
+@called_from_c
 def _dispatch(env, instance, status, category, message) -> None:
     """The one fmi2CallbackLogger: the message to its instance's sink, or printed."""
     found = _SINKS.get(env or 0)

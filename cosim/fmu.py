@@ -45,6 +45,7 @@ import weakref
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from reference_models.interrupts import called_from_c
 from reference_models.messages import one_line
 
 LOG_KEPT = 10_000  # log messages kept per instance (the latest)
@@ -270,6 +271,7 @@ class FMU:
         if self._on_message is not None:
             self._on_message(int(status), category.decode(errors="replace") if category else "", text)
 
+    @called_from_c
     def _log3(self, env, status, category, message) -> None:
         """fmi3LogMessageCallback (no instance argument): as _log."""
         self._log(status, category, message)

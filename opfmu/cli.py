@@ -613,10 +613,13 @@ def _dataset_error(exc: Exception) -> bool:
 
 
 def main(argv=None) -> int:
+    from reference_models.interrupts import ctrl_c_taken
+
     args = None
     try:
-        args = build_parser().parse_args(argv)
-        args.func(args)
+        with ctrl_c_taken():
+            args = build_parser().parse_args(argv)
+            args.func(args)
     except UserError as exc:
         print(f"error: {one_line(exc, None)}", file=sys.stderr)
         return 2

@@ -1,5 +1,6 @@
 """reference_models.interrupts: a Ctrl-C while worker processes start is held for this process and
-never reaches the processes started meanwhile."""
+never reaches the processes started meanwhile; one that comes inside an import or a ctypes callback
+is raised after it, not dropped there."""
 import os
 import signal
 import subprocess
@@ -47,3 +48,64 @@ def test_a_ctrl_c_inside_the_block_is_raised_where_it_ends_and_the_processes_it_
     assert done.stdout.splitlines() == ["the block ran on", "KeyboardInterrupt where the block ended",
                                         "child running", "child running"], done.stdout + done.stderr
     assert "KeyboardInterrupt" in done.stderr and done.returncode != 0  # the default handler is back
+
+
+# Ctrl-C inside an import whose module drops every exception (as lxml.etree's initialisation drops
+# one raised in the Python it calls) and inside a ctypes callback (libc's qsort calling a comparison)
+_DROPPED = textwrap.dedent("""
+    import ctypes, ctypes.util, os, signal, sys, time
+    from reference_models.interrupts import called_from_c, ctrl_c_taken
+
+    def ctrl_c_then_work():
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(50):
+            time.sleep(0.001)
+
+    for name in ("dropping", "dropping_last"):
+        with open(os.path.join(sys.argv[1], name + ".py"), "w") as f:
+            f.write("from __main__ import ctrl_c_then_work\\n"
+                    "try:\\n    ctrl_c_then_work()\\nexcept BaseException:\\n    pass\\n")
+    sys.path.insert(0, sys.argv[1])
+
+    @called_from_c
+    def compare(a, b):
+        ctrl_c_then_work()
+        return 0
+
+    def import_then_more():
+        import dropping
+        print("the import ended", flush=True)
+        time.sleep(30)  # woken by the Ctrl-C
+        print("slept through", flush=True)
+
+    def callback_then_more():
+        values = (ctypes.c_int * 2)(2, 1)
+        kind = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.POINTER(ctypes.c_int), ctypes.POINTER(ctypes.c_int))
+        ctypes.CDLL(ctypes.util.find_library("c")).qsort(values, 2, ctypes.sizeof(ctypes.c_int), kind(compare))
+        print("the callback returned", flush=True)
+        time.sleep(30)
+        print("slept through", flush=True)
+
+    def import_last():  # the block ends right after the import: the Ctrl-C is raised there
+        import dropping_last
+
+    for work in (import_then_more, callback_then_more, import_last):
+        try:
+            with ctrl_c_taken():
+                work()
+            print("not interrupted", flush=True)
+        except KeyboardInterrupt:
+            print("KeyboardInterrupt", flush=True)
+    print("handler back:", signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True)
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="libc's qsort found by ctypes.util as on Linux")
+def test_a_ctrl_c_inside_an_import_or_a_ctypes_callback_is_raised_after_it_not_dropped(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    done = subprocess.run([sys.executable, "-c", _DROPPED, str(tmp_path)], capture_output=True, text=True, timeout=120,
+                          env=env)
+    assert done.stdout.splitlines() == ["the import ended", "KeyboardInterrupt", "the callback returned",
+                                        "KeyboardInterrupt", "KeyboardInterrupt", "handler back: True"], \
+        done.stdout + done.stderr
+    assert done.stderr == ""  # nothing printed and dropped by ctypes
