@@ -14,6 +14,7 @@ such code instead: an import or a function marked `called_from_c` finishes first
 KeyboardInterrupt comes."""
 from __future__ import annotations
 
+import _thread
 import signal
 import threading
 from contextlib import contextmanager
@@ -44,11 +45,15 @@ _pending_lock = threading.RLock()  # re-entered where the handler runs while the
 
 
 def _again() -> None:
-    """SIGINT once more to the main thread (waking a blocking call there) while the deferred Ctrl-C
-    is pending."""
+    """SIGINT once more to the main thread (waking a blocking call there; where threads take no
+    signals, as on Windows, the handler is called at its next Python step) while the deferred
+    Ctrl-C is pending."""
     with _pending_lock:
         if _pending[0]:
-            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+            if hasattr(signal, "pthread_kill"):
+                signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+            else:
+                _thread.interrupt_main()
 
 
 def _on_ctrl_c(signum, frame) -> None:
