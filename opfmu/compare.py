@@ -370,58 +370,104 @@ def _ratio(speedup: float) -> str:
     return f"surrogate {speedup:.1f}x faster" if speedup >= 1 else f"surrogate {1 / speedup:.1f}x slower"
 
 
-def plot_comparison(result: dict, out_dir, stem: str) -> list[Path]:
-    """Two PNGs: the inputs and the states, and the derived outputs (SM4: currents and powers);
-    each output with both curves (left) and the surrogate's error (right)."""
+class ComparisonPlots:
+    """Draws plot_comparison's figures: built once per machine (its states, outputs and inputs) and
+    drawn again with the data of each further comparison, which costs half of building them anew
+    (their axes and ticks are kept). A context manager; `close` frees the figures."""
+
+    def __init__(self):
+        self._figures = {}  # (component name, suffix) -> (figure, {series: Line2D}, axes, title)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        import matplotlib.pyplot as plt
+
+        for fig, *_ in self._figures.values():
+            plt.close(fig)
+        self._figures = {}
+
+    def draw(self, result: dict, out_dir, stem: str) -> list[Path]:
+        """The two PNGs of `result` (compare's) in out_dir: <stem>_states.png (the inputs and the
+        states) and <stem>_currents_powers.png (the derived outputs)."""
+        component = result.get("component", COMPONENT)
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        traj = result["trajectories"]
+        t = traj["reference"]["time"]
+        paths = []
+        for suffix, names in (("states", component.state_names), ("currents_powers", component.output_names)):
+            key = (component.name, suffix)
+            if key not in self._figures:
+                self._figures[key] = _comparison_figure(component, names, suffix == "states")
+            fig, lines, axes, title = self._figures[key]
+            for i in range(len(component.input_names) if suffix == "states" else 0):
+                lines[("input", i)].set_data(t, traj["inputs"][:, i])
+            for name in names:
+                ref, sur = traj["reference"][name], traj["surrogate"][name]
+                lines[("reference", name)].set_data(t, ref)
+                lines[("surrogate", name)].set_data(t, sur)
+                lines[("error", name)].set_data(t, sur - ref)
+            for ax in axes:
+                ax.relim()
+                ax.autoscale_view()
+            title.set_text(f"{result['inputs']}, h = {result['step_s'] * 1e3:g} ms: surrogate FMU against reference FMU")
+            path = out_dir / f"{stem}_{suffix}.png"
+            fig.savefig(path, dpi=110, pil_kwargs={"compress_level": 1})
+            paths.append(path)
+        return paths
+
+
+def _comparison_figure(component, names, with_inputs: bool) -> tuple:
+    """(figure, {series: Line2D}, axes, suptitle) of one comparison figure without its data: the
+    inputs two a row (with_inputs), then each output with both curves (left) and the surrogate's
+    error (right)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    component = result.get("component", COMPONENT)
     units = {q.name: q.unit for q in component.states + component.outputs}
-    input_names, input_units = component.input_names, tuple(q.unit for q in component.inputs)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    traj = result["trajectories"]
-    t = traj["reference"]["time"]
-    paths = []
-    input_rows = (len(input_names) + 1) // 2  # the inputs two a row above the states
-    for suffix, names in (("states", component.state_names), ("currents_powers", component.output_names)):
-        rows = len(names) + (input_rows if suffix == "states" else 0)
-        fig, axes = plt.subplots(rows, 2, figsize=(11, 2.1 * rows), sharex=True, squeeze=False)
-        row = 0
-        if suffix == "states":
-            for i, (name, unit) in enumerate(zip(input_names, input_units)):
-                ax = axes[i // 2, i % 2]
-                ax.plot(t, traj["inputs"][:, i], color="tab:gray", drawstyle="steps-post")
-                ax.set_ylabel(f"{name} [{unit}]")
-                ax.set_title("input" if i == 0 else "")
-            row = input_rows
-        for name in names:
-            ref, sur = traj["reference"][name], traj["surrogate"][name]
-            axes[row, 0].plot(t, ref, label="reference (RK45)", color="black", lw=1.2)
-            axes[row, 0].plot(t, sur, label="surrogate", color="tab:red", lw=1.0, ls="--")
-            axes[row, 0].set_ylabel(f"{name} [{units[name]}]")
-            axes[row, 1].plot(t, sur - ref, color="tab:red", lw=0.9)
-            axes[row, 1].set_ylabel(f"error [{units[name]}]")
-            row += 1
-        axes[input_rows if suffix == "states" else 0, 0].legend(loc="best", fontsize=8)
-        for ax in axes[-1]:
-            ax.set_xlabel("time [s]")
-        for ax in axes.ravel():
-            ax.grid(alpha=0.3)
-        # fixed margins [in] for the titles, the labels and the ticks: tight_layout would draw every figure twice
-        height = 2.1 * rows
-        fig.suptitle(f"{result['inputs']}, h = {result['step_s'] * 1e3:g} ms: surrogate FMU against reference FMU",
-                     y=1.0 - 0.12 / height)
-        fig.subplots_adjust(left=0.09, right=0.985, wspace=0.28, hspace=0.12, top=1.0 - 0.7 / height,
-                            bottom=0.5 / height)
-        path = out_dir / f"{stem}_{suffix}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        paths.append(path)
-    return paths
+    input_rows = (len(component.input_names) + 1) // 2 if with_inputs else 0
+    rows = len(names) + input_rows
+    fig, axes = plt.subplots(rows, 2, figsize=(11, 2.1 * rows), sharex=True, squeeze=False)
+    lines = {}
+    for i, q in enumerate(component.inputs if with_inputs else ()):
+        ax = axes[i // 2, i % 2]
+        lines[("input", i)], = ax.plot([], [], color="tab:gray", drawstyle="steps-post")
+        ax.set_ylabel(f"{q.name} [{q.unit}]")
+        ax.set_title("input" if i == 0 else "")
+    for row, name in enumerate(names, start=input_rows):
+        lines[("reference", name)], = axes[row, 0].plot([], [], label="reference (RK45)", color="black", lw=1.2)
+        lines[("surrogate", name)], = axes[row, 0].plot([], [], label="surrogate", color="tab:red", lw=1.0, ls="--")
+        axes[row, 0].set_ylabel(f"{name} [{units[name]}]")
+        lines[("error", name)], = axes[row, 1].plot([], [], color="tab:red", lw=0.9)
+        axes[row, 1].set_ylabel(f"error [{units[name]}]")
+    axes[input_rows, 0].legend(loc="best", fontsize=8)
+    for ax in axes[-1]:
+        ax.set_xlabel("time [s]")
+    for ax in axes.ravel():
+        ax.grid(alpha=0.3)
+    # fixed margins [in] for the titles, the labels and the ticks: tight_layout would draw every figure twice
+    height = 2.1 * rows
+    title = fig.suptitle("", y=1.0 - 0.12 / height)
+    fig.subplots_adjust(left=0.09, right=0.985, wspace=0.28, hspace=0.12, top=1.0 - 0.7 / height,
+                        bottom=0.5 / height)
+    return fig, lines, list(axes.ravel()), title
+
+
+def plot_comparison(result: dict, out_dir, stem: str, plots: ComparisonPlots | None = None) -> list[Path]:
+    """Two PNGs: the inputs and the states, and the derived outputs (SM4: currents and powers);
+    each output with both curves (left) and the surrogate's error (right). plots: the figures to
+    draw them in (kept for the next comparison of the same machine); None: built for these alone."""
+    if plots is not None:
+        return plots.draw(result, out_dir, stem)
+    with ComparisonPlots() as own:
+        return own.draw(result, out_dir, stem)
 
 
 def summary(result: dict) -> dict:

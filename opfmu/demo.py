@@ -100,10 +100,11 @@ def compare_scenarios(surrogate_fmu: Path, reference_fmu: Path, config: DemoConf
 
     from fmpy import extract
 
-    from opfmu.compare import compare, fmu_machine, format_table, plot_comparison, scenario_inputs, summary
+    from opfmu.compare import (ComparisonPlots, compare, fmu_machine, format_table, plot_comparison, scenario_inputs,
+                               summary)
 
     results = {}
-    with tempfile.TemporaryDirectory(prefix="opfmu_demo_") as tmp:
+    with tempfile.TemporaryDirectory(prefix="opfmu_demo_") as tmp, ComparisonPlots() as plots:
         surrogate_dir = extract(str(surrogate_fmu), unzipdir=str(Path(tmp) / "surrogate"))
         reference_dir = extract(str(reference_fmu), unzipdir=str(Path(tmp) / "reference"))
         machine = fmu_machine(surrogate_dir)
@@ -111,7 +112,8 @@ def compare_scenarios(surrogate_fmu: Path, reference_fmu: Path, config: DemoConf
             inputs = scenario_inputs(name, config.seed, config.stop_time, config.step, machine)
             result = compare(surrogate_dir, reference_dir, inputs, config.stop_time, config.step)
             directory = Path(config.out) / name
-            result["plots"] = [str(p.relative_to(config.out)) for p in plot_comparison(result, directory, name)]
+            result["plots"] = [str(p.relative_to(config.out)) for p in plot_comparison(result, directory, name,
+                                                                                            plots)]
             write_json(directory / "comparison.json", summary(result))
             results[name] = summary(result)
             say(format_table(result))

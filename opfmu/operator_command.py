@@ -333,11 +333,11 @@ def long_runs(surrogate_fmu: Path, reference_fmu: Path, out: Path, operating: tu
 
     from fmpy import extract
 
-    from opfmu.compare import compare, fmu_machine, plot_comparison, scenario_inputs, summary
+    from opfmu.compare import ComparisonPlots, compare, fmu_machine, plot_comparison, scenario_inputs, summary
     from reference_models.files import write_json
 
     results = {}
-    with tempfile.TemporaryDirectory(prefix="opfmu_operator_") as tmp:
+    with tempfile.TemporaryDirectory(prefix="opfmu_operator_") as tmp, ComparisonPlots() as plots:
         surrogate_dir = extract(str(surrogate_fmu), unzipdir=str(Path(tmp) / "surrogate"))
         reference_dir = extract(str(reference_fmu), unzipdir=str(Path(tmp) / "reference"))
         machine = fmu_machine(surrogate_dir)
@@ -349,7 +349,7 @@ def long_runs(surrogate_fmu: Path, reference_fmu: Path, out: Path, operating: tu
                 continue
             result = compare(surrogate_dir, reference_dir, inputs, stop, REPORT_STEP_S)
             directory = out / "report" / name
-            result["plots"] = [str(p.relative_to(out)) for p in plot_comparison(result, directory, name)]
+            result["plots"] = [str(p.relative_to(out)) for p in plot_comparison(result, directory, name, plots)]
             results[name] = summary(result)
             write_json(directory / "comparison.json", results[name])
             m = results[name]["metrics"]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from fmpy import extract
 
-from opfmu.compare import CompareError, compare, csv_inputs, scenario_inputs
+from opfmu.compare import ComparisonPlots, CompareError, compare, csv_inputs, plot_comparison, scenario_inputs
 from reference_models.scenarios import BUS_SCENARIOS, SCENARIOS, scenario
 from reference_models.simulate import simulate
 from reference_models.sm4 import SM4, min_voltage_with_equilibrium
@@ -196,6 +196,29 @@ def test_compare_command_refuses_a_stop_time_that_is_not_whole_steps(fmu_path, r
 
 
 @pytest.mark.slow
+def _plotted(t, scale: float, label: str) -> dict:
+    """A comparison result with SM4's trajectories of size `scale` (what plot_comparison reads)."""
+    def run(offset):
+        return {"time": t, **{n: scale * np.sin(t * (i + 1)) + offset for i, n in enumerate(SM4.state_names + SM4.output_names)}}
+
+    inputs = np.column_stack([scale * np.cos(t * (i + 1)) for i in range(len(SM4.input_names))])
+    return {"component": SM4, "inputs": label, "step_s": 0.01,
+            "trajectories": {"reference": run(0.0), "surrogate": run(scale * 1e-3), "inputs": inputs}}
+
+
+def test_comparison_figures_drawn_again_with_new_data_equal_figures_drawn_anew(tmp_path):
+    from PIL import Image
+
+    t = np.linspace(0.0, 2.0, 201)
+    small, large = _plotted(t, 1e-3, "small"), _plotted(t, 250.0, "large")  # other tick labels, other widths
+    fresh = plot_comparison(large, tmp_path / "fresh", "large")
+    with ComparisonPlots() as plots:
+        plot_comparison(small, tmp_path / "again", "small", plots)
+        again = plot_comparison(large, tmp_path / "again", "large", plots)
+    for a, b in zip(fresh, again):
+        assert a.name == b.name and np.array_equal(np.asarray(Image.open(a)), np.asarray(Image.open(b))), a.name
+
+
 def test_demo_builds_both_fmus_compares_every_scenario_and_writes_the_report(tmp_path):
     result = opfmu("demo", "--out", str(tmp_path), "--stop-time", "2")
     assert result.returncode == 0, result.stderr
