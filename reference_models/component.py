@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -184,15 +185,15 @@ class Component:
             raise ValueError(f"component {self.name!r}: its initialisation solves {self.initialisation.solves}, "
                              f"which are not all inputs ({', '.join(self.input_names)})")
 
-    @property
+    @cached_property  # read in every right-hand side of a grid's DAE
     def state_names(self) -> tuple:
         return tuple(q.name for q in self.states)
 
-    @property
+    @cached_property  # read in every right-hand side of a grid's DAE
     def input_names(self) -> tuple:
         return tuple(q.name for q in self.inputs)
 
-    @property
+    @cached_property  # read in every right-hand side of a grid's DAE
     def output_names(self) -> tuple:
         return tuple(q.name for q in self.outputs)
 

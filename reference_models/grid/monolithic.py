@@ -142,12 +142,18 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
         Vs, theta = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
     held = held or {}
     inputs = [None] * len(devices)
+    outputs = [None] * len(devices)  # each device's outputs, once its inputs are final
 
     def value(j, variable):
         d = devices[j]
         if variable in d.component.state_names:
             return state(j)[d.component.state_names.index(variable)]
-        return d.component.output_equations(state(j), inputs_of(j), d.params, m)[d.component.output_names.index(variable)]
+        found = outputs[j]
+        if found is None:
+            found = d.component.output_equations(state(j), inputs_of(j), d.params, m)
+            if j in final:  # not while a cycle reads j's provisional inputs
+                outputs[j] = found
+        return found[d.component.output_names.index(variable)]
 
     def terminal(index):
         if impedance == 0:
@@ -185,8 +191,10 @@ def unit_inputs(devices, wiring, starts, impedance: complex, state, V_re, V_im, 
                 else:
                     values.append(value(source.device, source.variable))
             inputs[j] = tuple(values)
+            final.add(j)
         return inputs[j]
 
+    final = set()  # the devices whose inputs are final
     return [inputs_of(j) for j in range(len(devices))]
 
 
