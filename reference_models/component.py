@@ -197,6 +197,14 @@ class Component:
     def output_names(self) -> tuple:
         return tuple(q.name for q in self.outputs)
 
+    @cached_property
+    def bus_port_at(self) -> tuple:
+        """(magnitude, angle, I_re, I_im): where the bus port's voltage is among the inputs and its
+        current among the outputs (a device on a bus)."""
+        bus = self.ports.bus
+        return (self.input_names.index(bus.voltage[0]), self.input_names.index(bus.voltage[1]),
+                self.output_names.index(bus.current[0]), self.output_names.index(bus.current[1]))
+
     @property
     def n_states(self) -> int:
         return len(self.states)

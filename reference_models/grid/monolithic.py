@@ -96,15 +96,14 @@ def _bus_current(component, x, p, m, u0, V_re, V_im):
     """(I_re, I_im): the bus current of a device in states x at bus voltage V_re + j V_im (scalars, or
     arrays with m = numpy), its other inputs u0 (component order, the bus-port entries ignored;
     None: zeros)."""
-    bus = component.ports.bus
-    names = component.input_names
-    u = [0.0] * len(names) if u0 is None else list(u0)
+    magnitude, angle, real, imaginary = component.bus_port_at
+    u = [0.0] * len(component.inputs) if u0 is None else list(u0)
     if _scalar(m):
-        u[names.index(bus.voltage[0])], u[names.index(bus.voltage[1])] = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
+        u[magnitude], u[angle] = math.hypot(V_re, V_im), math.atan2(V_im, V_re)
     else:
-        u[names.index(bus.voltage[0])], u[names.index(bus.voltage[1])] = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
+        u[magnitude], u[angle] = np.hypot(V_re, V_im), np.arctan2(V_im, V_re)
     y = component.output_equations(x, tuple(u), p, m)
-    return y[component.output_names.index(bus.current[0])], y[component.output_names.index(bus.current[1])]
+    return y[real], y[imaginary]
 
 
 def _current_map(component, x, p, m, u0=None, at=None):
@@ -393,16 +392,27 @@ class System:
             n = len(at) if at is not None else len(next(iter(states.values()))[0])
             M = np.broadcast_to(network.Y_real, (n, 2 * b, 2 * b)).copy()
             c = np.zeros((n, 2 * b))
+        slots, maps = [], []  # scalar: per active unit its bus's first row in M and its (c, A) flattened
         for k in active:
             if isinstance(m, _Branches):
                 m.owner = (k, 0)
             d, i = self.units[k].machine, 2 * self.bus_slot[k]
             point = None if k not in newton else ((at[i], at[i + 1]) if scalar else (at[:, i], at[:, i + 1]))
             ck, A = _current_map(d.component, states[k], d.params, m, others[k], point)
+            if scalar:
+                slots.append(i)
+                maps.append((ck[0], ck[1], A[0][0], A[0][1], A[1][0], A[1][1]))
+                continue
             for r in range(2):
                 c[..., i + r] += ck[r]
                 for q in range(2):
                     M[..., i + r, i + q] -= A[r][q]
+        if slots:  # in one numpy call each; units on one bus add up in unit order (ufunc.at is unbuffered)
+            rows, values = np.array(slots), np.array(maps, dtype=float)
+            np.add.at(c, rows, values[:, 0])
+            np.add.at(c, rows + 1, values[:, 1])
+            for e, (r, q) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):
+                np.subtract.at(M, (rows + r, rows + q), values[:, 2 + e])
         return np.linalg.solve(M, c) if scalar else np.linalg.solve(M, c[..., None])[..., 0]
 
     def _machine_u(self, k: int, y, m=math) -> list:
