@@ -22,6 +22,7 @@ from contextlib import contextmanager
 _SIGINT = {signal.SIGINT}
 RETRY_S = 0.02  # s: how often a Ctrl-C deferred past an import or a callback looks again
 _CALLED_FROM_C: set = set()  # the code objects of functions marked called_from_c
+_IMPORT_MACHINERY = ("importlib._bootstrap", "importlib._bootstrap_external")  # frozen or not
 
 
 def called_from_c(function):
@@ -34,7 +35,7 @@ def called_from_c(function):
 def _deferred(frame) -> bool:
     """True where `frame` or a frame under it is an import or a function marked called_from_c."""
     while frame is not None:
-        if frame.f_code in _CALLED_FROM_C or frame.f_code.co_filename.startswith("<frozen importlib"):
+        if frame.f_code in _CALLED_FROM_C or frame.f_globals.get("__name__") in _IMPORT_MACHINERY:
             return True
         frame = frame.f_back
     return False
