@@ -376,7 +376,7 @@ class ComparisonPlots:
     (their axes and ticks are kept). A context manager; `close` frees the figures."""
 
     def __init__(self):
-        self._figures = {}  # (component name, suffix) -> (figure, {series: Line2D}, axes, title)
+        self._figures = {}  # (suffix, machine, its variables) -> (figure, {series: Line2D}, axes, title)
 
     def __enter__(self):
         return self
@@ -385,6 +385,8 @@ class ComparisonPlots:
         self.close()
 
     def close(self) -> None:
+        if not self._figures:
+            return
         import matplotlib.pyplot as plt
 
         for fig, *_ in self._figures.values():
@@ -401,7 +403,7 @@ class ComparisonPlots:
         t = traj["reference"]["time"]
         paths = []
         for suffix, names in (("states", component.state_names), ("currents_powers", component.output_names)):
-            key = (component.name, suffix)
+            key = (suffix, component.name, names, component.input_names)
             if key not in self._figures:
                 self._figures[key] = _comparison_figure(component, names, suffix == "states")
             fig, lines, axes, title = self._figures[key]
