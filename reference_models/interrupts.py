@@ -72,8 +72,11 @@ def _on_ctrl_c(signum, frame) -> None:
 def ctrl_c_taken():
     """Within the block a Ctrl-C is a KeyboardInterrupt raised where no import and no function
     marked called_from_c runs; one still deferred where the block ends is raised there. The
-    handler before it is back after the block. Off the main thread it does nothing."""
-    if threading.current_thread() is not threading.main_thread():
+    handler before it is back after the block. It does nothing off the main thread, and where
+    SIGINT has another handler than Python's own (ignored, as in a process started in the
+    background; or the caller's)."""
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
         yield
         return
     previous = signal.signal(signal.SIGINT, _on_ctrl_c)

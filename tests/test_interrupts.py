@@ -97,15 +97,23 @@ _DROPPED = textwrap.dedent("""
         except KeyboardInterrupt:
             print("KeyboardInterrupt", flush=True)
     print("handler back:", signal.getsignal(signal.SIGINT) is signal.default_int_handler, flush=True)
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # as in a process started in the background
+    with ctrl_c_taken():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.1)
+    print("ignored:", signal.getsignal(signal.SIGINT) is signal.SIG_IGN, flush=True)
 """)
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="libc's qsort found by ctypes.util as on Linux")
-def test_a_ctrl_c_inside_an_import_or_a_ctypes_callback_is_raised_after_it_not_dropped(tmp_path):
+def test_a_ctrl_c_inside_an_import_or_a_ctypes_callback_is_raised_after_it_not_dropped_and_an_ignored_one_stays_so(
+        tmp_path):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, "-c", _DROPPED, str(tmp_path)], capture_output=True, text=True, timeout=120,
-                          env=env)
+                          env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert done.stdout.splitlines() == ["the import ended", "KeyboardInterrupt", "the callback returned",
-                                        "KeyboardInterrupt", "KeyboardInterrupt", "handler back: True"], \
+                                        "KeyboardInterrupt", "KeyboardInterrupt", "handler back: True",
+                                        "ignored: True"], \
         done.stdout + done.stderr
     assert done.stderr == ""  # nothing printed and dropped by ctypes
