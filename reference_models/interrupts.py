@@ -85,7 +85,7 @@ def ctrl_c_taken():
     finally:
         with _pending_lock:
             pending, _pending[0] = _pending[0], False
-        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
+        signal.signal(signal.SIGINT, previous)  # Python's own: the only one the block replaces
     if pending:
         raise KeyboardInterrupt
 
