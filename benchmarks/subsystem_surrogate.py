@@ -15,7 +15,7 @@ one host generator tripped. Each runs to --stop at h = 10 ms as
 * the detail as native FMUs in opfmu's master;
 * the aggregate (reference_models.grid.aggregate) as native FMUs;
 * the surrogate: the host's devices as native FMUs, the sub-system one surrogate FMU
-  (cosim.subsystem_operator.surrogate_in).
+  (cosim.subsystem_surrogate.surrogate_in).
 Errors outside the fault's own steps: the power and current each sub-system injects at its boundary
 (P, Q, |I| in % of its rating; the largest over the boundaries), the boundary voltage [pu] and the host's rotor angles relative to
 its first machine [deg]. Writes OUT.json (every number), OUT.md (the tables, the aggregate's errors
@@ -40,7 +40,7 @@ from cosim.andes_runner import AndesRunner  # noqa: E402
 from cosim.fmus import generator_files  # noqa: E402
 from cosim.master import MasterSettings  # noqa: E402
 from cosim.runners import MasterRunner  # noqa: E402
-from cosim.subsystem_operator import registered, surrogate_in  # noqa: E402
+from cosim.subsystem_surrogate import registered, surrogate_in  # noqa: E402
 from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402

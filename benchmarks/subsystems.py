@@ -41,7 +41,7 @@ from cosim.runners import MasterRunner, MonolithicRunner  # noqa: E402
 from reference_models.grid.aggregate import aggregate_file  # noqa: E402
 from reference_models.grid.andes_case import ANDES_CASES, case_from_file  # noqa: E402
 from reference_models.grid.attach import attached_file  # noqa: E402
-from cosim.subsystem_operator import registered, surrogate_in  # noqa: E402
+from cosim.subsystem_surrogate import registered, surrogate_in  # noqa: E402
 from reference_models.grid.boundary import boundary_power, equivalent_units  # noqa: E402
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency  # noqa: E402
 from reference_models.grid.subsystems import FeederSpec, PlantSpec, feeder, plant, write_case  # noqa: E402

@@ -49,15 +49,13 @@ def fmu_parameters(directory: Path, component):
             raise CouplingError(f"{directory.name}: resources/machine.json holds no {component.name} parameters "
                                 f"({' '.join(str(exc).split())[:160]})") from None
     if operator.is_file():
-        import onnx
-
-        from surrogate.contract import ContractError, operator_metadata
+        from surrogate.contract import ContractError, metadata_of, operator_metadata
 
         try:
-            meta = operator_metadata(onnx.load(str(operator), load_external_data=False))
+            meta = operator_metadata(metadata_of(operator))
         except ContractError as exc:
             raise CouplingError(f"{directory.name}: {exc}") from None
-        except Exception as exc:  # onnx raises several types for unreadable files
+        except OSError as exc:
             raise CouplingError(f"{directory.name}: resources/model.onnx is not a readable operator "
                                 f"({' '.join(str(exc).split())[:120]})") from None
         if meta["component"].name != component.name:

@@ -113,13 +113,11 @@ def operator_path(name) -> Path:
 def _check_operator(path: Path, device, bus: int) -> None:
     """Refuses an operator that is not of the device's component with its inputs, or was trained for
     other parameters."""
-    import onnx
-
-    from surrogate.contract import ContractError, operator_metadata
+    from surrogate.contract import ContractError, metadata_of, operator_metadata
 
     component = device.component
     try:
-        meta = operator_metadata({p.key: p.value for p in onnx.load(str(path), load_external_data=False).metadata_props})
+        meta = operator_metadata(metadata_of(path))
     except ContractError as exc:
         raise CouplingError(f"generator at bus {bus}: {path}: {exc}") from None
     except Exception as exc:

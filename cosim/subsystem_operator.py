@@ -10,12 +10,10 @@ Stages, each resumed where an interrupted call left it (call again with the same
    checkpoint;
 3. out/operator.onnx (checked against torch; several runs: their mean) and
    out/<NAME>Surrogate.fmu (checked against onnxruntime), and the operator registered for the
-   sub-system file's content (`registered`), so that `--attach BUS=FILE:surrogate` finds it.
+   sub-system file's content (cosim.subsystem_surrogate), so that `--attach BUS=FILE:surrogate` finds it.
 """
 from __future__ import annotations
 
-import hashlib
-import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -25,6 +23,7 @@ from surrogate.models import OperatorConfig
 from surrogate.training import TrainConfig
 
 from .subsystem_data import Plan, generate
+from .subsystem_surrogate import register
 
 # Ip and Iq are what the FMU takes from the operator; theta_f, theta_w and n it steps exactly
 # (their rates are affine: corrections.c), so the data loss weighs them little; a plant controller's
@@ -52,39 +51,6 @@ def training_config(state_names, seed: int, epochs: int | None, features: bool =
                                              for name in state_names[len(TRAINING.state_weights):])
     return replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs),
                    state_weights=weights, model=replace(TRAINING.model, features=features))
-
-
-# the operators of the shipped sub-systems (`feeder`, `plant`): <name>-<first 16 hex digits of the
-# sha256 of the sub-system file>.onnx
-SHIPPED = Path(__file__).resolve().parents[1] / "surrogate" / "default" / "subsystems"
-
-
-def operator_registry() -> Path:
-    """The folder of the operators `learn` registered: <sha256 of the sub-system file>.onnx."""
-    from reference_models.grid.andes_case import case_cache_dir
-
-    return case_cache_dir() / "subsystem_operators"
-
-
-def registered(subsystem) -> Path | None:
-    """The operator for the sub-system file's content: one `learn` registered, else a shipped one,
-    else None."""
-    digest = hashlib.sha256(Path(subsystem).read_bytes()).hexdigest()
-    path = operator_registry() / f"{digest}.onnx"
-    if path.is_file():
-        return path
-    return next(iter(sorted(SHIPPED.glob(f"*-{digest[:16]}.onnx"))), None)
-
-
-def register(subsystem, operator) -> Path:
-    """Keeps a copy of `operator` as the one of the sub-system file's content (atomically)."""
-    from reference_models.files import atomic_path
-
-    path = operator_registry() / f"{hashlib.sha256(Path(subsystem).read_bytes()).hexdigest()}.onnx"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        shutil.copyfile(operator, tmp)
-    return path
 
 
 def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
@@ -120,27 +86,3 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
         build_surrogate_fmu(operator, fmu, model_name=f"{name}Surrogate")
     return {"data": meta, "training": results, "operator": operator, "fmu": fmu,
             "registered": register(subsystem, operator)}
-
-
-def surrogate_in(case, bus: int, subsystem):
-    """`case` (with the sub-system file `subsystem` attached at its bus `bus`) with that sub-system
-    run as its surrogate FMU: one `subsystem` device at `bus` whose operator is the one registered
-    for the file (boundary.with_equivalent); CouplingError where none is."""
-    import onnx
-
-    from reference_models.grid.boundary import with_equivalent
-    from reference_models.grid.case import Device
-    from surrogate.contract import ContractError, operator_metadata
-
-    from .fmu import CouplingError
-
-    operator = registered(subsystem)
-    if operator is None:
-        raise CouplingError(f"no operator is registered for the sub-system {Path(subsystem).name}: learn one with "
-                            f"opfmu operator --subsystem {subsystem} --boundary BUS --out DIR")
-    try:
-        meta = operator_metadata(onnx.load(str(operator), load_external_data=False))
-    except (ContractError, OSError, ValueError) as exc:
-        raise CouplingError(f"the operator registered for {Path(subsystem).name} ({operator}) is not usable: {exc}") from None
-    device = Device("subsystem", meta["component"], meta["params"])
-    return with_equivalent(case, bus, device, {"kind": "surrogate", "operator": str(operator)})

@@ -184,19 +184,17 @@ def operator_component(path, machine: bool = True) -> tuple:
 
 def _operator(path) -> tuple:
     """(component, parameters) of an operator file's validated metadata; CompareError otherwise."""
-    import onnx
-
-    from surrogate.contract import ContractError, operator_metadata
+    from surrogate.contract import ContractError, metadata_of, operator_metadata
 
     if Path(path).is_dir():
         raise CompareError(f"operator file {path} is a folder, not a file")
     if not Path(path).exists():
         raise CompareError(f"there is no operator file at {path}")
     try:
-        meta = operator_metadata(onnx.load(str(path), load_external_data=False))
+        meta = operator_metadata(metadata_of(path))
     except ContractError as exc:
         raise CompareError(f"{path}: {exc}") from None
-    except Exception as exc:  # onnx raises several types for unreadable files
+    except OSError as exc:
         raise CompareError(f"{path} is not a readable operator file: {' '.join(str(exc).split())[:200]}") from None
     return meta["component"], meta["params"]
 

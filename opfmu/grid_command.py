@@ -350,9 +350,9 @@ def _subsystem_file(attachment, folder: Path) -> Path:
 
 def _surrogate(case, attachment, path: Path):
     """`case` with the sub-system of `attachment` (attached from the file `path`) run as its surrogate
-    FMU (cosim.subsystem_operator.surrogate_in); UserError where it has no operator."""
+    FMU (cosim.subsystem_surrogate.surrogate_in); UserError where it has no operator."""
     from cosim.fmu import CouplingError
-    from cosim.subsystem_operator import surrogate_in
+    from cosim.subsystem_surrogate import surrogate_in
 
     try:
         return surrogate_in(case, attachment.bus, path)
@@ -372,14 +372,15 @@ def _attached_case(args):
                         "without --dynamic-data or --dyr")
     if importlib.util.find_spec("andes") is None:
         raise UserError("--attach needs ANDES to read and join the case files: pip install -e '.[andes]'")
-    import andes
-
-    from reference_models.grid.andes_case import ANDES_CASES, case_cache_dir, case_from_file
+    from reference_models.grid.andes_case import ANDES_CASES, case_cache_dir, case_from_file, stock_case
     from reference_models.grid.attach import attached_file
     from reference_models.grid.case import CaseError
 
     if args.case in ANDES_CASES:
-        host = Path(andes.get_case(ANDES_CASES[args.case]))
+        try:
+            host = stock_case(ANDES_CASES[args.case])
+        except CaseError as exc:
+            raise UserError(one_line(exc, 300)) from None
     elif args.case in CASES:
         raise UserError(f"--attach needs a case ANDES reads; {args.case} has no ANDES case file "
                         f"(use one of {', '.join(ANDES_CASES)} or a case file)")

@@ -63,6 +63,20 @@ def test_metadata_carries_the_contract_fields(exported, paper_tiny):
     assert meta["opfmu_version"] and json.loads(meta["architecture"])["arch"] in ("unstacked", "pinn")
 
 
+def test_the_metadata_read_without_the_onnx_package_is_what_onnx_reads_and_a_bad_file_is_refused(exported, tmp_path):
+    """surrogate.contract.metadata_of (what the commands that run built FMUs read, through
+    onnxruntime) gives every key and value onnx reads; a file that is not a model is a ContractError."""
+    from surrogate.contract import ContractError, metadata_of
+
+    assert metadata_of(exported[1]) == {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}
+    garbage = tmp_path / "garbage.onnx"
+    garbage.write_bytes(b"not a protobuf" * 10)
+    with pytest.raises(ContractError, match="not an ONNX model"):
+        metadata_of(garbage)
+    with pytest.raises(OSError):
+        metadata_of(tmp_path / "absent.onnx")
+
+
 def test_a_freely_trained_operator_rolls_over_at_its_whole_horizon(exported):
     meta = {p.key: p.value for p in onnx.load(str(exported[1])).metadata_props}
     assert float(meta["rollover_horizon_s"]) == float(meta["horizon_s"])

@@ -6,6 +6,8 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -589,6 +591,25 @@ def test_the_shipped_feeder_runs_as_one_surrogate_fmu_closer_to_its_detail_than_
 
 
 @pytest.mark.andes
+def test_a_run_with_a_subsystem_surrogate_again_imports_neither_torch_nor_onnx_nor_andes(tmp_path, monkeypatch):
+    """Running a sub-system's surrogate FMU needs no training, no graph and, once the case is joined,
+    no case reader: after a first run (which joins the case and builds the FMUs into the run's
+    caches), the same command loads neither torch nor scipy's statistics (about 4 s of a whole run's
+    CPU), nor the onnx package (about 1 s: its ml_dtypes extension), nor ANDES (0.6 s)."""
+    from opfmu.cli import main
+
+    monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
+    argv = ["grid", "run", "--case", "ieee14", "--attach", "9=feeder:surrogate", "--fault", "4", "--fault-start", "0.05",
+            "--clear", "0.1", "--stop", "0.2", "--compare", "none", "--out"]
+    assert main([*argv, str(tmp_path / "first")]) == 0
+    script = ("import sys\nfrom opfmu.cli import main\n"
+              f"code = main({[*argv, str(tmp_path / 'run')]!r})\n"
+              "print(code, sorted(m for m in ('torch', 'onnx', 'scipy.stats', 'andes') if m in sys.modules))\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.stdout.splitlines()[-1] == "0 []", done.stdout[-2000:] + done.stderr[-2000:]
+
+
+@pytest.mark.andes
 @pytest.mark.veragrid
 @pytest.mark.skipif(importlib.util.find_spec("VeraGridEngine") is None, reason="no VeraGridEngine (optional host)")
 def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, monkeypatch):
@@ -623,7 +644,7 @@ def test_a_shipped_subsystem_surrogate_fmu_starts_itself_from_the_load_flow_and_
     from fmpy import simulate_fmu
     from fmpy.validation import validate_fmu
 
-    from cosim.subsystem_operator import SHIPPED
+    from cosim.subsystem_surrogate import SHIPPED
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.contract import operator_metadata
 
@@ -655,7 +676,7 @@ def _finds_the_operator_shipped_for(path, prefix: str) -> None:
     is that file's (the sum of its generating devices' Sn)."""
     import onnx
 
-    from cosim.subsystem_operator import SHIPPED, registered
+    from cosim.subsystem_surrogate import SHIPPED, registered
     from surrogate.contract import operator_metadata
 
     operator = registered(path)

@@ -488,6 +488,21 @@ def _replaced(ss, inputs: dict) -> tuple:
     return refused, stated, seen
 
 
+def stock_case(rpath: str) -> Path:
+    """The path of a case file ANDES ships (`rpath` under andes/cases, as andes.get_case takes it),
+    found without importing ANDES (0.6 s: a run of a cached case needs no more of it). CaseError where
+    ANDES is not installed or ships no such file."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("andes")
+    if spec is None or not spec.submodule_search_locations:
+        raise CaseError("reading case files needs ANDES: pip install -e '.[andes]'")
+    path = Path(next(iter(spec.submodule_search_locations))) / "cases" / rpath
+    if not path.is_file():
+        raise CaseError(f"ANDES ships no case file {rpath}")
+    return path
+
+
 def case_cache_dir() -> Path:
     """$OPFMU_CASE_CACHE, else ~/.cache/opfmu/cases: where case_from_file keeps its conversions."""
     return Path(os.environ.get("OPFMU_CASE_CACHE") or Path.home() / ".cache" / "opfmu" / "cases")

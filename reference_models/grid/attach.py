@@ -154,9 +154,7 @@ def _load(andes, path):
 def attached_file(host, attachments, folder) -> Path:
     """The case file (ANDES JSON in `folder`) of the host case file `host` with each (bus, sub-system
     file) of `attachments` attached; CaseError for a file ANDES cannot read, a sub-system without
-    exactly one Slack, or a bus the host lacks."""
-    import andes
-
+    exactly one Slack, or a bus the host lacks. A file joined before is taken as it is, without ANDES."""
     host = Path(host)
     digest = hashlib.sha256(host.read_bytes())
     for bus, path in attachments:
@@ -166,6 +164,8 @@ def attached_file(host, attachments, folder) -> Path:
     out = Path(folder) / f"{host.stem}_attached_{digest.hexdigest()[:16]}.json"
     if out.exists():
         return out
+    import andes
+
     own = [_own_voltages(andes, path) for _, path in attachments]
     ss = _load(andes, host)
     try:
