@@ -12,7 +12,8 @@ N = 30 and 100), attached at each bus of --at. One contingency: a fault at --fau
 * surrogate, aggregate, reference: `opfmu grid run --case CASE --attach BUS=FILE:KIND ... --fault B
   --fault-start 1 --clear 1.1 --stop T --compare none --out DIR` (it writes result.csv, result.png,
   report.md, summary.json). An untimed first run of each fills the case and FMU caches; a timed run
-  that built an FMU is thrown away and run again (benchmarks/cases_cpu.py).
+  that built an FMU is thrown away and run again; the children keep their modules' bytecode as an
+  installed package does (benchmarks/cases_cpu.py).
 * ANDES: what ANDES' user does with the joined case file (the one opfmu's --attach writes, its tap
   settled to the boundary's voltage), in a process of its own: `andes.load`, a Fault at the same bus
   and times, setup, power flow, TDS with the trapezoid at a fixed 10 ms to T.

@@ -195,14 +195,14 @@ def _path_impedance(records: dict, boundary) -> complex:
 
 def aggregate_file(path, folder) -> Path:
     """The equivalent of the sub-system file `path` as a sub-system file in `folder` (cached by the
-    file's bytes); CaseError where ANDES cannot read or solve it."""
-    import andes
-
+    file's bytes, taken from there without ANDES); CaseError where ANDES cannot read or solve it."""
     path = Path(path)
     digest = hashlib.sha256(path.read_bytes())
     digest.update(Path(__file__).read_bytes())
     out = Path(folder) / f"{path.stem}_aggregate_{digest.hexdigest()[:16]}.json"
     if out.exists():
         return out
+    import andes
+
     ss, boundary, S_b, V_b = _boundary_flow(andes, path)
     return write_case(aggregate(case_records(ss), ss, boundary, S_b, V_b), out)
