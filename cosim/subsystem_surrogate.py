@@ -15,7 +15,8 @@ SHIPPED = Path(__file__).resolve().parents[1] / "surrogate" / "default" / "subsy
 
 
 def operator_registry() -> Path:
-    """The folder of the operators registered (`register`, which cosim.subsystem_operator.learn calls): <sha256 of the sub-system file>.onnx."""
+    """The folder of the operators registered (`register`, which cosim.subsystem_operator.learn
+    calls): <sha256 of the sub-system file>.onnx."""
     from reference_models.grid.andes_case import case_cache_dir
 
     return case_cache_dir() / "subsystem_operators"

@@ -1,5 +1,6 @@
 """The ONNX operator contract that needs no torch: the export tolerance, in-envelope test inputs and
-the validated metadata of an operator file (`operator_metadata`).
+the validated metadata of an operator file (`operator_metadata`; `metadata_of` reads it without the
+onnx package).
 
 Used by the export (against torch), by inference and by the FMU builder (the compiled kernel against
 onnxruntime), which must not import torch.
