@@ -53,11 +53,19 @@ CHILD_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECOD
 
 
 def andes_child(name: str, bus: int, step: float, stop: float) -> None:
-    """ANDES' user's run (see the module docstring); exits non-zero where it does not reach `stop`."""
+    """ANDES' user's run of the shipped case `name` (see the module docstring)."""
+    import andes
+
+    andes_run(andes.get_case(ANDES_FILES[name]), bus, step, stop)
+
+
+def andes_run(path, bus: int, step: float, stop: float) -> None:
+    """ANDES' user's run of the case file `path`: a fault at `bus` from FAULT_START to CLEAR, the
+    trapezoid at the fixed `step` to `stop` [s]; exits non-zero where it does not reach `stop`."""
     import andes
 
     andes.config_logger(stream_level=40)
-    ss = andes.load(andes.get_case(ANDES_FILES[name]), setup=False, no_output=True, default_config=True)
+    ss = andes.load(str(path), setup=False, no_output=True, default_config=True)
     idx = next(i for i in ss.Bus.idx.v if int(i) == bus)
     ss.add("Fault", {"bus": idx, "tf": FAULT_START, "tc": CLEAR})
     ss.setup()

@@ -37,28 +37,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from cases_cpu import OPFMU, checked, timed  # noqa: E402
+from cases_cpu import CLEAR, FAULT_START, OPFMU, andes_run, checked, timed  # noqa: E402
 
-FAULT_START, CLEAR, STEP = 1.0, 1.1, 0.01  # s
+STEP = 0.01  # s
 KINDS = ("surrogate", "aggregate", "reference")
-
-
-def andes_child(path: str, bus: int, stop: float) -> None:
-    """ANDES' user's run of the joined case file (module docstring); exits non-zero short of `stop`."""
-    import andes
-
-    andes.config_logger(stream_level=40)
-    ss = andes.load(path, setup=False, no_output=True, default_config=True)
-    idx = next(i for i in ss.Bus.idx.v if int(i) == bus)
-    ss.add("Fault", {"bus": idx, "tf": FAULT_START, "tc": CLEAR})
-    ss.setup()
-    if not ss.PFlow.run():
-        sys.exit("ANDES' power flow does not converge")
-    ss.TDS.config.tf, ss.TDS.config.tstep = stop, STEP
-    ss.TDS.config.fixt, ss.TDS.config.shrinkt, ss.TDS.config.criteria, ss.TDS.config.no_tqdm = 1, 0, 0, 1
-    ss.TDS.run()
-    if ss.dae.t < stop - 0.5 * STEP:
-        sys.exit(f"ANDES stopped at t = {ss.dae.t:.4f} s")
 
 
 def commands(args, feeder: Path, joined: Path, work: Path) -> dict:
@@ -142,7 +124,7 @@ def main(argv=None) -> None:
     parser.add_argument("--bus", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.andes_child:
-        andes_child(args.andes_child, args.bus, args.stop)
+        andes_run(args.andes_child, args.bus, STEP, args.stop)
         return
     load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="opfmu_subsystem_cpu_") as work:
