@@ -22,7 +22,11 @@ the host records at the boundary becomes the component's inputs and states, each
     df_units           where the plan carries the devices' measured frequency (`subsystem_uf`): the
                        rating-weighted mean of the frequency deviation [Hz] that the devices behind
                        the boundary which measure one (a BusFreq's theta_f, theta_w among their
-                       states) read at their own buses, less the boundary's measurement above.
+                       states) read at their own buses, less the boundary's measurement above;
+    Ip_held            where the plan carries the held-back current (`subsystem_held`,
+                       `subsystem_pc_held`): the sum over the REGCA1 behind the boundary of the
+                       active current each holds back at low voltage, S0_y (1 - LVG(V)) with V its
+                       own bus voltage (system base, as ANDES' currents).
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -53,8 +57,9 @@ from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
-from reference_models.models.subsystem import (MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY, PLANT_CONTROLLER_FIELDS,
-                                              PLANT_CONTROLLER_STATES, UNIT_FREQUENCY_STATE)
+from reference_models.models.regca1 import low_voltage_gain
+from reference_models.models.subsystem import (HELD_CURRENT_STATE, MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY,
+                                              PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES, UNIT_FREQUENCY_STATE)
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -74,7 +79,9 @@ class Plan:
     `carry_controller`: the windows carry the sub-system's plant controller states too (component
     `subsystem_pc`, which needs an REPCA1; docs/subsystems.md); `memory`: and a memory of the boundary
     voltage (components `subsystem_mem`, `subsystem_pc_mem`); `unit_frequency`: the devices' own
-    measured frequency (component `subsystem_uf`, neither of those)."""
+    measured frequency (component `subsystem_uf`, neither of those); `held_current`: the active
+    current its REGCA1 hold back at low voltage (components `subsystem_held`, `subsystem_pc_held`,
+    not with a memory or the devices' measured frequency)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -90,6 +97,7 @@ class Plan:
     carry_controller: bool = False
     memory: bool = False
     unit_frequency: bool = False
+    held_current: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
@@ -175,17 +183,24 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
 
 
 def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False,
-                    unit_frequency: bool = False):
+                    unit_frequency: bool = False, held_current: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
     plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
-    voltage (`_mem`) where asked; `subsystem_uf` where the devices' measured frequency is asked
-    (DatasetError together with either of the others)."""
+    voltage (`_mem`) or the held-back current (`_held`, DatasetError where it has no REGCA1) where
+    asked; `subsystem_uf` where the devices' measured frequency is asked (DatasetError together with
+    any of the others)."""
     if unit_frequency:
-        if carry_controller or memory:
-            raise DatasetError("the devices' measured frequency is carried without a plant controller or a memory")
+        if carry_controller or memory or held_current:
+            raise DatasetError("the devices' measured frequency is carried without a plant controller, a memory or "
+                               "the held-back current")
         return component("subsystem_uf")
-    suffix = "_mem" if memory else ""
+    if held_current:
+        if memory:
+            raise DatasetError("the held-back current is carried without a memory")
+        if not records.get("REGCA1"):
+            raise DatasetError("the sub-system has no REGCA1 whose held-back active current it could carry")
+    suffix = "_held" if held_current else "_mem" if memory else ""
     if not carry_controller:
         return component("subsystem" + suffix)
     if not records.get("REPCA1"):
@@ -246,13 +261,27 @@ def unit_frequency_columns(case, bus: int, model) -> list:
     return out
 
 
-def run_rows(result, case, bus: int, params: dict, columns: list = (), units: list = ()) -> dict:
+def held_current_columns(case, bus: int, model) -> list:
+    """Where the `model` carries Ip_held, (S0_y column of the grid result, its bus, its REGCA1Params)
+    of each REGCA1 behind the boundary `bus` of `case`; else []. ValueError where it has none."""
+    if HELD_CURRENT_STATE.name not in model.state_names:
+        return []
+    behind = set(subsystem_buses(case.network, bus)) - {bus}
+    out = [(f"{label}_S0_y", unit.bus, d.params) for unit, labels in zip(case.units, device_labels(case.units))
+           if unit.bus in behind for d, label in zip(unit.devices, labels) if d.component.name == "regca1"]
+    if not out:
+        raise ValueError(f"no REGCA1 behind bus {bus}: nothing for Ip_held")
+    return out
+
+
+def run_rows(result, case, bus: int, params: dict, columns: list = (), units: list = (), held: list = ()) -> dict:
     """The component's inputs u [n, 2] and states x [n, 5 + len(columns)] at the rows t [n] of a grid
     result (module docstring); columns: per carried state the result's device states it combines and
     how (controller_columns); units: the devices whose measured frequency the rows' f_units [n] (Hz
     from nominal, their rating-weighted mean) averages (unit_frequency_columns; none: no f_units),
     each a BusFreq of its settings along its own bus' recorded angle as the boundary's measurement is
-    (bus_frequency_states), so that at a switching both see the same angles."""
+    (bus_frequency_states), so that at a switching both see the same angles; held: the REGCA1 whose
+    held-back current the rows' Ip_held [n] sums (held_current_columns; none: no Ip_held)."""
     net = case.network
     b = net.bus_index(bus)
     t = np.asarray(result.time, float)
@@ -271,6 +300,10 @@ def run_rows(result, case, bus: int, params: dict, columns: list = (), units: li
         measured = [frequency_deviation(*bus_frequency_states(t, theta_bus[:, net.bus_index(at)], Tf, Tw), Tw)
                     for at, _, Tf, Tw in units]
         rows["f_units"] = np.average(measured, axis=0, weights=[w for _, w, _, _ in units])
+    if held:
+        V_bus = np.asarray(result.V_bus)
+        rows["held"] = sum(np.asarray(result.device_states[column], float)
+                           * (1.0 - low_voltage_gain(np, V_bus[:, net.bus_index(at)], p)) for column, at, p in held)
     return rows
 
 
@@ -411,7 +444,7 @@ def record_run(task: tuple) -> str:
         result, _ = runner.run(contingency_of(Run(**run), case, plan), plan.stop, stop_at_loss=True)
         model = component(model)
         rows = run_rows(result, case, bus, params, controller_columns(case, bus, model),
-                        unit_frequency_columns(case, bus, model))
+                        unit_frequency_columns(case, bus, model), held_current_columns(case, bus, model))
         write_npz(out, **rows, failed=np.array(""))
     except (RuntimeError, ValueError, ArithmeticError) as exc:  # the master's one-line errors
         write_npz(out, failed=np.array(str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__))
@@ -480,7 +513,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency)
+    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency, plan.held_current)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
@@ -533,6 +566,8 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if UNIT_FREQUENCY_STATE.name in model.state_names:  # the devices' measurement less the boundary's
             boundary = frequency_deviation(rows["x"][:, 0], rows["x"][:, 1], p.busf_Tw)
             rows["x"] = np.concatenate([rows["x"], (rows["f_units"] - boundary)[:, None]], axis=1)
+        if HELD_CURRENT_STATE.name in model.state_names:
+            rows["x"] = np.concatenate([rows["x"], rows["held"][:, None]], axis=1)
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

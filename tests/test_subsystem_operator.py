@@ -34,13 +34,15 @@ def test_the_subsystem_starts_from_the_load_flow_and_gives_back_its_injection():
     assert f == 1.0 and np.all(SUBSYSTEM.rhs(x, u, p) == 0.0)  # at rest: the measurement at the angle
 
 
-def test_a_subsystem_carrying_its_devices_measured_frequency_starts_it_at_the_boundarys_from_the_load_flow():
-    """subsystem_uf's df_units is learned, but its start is known (0: every device's measurement at
-    rest with the boundary's); the FMU's own start from the load flow solves the rest as for
-    `subsystem` and fixes df_units by its start equation, not by the load flow."""
+@pytest.mark.parametrize("name", ["subsystem_uf", "subsystem_held"])
+def test_a_subsystem_carrying_a_learned_device_state_starts_it_at_0_from_the_load_flow(name):
+    """subsystem_uf's df_units and subsystem_held's Ip_held are learned, but their start is known (0:
+    every device's measurement at rest with the boundary's, no current held back); the FMU's own
+    start from the load flow solves the rest as for `subsystem` and fixes that state by its start
+    equation, not by the load flow."""
     from fmu_export.self_start import describe, rate_rows
 
-    model = component("subsystem_uf")
+    model = component(name)
     p = model.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": 0.98, "Ip_own": 0.03, "Iq_own": 0.004})
     x, _ = model.initialisation.start({"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}, p)
     assert x[5] == 0.0 and np.array_equal(x[:5], SUBSYSTEM.initialisation.start(
@@ -291,6 +293,25 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
     rows = run_rows(result, case, 9, params, columns)
     x, u, t = rows["x"], rows["u"], rows["t"]
     assert x.shape[1] == 11
+    # the held-back current (--held-current, subsystem_pc_held): what the REGCA1's low-voltage gain keeps
+    # of S0_y from their output current (their own output equations), 0 at rest and once the voltage is back
+    from cosim.subsystem_data import held_current_columns
+    from reference_models.models.regca1 import currents
+
+    held_model = subsystem_model(records, carry_controller=True, held_current=True)
+    assert held_model.name == "subsystem_pc_held" and held_model.state_names[5:] == model.state_names[5:] + ("Ip_held",)
+    held = held_current_columns(case, 9, held_model)
+    assert len(held) == 4 and held_current_columns(case, 9, model) == []
+    back = run_rows(result, case, 9, params, columns, held=held)["held"]
+    expected = 0.0
+    for column, at, q in held:
+        S0 = result.device_states[column]
+        state = np.stack([S0, result.device_states[column.replace("S0_y", "S1_y")], np.zeros_like(S0), np.zeros_like(S0)])
+        expected = expected + S0 - currents(state, result.V_bus[:, case.network.bus_index(at)], q, np)[0]
+    np.testing.assert_allclose(back, expected, rtol=0, atol=1e-12)
+    S0_sum = sum(result.device_states[c] for c, _, _ in held)
+    assert abs(back[0]) < 1e-9 and np.all(np.abs(back[t > 1.0]) < 1e-9)
+    assert np.max(back) > 0.5 * np.max(S0_sum)  # the dip holds back most of the plant's active current
     for k, (group, how) in enumerate(columns):
         assert np.allclose(x[:, 5 + k], getattr(np, how)([result.device_states[c] for c in group], axis=0), rtol=0, atol=1e-15)
     start = model.equilibrium(u[0], p)
@@ -445,7 +466,13 @@ def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     (["--subsystem", "{box}", "--rating", "5", "--unit-frequency", "--out", "{out}"],
      "--unit-frequency is for a case file"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--unit-frequency", "--memory", "--out", "{out}"],
-     "--unit-frequency: not with --carry-controller or --memory"),
+     "--unit-frequency: not with --carry-controller, --memory or --held-current"),
+    (["--subsystem", "{box}", "--rating", "5", "--held-current", "--out", "{out}"],
+     "--held-current is for a case file"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--held-current", "--out", "{out}"],
+     "has no REGCA1 whose held-back active current"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--held-current", "--memory", "--out", "{out}"],
+     "--held-current: not with --memory"),
     (["--subsystem", "{feeder}", "--out", "{out}"], "needs --boundary BUS"),
     (["--subsystem", "{feeder}", "--boundary", "7", "--out", "{out}"], "bus of its one Slack (1)"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--pm", "0.1", "0.9", "--out", "{out}"], "--pm: for a machine"),

@@ -14,7 +14,9 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         boundary voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s); a sub-system whose devices' own
         measured frequency is carried (SUBSYSTEM_UF, `subsystem_uf`) carries last df_units [Hz]: the
         rating-weighted mean of the frequency its devices measure at their own buses, less the
-        boundary's measured frequency
+        boundary's measured frequency; a sub-system whose held-back current is carried
+        (SUBSYSTEM_HELD, SUBSYSTEM_PC_HELD) carries last Ip_held [pu, system base]: the active
+        current its REGCA1 hold back at low voltage, sum of S0_y (1 - LVG(V)) at their own buses
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -56,7 +58,13 @@ What is known is written here; what is not is learned:
     on it sees, just after a clearing and while the generation falls, a frequency some 0.01-0.05 Hz
     off the boundary's, in a filter whose state a window started there does not see: with
     `--unit-frequency` the operator carries that difference, df_units (learned: it follows the
-    devices' currents), and reads it at each window's start.
+    devices' currents), and reads it at each window's start;
+    a REGCA1 delivers its active current S0_y through a low-voltage gain, Ipout = S0_y LVG(V) (0
+    below Lvpnt0), and keeps S0_y through a dip: at the clearing the current comes back at once with
+    the voltage, by an amount the delivered currents of a window started in the dip do not tell;
+    with `--held-current` the operator carries it, Ip_held = sum of S0_y (1 - LVG(V)) over the
+    units (learned: S0_y follows the units' controls; 0 where no unit is below Lvpnt1, so at rest),
+    and reads it at each window's start.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -171,12 +179,12 @@ def _controller_rates(x, u, p, m) -> tuple:
     return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
 
 
-def _equations(carried: int, memory: tuple, unit_frequency: bool = False) -> tuple:
+def _equations(carried: int, memory: tuple, learned: int = 0) -> tuple:
     """(derivatives, start_equations) of a sub-system that carries `carried` plant controller states
-    (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them) and the devices' measured
-    frequency (last, learned, 0 at rest)."""
+    (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them) and `learned` more states of
+    its devices (last: learned, 0 at rest: df_units, Ip_held)."""
     first = N_BOUNDARY + carried  # the memory's first state
-    last = first + len(memory)  # df_units, where carried
+    last = first + len(memory)  # the devices' carried states, where any
 
     def derivatives(x, u, p: SubsystemParams, m):
         """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's, then a memory's)/dt:
@@ -185,19 +193,19 @@ def _equations(carried: int, memory: tuple, unit_frequency: bool = False) -> tup
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = _controller_rates(x, u, p, m) if carried else ()
         lags = tuple((u[0] - x[first + k]) / T for k, T in enumerate(memory))
-        units = (0.0 * x[last],) if unit_frequency else ()
+        units = tuple(0.0 * x[last + k] for k in range(learned))
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags, *units)
 
     def start_equations(x, u, p: SubsystemParams, m):
         """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
         voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
         integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs, the devices'
-        measurement at the boundary's; the learned currents' rows are unread (the load flow's P, Q
-        fix them)."""
+        carried states at 0 (their measurement at the boundary's, no current held back); the learned
+        currents' rows are unread (the load flow's P, Q fix them)."""
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
-        units = (x[last],) if unit_frequency else ()
+        units = tuple(x[last + k] for k in range(learned))
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *units)
 
     return derivatives, start_equations
@@ -216,19 +224,19 @@ def outputs(x, u, p: SubsystemParams, m):
     return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
 
 
-def _equilibrium(carried: int, memory: int, unit_frequency: bool = False):
+def _equilibrium(carried: int, memory: int, learned: int = 0):
     def equilibrium(u, p: SubsystemParams) -> np.ndarray:
-        """The rest [5 + carried + memory (+ 1)] under constant (Vs, theta_vs), as if the load flow had
+        """The rest [5 + carried + memory + learned] under constant (Vs, theta_vs), as if the load flow had
         put the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering
         the power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled
         tap, a carried controller at its start (_controller_start), a memory at Vs, the devices'
-        measurement at the boundary's (df_units = 0)."""
+        carried states at 0."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
         return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
-                        + [Vs] * memory + [0.0] * unit_frequency)
+                        + [Vs] * memory + [0.0] * learned)
     return equilibrium
 
 
@@ -258,14 +266,14 @@ def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.nda
     return out / (2.0 * math.pi * p.busf_Tw)
 
 
-def _starter(carried: int, memory: int, unit_frequency: bool = False):
+def _starter(carried: int, memory: int, learned: int = 0):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
         return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
-                        + _controller_start(V0, carried) + [V0] * memory + [0.0] * unit_frequency), {}
+                        + _controller_start(V0, carried) + [V0] * memory + [0.0] * learned), {}
     return start
 
 
@@ -292,37 +300,43 @@ MEMORY_STATES = tuple(Quantity(f"Vm{k + 1}", "pu", f"boundary voltage through a 
                       for k, T in enumerate(MEMORY_LAGS))
 UNIT_FREQUENCY_STATE = Quantity("df_units", "Hz", "the devices' own measured frequency (rating-weighted mean) "
                                 "less the boundary's")
+HELD_CURRENT_STATE = Quantity("Ip_held", "pu", "active current the devices hold back at low voltage (REGCA1: "
+                              "S0_y (1 - LVG(V)) summed, system base)")
+# the scale of each learned carried state (what a state's changes are measured against)
+LEARNED_SCALES = {UNIT_FREQUENCY_STATE.name: 0.02, HELD_CURRENT_STATE.name: 0.05}
 CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
                                                           else "alike in every REPCA1)"))
                           for n, _, how, what in PLANT_CONTROLLER_STATES)
 
 
 def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = (),
-               unit_frequency: bool = False) -> Component:
+               learned: tuple = ()) -> Component:
     """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
-    each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and,
-    where `unit_frequency`, the devices' measured frequency (UNIT_FREQUENCY_STATE, learned)."""
+    each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and
+    the devices' `learned` carried states (Quantity each: UNIT_FREQUENCY_STATE, HELD_CURRENT_STATE;
+    learned, 0 at rest)."""
     extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory)))
-    units = (N_BOUNDARY + len(extra),) if unit_frequency else ()
-    derivatives, start_equations = _equations(len(carried), memory, unit_frequency)
+    units = tuple(range(N_BOUNDARY + len(extra), N_BOUNDARY + len(extra) + len(learned)))
+    derivatives, start_equations = _equations(len(carried), memory, len(learned))
     n_x = N_BOUNDARY + len(extra) + len(units)
     return Component(
         name=name,
         description=description,
-        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)] + (UNIT_FREQUENCY_STATE,) * unit_frequency,
+        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)] + learned,
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
         params_type=params_type,
         derivatives=derivatives,
         output_equations=outputs,
-        equilibrium=_equilibrium(len(carried), len(memory), unit_frequency),
-        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory)) + (0.02,) * len(units),
+        equilibrium=_equilibrium(len(carried), len(memory), len(learned)),
+        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory))
+        + tuple(LEARNED_SCALES[q.name] for q in learned),
         # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
         # plant controller's lags, PIs and hold, piecewise affine in their own state; the memory's lags
         affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-        initialisation=Initialisation((), _starter(len(carried), len(memory), unit_frequency)),
+        initialisation=Initialisation((), _starter(len(carried), len(memory), len(learned))),
         learned_states=(2, 3) + units,
         started_states=units,
         start_equations=start_equations,
@@ -341,4 +355,10 @@ SUBSYSTEM_MEM = _subsystem("subsystem_mem", f"a sub-system{_MEMORY} seen through
 SUBSYSTEM_PC_MEM = _subsystem("subsystem_pc_mem", f"a sub-system with a plant controller{_MEMORY} seen through its "
                               f"boundary bus: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams, MEMORY_LAGS)
 SUBSYSTEM_UF = _subsystem("subsystem_uf", "a sub-system seen through its boundary bus, its devices' own measured "
-                          f"frequency carried: {_KNOWN}", (), SubsystemParams, unit_frequency=True)
+                          f"frequency carried: {_KNOWN}", (), SubsystemParams, learned=(UNIT_FREQUENCY_STATE,))
+_HELD = ", its held-back current carried"
+SUBSYSTEM_HELD = _subsystem("subsystem_held", f"a sub-system seen through its boundary bus{_HELD}: {_KNOWN}", (),
+                            SubsystemParams, learned=(HELD_CURRENT_STATE,))
+SUBSYSTEM_PC_HELD = _subsystem("subsystem_pc_held", f"a sub-system with a plant controller seen through its boundary "
+                               f"bus{_HELD}: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams,
+                               learned=(HELD_CURRENT_STATE,))
