@@ -23,10 +23,12 @@ the host records at the boundary becomes the component's inputs and states, each
                        rating-weighted mean of the frequency deviation [Hz] that the devices behind
                        the boundary which measure one (a BusFreq's theta_f, theta_w among their
                        states) read at their own buses, less the boundary's measurement above;
-    Ip_held            where the plan carries the held-back current (`subsystem_held`,
-                       `subsystem_pc_held`): the sum over the REGCA1 behind the boundary of the
-                       active current each holds back at low voltage, S0_y (1 - LVG(V)) with V its
-                       own bus voltage (system base, as ANDES' currents).
+    Ip_full, Ip_res    where the plan passes the devices' active current through a low-voltage gain
+                       (`subsystem_lvg`, `subsystem_pc_lvg`): Ip_full (in Ip's place) is Ip and what
+                       the REGCA1 behind the boundary hold back at low voltage, the sum of S0_y
+                       (1 - LVG(V)) with V each one's own bus voltage (system base, as ANDES'
+                       currents); Ip_res (last) is Ip less Ip_full through the sub-system's gain
+                       at the boundary (reference_models.models.subsystem.low_voltage_gain).
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -58,8 +60,9 @@ from reference_models.grid.boundary import boundary_current, passive_admittance,
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
 from reference_models.models.regca1 import low_voltage_gain
-from reference_models.models.subsystem import (HELD_CURRENT_STATE, MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY,
-                                              PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES, UNIT_FREQUENCY_STATE)
+from reference_models.models.subsystem import (MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY, PLANT_CONTROLLER_FIELDS,
+                                              PLANT_CONTROLLER_STATES, RESIDUAL_CURRENT_STATE, UNIT_FREQUENCY_STATE)
+from reference_models.models.subsystem import low_voltage_gain as subsystem_gain
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
 from surrogate.data.datasets import FORMAT_VERSION, DatasetError, envelope_of, in_frame, load_metadata
@@ -79,9 +82,9 @@ class Plan:
     `carry_controller`: the windows carry the sub-system's plant controller states too (component
     `subsystem_pc`, which needs an REPCA1; docs/subsystems.md); `memory`: and a memory of the boundary
     voltage (components `subsystem_mem`, `subsystem_pc_mem`); `unit_frequency`: the devices' own
-    measured frequency (component `subsystem_uf`, neither of those); `held_current`: the active
-    current its REGCA1 hold back at low voltage (components `subsystem_held`, `subsystem_pc_held`,
-    not with a memory or the devices' measured frequency)."""
+    measured frequency (component `subsystem_uf`, neither of those); `voltage_gain`: its devices'
+    active current through a low-voltage gain, for a sub-system of REGCA1 (components
+    `subsystem_lvg`, `subsystem_pc_lvg`, not with a memory or the devices' measured frequency)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -97,17 +100,18 @@ class Plan:
     carry_controller: bool = False
     memory: bool = False
     unit_frequency: bool = False
-    held_current: bool = False
+    voltage_gain: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
 
-def subsystem_params(records: dict, case, bus: int, carry_controller: bool = False) -> dict:
+def subsystem_params(records: dict, case, bus: int, carry_controller: bool = False, voltage_gain: bool = False) -> dict:
     """The `subsystem` component's parameters of the sub-system `records` (ANDES JSON records, its
     own file) attached at `bus` of `case` (the joint case): its rating, its own boundary voltage,
     its passive admittance referred to that voltage and the devices' currents there, its BusFreq;
-    carry_controller: also its plant controller's (`subsystem_pc`: plant_controller_params)."""
+    carry_controller: also its plant controller's (`subsystem_pc`: plant_controller_params);
+    voltage_gain: also its low-voltage gain's (`subsystem_lvg`: gain_params)."""
     behind = subsystem_buses(case.network, bus)
     b = case.network.bus_index(bus)
     V0 = float(case.flow.V[b])
@@ -125,7 +129,27 @@ def subsystem_params(records: dict, case, bus: int, carry_controller: bool = Fal
               "busf_Tf": float(np.median([r.get("Tf", BUSFREQ_DEFAULTS["Tf"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tf"],
               "busf_Tw": float(np.median([r.get("Tw", BUSFREQ_DEFAULTS["Tw"]) for r in freq])) if freq else BUSFREQ_DEFAULTS["Tw"],
               "busf_fn": float(case.network.f_hz)}
-    return {**params, **plant_controller_params(case, bus, params)} if carry_controller else params
+    if carry_controller:
+        params.update(plant_controller_params(case, bus, params))
+    return {**params, **gain_params(case, bus, V_own)} if voltage_gain else params
+
+
+def gain_params(case, bus: int, V_own: float) -> dict:
+    """The knees lvg_V0 < lvg_V1 of `subsystem_lvg`'s low-voltage gain [pu of the sub-system's own
+    boundary voltage V_own]: the rating-weighted means over the REGCA1 behind the boundary `bus` of
+    `case` of their Lvpnt0, Lvpnt1, each over its terminal voltage's ratio to V_own in the load flow
+    (the inside keeps its own voltages behind the settled tap: a unit at 1.03 pu where the boundary
+    is at 1.0 reaches its knee at a boundary voltage 1.03 times lower). DatasetError where there is
+    none."""
+    net = case.network
+    behind = set(subsystem_buses(net, bus)) - {bus}
+    units = [(d.params, float(case.flow.V[net.bus_index(unit.bus)]) / V_own) for unit in case.units
+             if unit.bus in behind for d in unit.devices if d.component.name == "regca1"]
+    if not units:
+        raise DatasetError(f"no REGCA1 behind bus {bus}: no low-voltage gain")
+    weights = [q.Sn for q, _ in units]
+    return {"lvg_V0": float(np.average([q.Lvpnt0 / r for q, r in units], weights=weights)),
+            "lvg_V1": float(np.average([q.Lvpnt1 / r for q, r in units], weights=weights))}
 
 
 # the REPCA1 parameters that are the unit's share of the plant's (gains, output limits); the others are
@@ -183,24 +207,24 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
 
 
 def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False,
-                    unit_frequency: bool = False, held_current: bool = False):
+                    unit_frequency: bool = False, voltage_gain: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
     plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
-    voltage (`_mem`) or the held-back current (`_held`, DatasetError where it has no REGCA1) where
-    asked; `subsystem_uf` where the devices' measured frequency is asked (DatasetError together with
+    voltage (`_mem`) or its devices' active current through a low-voltage gain (`_lvg`, DatasetError
+    where it has no REGCA1) where asked; `subsystem_uf` where the devices' measured frequency is asked (DatasetError together with
     any of the others)."""
     if unit_frequency:
-        if carry_controller or memory or held_current:
+        if carry_controller or memory or voltage_gain:
             raise DatasetError("the devices' measured frequency is carried without a plant controller, a memory or "
-                               "the held-back current")
+                               "a low-voltage gain")
         return component("subsystem_uf")
-    if held_current:
+    if voltage_gain:
         if memory:
-            raise DatasetError("the held-back current is carried without a memory")
+            raise DatasetError("a low-voltage gain is learned without a memory")
         if not records.get("REGCA1"):
-            raise DatasetError("the sub-system has no REGCA1 whose held-back active current it could carry")
-    suffix = "_held" if held_current else "_mem" if memory else ""
+            raise DatasetError("the sub-system has no REGCA1, whose low-voltage gain it would pass its current through")
+    suffix = "_lvg" if voltage_gain else "_mem" if memory else ""
     if not carry_controller:
         return component("subsystem" + suffix)
     if not records.get("REPCA1"):
@@ -262,15 +286,16 @@ def unit_frequency_columns(case, bus: int, model) -> list:
 
 
 def held_current_columns(case, bus: int, model) -> list:
-    """Where the `model` carries Ip_held, (S0_y column of the grid result, its bus, its REGCA1Params)
-    of each REGCA1 behind the boundary `bus` of `case`; else []. ValueError where it has none."""
-    if HELD_CURRENT_STATE.name not in model.state_names:
+    """Where the `model` passes its current through a low-voltage gain (carries Ip_res), (S0_y column
+    of the grid result, its bus, its REGCA1Params) of each REGCA1 behind the boundary `bus` of
+    `case`; else []. ValueError where it has none."""
+    if RESIDUAL_CURRENT_STATE.name not in model.state_names:
         return []
     behind = set(subsystem_buses(case.network, bus)) - {bus}
     out = [(f"{label}_S0_y", unit.bus, d.params) for unit, labels in zip(case.units, device_labels(case.units))
            if unit.bus in behind for d, label in zip(unit.devices, labels) if d.component.name == "regca1"]
     if not out:
-        raise ValueError(f"no REGCA1 behind bus {bus}: nothing for Ip_held")
+        raise ValueError(f"no REGCA1 behind bus {bus}: no low-voltage gain")
     return out
 
 
@@ -281,7 +306,7 @@ def run_rows(result, case, bus: int, params: dict, columns: list = (), units: li
     from nominal, their rating-weighted mean) averages (unit_frequency_columns; none: no f_units),
     each a BusFreq of its settings along its own bus' recorded angle as the boundary's measurement is
     (bus_frequency_states), so that at a switching both see the same angles; held: the REGCA1 whose
-    held-back current the rows' Ip_held [n] sums (held_current_columns; none: no Ip_held)."""
+    held-back current the rows' held [n] sums (held_current_columns; none: no held)."""
     net = case.network
     b = net.bus_index(bus)
     t = np.asarray(result.time, float)
@@ -513,7 +538,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency, plan.held_current)
+    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency, plan.voltage_gain)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
@@ -529,7 +554,7 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
             path = attached_file(host, [(bus, subsystem)], out / ".attached")
             attachments.append((name, bus, str(path)))
             cases.append((case_from_file(path), bus))
-    params = subsystem_params(records, cases[0][0], cases[0][1], plan.carry_controller)
+    params = subsystem_params(records, cases[0][0], cases[0][1], plan.carry_controller, plan.voltage_gain)
     model.params(params)  # checked before anything is built or runs
     for case, _ in cases:
         generator_files(case, "reference", out / ".fmus")  # built once, before the workers start
@@ -566,8 +591,11 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if UNIT_FREQUENCY_STATE.name in model.state_names:  # the devices' measurement less the boundary's
             boundary = frequency_deviation(rows["x"][:, 0], rows["x"][:, 1], p.busf_Tw)
             rows["x"] = np.concatenate([rows["x"], (rows["f_units"] - boundary)[:, None]], axis=1)
-        if HELD_CURRENT_STATE.name in model.state_names:
-            rows["x"] = np.concatenate([rows["x"], rows["held"][:, None]], axis=1)
+        if RESIDUAL_CURRENT_STATE.name in model.state_names:  # Ip_full in Ip's place, Ip_res last
+            full = rows["x"][:, 2] + rows["held"]
+            gain = subsystem_gain(rows["x"].T, rows["u"].T, p, np)
+            rows["x"] = np.concatenate([rows["x"], (rows["x"][:, 2] - full * gain)[:, None]], axis=1)
+            rows["x"][:, 2] = full
         x0, u, x = windows(rows, plan)
         group = parts[run.split]
         group[0].append(x0), group[1].append(u), group[2].append(x), group[3].extend([label] * len(x0))

@@ -26,7 +26,7 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
 SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
-                  "unit_frequency", "held_current", "members", "frequency_features")
+                  "unit_frequency", "voltage_gain", "members", "frequency_features")
 MAX_MEMBERS = 16
 
 
@@ -60,16 +60,16 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--memory", action="store_true", default=None,
                     help="with --subsystem: carry the boundary voltage's recent past, the voltage through lags of "
                          "0.05, 0.25 and 1 s, stepped exactly, which the operators read at each window's start "
-                         "(components subsystem_mem, subsystem_pc_mem; not with --held-current; docs/subsystems.md)")
+                         "(components subsystem_mem, subsystem_pc_mem; not with --voltage-gain; docs/subsystems.md)")
     op.add_argument("--unit-frequency", action="store_true", default=None,
                     help="with --subsystem FILE: carry how far the frequency its devices measure at their own buses "
                          "is off the boundary's, learned, which the operators read at each window's start (component "
                          "subsystem_uf; not with --carry-controller or --memory; docs/subsystems.md)")
-    op.add_argument("--held-current", action="store_true", default=None,
-                    help="with --subsystem FILE with REGCA1: carry the active current they hold back at low voltage "
-                         "and give back with it, learned, which the operators read at each window's start "
-                         "(components subsystem_held, subsystem_pc_held; not with --memory or --unit-frequency; "
-                         "docs/subsystems.md)")
+    op.add_argument("--voltage-gain", action="store_true", default=None,
+                    help="with --subsystem FILE with REGCA1: the devices' active current through their low-voltage "
+                         "gain at the boundary voltage, known, of a full-voltage current and a residual, learned, so "
+                         "that it falls and returns with the voltage at once (components subsystem_lvg, "
+                         "subsystem_pc_lvg; not with --memory or --unit-frequency; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",
@@ -85,7 +85,7 @@ def cmd_subsystem(args) -> None:
     given = [f"--{k.replace('_', '-')}" for k, v in MACHINE_ONLY.items() if getattr(args, k, v) != v]
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
-                        "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --held-current, "
+                        "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --voltage-gain, "
                         "--members, --frequency-features, --epochs, --seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
@@ -110,12 +110,12 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
-    if args.unit_frequency and (args.carry_controller or args.memory or args.held_current):
-        raise UserError("--unit-frequency: not with --carry-controller, --memory or --held-current")
-    if args.held_current and args.memory:
-        raise UserError("--held-current: not with --memory")
-    if args.held_current and not records.get("REGCA1"):
-        raise UserError(f"--held-current: {path.name} has no REGCA1 whose held-back active current it could carry")
+    if args.unit_frequency and (args.carry_controller or args.memory or args.voltage_gain):
+        raise UserError("--unit-frequency: not with --carry-controller, --memory or --voltage-gain")
+    if args.voltage_gain and args.memory:
+        raise UserError("--voltage-gain: not with --memory")
+    if args.voltage_gain and not records.get("REGCA1"):
+        raise UserError(f"--voltage-gain: {path.name} has no REGCA1, whose low-voltage gain it would learn through")
     if args.carry_controller and not records.get("REPCA1"):
         raise UserError(f"--carry-controller: {path.name} has no plant controller (REPCA1) whose states it could carry")
     out, plan, name = _output(args), _plan(args), _name(args)
@@ -143,7 +143,7 @@ def _check_case(path: Path) -> None:
 def _black_box(path: Path, args) -> None:
     """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
     for option, value in (("--boundary", args.boundary), ("--carry-controller", args.carry_controller),
-                          ("--unit-frequency", args.unit_frequency), ("--held-current", args.held_current)):
+                          ("--unit-frequency", args.unit_frequency), ("--voltage-gain", args.voltage_gain)):
         if value is not None:
             raise UserError(f"{option} is for a case file; a black box (an FMU) is its bus port, never read inside")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
@@ -177,7 +177,7 @@ def _plan(args):
                 buses=Plan.buses if args.buses is None else args.buses,
                 stride=Plan.stride if args.stride is None else args.stride,
                 carry_controller=bool(args.carry_controller), memory=bool(args.memory),
-                unit_frequency=bool(args.unit_frequency), held_current=bool(args.held_current))
+                unit_frequency=bool(args.unit_frequency), voltage_gain=bool(args.voltage_gain))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)

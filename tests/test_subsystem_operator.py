@@ -34,15 +34,13 @@ def test_the_subsystem_starts_from_the_load_flow_and_gives_back_its_injection():
     assert f == 1.0 and np.all(SUBSYSTEM.rhs(x, u, p) == 0.0)  # at rest: the measurement at the angle
 
 
-@pytest.mark.parametrize("name", ["subsystem_uf", "subsystem_held"])
-def test_a_subsystem_carrying_a_learned_device_state_starts_it_at_0_from_the_load_flow(name):
-    """subsystem_uf's df_units and subsystem_held's Ip_held are learned, but their start is known (0:
-    every device's measurement at rest with the boundary's, no current held back); the FMU's own
-    start from the load flow solves the rest as for `subsystem` and fixes that state by its start
-    equation, not by the load flow."""
+def test_a_subsystem_carrying_a_learned_device_state_starts_it_at_0_from_the_load_flow():
+    """subsystem_uf's df_units is learned, but its start is known (0: every device's measurement at
+    rest with the boundary's); the FMU's own start from the load flow solves the rest as for
+    `subsystem` and fixes that state by its start equation, not by the load flow."""
     from fmu_export.self_start import describe, rate_rows
 
-    model = component(name)
+    model = component("subsystem_uf")
     p = model.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": 0.98, "Ip_own": 0.03, "Iq_own": 0.004})
     x, _ = model.initialisation.start({"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}, p)
     assert x[5] == 0.0 and np.array_equal(x[:5], SUBSYSTEM.initialisation.start(
@@ -53,6 +51,42 @@ def test_a_subsystem_carrying_a_learned_device_state_starts_it_at_0_from_the_loa
     spec, why = describe(model, p, x_rest, model.start_inputs)
     assert why is None and spec.load_flow
     assert np.all(model.start_residual(x, np.array([1.03, 0.4]), p)[[0, 1, 4, 5]] == pytest.approx(0.0, abs=1e-15))
+
+
+@pytest.mark.parametrize("V_own, knees", [(0.98, (0.35, 0.85)), (1.0, (0.6, 1.1))])
+def test_a_subsystem_with_a_low_voltage_gain_starts_from_the_load_flow_and_its_current_follows_the_voltage_at_once(
+        V_own, knees):
+    """subsystem_lvg delivers Ip_full LVG(Vs / n) + Ip_res: started from the load flow it gives back
+    the boundary's injection as `subsystem` does, with Ip_full the delivered current and Ip_res what
+    the gain holds back of it there (0 above the upper knee, which its start equation fixes); a
+    voltage step moves the delivered current with the gain at once, without a state moving."""
+    from fmu_export.self_start import describe, rate_rows
+
+    model = component("subsystem_lvg")
+    p = model.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": V_own, "Ip_own": 0.03, "Iq_own": 0.004,
+                      "lvg_V0": knees[0], "lvg_V1": knees[1]})
+    given = {"V0": 1.03, "theta0": 0.4, "P0": -0.012, "Q0": 0.007}
+    x, _ = model.initialisation.start(given, p)
+    plain = SUBSYSTEM.initialisation.start(given, SUBSYSTEM.params({k: v for k, v in p.to_dict().items()
+                                                                    if not k.startswith("lvg_")}))[0]
+    assert np.array_equal(x[:5], plain)
+    held = 1.0 - min(max((V_own - knees[0]) / (knees[1] - knees[0]), 0.0), 1.0)
+    assert x[5] == pytest.approx(plain[2] * held, rel=1e-15, abs=1e-300) and (x[5] == 0.0) == (held == 0.0)
+    u = np.array([1.03, 0.4])
+    assert model.output_equations(x, u, p, math)[2:4] == pytest.approx((-0.012, 0.007), rel=1e-13)
+    assert model.learned_states == (2, 3, 5) and rate_rows(model) == [0, 1, 4, 5]
+    spec, why = describe(model, p, model.equilibrium(model.start_inputs, p), model.start_inputs)
+    assert why is None and spec.load_flow
+    assert np.all(model.start_residual(x, u, p)[[0, 1, 4, 5]] == pytest.approx(0.0, abs=1e-15))
+    # the inside at the knees' middle: half the full-voltage current gets through, on the same state
+    middle = 0.5 * (knees[0] + knees[1]) * x[4]
+    P = model.output_equations(x, np.array([middle, 0.4]), p, math)[2]
+    G = p.G / x[4] ** 2
+    assert P == pytest.approx((0.5 * x[2] + x[5]) * middle - G * middle ** 2, rel=1e-13)
+    assert model.output_equations(x, np.array([0.9 * knees[0] * x[4], 0.4]), p, math)[2] == pytest.approx(
+        x[5] * 0.9 * knees[0] * x[4] - G * (0.9 * knees[0] * x[4]) ** 2, rel=1e-13)
+    with pytest.raises(ValueError, match="lvg_V1"):
+        model.params({**p.to_dict(), "lvg_V1": knees[0]})
 
 
 def test_a_frame_without_a_speed_only_turns():
@@ -293,13 +327,17 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
     rows = run_rows(result, case, 9, params, columns)
     x, u, t = rows["x"], rows["u"], rows["t"]
     assert x.shape[1] == 11
-    # the held-back current (--held-current, subsystem_pc_held): what the REGCA1's low-voltage gain keeps
+    # the held-back current (--voltage-gain, subsystem_pc_lvg): what the REGCA1's low-voltage gain keeps
     # of S0_y from their output current (their own output equations), 0 at rest and once the voltage is back
-    from cosim.subsystem_data import held_current_columns
+    from cosim.subsystem_data import gain_params, held_current_columns
     from reference_models.models.regca1 import currents
 
-    held_model = subsystem_model(records, carry_controller=True, held_current=True)
-    assert held_model.name == "subsystem_pc_held" and held_model.state_names[5:] == model.state_names[5:] + ("Ip_held",)
+    held_model = subsystem_model(records, carry_controller=True, voltage_gain=True)
+    assert held_model.name == "subsystem_pc_lvg" and held_model.state_names[5:] == model.state_names[5:] + ("Ip_res",)
+    knees = gain_params(case, 9, params["V_own"])
+    units = [d.params for u in case.units for d in u.devices if d.component.name == "regca1"]
+    assert min(q.Lvpnt0 for q in units) * 0.9 < knees["lvg_V0"] < max(q.Lvpnt0 for q in units) * 1.1
+    assert min(q.Lvpnt1 for q in units) * 0.9 < knees["lvg_V1"] < max(q.Lvpnt1 for q in units) * 1.1
     held = held_current_columns(case, 9, held_model)
     assert len(held) == 4 and held_current_columns(case, 9, model) == []
     back = run_rows(result, case, 9, params, columns, held=held)["held"]
@@ -466,13 +504,13 @@ def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     (["--subsystem", "{box}", "--rating", "5", "--unit-frequency", "--out", "{out}"],
      "--unit-frequency is for a case file"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--unit-frequency", "--memory", "--out", "{out}"],
-     "--unit-frequency: not with --carry-controller, --memory or --held-current"),
-    (["--subsystem", "{box}", "--rating", "5", "--held-current", "--out", "{out}"],
-     "--held-current is for a case file"),
-    (["--subsystem", "{feeder}", "--boundary", "1", "--held-current", "--out", "{out}"],
-     "has no REGCA1 whose held-back active current"),
-    (["--subsystem", "{feeder}", "--boundary", "1", "--held-current", "--memory", "--out", "{out}"],
-     "--held-current: not with --memory"),
+     "--unit-frequency: not with --carry-controller, --memory or --voltage-gain"),
+    (["--subsystem", "{box}", "--rating", "5", "--voltage-gain", "--out", "{out}"],
+     "--voltage-gain is for a case file"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--voltage-gain", "--out", "{out}"],
+     "has no REGCA1, whose low-voltage gain"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--voltage-gain", "--memory", "--out", "{out}"],
+     "--voltage-gain: not with --memory"),
     (["--subsystem", "{feeder}", "--out", "{out}"], "needs --boundary BUS"),
     (["--subsystem", "{feeder}", "--boundary", "7", "--out", "{out}"], "bus of its one Slack (1)"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--pm", "0.1", "0.9", "--out", "{out}"], "--pm: for a machine"),

@@ -14,9 +14,10 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         boundary voltage through lags of MEMORY_LAGS (0.05, 0.25, 1 s); a sub-system whose devices' own
         measured frequency is carried (SUBSYSTEM_UF, `subsystem_uf`) carries last df_units [Hz]: the
         rating-weighted mean of the frequency its devices measure at their own buses, less the
-        boundary's measured frequency; a sub-system whose held-back current is carried
-        (SUBSYSTEM_HELD, SUBSYSTEM_PC_HELD) carries last Ip_held [pu, system base]: the active
-        current its REGCA1 hold back at low voltage, sum of S0_y (1 - LVG(V)) at their own buses
+        boundary's measured frequency; a sub-system whose active current passes a low-voltage gain
+        (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG) has Ip_full [pu, system base] in Ip's place, the current its
+        devices would deliver at full voltage, and carries last Ip_res [pu, system base], what they
+        deliver less Ip_full through the gain
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -60,11 +61,14 @@ What is known is written here; what is not is learned:
     `--unit-frequency` the operator carries that difference, df_units (learned: it follows the
     devices' currents), and reads it at each window's start;
     a REGCA1 delivers its active current S0_y through a low-voltage gain, Ipout = S0_y LVG(V) (0
-    below Lvpnt0), and keeps S0_y through a dip: at the clearing the current comes back at once with
-    the voltage, by an amount the delivered currents of a window started in the dip do not tell;
-    with `--held-current` the operator carries it, Ip_held = sum of S0_y (1 - LVG(V)) over the
-    units (learned: S0_y follows the units' controls; 0 where no unit is below Lvpnt1, so at rest),
-    and reads it at each window's start.
+    below Lvpnt0, 1 above Lvpnt1), and keeps S0_y through a dip: at a fault and at its clearing the
+    current falls and comes back with the voltage at once, which a learned state cannot; with
+    `--voltage-gain` (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG) the delivered active current is
+        Ip = Ip_full LVG_s(Vs / n) + Ip_res,
+    LVG_s the sub-system's gain at the boundary voltage on its own base (knees lvg_V0, lvg_V1: the
+    units' Lvpnt0, Lvpnt1 over their voltage's ratio to the boundary's in the load flow, rating-
+    weighted), Ip_full (in Ip's place) the delivered current and what the units hold back, Ip_res
+    (last) the rest: both learned and both moving only as the units' states move.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -75,7 +79,8 @@ devices' Sn); G, B; the boundary voltage V_own [pu] of the sub-system's own load
 devices' currents Ip_own, Iq_own there (its rest: the learned rates have none of their own); the
 measurement's busf_Tf, busf_Tw [s], busf_fn [Hz] (the sub-system's own BusFreq settings);
 SUBSYSTEM_PC's also the plant controller's, REPCA1's named with pc_ (pc_Kp, ..., system base: the
-sums of its REPCA1's gains and limits). An operator of it is trained for one sub-system: its FMU
+sums of its REPCA1's gains and limits); SUBSYSTEM_LVG's and SUBSYSTEM_PC_LVG's also the knees of the
+low-voltage gain lvg_V0 < lvg_V1 [pu of V_own]. An operator of it is trained for one sub-system: its FMU
 holds them fixed.
 
 Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
@@ -93,8 +98,9 @@ import numpy as np
 from ..blocks import bus_frequency, lags_of_ramp
 from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
+from ..piecewise import where
 from ..ports import BusPort, Ports
-from .common import check_ranges, finite_inputs
+from .common import check_limits, check_ranges, finite_inputs
 from .repca1 import REPCA1Params, signals as plant_controller_signals
 
 PARAMETER_RANGES = {
@@ -152,6 +158,29 @@ SubsystemPCParams = make_dataclass(
                           "the parameters of the one REPCA1 its REPCA1 are shares of (system base)."})
 SubsystemPCParams.__module__ = __name__
 
+# the low-voltage gain's knees [pu of the sub-system's own boundary voltage] (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG)
+GAIN_RANGES = {"lvg_V0": (0.0, 2.0, "pu"), "lvg_V1": (0.0, 2.0, "pu")}
+
+
+def _with_gain(base, name: str):
+    """`base` and the knees of the low-voltage gain, lvg_V0 < lvg_V1 (module docstring)."""
+    def check(self) -> None:
+        base.check(self)
+        check_ranges(self, GAIN_RANGES)
+        check_limits(self, "lvg_V0", "lvg_V1")
+
+    made = make_dataclass(name, [("lvg_V0", float, 0.35), ("lvg_V1", float, 0.85)], bases=(base,), frozen=True,
+                          namespace={"check": check,
+                                     "__doc__": f"{base.__name__} and the knees lvg_V0 < lvg_V1 [pu of the "
+                                                "sub-system's own boundary voltage] of its devices' low-voltage "
+                                                "gain (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG)."})
+    made.__module__ = __name__
+    return made
+
+
+SubsystemLVGParams = _with_gain(SubsystemParams, "SubsystemLVGParams")
+SubsystemPCLVGParams = _with_gain(SubsystemPCParams, "SubsystemPCLVGParams")
+
 
 # the plant controller's states a sub-system with one carries (SUBSYSTEM_PC): (name, its REPCA1's state,
 # how the REPCA1's are combined: summed where each is a share of the plant's, else alike in all, averaged)
@@ -179,10 +208,26 @@ def _controller_rates(x, u, p, m) -> tuple:
     return rates[2], rates[9], rates[4], rates[5], rates[7], rates[8]
 
 
-def _equations(carried: int, memory: tuple, learned: int = 0) -> tuple:
+def low_voltage_gain(x, u, p, m):
+    """The devices' low-voltage gain [1] at the boundary voltage on the sub-system's own base, Vs / n:
+    0 up to lvg_V0, linear to 1 at lvg_V1 (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG; module docstring)."""
+    V = u[0] / x[4]
+    return where(m, V <= p.lvg_V0, 0.0 * V,
+                 where(m, V <= p.lvg_V1, (V - p.lvg_V0) / (p.lvg_V1 - p.lvg_V0), 1.0 + 0.0 * V))
+
+
+def delivered_active_current(x, u, p, m, gain: bool = False):
+    """Ip [pu, system base]: the devices' active current at the boundary, the state Ip, or with a
+    low-voltage gain (`gain`) the full-voltage current through it and the residual (the last state),
+    Ip_full LVG + Ip_res."""
+    return x[2] * low_voltage_gain(x, u, p, m) + x[len(x) - 1] if gain else x[2]
+
+
+def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False) -> tuple:
     """(derivatives, start_equations) of a sub-system that carries `carried` plant controller states
     (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them) and `learned` more states of
-    its devices (last: learned, 0 at rest: df_units, Ip_held)."""
+    its devices (last: learned, 0 at rest: df_units; with a low-voltage gain, `gain`, Ip_res, the
+    full-voltage current's part the gain holds back at rest)."""
     first = N_BOUNDARY + carried  # the memory's first state
     last = first + len(memory)  # the devices' carried states, where any
 
@@ -200,43 +245,55 @@ def _equations(carried: int, memory: tuple, learned: int = 0) -> tuple:
         """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
         voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
         integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs, the devices'
-        carried states at 0 (their measurement at the boundary's, no current held back); the learned
-        currents' rows are unread (the load flow's P, Q fix them)."""
+        carried states at 0 (their measurement at the boundary's), Ip_res at Ip_full (1 - LVG); the
+        learned currents' rows are unread (the load flow's P, Q fix them)."""
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
         units = tuple(x[last + k] for k in range(learned))
+        if gain:
+            units = (x[last] - x[2] * (1.0 - low_voltage_gain(x, u, p, m)),)
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *units)
 
     return derivatives, start_equations
 
 
-def outputs(x, u, p: SubsystemParams, m):
-    """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
-    Ip, Iq = x[2], x[3]
-    Vs, theta = u[0], u[1]
-    c, s = m.cos(theta), m.sin(theta)
-    f = bus_frequency(m, theta, x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)[2]
-    G, B = p.G / (x[4] * x[4]), p.B / (x[4] * x[4])  # the passive part through the settled tap
-    V_re, V_im = Vs * c, Vs * s
-    I_re = Ip * c + Iq * s - (G * V_re - B * V_im)
-    I_im = Ip * s - Iq * c - (G * V_im + B * V_re)
-    return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
+def _outputs(gain: bool = False):
+    def outputs(x, u, p: SubsystemParams, m):
+        """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
+        Ip, Iq = delivered_active_current(x, u, p, m, gain), x[3]
+        Vs, theta = u[0], u[1]
+        c, s = m.cos(theta), m.sin(theta)
+        f = bus_frequency(m, theta, x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)[2]
+        G, B = p.G / (x[4] * x[4]), p.B / (x[4] * x[4])  # the passive part through the settled tap
+        V_re, V_im = Vs * c, Vs * s
+        I_re = Ip * c + Iq * s - (G * V_re - B * V_im)
+        I_im = Ip * s - Iq * c - (G * V_im + B * V_re)
+        return I_re, I_im, Ip * Vs - G * Vs * Vs, Iq * Vs + B * Vs * Vs, f
+    return outputs
 
 
-def _equilibrium(carried: int, memory: int, learned: int = 0):
+def _held_at_rest(x: list, Vs: float, p, learned: int, gain: bool) -> list:
+    """x (the rest's states, Ip at the delivered current) with its `learned` carried states at 0, or
+    with a low-voltage gain Ip_res = Ip (1 - LVG) (Ip is then the full-voltage current)."""
+    if not gain:
+        return x + [0.0] * learned
+    return x + [x[2] * (1.0 - float(low_voltage_gain(x, (Vs,), p, math)))]
+
+
+def _equilibrium(carried: int, memory: int, learned: int = 0, gain: bool = False):
     def equilibrium(u, p: SubsystemParams) -> np.ndarray:
         """The rest [5 + carried + memory + learned] under constant (Vs, theta_vs), as if the load flow had
         put the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering
         the power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled
         tap, a carried controller at its start (_controller_start), a memory at Vs, the devices'
-        carried states at 0."""
+        carried states at rest (_held_at_rest)."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
-        return np.array([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
-                        + [Vs] * memory + [0.0] * learned)
+        return np.array(_held_at_rest([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
+                                      + [Vs] * memory, Vs, p, learned, gain))
     return equilibrium
 
 
@@ -266,14 +323,15 @@ def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.nda
     return out / (2.0 * math.pi * p.busf_Tw)
 
 
-def _starter(carried: int, memory: int, learned: int = 0):
+def _starter(carried: int, memory: int, learned: int = 0, gain: bool = False):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
-        return np.array([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0, (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
-                        + _controller_start(V0, carried) + [V0] * memory + [0.0] * learned), {}
+        return np.array(_held_at_rest([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0,
+                                       (Q0 - p.B * V0 * V0 / n ** 2) / V0, n] + _controller_start(V0, carried)
+                                      + [V0] * memory, V0, p, learned, gain)), {}
     return start
 
 
@@ -300,35 +358,40 @@ MEMORY_STATES = tuple(Quantity(f"Vm{k + 1}", "pu", f"boundary voltage through a 
                       for k, T in enumerate(MEMORY_LAGS))
 UNIT_FREQUENCY_STATE = Quantity("df_units", "Hz", "the devices' own measured frequency (rating-weighted mean) "
                                 "less the boundary's")
-HELD_CURRENT_STATE = Quantity("Ip_held", "pu", "active current the devices hold back at low voltage (REGCA1: "
-                              "S0_y (1 - LVG(V)) summed, system base)")
+FULL_CURRENT_STATE = Quantity("Ip_full", "pu", "devices' active current at the boundary at full voltage: the "
+                              "delivered and what their low-voltage gain holds back (system base)")
+RESIDUAL_CURRENT_STATE = Quantity("Ip_res", "pu", "devices' delivered active current at the boundary less "
+                                  "Ip_full through the sub-system's low-voltage gain (system base)")
 # the scale of each learned carried state (what a state's changes are measured against)
-LEARNED_SCALES = {UNIT_FREQUENCY_STATE.name: 0.02, HELD_CURRENT_STATE.name: 0.05}
+LEARNED_SCALES = {UNIT_FREQUENCY_STATE.name: 0.02, RESIDUAL_CURRENT_STATE.name: 0.05}
 CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
                                                           else "alike in every REPCA1)"))
                           for n, _, how, what in PLANT_CONTROLLER_STATES)
 
 
 def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = (),
-               learned: tuple = ()) -> Component:
+               learned: tuple = (), gain: bool = False) -> Component:
     """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
     each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and
     the devices' `learned` carried states (Quantity each: UNIT_FREQUENCY_STATE, HELD_CURRENT_STATE;
-    learned, 0 at rest)."""
+    learned, 0 at rest); `gain`: Ip is the full-voltage current (FULL_CURRENT_STATE) that the devices
+    deliver through the low-voltage gain, plus the learned residual (RESIDUAL_CURRENT_STATE, last)."""
+    learned = learned + (RESIDUAL_CURRENT_STATE,) * gain
     extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory)))
     units = tuple(range(N_BOUNDARY + len(extra), N_BOUNDARY + len(extra) + len(learned)))
-    derivatives, start_equations = _equations(len(carried), memory, len(learned))
+    derivatives, start_equations = _equations(len(carried), memory, len(learned), gain)
     n_x = N_BOUNDARY + len(extra) + len(units)
     return Component(
         name=name,
         description=description,
-        states=BOUNDARY_STATES + carried + MEMORY_STATES[:len(memory)] + learned,
+        states=BOUNDARY_STATES[:2] + ((FULL_CURRENT_STATE,) if gain else BOUNDARY_STATES[2:3]) + BOUNDARY_STATES[3:]
+        + carried + MEMORY_STATES[:len(memory)] + learned,
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
         params_type=params_type,
         derivatives=derivatives,
-        output_equations=outputs,
-        equilibrium=_equilibrium(len(carried), len(memory), len(learned)),
+        output_equations=_outputs(gain),
+        equilibrium=_equilibrium(len(carried), len(memory), len(learned), gain),
         state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory))
         + tuple(LEARNED_SCALES[q.name] for q in learned),
         # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
@@ -336,7 +399,7 @@ def _subsystem(name: str, description: str, carried: tuple, params_type, memory:
         affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-        initialisation=Initialisation((), _starter(len(carried), len(memory), len(learned))),
+        initialisation=Initialisation((), _starter(len(carried), len(memory), len(learned), gain)),
         learned_states=(2, 3) + units,
         started_states=units,
         start_equations=start_equations,
@@ -356,9 +419,8 @@ SUBSYSTEM_PC_MEM = _subsystem("subsystem_pc_mem", f"a sub-system with a plant co
                               f"boundary bus: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams, MEMORY_LAGS)
 SUBSYSTEM_UF = _subsystem("subsystem_uf", "a sub-system seen through its boundary bus, its devices' own measured "
                           f"frequency carried: {_KNOWN}", (), SubsystemParams, learned=(UNIT_FREQUENCY_STATE,))
-_HELD = ", its held-back current carried"
-SUBSYSTEM_HELD = _subsystem("subsystem_held", f"a sub-system seen through its boundary bus{_HELD}: {_KNOWN}", (),
-                            SubsystemParams, learned=(HELD_CURRENT_STATE,))
-SUBSYSTEM_PC_HELD = _subsystem("subsystem_pc_held", f"a sub-system with a plant controller seen through its boundary "
-                               f"bus{_HELD}: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCParams,
-                               learned=(HELD_CURRENT_STATE,))
+_GAIN = ", its devices' active current through a low-voltage gain"
+SUBSYSTEM_LVG = _subsystem("subsystem_lvg", f"a sub-system seen through its boundary bus{_GAIN}: {_KNOWN}", (),
+                           SubsystemLVGParams, gain=True)
+SUBSYSTEM_PC_LVG = _subsystem("subsystem_pc_lvg", f"a sub-system with a plant controller seen through its boundary "
+                              f"bus{_GAIN}: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCLVGParams, gain=True)
