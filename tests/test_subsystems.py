@@ -105,14 +105,18 @@ def test_a_subsystem_andes_cannot_run_is_one_line_and_exit_code_2(spoil, message
 
 
 @pytest.mark.andes
-def test_a_feeder_attached_to_ieee14_solves_jointly_and_runs_through_a_host_fault(tmp_path):
+def test_a_feeder_attached_to_ieee14_solves_jointly_beside_another_probe_and_runs_through_a_host_fault(tmp_path):
     import andes
 
     from reference_models.grid.andes_case import case_from_file
     from reference_models.grid.attach import attached_file
 
     sub = write_case(feeder(FeederSpec(units=12, seed=1)), tmp_path / "feeder.json")
+    # another process' joint power flow probe in flight in the same cache folder is left alone
+    other = write_case({"Bus": []}, tmp_path / "attached" / ".joint_power_flow_probe.json")
     path = attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached")
+    assert json.loads(other.read_text()) == {"Bus": []}
+    assert sorted(p.name for p in path.parent.iterdir()) == sorted([path.name, other.name])  # no probe left behind
     assert attached_file(andes.get_case("ieee14/ieee14_full.xlsx"), [(9, sub)], tmp_path / "attached") == path
     merged = json.loads(path.read_text())
     assert not any(r["idx"] == "9:grid" for r in merged["Slack"])  # the sub-system's grid is the host now

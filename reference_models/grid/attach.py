@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
@@ -281,12 +282,11 @@ def _probe_flow(andes, merged: dict, pvs: set, taps: dict, folder: Path) -> tupl
     for r in probe.get("Line", []):
         if r["idx"] in taps:
             r["tap"] = taps[r["idx"]]
-    path = write_case(probe, folder / ".joint_power_flow_probe.json")
-    try:
+    folder.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=folder, prefix=".probe.") as scratch:  # its own: others may probe too
+        path = write_case(probe, Path(scratch) / "joint_power_flow_probe.json")
         ss = andes.load(str(path), no_output=True, default_config=True, config_option=["PV.pv2pq=1"])
         converged = ss is not None and ss.PFlow.run() and ss.PFlow.converged
         if not converged:
             raise CaseError("the joint power flow of the host and its sub-systems does not converge")
         return dict(zip(ss.Bus.idx.v, ss.Bus.v.v)), dict(zip(ss.PV.idx.v, ss.PV.bus.v))
-    finally:
-        path.unlink(missing_ok=True)
