@@ -273,7 +273,7 @@ def _outputs(gain: bool = False):
     return outputs
 
 
-def _held_at_rest(x: list, Vs: float, p, learned: int, gain: bool) -> list:
+def _carried_at_rest(x: list, Vs: float, p, learned: int, gain: bool) -> list:
     """x (the rest's states, Ip at the delivered current) with its `learned` carried states at 0, or
     with a low-voltage gain Ip_res = Ip (1 - LVG) (Ip is then the full-voltage current)."""
     if not gain:
@@ -287,12 +287,12 @@ def _equilibrium(carried: int, memory: int, learned: int = 0, gain: bool = False
         put the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering
         the power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled
         tap, a carried controller at its start (_controller_start), a memory at Vs, the devices'
-        carried states at rest (_held_at_rest)."""
+        carried states at rest (_carried_at_rest)."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
-        return np.array(_held_at_rest([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
+        return np.array(_carried_at_rest([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
                                       + [Vs] * memory, Vs, p, learned, gain))
     return equilibrium
 
@@ -329,7 +329,7 @@ def _starter(carried: int, memory: int, learned: int = 0, gain: bool = False):
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
-        return np.array(_held_at_rest([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0,
+        return np.array(_carried_at_rest([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0,
                                        (Q0 - p.B * V0 * V0 / n ** 2) / V0, n] + _controller_start(V0, carried)
                                       + [V0] * memory, V0, p, learned, gain)), {}
     return start
@@ -373,7 +373,7 @@ def _subsystem(name: str, description: str, carried: tuple, params_type, memory:
                learned: tuple = (), gain: bool = False) -> Component:
     """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
     each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and
-    the devices' `learned` carried states (Quantity each: UNIT_FREQUENCY_STATE, HELD_CURRENT_STATE;
+    the devices' `learned` carried states (Quantity each: UNIT_FREQUENCY_STATE;
     learned, 0 at rest); `gain`: Ip is the full-voltage current (FULL_CURRENT_STATE) that the devices
     deliver through the low-voltage gain, plus the learned residual (RESIDUAL_CURRENT_STATE, last)."""
     learned = learned + (RESIDUAL_CURRENT_STATE,) * gain
