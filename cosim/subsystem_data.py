@@ -141,12 +141,10 @@ def gain_params(case, bus: int, V_own: float) -> dict:
     (the inside keeps its own voltages behind the settled tap: a unit at 1.03 pu where the boundary
     is at 1.0 reaches its knee at a boundary voltage 1.03 times lower). DatasetError where there is
     none."""
-    net = case.network
-    behind = set(subsystem_buses(net, bus)) - {bus}
-    units = [(d.params, float(case.flow.V[net.bus_index(unit.bus)]) / V_own) for unit in case.units
-             if unit.bus in behind for d in unit.devices if d.component.name == "regca1"]
-    if not units:
-        raise DatasetError(f"no REGCA1 behind bus {bus}: no low-voltage gain")
+    try:
+        units = [(q, float(case.flow.V[case.network.bus_index(at)]) / V_own) for _, at, q in regca1_behind(case, bus)]
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
     weights = [q.Sn for q, _ in units]
     return {"lvg_V0": float(np.average([q.Lvpnt0 / r for q, r in units], weights=weights)),
             "lvg_V1": float(np.average([q.Lvpnt1 / r for q, r in units], weights=weights))}
@@ -212,8 +210,8 @@ def subsystem_model(records: dict, carry_controller: bool = False, memory: bool 
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
     plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
     voltage (`_mem`) or its devices' active current through a low-voltage gain (`_lvg`, DatasetError
-    where it has no REGCA1) where asked; `subsystem_uf` where the devices' measured frequency is asked (DatasetError together with
-    any of the others)."""
+    where it has no REGCA1) where asked; `subsystem_uf` where the devices' measured frequency is
+    asked (DatasetError together with any of the others)."""
     if unit_frequency:
         if carry_controller or memory or voltage_gain:
             raise DatasetError("the devices' measured frequency is carried without a plant controller, a memory or "
@@ -291,8 +289,14 @@ def held_current_columns(case, bus: int, model) -> list:
     `case`; else []. ValueError where it has none."""
     if RESIDUAL_CURRENT_STATE.name not in model.state_names:
         return []
+    return [(f"{label}_S0_y", at, q) for label, at, q in regca1_behind(case, bus)]
+
+
+def regca1_behind(case, bus: int) -> list:
+    """(device label, bus, REGCA1Params) of each REGCA1 behind the boundary `bus` of `case`;
+    ValueError where there is none."""
     behind = set(subsystem_buses(case.network, bus)) - {bus}
-    out = [(f"{label}_S0_y", unit.bus, d.params) for unit, labels in zip(case.units, device_labels(case.units))
+    out = [(label, unit.bus, d.params) for unit, labels in zip(case.units, device_labels(case.units))
            if unit.bus in behind for d, label in zip(unit.devices, labels) if d.component.name == "regca1"]
     if not out:
         raise ValueError(f"no REGCA1 behind bus {bus}: no low-voltage gain")

@@ -384,14 +384,15 @@ def test_a_plant_carries_its_controller_as_known_physics_that_follows_its_repca1
 
 
 @pytest.mark.andes
-@pytest.mark.parametrize("memory", [False, True])
-def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_path, monkeypatch, memory):
+@pytest.mark.parametrize("memory, gain", [(False, False), (True, False), (False, True)])
+def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_path, monkeypatch, memory, gain):
     """Whatever its operator learned (here: three epochs), a `subsystem_pc` surrogate FMU steps the
     plant controller's states by the controller's own equations (the exact step of its affine
     states, each reading the ones before it): through a dip below the controller's freeze voltage
     and back, then an over-frequency, they follow the component's equations integrated under the
     same held inputs (within 1 % of how far they moved); with a memory (`subsystem_pc_mem`) its lags
-    of the boundary voltage too."""
+    of the boundary voltage too; with the low-voltage gain (`subsystem_pc_lvg`) too, and its data's
+    Ip_full through the gain and Ip_res give back the delivered Ip of the same runs without it."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
     from scipy.integrate import solve_ivp
@@ -405,11 +406,24 @@ def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_pat
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
     sub = write_case(plant(PlantSpec(units=4, seed=3)), tmp_path / "plant.json")
-    done = learn(sub, 1, tmp_path / "op", Plan(hosts=("ieee14",), buses=1, runs=6, stop=1.0, trips=0.0,
-                                               carry_controller=True, memory=memory), epochs=3, progress=False)
+    plan = Plan(hosts=("ieee14",), buses=1, runs=6, stop=1.0, trips=0.0, carry_controller=True, memory=memory,
+                voltage_gain=gain)
+    done = learn(sub, 1, tmp_path / "op", plan, epochs=3, progress=False)
     meta = operator_metadata(onnx.load(str(done["operator"])))
     model, p = meta["component"], meta["params"]
-    assert model.name == "subsystem_pc" + ("_mem" if memory else "")
+    assert model.name == "subsystem_pc" + ("_mem" if memory else "") + ("_lvg" if gain else "")
+    if gain:
+        from dataclasses import replace
+
+        from cosim.subsystem_data import generate
+        from reference_models.models.subsystem import low_voltage_gain
+
+        generate(sub, 1, tmp_path / "plain", replace(plan, voltage_gain=False), progress=False)
+        with np.load(tmp_path / "op" / "data" / "train.npz") as lvg, np.load(tmp_path / "plain" / "train.npz") as plain:
+            x, u, Ip = lvg["x"], lvg["u"], plain["x"][..., 2]
+            delivered = x[..., 2] * low_voltage_gain(np.moveaxis(x, -1, 0), np.moveaxis(u, -1, 0), p, np) + x[..., -1]
+            np.testing.assert_allclose(delivered, Ip, rtol=0, atol=1e-12)
+            assert np.all(x[..., 2] >= Ip - 1e-12) and np.ptp(x[..., 2] - Ip) > 0.01  # the dip held some back
     V0, theta0 = 1.02, 0.2
     P0, Q0 = p.Ip_own * V0 - p.G * V0 ** 2, p.Iq_own * V0 + p.B * V0 ** 2
     x, _ = model.initialisation.start({"V0": V0, "theta0": theta0, "P0": P0, "Q0": Q0}, p)
@@ -423,7 +437,7 @@ def test_a_plant_surrogate_fmu_steps_its_controller_by_its_own_equations(tmp_pat
     fmu.enterInitializationMode()
     fmu.setReal([ref[n] for n in ("V_lf", "theta_lf", "P_lf", "Q_lf")], [V0, theta0, P0, Q0])
     fmu.exitInitializationMode()
-    known = [0, 1] + list(range(5, model.n_states))
+    known = [i for i in range(model.n_states) if i not in model.learned_states and i != 4]  # n stands still
     names = [model.state_names[i] for i in known]
     h, dip = 0.01, (0.5, 0.65)
     voltage = lambda t: V0 - (V0 - 0.6) * (dip[0] <= t < dip[1]) + 0.03 * (t >= dip[1])  # noqa: E731
