@@ -141,10 +141,7 @@ def gain_params(case, bus: int, V_own: float) -> dict:
     (the inside keeps its own voltages behind the settled tap: a unit at 1.03 pu where the boundary
     is at 1.0 reaches its knee at a boundary voltage 1.03 times lower). DatasetError where there is
     none."""
-    try:
-        units = [(q, float(case.flow.V[case.network.bus_index(at)]) / V_own) for _, at, q in regca1_behind(case, bus)]
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
+    units = [(q, float(case.flow.V[case.network.bus_index(at)]) / V_own) for _, at, q in regca1_behind(case, bus)]
     weights = [q.Sn for q, _ in units]
     return {"lvg_V0": float(np.average([q.Lvpnt0 / r for q, r in units], weights=weights)),
             "lvg_V1": float(np.average([q.Lvpnt1 / r for q, r in units], weights=weights))}
@@ -286,7 +283,7 @@ def unit_frequency_columns(case, bus: int, model) -> list:
 def held_current_columns(case, bus: int, model) -> list:
     """Where the `model` passes its current through a low-voltage gain (carries Ip_res), (S0_y column
     of the grid result, its bus, its REGCA1Params) of each REGCA1 behind the boundary `bus` of
-    `case`; else []. ValueError where it has none."""
+    `case`; else []. DatasetError (a ValueError) where it has none."""
     if RESIDUAL_CURRENT_STATE.name not in model.state_names:
         return []
     return [(f"{label}_S0_y", at, q) for label, at, q in regca1_behind(case, bus)]
@@ -294,12 +291,12 @@ def held_current_columns(case, bus: int, model) -> list:
 
 def regca1_behind(case, bus: int) -> list:
     """(device label, bus, REGCA1Params) of each REGCA1 behind the boundary `bus` of `case`;
-    ValueError where there is none."""
+    DatasetError where there is none."""
     behind = set(subsystem_buses(case.network, bus)) - {bus}
     out = [(label, unit.bus, d.params) for unit, labels in zip(case.units, device_labels(case.units))
            if unit.bus in behind for d, label in zip(unit.devices, labels) if d.component.name == "regca1"]
     if not out:
-        raise ValueError(f"no REGCA1 behind bus {bus}: no low-voltage gain")
+        raise DatasetError(f"no REGCA1 behind bus {bus}: no low-voltage gain")
     return out
 
 

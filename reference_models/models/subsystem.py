@@ -250,9 +250,8 @@ def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
-        units = tuple(x[last + k] for k in range(learned))
-        if gain:
-            units = (x[last] - x[2] * (1.0 - low_voltage_gain(x, u, p, m)),)
+        units = ((x[last] - x[2] * (1.0 - low_voltage_gain(x, u, p, m)),) if gain
+                 else tuple(x[last + k] for k in range(learned)))
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *units)
 
     return derivatives, start_equations
