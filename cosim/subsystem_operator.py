@@ -41,28 +41,33 @@ UNIT_FREQUENCY_WEIGHT = 0.2  # and of the devices' measured frequency
 MEMBERS = 1  # operators trained per sub-system and exported as their mean
 
 
-def training_config(state_names, seed: int, epochs: int | None, features: bool = False) -> TrainConfig:
+def training_config(state_names, seed: int, epochs: int | None, features: bool = False,
+                    rollover_share: float = 0.0) -> TrainConfig:
     """TRAINING for a sub-system component of the states `state_names` (its carried states after
     the boundary's five weighing CARRIED_WEIGHT, a memory's lags MEMORY_WEIGHT, the devices' measured
     frequency UNIT_FREQUENCY_WEIGHT); features: the branch also reads the boundary's measured
-    frequency at every sensor (the component's window features, surrogate/models.py)."""
+    frequency at every sensor (the component's window features, surrogate/models.py); rollover_share:
+    TrainConfig's (windows that start from the operator's own rollover)."""
     weight = {**{q.name: MEMORY_WEIGHT for q in MEMORY_STATES}, UNIT_FREQUENCY_STATE.name: UNIT_FREQUENCY_WEIGHT}
     weights = TRAINING.state_weights + tuple(weight.get(name, CARRIED_WEIGHT)
                                              for name in state_names[len(TRAINING.state_weights):])
     return replace(TRAINING, seed=seed, epochs=TRAINING.epochs if epochs is None else int(epochs),
-                   state_weights=weights, model=replace(TRAINING.model, features=features))
+                   state_weights=weights, model=replace(TRAINING.model, features=features),
+                   rollover_share=float(rollover_share))
 
 
 def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int | None = None, seed: int = 0,
           workers: int = 1, name: str = "Subsystem", progress: bool = True, rating_mva: float | None = None,
-          bus_port: str | None = None, members: int = MEMBERS, features: bool = False) -> dict:
+          bus_port: str | None = None, members: int = MEMBERS, features: bool = False,
+          rollover_share: float = 0.0) -> dict:
     """Runs (or resumes) the stages of the module docstring; returns {"data": dataset metadata,
     "training": [TrainResult per member], "operator": path, "fmu": path, "registered": path}. A
     sub-system given as an FMU (.fmu: a black box, cosim.black_box_data) takes its rating rating_mva
     [MVA], no boundary, and where its model description declares no bus port, `bus_port`
     (black_box_data.bus_port). members: operators trained on the data with seeds seed, seed + 1, ...
     (out/run, out/run_2, ...), exported as their mean (surrogate.ensemble) where more than one;
-    features: they read the boundary's measured frequency (training_config)."""
+    features: they read the boundary's measured frequency, rollover_share: windows that start from
+    their own rollover (training_config)."""
     from fmu_export.surrogate_fmu import build_surrogate_fmu
     from surrogate.onnx_export import export_onnx
     from surrogate.training import train
@@ -75,7 +80,8 @@ def learn(subsystem, boundary: int | None, out, plan: Plan = Plan(), epochs: int
     else:
         meta = generate(subsystem, boundary, out / "data", plan, seed, workers, progress)
     runs = [out / "run"] + [out / f"run_{k}" for k in range(2, members + 1)]
-    results = [train(out / "data", training_config(meta["state_names"], seed + k, epochs, features), run, progress)
+    results = [train(out / "data", training_config(meta["state_names"], seed + k, epochs, features, rollover_share),
+                     run, progress)
                for k, run in enumerate(runs)]
     operator = out / "operator.onnx"
     trained = max((run / "result.json").stat().st_mtime for run in runs)

@@ -2,7 +2,8 @@
 FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
 
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
-                   [--buses N] [--stride S] [--members K] [--frequency-features] [--epochs N] [--seed S]
+                   [--buses N] [--stride S] [--members K] [--frequency-features] [--rollover-share S]
+                   [--epochs N] [--seed S]
                    [--workers N] [--name NAME] [--quiet]
     opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [--bus-port SPEC] [the same options]
 
@@ -26,7 +27,7 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
 SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
-                  "unit_frequency", "voltage_gain", "members", "frequency_features")
+                  "unit_frequency", "voltage_gain", "members", "frequency_features", "rollover_share")
 MAX_MEMBERS = 16
 
 
@@ -54,6 +55,10 @@ def add_subsystem_options(op) -> None:
     op.add_argument("--frequency-features", action="store_true", default=None,
                     help="with --subsystem: the operators also read the boundary's measured frequency at every sensor "
                          "(docs/subsystems.md)")
+    op.add_argument("--rollover-share", type=float, default=None, metavar="S",
+                    help="with --subsystem: each epoch this share of the windows that start at another's rollover "
+                         "start their learned states from the operator's own answer there, so that it learns to "
+                         "return from its error at a rollover (0 to 1; default 0: off; docs/subsystems.md)")
     op.add_argument("--carry-controller", action="store_true", default=None,
                     help="with --subsystem FILE of a plant whose REPCA1 read its boundary bus: carry its plant "
                          "controller's states with their own equations (component subsystem_pc; docs/subsystems.md)")
@@ -86,9 +91,11 @@ def cmd_subsystem(args) -> None:
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
                         "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --voltage-gain, "
-                        "--members, --frequency-features, --epochs, --seed, --workers, --name")
+                        "--members, --frequency-features, --rollover-share, --epochs, --seed, --workers, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
+    if args.rollover_share is not None and not 0.0 <= args.rollover_share <= 1.0:
+        raise UserError(f"--rollover-share {args.rollover_share:g}: a share of the windows, from 0 to 1")
     path = Path(args.subsystem)
     if not path.is_file():
         raise UserError(f"--subsystem: no file {path}")
@@ -211,7 +218,7 @@ def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
                      args.rating, args.bus_port, **({} if args.members is None else {"members": args.members}),
-                     features=bool(args.frequency_features))
+                     features=bool(args.frequency_features), rollover_share=args.rollover_share or 0.0)
     except (DatasetError, TrainError, CouplingError, CaseError) as exc:
         raise UserError(str(exc)) from None
     meta = done["data"]

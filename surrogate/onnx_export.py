@@ -27,13 +27,9 @@ from .evaluation import evaluate
 from .folding import fold
 from .frame_graph import wrap_in_frame
 from .losses import residual_scale
-from .training import load_model
+from .training import CAUSAL_ROLLOVER_SHARE, load_model
 
 OPSET = 17
-# A causally trained operator learns window time t with weight 1 - t/T (a uniform cut), so its last
-# part is its least trained: rolled over before it, at this share of the horizon, the shipped one's
-# omega error under slowly moving inputs fell from 0.013 to 0.005 rad/s (README, long co-simulations).
-CAUSAL_ROLLOVER_SHARE = 0.8
 
 
 class ExportError(ValueError):

@@ -83,7 +83,7 @@ def test_a_freely_trained_operator_rolls_over_at_its_whole_horizon(exported):
 
 
 def test_a_causally_trained_operator_rolls_over_before_its_least_trained_end(paper_tiny, tmp_path):
-    from surrogate.onnx_export import CAUSAL_ROLLOVER_SHARE
+    from surrogate.training import CAUSAL_ROLLOVER_SHARE
 
     causal = TrainConfig(model=OperatorConfig(**{**SMALL.to_dict(), "anchored": True}), epochs=2, time_points=20,
                          causal=True)

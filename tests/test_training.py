@@ -222,3 +222,62 @@ def test_causal_anchored_training_runs_resumes_exactly_and_logs_every_term(paper
 def test_the_pinn_cannot_be_anchored():
     with pytest.raises(ValueError, match="anchored"):
         OperatorConfig(arch="pinn", anchored=True)
+
+
+def _subsystem_windows(seed: int, rows: int):
+    """The windows (cosim.subsystem_data.windows: 0.2 s every 20 ms at 10 ms) of a made-up run of
+    `rows` steps of the `subsystem` component: states and inputs that never repeat."""
+    from cosim.subsystem_data import Plan, windows
+
+    rng = np.random.default_rng(seed)
+    t = np.round(np.arange(rows) * 0.01, 12)
+    x = np.cumsum(rng.normal(size=(rows, 5)), axis=0) * 1e-3 + [0.0, 0.0, 0.5, 0.1, 1.0]
+    u = np.column_stack([1.0 + 1e-3 * np.cumsum(rng.normal(size=rows)), 0.3 + 1e-3 * np.cumsum(rng.normal(size=rows))])
+    return windows({"t": t, "x": x, "u": u}, Plan())
+
+
+def test_the_windows_that_start_at_another_windows_rollover_are_those_of_the_same_run_eight_strides_on():
+    """A causal operator rolls over at 0.8 of its 0.2 s horizon (sensor 16 of 21), eight 20 ms strides:
+    window j pairs with window j - 8 of its own run and with no other; a run too short has none. A
+    component without learned states, or whose learned states a window frame moves, is refused."""
+    from reference_models.components import component
+
+    runs = [_subsystem_windows(seed, rows) for seed, rows in ((1, 101), (2, 60), (3, 25))]
+    x0, u, x = (np.concatenate(parts) for parts in zip(*runs))
+    found = training.rollovers({"x0": x0, "u": u, "x": x}, component("subsystem"), causal=True)
+    first = np.cumsum([0] + [len(r[0]) for r in runs])
+    expected = [(first[k] + j - 8, first[k] + j) for k, r in enumerate(runs) for j in range(8, len(r[0]))]
+    assert found.index == 16 and found.learned.tolist() == [2, 3]
+    assert sorted(zip(found.earlier.tolist(), found.later.tolist())) == expected and len(expected) == 33 + 12
+    assert training.rollovers({"x0": x0, "u": u, "x": x}, component("subsystem"), causal=False).index == 20
+    with pytest.raises(TrainError, match="learned states"):
+        training.rollovers({"x0": x0, "u": u, "x": x}, component("sm4"), causal=True)
+
+
+def test_a_rolled_over_window_starts_its_learned_states_from_the_operators_answer_at_the_earlier_ones_rollover():
+    """With rollover_share 1 every window that starts at another's rollover takes Ip and Iq from the
+    operator at sensor 16 of the earlier window with its input held after it, and keeps its recorded
+    known states; with share 0 nothing changes; the draw comes from the training generator."""
+    from reference_models.components import component
+    from surrogate.models import NormStats, build_model
+
+    sub = component("subsystem")
+    params = sub.params({"S": 5.0, "G": 0.05, "B": -0.02, "V_own": 1.0, "Ip_own": 0.03, "Iq_own": 0.004})
+    x0, u, x = (np.concatenate(parts) for parts in zip(*[_subsystem_windows(s, 101) for s in (4, 5)]))
+    split = {"x0": x0, "u": u, "x": x, "t": np.round(np.arange(21) * 0.01, 12)}
+    torch.manual_seed(0)
+    model = build_model(OperatorConfig(width=16, depth=2, latent=8, anchored=True), NormStats.fit(split))
+    tensors = training._to_tensors({"train": split, "val": split}, model, (sub, params))
+    tensors.rollovers = training.rollovers(split, sub, causal=True)
+    generator = torch.Generator().manual_seed(0)
+    assert torch.equal(training.rolled_over_starts(model, tensors, 0.0, generator), tensors.x0)
+    started = training.rolled_over_starts(model, tensors, 1.0, generator)
+    earlier, later = tensors.rollovers.earlier, tensors.rollovers.later
+    with torch.no_grad():
+        held = training.held_after(tensors.u[earlier], torch.full((len(earlier),), 16))
+        answer = model(tensors.x0[earlier], held, tensors.t)[:, 16]
+    torch.testing.assert_close(started[later][:, 2:4], answer[:, 2:4], rtol=0, atol=1e-6)
+    assert not torch.allclose(started[later][:, 2:4], tensors.x0[later][:, 2:4], rtol=0, atol=1e-4)
+    others = torch.ones(len(started), dtype=torch.bool)
+    others[later] = False
+    assert torch.equal(started[:, [0, 1, 4]], tensors.x0[:, [0, 1, 4]]) and torch.equal(started[others], tensors.x0[others])
