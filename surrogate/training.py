@@ -17,6 +17,7 @@ learning rate follows `lr_schedule` (a cosine decay by default; "constant" is th
 """
 from __future__ import annotations
 
+import bisect
 import contextlib
 import json
 import math
@@ -317,8 +318,9 @@ def rollover_index(n_times: int, causal: bool) -> int:
 def rollovers(raw: dict, component, causal: bool) -> Rollovers:
     """The Rollovers of a split as solved (load_split(frame=False): x0 [N, n_x], u [N, S, n_u], x [N,
     S, n_x]): window j starts at window i's rollover r where j's states and inputs over its first
-    S - r sensors are i's over its last ones, bit for bit (consecutive windows of one recorded run;
-    windows at rest alike in two runs are alike there too). TrainError where the component has no
+    S - r sensors are i's over its last ones, bit for bit: consecutive windows of one recorded run
+    (of several such i, windows at rest alike in two runs, the last before j: a run's windows come in
+    order). TrainError where the component has no
     learned states, where a window frame moves them, or where no window starts at another's rollover."""
     learned = sorted(component.learned_states)
     moved = () if component.drift is None else (*component.drift.angle_states, component.drift.speed_state)
@@ -329,13 +331,14 @@ def rollovers(raw: dict, component, causal: bool) -> Rollovers:
     index = rollover_index(x.shape[1], causal)
     tail = {}
     for i in range(len(x)):
-        tail.setdefault(x[i, index:].tobytes() + u[i, index:].tobytes(), i)
+        tail.setdefault(x[i, index:].tobytes() + u[i, index:].tobytes(), []).append(i)
     earlier, later = [], []
     overlap = x.shape[1] - index
     for j in range(len(x)):
-        i = tail.get(x[j, :overlap].tobytes() + u[j, :overlap].tobytes())
-        if i is not None and i != j:
-            earlier.append(i)
+        candidates = tail.get(x[j, :overlap].tobytes() + u[j, :overlap].tobytes(), [])
+        k = bisect.bisect_left(candidates, j)  # candidates ascend
+        if k > 0:
+            earlier.append(candidates[k - 1])
             later.append(j)
     if not later:
         raise TrainError(f"rollover_share: no training window starts at another's rollover (sensor {index} of "
