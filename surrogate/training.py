@@ -318,10 +318,10 @@ def rollover_index(n_times: int, causal: bool) -> int:
 def rollovers(raw: dict, component, causal: bool) -> Rollovers:
     """The Rollovers of a split as solved (load_split(frame=False): x0 [N, n_x], u [N, S, n_u], x [N,
     S, n_x]): window j starts at window i's rollover r where j's states and inputs over its first
-    S - r sensors are i's over its last ones, bit for bit: consecutive windows of one recorded run
-    (of several such i, windows at rest alike in two runs, the last before j: a run's windows come in
-    order). TrainError where the component has no
-    learned states, where a window frame moves them, or where no window starts at another's rollover."""
+    S - r sensors are i's over its last ones, bit for bit: consecutive windows of one recorded run.
+    Of several such i (windows at rest alike in two runs) it takes the last before j, as a run's
+    windows come in order. TrainError where the component has no learned states, where a window
+    frame moves them, or where no window starts at another's rollover."""
     learned = sorted(component.learned_states)
     moved = () if component.drift is None else (*component.drift.angle_states, component.drift.speed_state)
     if not learned or set(learned) & set(moved):
