@@ -4,7 +4,7 @@ FMU (cosim.subsystem_operator.learn), resumable; parses and prints only.
     opfmu operator --subsystem FILE --boundary BUS --out DIR [--runs N] [--hosts NAME ...]
                    [--buses N] [--stride S] [--members K] [--frequency-features] [--rollover-share S]
                    [--epochs N] [--seed S]
-                   [--workers N] [--name NAME] [--quiet]
+                   [--workers N] [--threads N] [--name NAME] [--quiet]
     opfmu operator --subsystem BOX.fmu --rating MVA --out DIR [--bus-port SPEC] [the same options]
 
 A case file is learned from its detail, an FMU with the bus port (a black box) from its replies to
@@ -23,7 +23,7 @@ from .errors import UserError
 
 # the options of `opfmu operator` that only a machine takes, with their defaults
 MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "efd": None, "vs": None,
-                "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000, "threads": None}
+                "operating_point": None, "recipe": "machine", "horizon": 1.0, "windows": 3000}
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
 SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
@@ -91,7 +91,8 @@ def cmd_subsystem(args) -> None:
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
                         "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --voltage-gain, "
-                        "--members, --frequency-features, --rollover-share, --epochs, --seed, --workers, --name")
+                        "--members, --frequency-features, --rollover-share, --epochs, --seed, --workers, --threads, "
+                        "--name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     if args.rollover_share is not None and not 0.0 <= args.rollover_share <= 1.0:
@@ -187,11 +188,12 @@ def _plan(args):
                 unit_frequency=bool(args.unit_frequency), voltage_gain=bool(args.voltage_gain))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
-            and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256 and math.isfinite(steps)
-            and 1 <= round(steps) <= 100 and abs(steps - round(steps)) < 1e-9):
+            and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256
+            and (args.threads is None or args.threads >= 1)
+            and math.isfinite(steps) and 1 <= round(steps) <= 100 and abs(steps - round(steps)) < 1e-9):
         raise UserError(f"--runs must lie in [10, {MAX_RUNS}], --buses in [1, 100], --epochs in [1, {MAX_COUNT}], "
-                        f"--seed in [0, {MAX_COUNT}], --workers in [1, 256] and --stride be 1 to 100 steps of "
-                        f"{plan.step:g} s")
+                        f"--seed in [0, {MAX_COUNT}], --workers in [1, 256], --threads be >= 1 and --stride be 1 "
+                        f"to 100 steps of {plan.step:g} s")
     return plan
 
 
@@ -215,6 +217,10 @@ def _learn(path: Path, boundary: int, out: Path, plan, args, name: str) -> None:
     from surrogate.data import DatasetError
     from surrogate.training import TrainError
 
+    if args.threads is not None:
+        import torch
+
+        torch.set_num_threads(args.threads)
     try:
         done = learn(path, boundary, out, plan, args.epochs, args.seed, args.workers, name, not args.quiet,
                      args.rating, args.bus_port, **({} if args.members is None else {"members": args.members}),

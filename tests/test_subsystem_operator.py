@@ -530,6 +530,7 @@ def test_a_black_box_without_a_bus_port_is_refused(tmp_path):
     (["--subsystem", "{feeder}", "--boundary", "1", "--pm", "0.1", "0.9", "--out", "{out}"], "--pm: for a machine"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--runs", "3", "--out", "{out}"], "--runs must lie in"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--members", "0", "--out", "{out}"], "--members 0: from 1 to 16"),
+    (["--subsystem", "{feeder}", "--boundary", "1", "--threads", "0", "--out", "{out}"], "--threads be >= 1"),
     (["--subsystem", "{feeder}", "--boundary", "1", "--rollover-share", "1.5", "--out", "{out}"],
      "--rollover-share 1.5: a share of the windows, from 0 to 1"),
     (["--machine", "{feeder}", "--rollover-share", "0.5", "--out", "{out}"], "--rollover-share"),
