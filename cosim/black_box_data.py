@@ -219,7 +219,7 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
     rating_mva [MVA]) in `out`; returns its metadata. bus_port_spec: where its bus is when its model
     description declares no bus port (bus_port). DatasetError for an FMU without a bus port, a
     spec that does not fit it, a plan that carries a plant controller, the devices' measured
-    frequency or their low-voltage gain (a box is not read inside) or another dataset in `out`."""
+    frequency, their low-voltage gain or dip current (a box is not read inside) or another dataset in `out`."""
     box, out = Path(box), Path(out)
     if plan.carry_controller:
         raise DatasetError(f"{box.name}: a black box is not read inside, so it has no plant controller states to carry")
@@ -227,6 +227,8 @@ def generate_black_box(box, out, rating_mva: float, plan: Plan = Plan(), seed: i
         raise DatasetError(f"{box.name}: a black box is not read inside, so what its devices measure is not known")
     if plan.voltage_gain:
         raise DatasetError(f"{box.name}: a black box is not read inside, so its devices' low-voltage gain is not known")
+    if plan.dip_current:
+        raise DatasetError(f"{box.name}: a black box is not read inside, so its devices' dip current is not known")
     import andes
 
     from reference_models.components import component

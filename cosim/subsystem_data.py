@@ -28,7 +28,14 @@ the host records at the boundary becomes the component's inputs and states, each
                        the REGCA1 behind the boundary hold back at low voltage, the sum of S0_y
                        (1 - LVG(V)) with V each one's own bus voltage (system base, as ANDES'
                        currents); Ip_res (last) is Ip less Ip_full through the sub-system's gain
-                       at the boundary (reference_models.models.subsystem.low_voltage_gain).
+                       at the boundary (reference_models.models.subsystem.low_voltage_gain);
+    Vd, Iq_dip         where the plan knows the devices' reactive dip current (`--dip-current`,
+                       components `subsystem*_dip`): Vs / n through the lag dip_Trv, linear between
+                       rows, and the dip current through the lag dip_Tg of its drive
+                       (reference_models.models.subsystem.dip_drive), linear between rows, both
+                       integrated exactly, the voltage held over the step up to a switching (the
+                       master's step ends there in the network before it); Iq_rest (in Iq's place)
+                       is Iq less Iq_dip.
 So the component's outputs give back the injected current of the detail row by row, exactly.
 Windows of `horizon` s start every `stride` s of each run (sensor = query times every `step` s); the
 runs, not the windows, are split into train, val and test, so a test window comes from a contingency
@@ -53,15 +60,18 @@ from pathlib import Path
 
 import numpy as np
 
-from reference_models.blocks import lag_of_ramp, lags_of_ramp
+from reference_models.blocks import dead_band, lag_of_ramp, lags_of_ramp
 from reference_models.components import component
 from reference_models.files import write_json, write_npz
 from reference_models.grid.boundary import boundary_current, passive_admittance, subsystem_buses
+from reference_models.grid.case import operating_point
 from reference_models.grid.contingency import ANDES_FAULT_IMPEDANCE, Contingency
 from reference_models.grid.result import device_labels
+from reference_models.models.reeca1 import LOWEST_VOLTAGE, NO_CURRENT_LIMIT, current_limits
 from reference_models.models.regca1 import low_voltage_gain
-from reference_models.models.subsystem import (MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY, PLANT_CONTROLLER_FIELDS,
-                                              PLANT_CONTROLLER_STATES, RESIDUAL_CURRENT_STATE, UNIT_FREQUENCY_STATE)
+from reference_models.models.subsystem import (DIP_KNOTS, DIP_STATES, MEMORY_LAGS, MEMORY_STATES, N_BOUNDARY,
+                                              PLANT_CONTROLLER_FIELDS, PLANT_CONTROLLER_STATES,
+                                              RESIDUAL_CURRENT_STATE, UNIT_FREQUENCY_STATE, dip_drive)
 from reference_models.models.subsystem import low_voltage_gain as subsystem_gain
 from reference_models.progress import progress_bar
 from reference_models.version import __version__
@@ -84,7 +94,9 @@ class Plan:
     voltage (components `subsystem_mem`, `subsystem_pc_mem`); `unit_frequency`: the devices' own
     measured frequency (component `subsystem_uf`, neither of those); `voltage_gain`: its devices'
     active current through a low-voltage gain, for a sub-system of REGCA1 (components
-    `subsystem_lvg`, `subsystem_pc_lvg`, not with a memory or the devices' measured frequency)."""
+    `subsystem_lvg`, `subsystem_pc_lvg`, not with a memory or the devices' measured frequency);
+    `dip_current`: its devices' reactive dip current as known states, for a sub-system of REECA1
+    (components `subsystem*_dip`, not with a memory or the devices' measured frequency)."""
 
     hosts: tuple = ("ieee14", "kundur", "ieee39")
     buses: int = 3
@@ -101,17 +113,20 @@ class Plan:
     memory: bool = False
     unit_frequency: bool = False
     voltage_gain: bool = False
+    dip_current: bool = False
 
     def to_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
 
 
-def subsystem_params(records: dict, case, bus: int, carry_controller: bool = False, voltage_gain: bool = False) -> dict:
+def subsystem_params(records: dict, case, bus: int, carry_controller: bool = False, voltage_gain: bool = False,
+                     dip_current: bool = False) -> dict:
     """The `subsystem` component's parameters of the sub-system `records` (ANDES JSON records, its
     own file) attached at `bus` of `case` (the joint case): its rating, its own boundary voltage,
     its passive admittance referred to that voltage and the devices' currents there, its BusFreq;
     carry_controller: also its plant controller's (`subsystem_pc`: plant_controller_params);
-    voltage_gain: also its low-voltage gain's (`subsystem_lvg`: gain_params)."""
+    voltage_gain: also its low-voltage gain's (`subsystem_lvg`: gain_params); dip_current: also its
+    dip current's (`subsystem_dip`: dip_params)."""
     behind = subsystem_buses(case.network, bus)
     b = case.network.bus_index(bus)
     V0 = float(case.flow.V[b])
@@ -131,7 +146,9 @@ def subsystem_params(records: dict, case, bus: int, carry_controller: bool = Fal
               "busf_fn": float(case.network.f_hz)}
     if carry_controller:
         params.update(plant_controller_params(case, bus, params))
-    return {**params, **gain_params(case, bus, V_own)} if voltage_gain else params
+    if voltage_gain:
+        params.update(gain_params(case, bus, V_own))
+    return {**params, **dip_params(case, bus, V_own)} if dip_current else params
 
 
 def gain_params(case, bus: int, V_own: float) -> dict:
@@ -145,6 +162,73 @@ def gain_params(case, bus: int, V_own: float) -> dict:
     weights = [q.Sn for q, _ in units]
     return {"lvg_V0": float(np.average([q.Lvpnt0 / r for q, r in units], weights=weights)),
             "lvg_V1": float(np.average([q.Lvpnt1 / r for q, r in units], weights=weights))}
+
+
+def dip_params(case, bus: int, V_own: float) -> dict:
+    """The parameters of `subsystem_dip`'s reactive dip current [system base; voltages in pu of the
+    sub-system's own boundary voltage V_own] from the REECA1 behind the boundary `bus` of `case`,
+    each with its REGCA1 and its unit's load-flow power P and terminal voltage, ratio r to V_own (the
+    inside keeps its own voltages behind the settled tap): dip_Trv, dip_Tg the rating-weighted means
+    of their Trv and Tg; dip_V0, dip_V1 the lowest and highest of their Vdip / r (the share of the
+    units in a dip falls from 1 to 0 between them); the table at each filtered voltage v of DIP_KNOTS
+    the sum over the units of the reactive current their REECA1 commands in a dip at the voltage r v,
+    Kqv db(Vref - r v) within the current limit its VDL tables and priority leave beside P / (r v) of
+    active current (Vref: Vref0, or the unit's load-flow voltage where that is 0; the unit's own
+    reactive command, its held s4_y or voltage PI, is left to the operator). DatasetError where there
+    is no REECA1."""
+    behind = set(subsystem_buses(case.network, bus)) - {bus}
+    units = []
+    for k, unit in enumerate(case.units):
+        kinds = {d.component.name: d.params for d in unit.devices}
+        if unit.bus in behind and "reeca1" in kinds and "regca1" in kinds:
+            V = operating_point(unit, k, case.flow)
+            units.append((kinds["reeca1"], kinds["regca1"], V["V"] / V_own, V["P"]))
+    if not units:
+        raise DatasetError(f"no REECA1 behind bus {bus}: no reactive dip current")
+    knots = np.array(DIP_KNOTS)
+    table = np.zeros_like(knots)
+    for q, _, r, P in units:
+        v = r * knots
+        Vref = q.Vref0 if q.Vref0 > 0.0 else r * V_own
+        cap = q.current_cap("p" if q.PQFLAG else "q")
+        vp = np.maximum(v, LOWEST_VOLTAGE)
+        injection = q.Kqv * dead_band(np, Vref - v, q.dbd1, q.dbd2)
+        limits = current_limits(np, q, NO_CURRENT_LIMIT + 0.0 * v if cap is None else cap(np, v), lambda c: c,
+                                0.0 * v, 0.0 * v, 0.0 * v, injection, P + 0.0 * v, vp)
+        table += limits["IqHL_y"]
+    weights = [g.Sn for _, g, _, _ in units]
+    low, high = min(q.Vdip / r for q, _, r, _ in units), max(q.Vdip / r for q, _, r, _ in units)
+    return {"dip_Trv": float(max(np.average([q.Trv for q, _, _, _ in units], weights=weights), 1e-3)),
+            "dip_Tg": float(max(np.average([g.Tg for _, g, _, _ in units], weights=weights), 1e-3)),
+            "dip_V0": float(low), "dip_V1": float(max(high, low + 1e-3)),
+            **{f"dip_I{k}": float(value) for k, value in enumerate(table)}}
+
+
+def dip_states(t: np.ndarray, V: np.ndarray, n: float, params, events=()) -> np.ndarray:
+    """[len(t), 2]: the dip current's states (Vd, Iq_dip) of the component parameters `params` along
+    the boundary voltage V [len(t)] at the rows t, at rest at the first row: Vd the lag dip_Trv of
+    V / n linear between rows, Iq_dip the lag dip_Tg of dip_drive linear between rows, each
+    integrated exactly (blocks.lag_of_ramp), as the surrogate FMU steps them over a step of the
+    master. A row at one of the run's switching times `events` [s] holds the network after it, but
+    the master's step up to it ends in the network before it (cosim.master): over that interval the
+    voltage stands at the row before's, and the switched voltage drives from that row on."""
+    out = np.empty((len(t), 2))
+    switching = np.zeros(len(t), bool)
+    for at in events:
+        switching |= np.abs(t - at) < 1e-9
+
+    def drive(Vd, Vs):
+        return float(dip_drive([0.0, 0.0, 0.0, 0.0, n, Vd], (Vs,), params, math, 5))
+    out[0] = V[0] / n, drive(V[0] / n, V[0])
+    for k in range(1, len(t)):
+        h = t[k] - t[k - 1]
+        if h <= 0.0:
+            out[k] = out[k - 1]
+            continue
+        end = V[k - 1] if switching[k] else V[k]
+        out[k, 0] = lag_of_ramp(out[k - 1, 0], V[k - 1] / n, end / n, h, params.dip_Trv)
+        out[k, 1] = lag_of_ramp(out[k - 1, 1], drive(out[k - 1, 0], V[k - 1]), drive(out[k, 0], end), h, params.dip_Tg)
+    return out
 
 
 # the REPCA1 parameters that are the unit's share of the plant's (gains, output limits); the others are
@@ -202,24 +286,30 @@ def bus_frequency_states(t: np.ndarray, theta: np.ndarray, Tf: float, Tw: float)
 
 
 def subsystem_model(records: dict, carry_controller: bool = False, memory: bool = False,
-                    unit_frequency: bool = False, voltage_gain: bool = False):
+                    unit_frequency: bool = False, voltage_gain: bool = False, dip_current: bool = False):
     """The component a sub-system's operator is of (ANDES JSON records of its file): `subsystem_pc`,
     which carries its plant controller's states, where asked (DatasetError where it has no REPCA1;
     plant_controller_params refuses the others), else `subsystem`; with a memory of the boundary
     voltage (`_mem`) or its devices' active current through a low-voltage gain (`_lvg`, DatasetError
-    where it has no REGCA1) where asked; `subsystem_uf` where the devices' measured frequency is
+    where it has no REGCA1) where asked, and its devices' reactive dip current known (`_dip`, DatasetError
+    where it has no REECA1 or with a memory); `subsystem_uf` where the devices' measured frequency is
     asked (DatasetError together with any of the others)."""
     if unit_frequency:
-        if carry_controller or memory or voltage_gain:
-            raise DatasetError("the devices' measured frequency is carried without a plant controller, a memory or "
-                               "a low-voltage gain")
+        if carry_controller or memory or voltage_gain or dip_current:
+            raise DatasetError("the devices' measured frequency is carried without a plant controller, a memory, "
+                               "a low-voltage gain or a dip current")
         return component("subsystem_uf")
+    if dip_current:
+        if memory:
+            raise DatasetError("a dip current is known without a memory")
+        if not records.get("REECA1"):
+            raise DatasetError("the sub-system has no REECA1, whose reactive dip current it would know")
     if voltage_gain:
         if memory:
             raise DatasetError("a low-voltage gain is learned without a memory")
         if not records.get("REGCA1"):
             raise DatasetError("the sub-system has no REGCA1, whose low-voltage gain it would pass its current through")
-    suffix = "_lvg" if voltage_gain else "_mem" if memory else ""
+    suffix = ("_lvg" if voltage_gain else "_mem" if memory else "") + ("_dip" if dip_current else "")
     if not carry_controller:
         return component("subsystem" + suffix)
     if not records.get("REPCA1"):
@@ -539,7 +629,8 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
     if len(slack) != 1 or int(slack[0]["bus"]) != int(boundary):
         raise DatasetError(f"{subsystem}: its boundary is the bus of its one Slack "
                            f"({', '.join(str(r['bus']) for r in slack) or 'none'}), not bus {boundary}")
-    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency, plan.voltage_gain)
+    model = subsystem_model(records, plan.carry_controller, plan.memory, plan.unit_frequency, plan.voltage_gain,
+                            plan.dip_current)
     key = fingerprint(subsystem.read_bytes(), int(boundary), plan, seed)
     if (meta := finished(out, key)) is not None:
         return meta
@@ -555,7 +646,8 @@ def generate(subsystem, boundary: int, out, plan: Plan = Plan(), seed: int = 0, 
             path = attached_file(host, [(bus, subsystem)], out / ".attached")
             attachments.append((name, bus, str(path)))
             cases.append((case_from_file(path), bus))
-    params = subsystem_params(records, cases[0][0], cases[0][1], plan.carry_controller, plan.voltage_gain)
+    params = subsystem_params(records, cases[0][0], cases[0][1], plan.carry_controller, plan.voltage_gain,
+                              plan.dip_current)
     model.params(params)  # checked before anything is built or runs
     for case, _ in cases:
         generator_files(case, "reference", out / ".fmus")  # built once, before the workers start
@@ -592,6 +684,11 @@ def _assemble(out: Path, runs: list, attachments: list, params: dict, plan: Plan
         if UNIT_FREQUENCY_STATE.name in model.state_names:  # the devices' measurement less the boundary's
             boundary = frequency_deviation(rows["x"][:, 0], rows["x"][:, 1], p.busf_Tw)
             rows["x"] = np.concatenate([rows["x"], (rows["f_units"] - boundary)[:, None]], axis=1)
+        if DIP_STATES[0].name in model.state_names:  # the dip current from the recorded voltage, Iq_rest in Iq's place
+            events = (plan.fault_start,) + ((run.clear_s,) if run.clear_s is not None else ())
+            dips = dip_states(rows["t"], rows["u"][:, 0], float(rows["x"][0, 4]), p, events)
+            rows["x"] = np.concatenate([rows["x"], dips], axis=1)
+            rows["x"][:, 3] -= dips[:, 1]
         if RESIDUAL_CURRENT_STATE.name in model.state_names:  # Ip_full in Ip's place, Ip_res last
             full = rows["x"][:, 2] + rows["held"]
             gain = subsystem_gain(rows["x"].T, rows["u"].T, p, np)

@@ -27,7 +27,8 @@ MACHINE_ONLY = {"machine": None, "component": "sm4", "case": None, "pm": None, "
 MAX_RUNS = 100_000
 # the options of `opfmu operator` that only a sub-system takes (all default None)
 SUBSYSTEM_ONLY = ("boundary", "runs", "hosts", "buses", "stride", "rating", "bus_port", "carry_controller", "memory",
-                  "unit_frequency", "voltage_gain", "members", "frequency_features", "rollover_share")
+                  "unit_frequency", "voltage_gain", "dip_current", "members", "frequency_features",
+                  "rollover_share")
 MAX_MEMBERS = 16
 
 
@@ -75,6 +76,11 @@ def add_subsystem_options(op) -> None:
                          "gain at the boundary voltage, known, of a full-voltage current and a residual, learned, so "
                          "that it falls and returns with the voltage at once (components subsystem_lvg, "
                          "subsystem_pc_lvg; not with --memory or --unit-frequency; docs/subsystems.md)")
+    op.add_argument("--dip-current", action="store_true", default=None,
+                    help="with --subsystem FILE with REECA1: the reactive current its units inject in a voltage dip, "
+                         "from their settings, as two known states stepped exactly (a filter and a lag), the rest of "
+                         "the reactive current learned (components subsystem*_dip; not with --memory or "
+                         "--unit-frequency; docs/subsystems.md)")
     op.add_argument("--rating", type=float, default=None, metavar="MVA",
                     help="with --subsystem BOX.fmu (a black box): its rating [MVA]")
     op.add_argument("--bus-port", default=None, metavar="SPEC",
@@ -91,8 +97,8 @@ def cmd_subsystem(args) -> None:
     if given:
         raise UserError(f"{', '.join(given)}: for a machine; a sub-system (--subsystem) takes --boundary, --runs, "
                         "--hosts, --buses, --stride, --carry-controller, --memory, --unit-frequency, --voltage-gain, "
-                        "--members, --frequency-features, --rollover-share, --epochs, --seed, --workers, --threads, "
-                        "--name")
+                        "--dip-current, --members, --frequency-features, --rollover-share, --epochs, --seed, --workers, "
+                        "--threads, --name")
     if args.members is not None and not 1 <= args.members <= MAX_MEMBERS:
         raise UserError(f"--members {args.members}: from 1 to {MAX_MEMBERS} operators")
     if args.rollover_share is not None and not 0.0 <= args.rollover_share <= 1.0:
@@ -118,10 +124,13 @@ def cmd_subsystem(args) -> None:
     if buses != [args.boundary]:
         raise UserError(f"--boundary {args.boundary}: the boundary of {path.name} is the bus of its one Slack "
                         f"({', '.join(map(str, buses)) or 'it has none'})")
-    if args.unit_frequency and (args.carry_controller or args.memory or args.voltage_gain):
-        raise UserError("--unit-frequency: not with --carry-controller, --memory or --voltage-gain")
-    if args.voltage_gain and args.memory:
-        raise UserError("--voltage-gain: not with --memory")
+    if args.unit_frequency and (args.carry_controller or args.memory or args.voltage_gain or args.dip_current):
+        raise UserError("--unit-frequency: not with --carry-controller, --memory, --voltage-gain or --dip-current")
+    for option, value in (("--voltage-gain", args.voltage_gain), ("--dip-current", args.dip_current)):
+        if value and args.memory:
+            raise UserError(f"{option}: not with --memory")
+    if args.dip_current and not records.get("REECA1"):
+        raise UserError(f"--dip-current: {path.name} has no REECA1, whose reactive dip current it would know")
     if args.voltage_gain and not records.get("REGCA1"):
         raise UserError(f"--voltage-gain: {path.name} has no REGCA1, whose low-voltage gain it would learn through")
     if args.carry_controller and not records.get("REPCA1"):
@@ -151,7 +160,8 @@ def _check_case(path: Path) -> None:
 def _black_box(path: Path, args) -> None:
     """Checks a black box's request (its rating; the bus port is checked on opening it), then runs it."""
     for option, value in (("--boundary", args.boundary), ("--carry-controller", args.carry_controller),
-                          ("--unit-frequency", args.unit_frequency), ("--voltage-gain", args.voltage_gain)):
+                          ("--unit-frequency", args.unit_frequency), ("--voltage-gain", args.voltage_gain),
+                          ("--dip-current", args.dip_current)):
         if value is not None:
             raise UserError(f"{option} is for a case file; a black box (an FMU) is its bus port, never read inside")
     if args.rating is None or not (math.isfinite(args.rating) and 0 < args.rating <= 1e6):
@@ -185,7 +195,8 @@ def _plan(args):
                 buses=Plan.buses if args.buses is None else args.buses,
                 stride=Plan.stride if args.stride is None else args.stride,
                 carry_controller=bool(args.carry_controller), memory=bool(args.memory),
-                unit_frequency=bool(args.unit_frequency), voltage_gain=bool(args.voltage_gain))
+                unit_frequency=bool(args.unit_frequency), voltage_gain=bool(args.voltage_gain),
+                dip_current=bool(args.dip_current))
     steps = plan.stride / plan.step
     if not (10 <= plan.runs <= MAX_RUNS and 1 <= plan.buses <= 100 and 1 <= args.epochs <= MAX_COUNT
             and 0 <= args.seed <= MAX_COUNT and 1 <= args.workers <= 256

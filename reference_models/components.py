@@ -4,12 +4,13 @@ from __future__ import annotations
 from .component import Component
 from .ieee1 import IEEE1
 from .models import STANDARD_MODELS
-from .models.subsystem import (SUBSYSTEM, SUBSYSTEM_LVG, SUBSYSTEM_MEM, SUBSYSTEM_PC, SUBSYSTEM_PC_LVG,
-                               SUBSYSTEM_PC_MEM, SUBSYSTEM_UF)
+from .models.subsystem import (SUBSYSTEM, SUBSYSTEM_DIP, SUBSYSTEM_LVG, SUBSYSTEM_LVG_DIP, SUBSYSTEM_MEM, SUBSYSTEM_PC,
+                               SUBSYSTEM_PC_DIP, SUBSYSTEM_PC_LVG, SUBSYSTEM_PC_LVG_DIP, SUBSYSTEM_PC_MEM, SUBSYSTEM_UF)
 from .sm4 import SM4
 
 COMPONENTS = {c.name: c for c in (SM4, IEEE1, *STANDARD_MODELS.values(), SUBSYSTEM, SUBSYSTEM_PC, SUBSYSTEM_MEM,
-                                   SUBSYSTEM_PC_MEM, SUBSYSTEM_UF, SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG)}
+                                   SUBSYSTEM_PC_MEM, SUBSYSTEM_UF, SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG, SUBSYSTEM_DIP,
+                                   SUBSYSTEM_PC_DIP, SUBSYSTEM_LVG_DIP, SUBSYSTEM_PC_LVG_DIP)}
 
 
 def component(name) -> Component:

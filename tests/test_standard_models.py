@@ -139,7 +139,8 @@ def test_components_without_non_windup_limits_declare_no_reset_and_reset_to_them
         "sm4", "ieee1", "gencls", "genrou", "exst1", "ieeest", "exac4", "esst4b", "ieeevc", "tg2", "ieesgo", "st2cut",
         "fload", "motor3", "motor5", "zip", "pvd1", "esd1", "repca1", "wtdta1", "wtara1", "wtds", "shaft5", "pll1",
         "pll2", "pv", "slack", "subsystem", "subsystem_pc", "subsystem_mem", "subsystem_pc_mem",
-        "subsystem_uf", "subsystem_lvg", "subsystem_pc_lvg"}
+        "subsystem_uf", "subsystem_lvg", "subsystem_pc_lvg", "subsystem_dip", "subsystem_pc_dip", "subsystem_lvg_dip",
+        "subsystem_pc_lvg_dip"}
     for name in ("sm4", "ieee1"):
         component = COMPONENTS[name]
         x = component.steady_state()

@@ -17,7 +17,10 @@ States  x = (theta_f, theta_w [rad]: the boundary's frequency measurement, ANDES
         boundary's measured frequency; a sub-system whose active current passes a low-voltage gain
         (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG) has Ip_full [pu, system base] in Ip's place, the current its
         devices would deliver at full voltage, and carries last Ip_res [pu, system base], what they
-        deliver less Ip_full through the gain
+        deliver less Ip_full through the gain; a sub-system whose devices' reactive dip current is
+        known (SUBSYSTEM_*_DIP) has Iq_rest [pu, system base] in Iq's place, the reactive current
+        less the dip current, and carries after a controller's states Vd [pu of V_own], the devices'
+        voltage through their dip filter, and Iq_dip [pu, system base], the dip current
 Inputs  u = (Vs [pu], theta_vs [rad]: the boundary bus voltage)
 Outputs y = (I_re, I_im [pu, system base]: the current injected into the boundary bus, network
         frame; P, Q [pu, system base]: the power injected, generator convention; f [pu]: the
@@ -68,7 +71,21 @@ What is known is written here; what is not is learned:
     LVG_s the sub-system's gain at the boundary voltage on its own base (knees lvg_V0, lvg_V1: the
     units' Lvpnt0, Lvpnt1 over their voltage's ratio to the boundary's in the load flow, rating-
     weighted), Ip_full (in Ip's place) the delivered current and what the units hold back, Ip_res
-    (last) the rest: both learned and both moving only as the units' states move.
+    (last) the rest: both learned and both moving only as the units' states move;
+    a REECA1 in a voltage dip (V < Vdip) adds to its reactive current command Kqv db(Vref - s0), its
+    voltage s0 through a lag Trv, within the current its limits leave, and drops it the moment the
+    voltage is back; its REGCA1 delivers the command through the lag Tg: the reactive current
+    rises through a fault and falls after its clearing in some 20 ms, faster than a window's
+    learned state follows; with `--dip-current` (SUBSYSTEM_*_DIP) that current is known:
+        dip_Trv dVd/dt = Vs / n - Vd,   dip_Tg dIq_dip/dt = share(Vs / n) I_dip(Vd) - Iq_dip,
+        Iq = Iq_rest + Iq_dip,
+    share the part of the devices in a dip (1 below dip_V0, linear to 0 at dip_V1: their Vdip over
+    their voltage's ratio to the boundary's), I_dip the table dip_I0 .. dip_I11 at DIP_KNOTS, the
+    sum over the REECA1 of the current they command in a dip at that filtered voltage (their own
+    reactive command, held or a voltage PI, left out: it is in Iq_rest), dip_Trv and dip_Tg their
+    rating-weighted Trv and Tg (cosim.subsystem_data.dip_params); Vd and Iq_dip are affine in
+    themselves and the FMU steps them exactly; what the aggregate misses (the spread of the lags,
+    the units' own voltages standing above the boundary's while they inject) is left to Iq_rest.
 
 A deep fault acts on the passive part exactly (its admittance is the Norton admittance of the port)
 and on the devices through the operator. The state is rotation invariant but not speed invariant
@@ -80,13 +97,14 @@ devices' currents Ip_own, Iq_own there (its rest: the learned rates have none of
 measurement's busf_Tf, busf_Tw [s], busf_fn [Hz] (the sub-system's own BusFreq settings);
 SUBSYSTEM_PC's also the plant controller's, REPCA1's named with pc_ (pc_Kp, ..., system base: the
 sums of its REPCA1's gains and limits); SUBSYSTEM_LVG's and SUBSYSTEM_PC_LVG's also the knees of the
-low-voltage gain lvg_V0 < lvg_V1 [pu of V_own]. An operator of it is trained for one sub-system: its FMU
-holds them fixed.
+low-voltage gain lvg_V0 < lvg_V1 [pu of V_own]; SUBSYSTEM_*_DIP's also the dip current's dip_Trv,
+dip_Tg [s], dip_V0 < dip_V1 [pu of V_own] and dip_I0 .. dip_I11 [pu, system base]. An operator of it
+is trained for one sub-system: its FMU holds them fixed.
 
 Start from the load flow (V0, theta0, P0, Q0 at the boundary): theta_f = theta_w = theta0,
 n = V0 / V_own, Ip = (P0 + G V0^2 / n^2) / V0, Iq = (Q0 - B V0^2 / n^2) / V0; a plant controller's
 filter and held voltage at V0, its integrators and lags at 0 (ANDES' REPCA1 start); a memory's lags
-at V0.
+at V0; a dip current's filter at V0 / n and the current at its drive (Iq_rest the rest of Iq).
 """
 from __future__ import annotations
 
@@ -95,7 +113,7 @@ from dataclasses import dataclass, fields, make_dataclass
 
 import numpy as np
 
-from ..blocks import bus_frequency, lags_of_ramp
+from ..blocks import bus_frequency, lags_of_ramp, piecewise_linear
 from ..component import Component, Initialisation, Parameters, Quantity
 from ..drift import Drift
 from ..piecewise import where
@@ -181,6 +199,39 @@ def _with_gain(base, name: str):
 SubsystemLVGParams = _with_gain(SubsystemParams, "SubsystemLVGParams")
 SubsystemPCLVGParams = _with_gain(SubsystemPCParams, "SubsystemPCLVGParams")
 
+# the devices' filtered voltage [pu of the sub-system's own boundary voltage] at which the dip current's
+# table gives dip_I0 .. dip_I11 (SUBSYSTEM_*_DIP), linear between, flat beyond
+DIP_KNOTS = tuple(round(0.1 * k, 1) for k in range(12))
+DIP_RANGES = {"dip_Trv": (1e-3, 10.0, "s"), "dip_Tg": (1e-3, 10.0, "s"), "dip_V0": (0.0, 2.0, "pu"),
+              "dip_V1": (0.0, 2.0, "pu"), **{f"dip_I{k}": (-1e4, 1e4, "pu") for k in range(len(DIP_KNOTS))}}
+
+
+def _with_dip(base, name: str):
+    """`base` and the dip current's parameters (module docstring): its lags dip_Trv, dip_Tg [s], the
+    knees dip_V0 < dip_V1 [pu of the sub-system's own boundary voltage] between which the share of the
+    devices in a dip falls from 1 to 0, and its table dip_I0 .. dip_I11 [pu, system base] at DIP_KNOTS."""
+    def check(self) -> None:
+        base.check(self)
+        check_ranges(self, DIP_RANGES)
+        check_limits(self, "dip_V0", "dip_V1")
+
+    table = [(f"dip_I{k}", float, 0.0) for k in range(len(DIP_KNOTS))]
+    made = make_dataclass(name, [("dip_Trv", float, 0.02), ("dip_Tg", float, 0.02), ("dip_V0", float, 0.85),
+                                 ("dip_V1", float, 0.9)] + table, bases=(base,), frozen=True,
+                          namespace={"check": check,
+                                     "__doc__": f"{base.__name__} and the devices' reactive dip current: its "
+                                                "lags dip_Trv, dip_Tg [s], the knees dip_V0 < dip_V1 [pu of the "
+                                                "sub-system's own boundary voltage] of the share in a dip, its "
+                                                "table dip_I0 .. dip_I11 [pu, system base] at DIP_KNOTS."})
+    made.__module__ = __name__
+    return made
+
+
+SubsystemDipParams = _with_dip(SubsystemParams, "SubsystemDipParams")
+SubsystemPCDipParams = _with_dip(SubsystemPCParams, "SubsystemPCDipParams")
+SubsystemLVGDipParams = _with_dip(SubsystemLVGParams, "SubsystemLVGDipParams")
+SubsystemPCLVGDipParams = _with_dip(SubsystemPCLVGParams, "SubsystemPCLVGDipParams")
+
 
 # the plant controller's states a sub-system with one carries (SUBSYSTEM_PC): (name, its REPCA1's state,
 # how the REPCA1's are combined: summed where each is a share of the plant's, else alike in all, averaged)
@@ -216,6 +267,16 @@ def low_voltage_gain(x, u, p, m):
                  where(m, V <= p.lvg_V1, (V - p.lvg_V0) / (p.lvg_V1 - p.lvg_V0), 1.0 + 0.0 * V))
 
 
+def dip_drive(x, u, p, m, at: int):
+    """The dip current's drive [pu, system base] (SUBSYSTEM_*_DIP; module docstring): the share of the
+    devices in a dip at the boundary voltage on the sub-system's own base, Vs / n (1 up to dip_V0,
+    linear to 0 at dip_V1), times the table at their filtered voltage, the state x[at]."""
+    V = u[0] / x[4]
+    share = where(m, V <= p.dip_V0, 1.0 + 0.0 * V,
+                  where(m, V <= p.dip_V1, (p.dip_V1 - V) / (p.dip_V1 - p.dip_V0), 0.0 * V))
+    return share * piecewise_linear(m, x[at], DIP_KNOTS, tuple(getattr(p, f"dip_I{k}") for k in range(len(DIP_KNOTS))))
+
+
 def delivered_active_current(x, u, p, m, gain: bool = False):
     """Ip [pu, system base]: the devices' active current at the boundary, the state Ip, or with a
     low-voltage gain (`gain`) the full-voltage current through it and the residual (the last state),
@@ -223,44 +284,51 @@ def delivered_active_current(x, u, p, m, gain: bool = False):
     return x[2] * low_voltage_gain(x, u, p, m) + x[len(x) - 1] if gain else x[2]
 
 
-def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False) -> tuple:
+def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False, dip: bool = False) -> tuple:
     """(derivatives, start_equations) of a sub-system that carries `carried` plant controller states
-    (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them) and `learned` more states of
-    its devices (last: learned, 0 at rest: df_units; with a low-voltage gain, `gain`, Ip_res, the
-    full-voltage current's part the gain holds back at rest)."""
+    (0 or N_CONTROLLER), a memory of the lags `memory` [s] (after them), with `dip` the dip current's
+    two states (Vd, Iq_dip, after those) and `learned` more states of its devices (last: learned, 0 at
+    rest: df_units; with a low-voltage gain, `gain`, Ip_res, the full-voltage current's part the gain
+    holds back at rest)."""
     first = N_BOUNDARY + carried  # the memory's first state
-    last = first + len(memory)  # the devices' carried states, where any
+    at = first + len(memory)  # the dip current's filtered voltage, where carried
+    last = at + 2 * dip  # the devices' carried states, where any
 
     def derivatives(x, u, p: SubsystemParams, m):
         """(dtheta_f, dtheta_w, dIp, dIq, dn, then a carried plant controller's, then a memory's)/dt:
-        the measurement's, the controller's and the memory's; the devices' currents' are learned (0);
-        n is a constant of the study."""
+        the measurement's, the controller's, the memory's and the dip current's; the devices'
+        currents' are learned (0); n is a constant of the study."""
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = _controller_rates(x, u, p, m) if carried else ()
         lags = tuple((u[0] - x[first + k]) / T for k, T in enumerate(memory))
+        dips = ((u[0] / x[4] - x[at]) / p.dip_Trv, (dip_drive(x, u, p, m, at) - x[at + 1]) / p.dip_Tg) if dip else ()
         units = tuple(0.0 * x[last + k] for k in range(learned))
-        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags, *units)
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags, *dips, *units)
 
     def start_equations(x, u, p: SubsystemParams, m):
         """The start's residuals: the measurement at rest, the tap settled to the load flow's boundary
         voltage (n V_own = Vs), a carried controller's filter and held voltage at Vs and its PI
-        integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs, the devices'
-        carried states at 0 (their measurement at the boundary's), Ip_res at Ip_full (1 - LVG); the
-        learned currents' rows are unread (the load flow's P, Q fix them)."""
+        integrators and command lags at 0 (ANDES' REPCA1 start), a memory's lags at Vs, the dip
+        current's filter at Vs / n and its current at its drive, the devices' carried states at 0
+        (their measurement at the boundary's), Ip_res at Ip_full (1 - LVG); the learned currents'
+        rows are unread (the load flow's P, Q fix them)."""
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
+        dips = (x[at] - u[0] / x[4], x[at + 1] - dip_drive(x, u, p, m, at)) if dip else ()
         units = ((x[last] - x[2] * (1.0 - low_voltage_gain(x, u, p, m)),) if gain
                  else tuple(x[last + k] for k in range(learned)))
-        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *units)
+        return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *dips, *units)
 
     return derivatives, start_equations
 
 
-def _outputs(gain: bool = False):
+def _outputs(gain: bool = False, dip_at: int | None = None):
     def outputs(x, u, p: SubsystemParams, m):
-        """(I_re, I_im, P, Q) [pu, system base], f [pu]."""
-        Ip, Iq = delivered_active_current(x, u, p, m, gain), x[3]
+        """(I_re, I_im, P, Q) [pu, system base], f [pu]; with a dip current (its filter the state
+        dip_at) the devices' reactive current is Iq_rest + Iq_dip."""
+        Ip = delivered_active_current(x, u, p, m, gain)
+        Iq = x[3] if dip_at is None else x[3] + x[dip_at + 1]
         Vs, theta = u[0], u[1]
         c, s = m.cos(theta), m.sin(theta)
         f = bus_frequency(m, theta, x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)[2]
@@ -280,19 +348,33 @@ def _carried_at_rest(x: list, Vs: float, p, learned: int, gain: bool) -> list:
     return x + [x[2] * (1.0 - float(low_voltage_gain(x, (Vs,), p, math)))]
 
 
-def _equilibrium(carried: int, memory: int, learned: int = 0, gain: bool = False):
+def _dip_at_rest(x: list, Vs: float, p, dip: bool) -> list:
+    """x (the rest's states up to a memory, Iq at the devices' whole reactive current) with the dip
+    current's states at rest under the boundary voltage Vs appended (the filter at Vs / n, the current
+    at its drive) and Iq_rest = Iq less it; x itself where there is no dip current."""
+    if not dip:
+        return x
+    at = len(x)
+    x = x + [Vs / x[4], 0.0]
+    x[at + 1] = float(dip_drive(x, (Vs,), p, math, at))
+    x[3] -= x[at + 1]
+    return x
+
+
+def _equilibrium(carried: int, memory: int, learned: int = 0, gain: bool = False, dip: bool = False):
     def equilibrium(u, p: SubsystemParams) -> np.ndarray:
         """The rest [5 + carried + memory + learned] under constant (Vs, theta_vs), as if the load flow had
         put the boundary at Vs: the measurement at theta_vs, n = Vs / V_own, the devices delivering
         the power of the sub-system's own load flow (Ip_own V_own, Iq_own V_own) through the settled
-        tap, a carried controller at its start (_controller_start), a memory at Vs, the devices'
-        carried states at rest (_carried_at_rest)."""
+        tap, a carried controller at its start (_controller_start), a memory at Vs, a dip current at
+        rest (_dip_at_rest), the devices' carried states at rest (_carried_at_rest)."""
         Vs, theta = (float(v) for v in finite_inputs(u, "SUBSYSTEM")[:2])
         if not Vs > 0.0:
             raise ValueError(f"SUBSYSTEM: no rest at a boundary voltage of {Vs:.6g} pu")
         n = Vs / p.V_own
-        return np.array(_carried_at_rest([theta, theta, p.Ip_own / n, p.Iq_own / n, n] + _controller_start(Vs, carried)
-                                      + [Vs] * memory, Vs, p, learned, gain))
+        return np.array(_carried_at_rest(_dip_at_rest([theta, theta, p.Ip_own / n, p.Iq_own / n, n]
+                                                      + _controller_start(Vs, carried) + [Vs] * memory, Vs, p, dip),
+                                         Vs, p, learned, gain))
     return equilibrium
 
 
@@ -322,15 +404,16 @@ def measured_frequency_map(p: SubsystemParams, sensor_times, n_x: int) -> np.nda
     return out / (2.0 * math.pi * p.busf_Tw)
 
 
-def _starter(carried: int, memory: int, learned: int = 0, gain: bool = False):
+def _starter(carried: int, memory: int, learned: int = 0, gain: bool = False, dip: bool = False):
     def start(given, p: SubsystemParams) -> tuple:
         V0, theta0, P0, Q0 = (float(given[k]) for k in ("V0", "theta0", "P0", "Q0"))
         if not (math.isfinite(V0) and V0 > 0.0):
             raise ValueError(f"SUBSYSTEM: no start at a boundary voltage of {V0:.6g} pu")
         n = V0 / p.V_own
-        return np.array(_carried_at_rest([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0,
-                                       (Q0 - p.B * V0 * V0 / n ** 2) / V0, n] + _controller_start(V0, carried)
-                                      + [V0] * memory, V0, p, learned, gain)), {}
+        return np.array(_carried_at_rest(_dip_at_rest([theta0, theta0, (P0 + p.G * V0 * V0 / n ** 2) / V0,
+                                                       (Q0 - p.B * V0 * V0 / n ** 2) / V0, n]
+                                                      + _controller_start(V0, carried) + [V0] * memory, V0, p, dip),
+                                         V0, p, learned, gain)), {}
     return start
 
 
@@ -361,6 +444,12 @@ FULL_CURRENT_STATE = Quantity("Ip_full", "pu", "devices' active current at the b
                               "delivered and what their low-voltage gain holds back (system base)")
 RESIDUAL_CURRENT_STATE = Quantity("Ip_res", "pu", "devices' delivered active current at the boundary less "
                                   "Ip_full through the sub-system's low-voltage gain (system base)")
+DIP_STATES = (Quantity("Vd", "pu", "devices' voltage through their reactive dip current's filter (Trv), on the "
+                       "sub-system's own base"),
+              Quantity("Iq_dip", "pu", "devices' reactive dip current at the boundary (system base; > 0 delivers "
+                       "reactive power)"))
+REACTIVE_REST_STATE = Quantity("Iq_rest", "pu", "devices' reactive current at the boundary less Iq_dip, voltage "
+                               "frame (system base; > 0 delivers reactive power)")
 # the scale of each learned carried state (what a state's changes are measured against)
 LEARNED_SCALES = {UNIT_FREQUENCY_STATE.name: 0.02, RESIDUAL_CURRENT_STATE.name: 0.05}
 CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPCA1, system base)" if how == "sum"
@@ -369,36 +458,40 @@ CONTROLLER_STATES = tuple(Quantity(n, "pu", f"{what} (" + ("summed over its REPC
 
 
 def _subsystem(name: str, description: str, carried: tuple, params_type, memory: tuple = (),
-               learned: tuple = (), gain: bool = False) -> Component:
+               learned: tuple = (), gain: bool = False, dip: bool = False) -> Component:
     """The sub-system component with the boundary's states, a plant controller's `carried` (Quantity
     each; their equations: _controller_rates), a memory of the lags `memory` [s] (MEMORY_STATES) and
     the devices' `learned` carried states (Quantity each: UNIT_FREQUENCY_STATE;
     learned, 0 at rest); `gain`: Ip is the full-voltage current (FULL_CURRENT_STATE) that the devices
-    deliver through the low-voltage gain, plus the learned residual (RESIDUAL_CURRENT_STATE, last)."""
+    deliver through the low-voltage gain, plus the learned residual (RESIDUAL_CURRENT_STATE, last);
+    `dip`: the dip current's known states (DIP_STATES, after a memory) and Iq_rest in Iq's place."""
     learned = learned + (RESIDUAL_CURRENT_STATE,) * gain
-    extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory)))
+    extra = tuple(range(N_BOUNDARY, N_BOUNDARY + len(carried) + len(memory) + 2 * dip))
     units = tuple(range(N_BOUNDARY + len(extra), N_BOUNDARY + len(extra) + len(learned)))
-    derivatives, start_equations = _equations(len(carried), memory, len(learned), gain)
+    dip_at = N_BOUNDARY + len(carried) + len(memory) if dip else None
+    derivatives, start_equations = _equations(len(carried), memory, len(learned), gain, dip)
     n_x = N_BOUNDARY + len(extra) + len(units)
     return Component(
         name=name,
         description=description,
-        states=BOUNDARY_STATES[:2] + ((FULL_CURRENT_STATE,) if gain else BOUNDARY_STATES[2:3]) + BOUNDARY_STATES[3:]
-        + carried + MEMORY_STATES[:len(memory)] + learned,
+        states=BOUNDARY_STATES[:2] + ((FULL_CURRENT_STATE,) if gain else BOUNDARY_STATES[2:3])
+        + ((REACTIVE_REST_STATE,) if dip else BOUNDARY_STATES[3:4]) + BOUNDARY_STATES[4:]
+        + carried + MEMORY_STATES[:len(memory)] + DIP_STATES * dip + learned,
         inputs=BOUNDARY_INPUTS,
         outputs=BOUNDARY_OUTPUTS,
         params_type=params_type,
         derivatives=derivatives,
-        output_equations=_outputs(gain),
-        equilibrium=_equilibrium(len(carried), len(memory), len(learned), gain),
-        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * (len(carried) + len(memory))
+        output_equations=_outputs(gain, dip_at),
+        equilibrium=_equilibrium(len(carried), len(memory), len(learned), gain, dip),
+        state_scales=(0.1, 0.1, 0.05, 0.05, 0.05) + (0.05,) * len(extra)
         + tuple(LEARNED_SCALES[q.name] for q in learned),
         # busf_Tf dtheta_f/dt = theta_vs - theta_f, busf_Tw dtheta_w/dt = theta_f - theta_w, dn/dt = 0; a
-        # plant controller's lags, PIs and hold, piecewise affine in their own state; the memory's lags
+        # plant controller's lags, PIs and hold, piecewise affine in their own state; the memory's lags;
+        # the dip current's filter and lag
         affine_states=(0, 1, 4) + extra,
         drift=Drift(angle_states=(0, 1), angle_inputs=(1,), speed_state=None),
         ports=Ports(bus=BusPort(voltage=("Vs", "theta_vs"), current=("I_re", "I_im"))),
-        initialisation=Initialisation((), _starter(len(carried), len(memory), len(learned), gain)),
+        initialisation=Initialisation((), _starter(len(carried), len(memory), len(learned), gain, dip)),
         learned_states=(2, 3) + units,
         started_states=units,
         start_equations=start_equations,
@@ -423,3 +516,13 @@ SUBSYSTEM_LVG = _subsystem("subsystem_lvg", f"a sub-system seen through its boun
                            SubsystemLVGParams, gain=True)
 SUBSYSTEM_PC_LVG = _subsystem("subsystem_pc_lvg", f"a sub-system with a plant controller seen through its boundary "
                               f"bus{_GAIN}: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCLVGParams, gain=True)
+_DIP = ", its devices' reactive dip current known"
+SUBSYSTEM_DIP = _subsystem("subsystem_dip", f"a sub-system seen through its boundary bus{_DIP}: {_KNOWN}", (),
+                           SubsystemDipParams, dip=True)
+SUBSYSTEM_PC_DIP = _subsystem("subsystem_pc_dip", f"a sub-system with a plant controller seen through its boundary "
+                              f"bus{_DIP}: {_KNOWN_PC}", CONTROLLER_STATES, SubsystemPCDipParams, dip=True)
+SUBSYSTEM_LVG_DIP = _subsystem("subsystem_lvg_dip", f"a sub-system seen through its boundary bus{_GAIN}{_DIP}: "
+                               f"{_KNOWN}", (), SubsystemLVGDipParams, gain=True, dip=True)
+SUBSYSTEM_PC_LVG_DIP = _subsystem("subsystem_pc_lvg_dip", f"a sub-system with a plant controller seen through its "
+                                  f"boundary bus{_GAIN}{_DIP}: {_KNOWN_PC}", CONTROLLER_STATES,
+                                  SubsystemPCLVGDipParams, gain=True, dip=True)
