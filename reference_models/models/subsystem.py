@@ -180,20 +180,26 @@ SubsystemPCParams.__module__ = __name__
 GAIN_RANGES = {"lvg_V0": (0.0, 2.0, "pu"), "lvg_V1": (0.0, 2.0, "pu")}
 
 
-def _with_gain(base, name: str):
-    """`base` and the knees of the low-voltage gain, lvg_V0 < lvg_V1 (module docstring)."""
+def _extended(base, name: str, fields: list, ranges: dict, knees: tuple, doc: str):
+    """The frozen parameters `name`: `base` and `fields` ((name, type, default) each), checked by
+    base's check, `ranges` and the order of the two `knees` (field names, low < high); `doc`: what
+    the fields are (the class docstring after base's name)."""
     def check(self) -> None:
         base.check(self)
-        check_ranges(self, GAIN_RANGES)
-        check_limits(self, "lvg_V0", "lvg_V1")
+        check_ranges(self, ranges)
+        check_limits(self, *knees)
 
-    made = make_dataclass(name, [("lvg_V0", float, 0.35), ("lvg_V1", float, 0.85)], bases=(base,), frozen=True,
-                          namespace={"check": check,
-                                     "__doc__": f"{base.__name__} and the knees lvg_V0 < lvg_V1 [pu of the "
-                                                "sub-system's own boundary voltage] of its devices' low-voltage "
-                                                "gain (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG)."})
+    made = make_dataclass(name, fields, bases=(base,), frozen=True,
+                          namespace={"check": check, "__doc__": f"{base.__name__} and {doc}"})
     made.__module__ = __name__
     return made
+
+
+def _with_gain(base, name: str):
+    """`base` and the knees of the low-voltage gain, lvg_V0 < lvg_V1 (module docstring)."""
+    return _extended(base, name, [("lvg_V0", float, 0.35), ("lvg_V1", float, 0.85)], GAIN_RANGES,
+                     ("lvg_V0", "lvg_V1"), "the knees lvg_V0 < lvg_V1 [pu of the sub-system's own boundary voltage] "
+                     "of its devices' low-voltage gain (SUBSYSTEM_LVG, SUBSYSTEM_PC_LVG).")
 
 
 SubsystemLVGParams = _with_gain(SubsystemParams, "SubsystemLVGParams")
@@ -210,21 +216,12 @@ def _with_dip(base, name: str):
     """`base` and the dip current's parameters (module docstring): its lags dip_Trv, dip_Tg [s], the
     knees dip_V0 < dip_V1 [pu of the sub-system's own boundary voltage] between which the share of the
     devices in a dip falls from 1 to 0, and its table dip_I0 .. dip_I11 [pu, system base] at DIP_KNOTS."""
-    def check(self) -> None:
-        base.check(self)
-        check_ranges(self, DIP_RANGES)
-        check_limits(self, "dip_V0", "dip_V1")
-
     table = [(f"dip_I{k}", float, 0.0) for k in range(len(DIP_KNOTS))]
-    made = make_dataclass(name, [("dip_Trv", float, 0.02), ("dip_Tg", float, 0.02), ("dip_V0", float, 0.85),
-                                 ("dip_V1", float, 0.9)] + table, bases=(base,), frozen=True,
-                          namespace={"check": check,
-                                     "__doc__": f"{base.__name__} and the devices' reactive dip current: its "
-                                                "lags dip_Trv, dip_Tg [s], the knees dip_V0 < dip_V1 [pu of the "
-                                                "sub-system's own boundary voltage] of the share in a dip, its "
-                                                "table dip_I0 .. dip_I11 [pu, system base] at DIP_KNOTS."})
-    made.__module__ = __name__
-    return made
+    return _extended(base, name, [("dip_Trv", float, 0.02), ("dip_Tg", float, 0.02), ("dip_V0", float, 0.85),
+                                  ("dip_V1", float, 0.9)] + table, DIP_RANGES, ("dip_V0", "dip_V1"),
+                     "the devices' reactive dip current: its lags dip_Trv, dip_Tg [s], the knees dip_V0 < dip_V1 "
+                     "[pu of the sub-system's own boundary voltage] of the share in a dip, its table dip_I0 .. "
+                     "dip_I11 [pu, system base] at DIP_KNOTS.")
 
 
 SubsystemDipParams = _with_dip(SubsystemParams, "SubsystemDipParams")
