@@ -218,7 +218,7 @@ def dip_states(t: np.ndarray, V: np.ndarray, n: float, params, events=()) -> np.
         switching |= np.abs(t - at) < 1e-9
 
     def drive(Vd, Vs):
-        return float(dip_drive([0.0, 0.0, 0.0, 0.0, n, Vd], (Vs,), params, math, 5))
+        return float(dip_drive(math, Vs / n, Vd, params))
     out[0] = V[0] / n, drive(V[0] / n, V[0])
     for k in range(1, len(t)):
         h = t[k] - t[k - 1]

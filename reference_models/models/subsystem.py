@@ -264,14 +264,12 @@ def low_voltage_gain(x, u, p, m):
                  where(m, V <= p.lvg_V1, (V - p.lvg_V0) / (p.lvg_V1 - p.lvg_V0), 1.0 + 0.0 * V))
 
 
-def dip_drive(x, u, p, m, at: int):
+def dip_drive(m, V, Vd, p):
     """The dip current's drive [pu, system base] (SUBSYSTEM_*_DIP; module docstring): the share of the
-    devices in a dip at the boundary voltage on the sub-system's own base, Vs / n (1 up to dip_V0,
-    linear to 0 at dip_V1), times the table at their filtered voltage, the state x[at]."""
-    V = u[0] / x[4]
-    share = where(m, V <= p.dip_V0, 1.0 + 0.0 * V,
-                  where(m, V <= p.dip_V1, (p.dip_V1 - V) / (p.dip_V1 - p.dip_V0), 0.0 * V))
-    return share * piecewise_linear(m, x[at], DIP_KNOTS, tuple(getattr(p, f"dip_I{k}") for k in range(len(DIP_KNOTS))))
+    devices in a dip at the boundary voltage on the sub-system's own base V = Vs / n (1 up to dip_V0,
+    linear to 0 at dip_V1), times the table at their filtered voltage Vd [pu of V_own]."""
+    share = piecewise_linear(m, V, (p.dip_V0, p.dip_V1), (1.0, 0.0))
+    return share * piecewise_linear(m, Vd, DIP_KNOTS, tuple(getattr(p, f"dip_I{k}") for k in range(len(DIP_KNOTS))))
 
 
 def delivered_active_current(x, u, p, m, gain: bool = False):
@@ -298,7 +296,8 @@ def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = _controller_rates(x, u, p, m) if carried else ()
         lags = tuple((u[0] - x[first + k]) / T for k, T in enumerate(memory))
-        dips = ((u[0] / x[4] - x[at]) / p.dip_Trv, (dip_drive(x, u, p, m, at) - x[at + 1]) / p.dip_Tg) if dip else ()
+        dips = ((u[0] / x[4] - x[at]) / p.dip_Trv,
+                (dip_drive(m, u[0] / x[4], x[at], p) - x[at + 1]) / p.dip_Tg) if dip else ()
         units = tuple(0.0 * x[last + k] for k in range(learned))
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], 0.0 * x[4], *controller, *lags, *dips, *units)
 
@@ -312,7 +311,7 @@ def _equations(carried: int, memory: tuple, learned: int = 0, gain: bool = False
         d_f, d_w, _ = bus_frequency(m, u[1], x[0], x[1], p.busf_Tf, p.busf_Tw, p.busf_fn)
         controller = (x[5] - u[0], x[6] - u[0], x[7], x[8], x[9], x[10]) if carried else ()
         lags = tuple(x[first + k] - u[0] for k in range(len(memory)))
-        dips = (x[at] - u[0] / x[4], x[at + 1] - dip_drive(x, u, p, m, at)) if dip else ()
+        dips = (x[at] - u[0] / x[4], x[at + 1] - dip_drive(m, u[0] / x[4], x[at], p)) if dip else ()
         units = ((x[last] - x[2] * (1.0 - low_voltage_gain(x, u, p, m)),) if gain
                  else tuple(x[last + k] for k in range(learned)))
         return (d_f, d_w, 0.0 * x[2], 0.0 * x[3], x[4] * p.V_own - u[0], *controller, *lags, *dips, *units)
@@ -351,11 +350,9 @@ def _dip_at_rest(x: list, Vs: float, p, dip: bool) -> list:
     at its drive) and Iq_rest = Iq less it; x itself where there is no dip current."""
     if not dip:
         return x
-    at = len(x)
-    x = x + [Vs / x[4], 0.0]
-    x[at + 1] = float(dip_drive(x, (Vs,), p, math, at))
-    x[3] -= x[at + 1]
-    return x
+    V = Vs / x[4]
+    drive = float(dip_drive(math, V, V, p))
+    return x[:3] + [x[3] - drive] + x[4:] + [V, drive]
 
 
 def _equilibrium(carried: int, memory: int, learned: int = 0, gain: bool = False, dip: bool = False):
