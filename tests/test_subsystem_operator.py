@@ -780,20 +780,24 @@ def test_a_run_with_a_subsystem_surrogate_again_imports_neither_torch_nor_onnx_n
 @pytest.mark.andes
 @pytest.mark.veragrid
 @pytest.mark.skipif(importlib.util.find_spec("VeraGridEngine") is None, reason="no VeraGridEngine (optional host)")
-def test_the_feeder_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, monkeypatch):
-    """The shipped feeder's surrogate FMU as a device of VeraGrid's RMS simulation (explicit coupling,
-    its Norton port) through a fault in ieee14: what the own master gives."""
+@pytest.mark.parametrize("name, settle", [("feeder", 0.0), ("plant", 0.05)])
+def test_a_shipped_subsystem_surrogate_runs_in_veragrid_like_in_the_own_master(tmp_path, monkeypatch, name, settle):
+    """A shipped sub-system's surrogate FMU as a device of VeraGrid's RMS simulation (explicit coupling,
+    its Norton port) through a fault in ieee14: what the own master gives, from `settle` seconds
+    after the clearing on. The plant's active current follows its units' low-voltage gain within the
+    step, and an explicitly coupled host hands the FMU the voltage a step late: in the 50 ms after the
+    clearing its P and Q differ by up to 4.4 and 6.0 % of its rating, from then on by 0.6 and 1.4 %."""
     from opfmu.cli import main
 
     monkeypatch.setenv("OPFMU_CASE_CACHE", str(tmp_path / "cases"))
-    common = ["grid", "run", "--case", "ieee14", "--attach", "9=feeder:surrogate", "--fault", "4", "--clear", "1.1",
+    common = ["grid", "run", "--case", "ieee14", "--attach", f"9={name}:surrogate", "--fault", "4", "--clear", "1.1",
               "--stop", "1.6", "--no-case-events"]
     assert main([*common, "--host", "veragrid", "--out", str(tmp_path / "veragrid")]) == 0
     assert main([*common, "--out", str(tmp_path / "master")]) == 0
 
     vg, own = _columns(tmp_path / "veragrid"), _columns(tmp_path / "master")
     rating = json.loads((tmp_path / "master" / "summary.json").read_text())["S_attach_9"] / 100.0
-    outside = (own["time"] < 1.0) | (own["time"] >= 1.1 + 1e-9)
+    outside = (own["time"] < 1.0) | (own["time"] >= 1.1 + settle + 1e-9)
     for name in ("P_attach_9", "Q_attach_9"):
         assert np.max(np.abs(vg[name] - own[name])[outside]) < 0.02 * rating
     angles = [n for n in own if n.startswith("delta_")]
