@@ -798,8 +798,8 @@ def test_a_shipped_subsystem_surrogate_runs_in_veragrid_like_in_the_own_master(t
     vg, own = _columns(tmp_path / "veragrid"), _columns(tmp_path / "master")
     rating = json.loads((tmp_path / "master" / "summary.json").read_text())["S_attach_9"] / 100.0
     outside = (own["time"] < 1.0) | (own["time"] >= 1.1 + settle + 1e-9)
-    for name in ("P_attach_9", "Q_attach_9"):
-        assert np.max(np.abs(vg[name] - own[name])[outside]) < 0.02 * rating
+    for column in ("P_attach_9", "Q_attach_9"):
+        assert np.max(np.abs(vg[column] - own[column])[outside]) < 0.02 * rating
     angles = [n for n in own if n.startswith("delta_")]
     relative = lambda c: np.array([c[n] - c[angles[0]] for n in angles])  # noqa: E731
     assert np.degrees(np.max(np.abs(relative(vg) - relative(own))[:, outside])) < 0.5
