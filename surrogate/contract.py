@@ -61,6 +61,7 @@ def drifted(frame, x0_f: np.ndarray, u_f: np.ndarray, s: np.ndarray, a: np.ndarr
 MAX_METADATA_CHARS = 8_000_000  # per value (sensor_times_s of the largest S is about 2.5 MB)
 MAX_NAMES = 256
 N_SENSORS_RANGE = (2, 100_000)
+ROLLOVER_MIN_INTERVALS = 10  # sensor intervals: the shortest window a surrogate FMU rolls over at
 MAX_HORIZON_S = 1000.0
 REQUIRED_KEYS = ("component", "params", "state_names", "input_names", "horizon_s", "n_sensors", "envelope")
 
@@ -103,7 +104,7 @@ def operator_metadata(source) -> dict:
         state_scale         tuple of n_x finite positive numbers (each state's standard deviation in
                             training, what the checks measure differences against), or None
         residual_limit      finite number >= 0, or None if absent or null
-        rollover_horizon_s  float in (0, horizon_s] (default horizon_s)
+        rollover_horizon_s  float in [the shortest rollover, horizon_s] (default horizon_s)
         operating_point     {input name: value} the FMUs start their inputs at (a machine's Pm and Efd
                             from its load flow), or None: the component's start values
         frame               the window frame (reference_models.drift.Frame) of a component with a drift
@@ -151,7 +152,7 @@ def operator_metadata(source) -> dict:
         "residual_scale": _residual_scale(raw, comp.n_states),
         "state_scale": _residual_scale(raw, comp.n_states, "state_scale"),
         "residual_limit": _residual_limit(raw),
-        "rollover_horizon_s": _rollover(raw, horizon),
+        "rollover_horizon_s": _rollover(raw, horizon, n_sensors),
         "frame": _frame(raw, comp, params),
         "operating_point": _operating_point(raw, comp),
         "raw": raw,
@@ -276,12 +277,20 @@ def _residual_limit(raw: dict):
     return limit
 
 
-def _rollover(raw: dict, horizon: float) -> float:
+def shortest_rollover(horizon: float, n_sensors: int) -> float:
+    """The shortest window [s] a surrogate FMU rolls over at: 10 sensor intervals, or the whole
+    horizon where it has fewer (the range of its parameter rollover_horizon, surrogate_variables.c)."""
+    return min(ROLLOVER_MIN_INTERVALS * horizon / (n_sensors - 1), horizon)
+
+
+def _rollover(raw: dict, horizon: float, n_sensors: int) -> float:
     if "rollover_horizon_s" not in raw:
         return horizon
     rollover = _number(raw, "rollover_horizon_s", _json(raw, "rollover_horizon_s"))
-    if not 0.0 < rollover <= horizon:
-        raise ContractError(f"metadata rollover_horizon_s = {rollover!r} must lie in (0, horizon_s = {horizon!r}]")
+    low = shortest_rollover(horizon, n_sensors)
+    if not low * (1.0 - 1e-9) <= rollover <= horizon:
+        raise ContractError(f"metadata rollover_horizon_s = {rollover!r} must lie in [{low!r}, horizon_s = {horizon!r}] "
+                            f"(at least {ROLLOVER_MIN_INTERVALS} sensor intervals, where the horizon has them)")
     return rollover
 
 

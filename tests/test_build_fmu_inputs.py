@@ -107,6 +107,9 @@ CASES = {
     "residual_scale too short": (lambda s: {"residual_scale": "[1, 1]"}, (), "list of 4 numbers"),
     "residual_limit text": (lambda s: {"residual_limit": json.dumps(INJECTION)}, (), "residual_limit"),
     "rollover beyond the horizon": (lambda s: {"rollover_horizon_s": "2.0"}, (), "rollover_horizon_s = 2.0"),
+    "rollover shorter than ten sensor intervals": (
+        lambda s: {"rollover_horizon_s": repr(5 * float(meta_of(s, "horizon_s")) / (int(meta_of(s, "n_sensors")) - 1))},
+        (), "at least 10 sensor intervals"),
     "deeply nested JSON": (lambda s: {"envelope": "[" * 100000 + "]" * 100000}, (), "envelope is not valid JSON"),
 }
 

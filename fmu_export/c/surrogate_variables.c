@@ -40,9 +40,10 @@ static ModelStatus parameter_in_range(unsigned int vr, double value, char *messa
         snprintf(message, size, "%s = %g is not a finite number", name, value);
         return MODEL_ERROR;
     }
-    if (vr == VR_ROLLOVER_HORIZON && !(value >= 10 * SENSOR_DT && value <= OPFMU_HORIZON + TIME_EPS)) {
+    const double shortest = fmin(10 * SENSOR_DT, OPFMU_HORIZON); /* surrogate.contract.shortest_rollover */
+    if (vr == VR_ROLLOVER_HORIZON && !(value >= shortest - TIME_EPS && value <= OPFMU_HORIZON + TIME_EPS)) {
         snprintf(message, size, "rollover_horizon = %g s must lie in [%g, %g] s (the trained horizon)", value,
-                 10 * SENSOR_DT, OPFMU_HORIZON);
+                 shortest, OPFMU_HORIZON);
         return MODEL_ERROR;
     }
     if (zero_means && value < 0.0) {
