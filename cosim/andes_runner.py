@@ -2,7 +2,8 @@
 case was converted from (`Case.source`: a user's file, with its dyr; for a shipped case its entry of
 reference_models.grid.andes_case.ANDES_CASES), with
 the case's own events (its Toggle and Fault devices) as the file has them, or switched off where
-the contingency leaves them out (Contingency.events empty), the contingency added as ANDES devices
+the contingency leaves them out (Contingency.events empty) or gives others (each added as a Fault or
+a Toggle of its line, load or generator's bus devices), the contingency added as ANDES devices
 (a Fault at the bus from fault_start to clear_s with the contingency's fault impedance, a Toggle of
 the tripped Line at clearing), ANDES' implicit trapezoid at the fixed step h, its result mapped
 onto a GridResult as the other runners give it (rows at the multiples of the row spacing, linear between
@@ -74,9 +75,11 @@ class AndesRunner:
         number = {idx: int(idx) for idx in ss.Bus.idx.v}
         bus_idx = {n: idx for idx, n in number.items()}
         c = contingency
-        if c.events and tuple(c.events) != tuple(self.case.events):
-            raise ValueError("ANDES runs the case's own events as its file has them, all or none")
         own = (ss.Fault.n, ss.Toggle.n)  # the case file's own events come first
+        replaced = bool(c.events) and tuple(c.events) != tuple(self.case.events)
+        if replaced:  # events the file does not hold: its own switched off below, these added
+            for event in c.events:
+                self._add_event(ss, event, number, bus_idx)
         if c.fault_bus is not None:
             z = complex(c.fault_impedance)
             ss.add("Fault", {"bus": bus_idx[c.fault_bus], "tf": c.fault_start, "tc": c.clear_s, "rf": z.real,
@@ -84,7 +87,7 @@ class AndesRunner:
         if c.trip:
             ss.add("Toggle", {"model": "Line", "dev": self._line(ss, c.trip, number), "t": c.clear_s})
         ss.setup()
-        if not c.events:
+        if not c.events or replaced:
             for model, n in zip((ss.Fault, ss.Toggle), own):
                 for i in range(n):  # the case's own events left out
                     model.u.v[i] = 0
@@ -102,6 +105,34 @@ class AndesRunner:
         ss.TDS.config.ddelta_limit = LOSS_LIMIT_DEG
         ss.TDS.config.no_tqdm = 1
         return ss, number
+
+    def _add_event(self, ss, event, number, bus_idx) -> None:
+        """ANDES devices for one case.Event: a Fault, or a Toggle of the Line, PQ load or bus
+        devices (machines, converters; a static generator's own where it has none) it switches.
+        Each Toggle flips its device, so a sequence of events alternates as Contingency checks."""
+        from reference_models.grid.andes_case import bus_devices
+
+        if event.kind == "fault":
+            z = complex(event.impedance)
+            ss.add("Fault", {"bus": bus_idx[event.bus], "tf": event.time, "tc": event.clear, "rf": z.real,
+                             "xf": z.imag})
+            return
+        if event.kind == "branch":
+            targets = [("Line", self._line(ss, event.branch, number))]
+        elif event.kind == "load":
+            targets = [("PQ", idx) for idx in ss.PQ.idx.v if str(idx) == event.name]
+        else:
+            static, _, device = event.generator.partition("/")
+            targets = [(model, idx) for model, _, idx in bus_devices(ss).get(static, [])
+                       if not device or str(idx) == device]
+            if not targets:  # a static generator without a machine or converter: its own status
+                targets = [(model, idx) for model in ("PV", "Slack") for idx in getattr(ss, model).idx.v
+                           if str(idx) == static]
+        if not targets:
+            raise ValueError(f"ANDES' {self.source} has no device for the event {event.kind} "
+                             f"{event.branch or event.generator or event.name}")
+        for model, idx in targets:
+            ss.add("Toggle", {"model": model, "dev": idx, "t": event.time})
 
     def _line(self, ss, trip, number):
         """ANDES' Line idx of the branch named `trip` (Network.branch's names)."""

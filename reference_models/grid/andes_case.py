@@ -690,7 +690,7 @@ def network_data(ss, name: str) -> dict:
     return data
 
 
-def _bus_devices(ss) -> dict:
+def bus_devices(ss) -> dict:
     """{static generator idx (text): [(model name, position, device idx)]}: the machines and
     converters in service that name each static generator (ANDES' gen), in model and file order."""
     out = {}
@@ -706,7 +706,7 @@ def device_generators(ss) -> dict:
     """{(model name, position): the network generator's name} of every machine and converter in
     service (the name its unit is keyed by)."""
     return {(dname, i): _generator_name(static, idx, len(devices) > 1)
-            for static, devices in _bus_devices(ss).items() for dname, i, idx in devices}
+            for static, devices in bus_devices(ss).items() for dname, i, idx in devices}
 
 
 def _generator_name(static: str, device, shared: bool) -> str:
@@ -719,7 +719,7 @@ def _network_generators(ss) -> list:
     """The network's generators (module docstring), in order: (ANDES model, kind, position, name,
     (P share, Q share)); one per bus device where several share a static generator. CaseError where
     the shares of a static generator's devices do not sum to 1."""
-    devices = _bus_devices(ss)
+    devices = bus_devices(ss)
     out = []
     for model, kind in ((ss.Slack, "slack"), (ss.PV, "pv")):
         for i in range(model.n):
@@ -744,7 +744,7 @@ def _network_generators(ss) -> list:
 def _static_generator_notes(ss) -> list:
     """The notes of the static generators in service that no machine or converter names: ANDES
     keeps their equations in the time domain, and so does their PV or Slack device."""
-    named = _bus_devices(ss)
+    named = bus_devices(ss)
     bare = [f"{kind} {model.idx.v[i]}" for model, kind in ((ss.Slack, "Slack"), (ss.PV, "PV"))
             for i in range(model.n) if _on(model, i) and str(model.idx.v[i]) not in named]
     if not bare:
@@ -769,7 +769,7 @@ def _pq_power(ss, i: int) -> complex:
 def events(ss, number) -> list:
     """The case's own enabled Toggle and Fault events as network-file entries."""
     out = []
-    devices = _bus_devices(ss)
+    devices = bus_devices(ss)
     for i in range(ss.Toggle.n):
         if ss.Toggle.u.v[i] == 0:
             continue
@@ -1172,7 +1172,7 @@ def dynamic_data(ss, name: str) -> dict:
     number = bus_numbers(ss)
     units = {}  # (ANDES group, bus device idx) -> its unit's entry
     owner = {None: {}}  # role -> {(ANDES group, device idx): the unit's key}
-    named = _bus_devices(ss)
+    named = bus_devices(ss)
     for static, devices in named.items():
         for dname, i, idx in devices:
             model = getattr(ss, dname)
