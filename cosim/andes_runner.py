@@ -46,6 +46,12 @@ def andes_available() -> bool:
     return importlib.util.find_spec("andes") is not None
 
 
+def _add_fault(ss, bus, start: float, clear: float, impedance) -> None:
+    """An ANDES Fault at the Bus idx `bus` from `start` to `clear` [s] through `impedance` [pu]."""
+    z = complex(impedance)
+    ss.add("Fault", {"bus": bus, "tf": start, "tc": clear, "rf": z.real, "xf": z.imag})
+
+
 class AndesRunner:
     """ANDES' time-domain simulation of `case` (converted from a case file, `Case.source`, or a
     shipped case named in ANDES_CASES) at the fixed step `step` [s], its result rows every `rows` [s]
@@ -81,9 +87,7 @@ class AndesRunner:
             for event in c.events:
                 self._add_event(ss, event, number, bus_idx)
         if c.fault_bus is not None:
-            z = complex(c.fault_impedance)
-            ss.add("Fault", {"bus": bus_idx[c.fault_bus], "tf": c.fault_start, "tc": c.clear_s, "rf": z.real,
-                             "xf": z.imag})
+            _add_fault(ss, bus_idx[c.fault_bus], c.fault_start, c.clear_s, c.fault_impedance)
         if c.trip:
             ss.add("Toggle", {"model": "Line", "dev": self._line(ss, c.trip, number), "t": c.clear_s})
         ss.setup()
@@ -113,9 +117,7 @@ class AndesRunner:
         from reference_models.grid.andes_case import bus_devices
 
         if event.kind == "fault":
-            z = complex(event.impedance)
-            ss.add("Fault", {"bus": bus_idx[event.bus], "tf": event.time, "tc": event.clear, "rf": z.real,
-                             "xf": z.imag})
+            _add_fault(ss, bus_idx[event.bus], event.time, event.clear, event.impedance)
             return
         if event.kind == "branch":
             targets = [("Line", self._line(ss, event.branch, number))]

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from surrogate.contract import ContractError, check_scale, drifted, operator_metadata, random_inputs
+from surrogate.contract import ContractError, check_scale, drifted, operator_metadata, random_inputs, shortest_rollover
 from surrogate.frame_graph import network_graph
 
 from .binaries import PLUMBING, BuildError, check_fmi_version, compile_binaries, compile_c, targets
@@ -166,6 +166,8 @@ def config_header(model_name: str, guid: str, meta: dict, x_default, first_layer
         f"#define OPFMU_N_SENSORS {int(meta['n_sensors'])}",
         f"#define OPFMU_HORIZON {_c_double(meta['horizon_s'])}",
         f"#define OPFMU_ROLLOVER_HORIZON {_c_double(meta['rollover_horizon_s'])} /* default of the parameter rollover_horizon */",
+        f"#define OPFMU_SHORTEST_ROLLOVER {_c_double(shortest_rollover(meta['horizon_s'], meta['n_sensors']))} "
+        "/* the least the parameter rollover_horizon takes */",
         f"#define OPFMU_FIRST_LAYER {first_layer} /* width of the sensor layer tracked incrementally; 0: none */",
         f"#define OPFMU_TRUNK_SIZE {kernel.trunk_size if first_layer else 0} /* trunk values kept per sensor time; 0: none */",
         f"#define OPFMU_COEF_SIZE {kernel.coef_size if first_layer else 0} /* coefficients the head multiplies */",

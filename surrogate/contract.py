@@ -279,7 +279,7 @@ def _residual_limit(raw: dict):
 
 def shortest_rollover(horizon: float, n_sensors: int) -> float:
     """The shortest window [s] a surrogate FMU rolls over at: 10 sensor intervals, or the whole
-    horizon where it has fewer (the range of its parameter rollover_horizon, surrogate_variables.c)."""
+    horizon where it has fewer (the least its parameter rollover_horizon takes: OPFMU_SHORTEST_ROLLOVER)."""
     return min(ROLLOVER_MIN_INTERVALS * horizon / (n_sensors - 1), horizon)
 
 

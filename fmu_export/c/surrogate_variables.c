@@ -40,10 +40,9 @@ static ModelStatus parameter_in_range(unsigned int vr, double value, char *messa
         snprintf(message, size, "%s = %g is not a finite number", name, value);
         return MODEL_ERROR;
     }
-    const double shortest = fmin(10 * SENSOR_DT, OPFMU_HORIZON); /* surrogate.contract.shortest_rollover */
-    if (vr == VR_ROLLOVER_HORIZON && !(value >= shortest - TIME_EPS && value <= OPFMU_HORIZON + TIME_EPS)) {
+    if (vr == VR_ROLLOVER_HORIZON && !(value >= OPFMU_SHORTEST_ROLLOVER - TIME_EPS && value <= OPFMU_HORIZON + TIME_EPS)) {
         snprintf(message, size, "rollover_horizon = %g s must lie in [%g, %g] s (the trained horizon)", value,
-                 shortest, OPFMU_HORIZON);
+                 OPFMU_SHORTEST_ROLLOVER, OPFMU_HORIZON);
         return MODEL_ERROR;
     }
     if (zero_means && value < 0.0) {
